@@ -1,0 +1,3 @@
+//! Files: the Madder bake cache.
+
+pub mod cache;

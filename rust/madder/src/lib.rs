@@ -1,0 +1,23 @@
+//! # madder — stain simulation on deforming cloth
+//!
+//! Pure Rust core (no Python) of the Madder Blender extension. The science follows the
+//! dissertation *Fluid animation on deforming surface meshes* (`shared/seed`), one module per
+//! seed section:
+//!
+//! - [`mesh`]: fixed triangle topology and the per-frame geometry of a deforming mesh.
+//! - [`ops`]: discrete operators on that geometry (cotan stiffness, lumped mass, §4.3.3)
+//!   and a prefactored sparse SPD solver that reuses its symbolic analysis across frames.
+//! - [`stain`]: the stain simulator (§4.3.3 implicit diffusion for now).
+//! - [`io`]: the Madder cache file.
+//!
+//! Conventions: `f64` inside solves, `f32` for bulk arrays at the boundary, `u32` indices;
+//! every loop that runs in parallel writes disjoint outputs, so results are bit-identical
+//! whatever the number of threads.
+
+pub mod error;
+pub mod io;
+pub mod mesh;
+pub mod ops;
+pub mod stain;
+
+pub use error::{CacheError, Error, MeshError, ParamError, Result, SolveError};

@@ -1,0 +1,234 @@
+//! Triangle-mesh topology: faces, unique edges, edge–face incidence, boundary and
+//! non-manifold detection, and the map from Blender polygons to the triangles they were
+//! split into (so n-gons work everywhere a per-polygon value is needed).
+//!
+//! Edges are stored once, as `(a, b)` with `a < b`, in lexicographic order; `face_edges[f][k]`
+//! is the edge opposite corner `k` of face `f` (i.e. between corners `k+1` and `k+2`).
+//! An edge with one incident face is a boundary edge, with three or more a non-manifold
+//! edge. The stain operators are assembled face by face, so they are well defined on
+//! boundaries and on non-manifold fans alike; the classification is reported so that the
+//! add-on can warn about it and later physics (evaporation boundary coefficient, eq. 4.8)
+//! can use it.
+
+use crate::error::MeshError;
+
+/// How many faces share an edge.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EdgeKind {
+    /// Exactly one incident face.
+    Boundary,
+    /// Exactly two incident faces.
+    Interior,
+    /// Three or more incident faces.
+    NonManifold,
+}
+
+/// Fixed connectivity of a triangle mesh.
+#[derive(Debug, Clone)]
+pub struct Topology {
+    n_vertices: usize,
+    faces: Vec<[u32; 3]>,
+    edges: Vec<[u32; 2]>,
+    face_edges: Vec<[u32; 3]>,
+    edge_face_count: Vec<u32>,
+    /// Blender polygon index of every triangle (identity when built from triangles).
+    face_polygon: Vec<u32>,
+    n_polygons: usize,
+}
+
+impl Topology {
+    /// Builds the topology of `n_vertices` vertices and triangles `faces`.
+    ///
+    /// Fails on an empty face list, on an index out of range and on a triangle that uses a
+    /// vertex twice (naming the face). Vertices used by no face ("loose" vertices) are
+    /// allowed: they carry no area and the operators leave them untouched.
+    pub fn from_triangles(n_vertices: usize, faces: Vec<[u32; 3]>) -> Result<Self, MeshError> {
+        let n = faces.len();
+        Self::with_polygons(n_vertices, faces, (0..n as u32).collect(), n)
+    }
+
+    /// Like [`Topology::from_triangles`], with `face_polygon[f]` the index of the polygon
+    /// (out of `n_polygons`) that triangle `f` belongs to.
+    pub fn with_polygons(
+        n_vertices: usize,
+        faces: Vec<[u32; 3]>,
+        face_polygon: Vec<u32>,
+        n_polygons: usize,
+    ) -> Result<Self, MeshError> {
+        if faces.is_empty() {
+            return Err(MeshError::Empty);
+        }
+        if face_polygon.len() != faces.len() {
+            return Err(MeshError::PolygonMapLength {
+                expected: faces.len(),
+                got: face_polygon.len(),
+            });
+        }
+        for (f, tri) in faces.iter().enumerate() {
+            for (k, &v) in tri.iter().enumerate() {
+                if v as usize >= n_vertices {
+                    return Err(MeshError::VertexOutOfRange {
+                        face: f,
+                        vertex: v,
+                        n_vertices,
+                    });
+                }
+                if tri[(k + 1) % 3] == v {
+                    return Err(MeshError::RepeatedVertex { face: f, vertex: v });
+                }
+            }
+        }
+        // Unique edges: sort the 3F half-edge keys, then run-length them.
+        let mut half: Vec<(u32, u32, u32)> = Vec::with_capacity(3 * faces.len());
+        for (f, tri) in faces.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (tri[(k + 1) % 3], tri[(k + 2) % 3]);
+                half.push((a.min(b), a.max(b), (3 * f + k) as u32));
+            }
+        }
+        half.sort_unstable();
+        let mut edges = Vec::new();
+        let mut edge_face_count = Vec::new();
+        let mut face_edges = vec![[0u32; 3]; faces.len()];
+        for (i, &(a, b, slot)) in half.iter().enumerate() {
+            if i == 0 || (half[i - 1].0, half[i - 1].1) != (a, b) {
+                edges.push([a, b]);
+                edge_face_count.push(0);
+            }
+            let e = edges.len() - 1;
+            edge_face_count[e] += 1;
+            face_edges[slot as usize / 3][slot as usize % 3] = e as u32;
+        }
+        Ok(Self {
+            n_vertices,
+            faces,
+            edges,
+            face_edges,
+            edge_face_count,
+            face_polygon,
+            n_polygons,
+        })
+    }
+
+    pub fn n_vertices(&self) -> usize {
+        self.n_vertices
+    }
+    pub fn n_faces(&self) -> usize {
+        self.faces.len()
+    }
+    pub fn n_edges(&self) -> usize {
+        self.edges.len()
+    }
+    pub fn n_polygons(&self) -> usize {
+        self.n_polygons
+    }
+    pub fn faces(&self) -> &[[u32; 3]] {
+        &self.faces
+    }
+    /// Unique edges `(a, b)`, `a < b`, sorted.
+    pub fn edges(&self) -> &[[u32; 2]] {
+        &self.edges
+    }
+    /// `face_edges()[f][k]`: the edge opposite corner `k` of face `f`.
+    pub fn face_edges(&self) -> &[[u32; 3]] {
+        &self.face_edges
+    }
+    pub fn face_polygon(&self) -> &[u32] {
+        &self.face_polygon
+    }
+
+    pub fn edge_kind(&self, e: usize) -> EdgeKind {
+        match self.edge_face_count[e] {
+            1 => EdgeKind::Boundary,
+            2 => EdgeKind::Interior,
+            _ => EdgeKind::NonManifold,
+        }
+    }
+
+    /// Indices of edges with exactly one incident face.
+    pub fn boundary_edges(&self) -> Vec<usize> {
+        (0..self.n_edges())
+            .filter(|&e| self.edge_kind(e) == EdgeKind::Boundary)
+            .collect()
+    }
+
+    /// Indices of edges shared by three or more faces.
+    pub fn non_manifold_edges(&self) -> Vec<usize> {
+        (0..self.n_edges())
+            .filter(|&e| self.edge_kind(e) == EdgeKind::NonManifold)
+            .collect()
+    }
+
+    /// `true` for every vertex on a boundary edge.
+    pub fn boundary_vertices(&self) -> Vec<bool> {
+        let mut on = vec![false; self.n_vertices];
+        for e in self.boundary_edges() {
+            let [a, b] = self.edges[e];
+            on[a as usize] = true;
+            on[b as usize] = true;
+        }
+        on
+    }
+
+    /// `true` for every vertex used by no face.
+    pub fn loose_vertices(&self) -> Vec<bool> {
+        let mut loose = vec![true; self.n_vertices];
+        for tri in &self.faces {
+            for &v in tri {
+                loose[v as usize] = false;
+            }
+        }
+        loose
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn two_triangles_share_one_interior_edge() {
+        let t = Topology::from_triangles(4, vec![[0, 1, 2], [0, 2, 3]]).unwrap();
+        assert_eq!(t.n_edges(), 5);
+        assert_eq!(t.boundary_edges().len(), 4);
+        assert!(t.non_manifold_edges().is_empty());
+        let shared = t.edges().iter().position(|&e| e == [0, 2]).unwrap();
+        assert_eq!(t.edge_kind(shared), EdgeKind::Interior);
+        // the edge opposite corner 1 of face 0 (vertex 1) is 2–0
+        assert_eq!(t.face_edges()[0][1] as usize, shared);
+        assert_eq!(t.face_edges()[1][2] as usize, shared);
+    }
+
+    #[test]
+    fn fin_of_three_faces_is_non_manifold() {
+        let t = Topology::from_triangles(5, vec![[0, 1, 2], [1, 0, 3], [0, 1, 4]]).unwrap();
+        let e01 = t.edges().iter().position(|&e| e == [0, 1]).unwrap();
+        assert_eq!(t.non_manifold_edges(), vec![e01]);
+    }
+
+    #[test]
+    fn bad_faces_are_named() {
+        assert_eq!(
+            Topology::from_triangles(3, vec![[0, 1, 2], [0, 1, 7]]).unwrap_err(),
+            MeshError::VertexOutOfRange {
+                face: 1,
+                vertex: 7,
+                n_vertices: 3
+            }
+        );
+        assert_eq!(
+            Topology::from_triangles(3, vec![[0, 1, 2], [2, 1, 2]]).unwrap_err(),
+            MeshError::RepeatedVertex { face: 1, vertex: 2 }
+        );
+        assert_eq!(
+            Topology::from_triangles(3, vec![]).unwrap_err(),
+            MeshError::Empty
+        );
+    }
+
+    #[test]
+    fn loose_vertices_are_reported() {
+        let t = Topology::from_triangles(4, vec![[0, 1, 2]]).unwrap();
+        assert_eq!(t.loose_vertices(), vec![false, false, false, true]);
+    }
+}

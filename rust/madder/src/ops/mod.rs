@@ -1,0 +1,14 @@
+//! Discrete operators on a mesh with fixed topology and per-frame geometry (seed §4.3.3).
+//!
+//! Global operators live on a [`VertexPattern`]: the lower triangle (diagonal included) of
+//! the `N×N` vertex–vertex sparsity pattern, fixed for the whole bake. An operator is a
+//! vector of values on that pattern, so a time-stepper rebuilds only values every frame and
+//! the sparse Cholesky factorization ([`PrefactoredSpd`]) reuses its symbolic analysis.
+
+pub mod cotan;
+pub mod pattern;
+pub mod solve;
+
+pub use cotan::{add_lumped_mass, cotan_stiffness};
+pub use pattern::VertexPattern;
+pub use solve::{PrefactoredSpd, solve_spd};
