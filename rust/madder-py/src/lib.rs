@@ -1,1 +1,24 @@
+//! Python bindings of the madder core, importable as `madder._core`.
+//!
+//! This crate only converts: numpy arrays in (copied into owned Rust data), numpy arrays
+//! out (Rust vectors handed to numpy without a copy), core errors to typed Python
+//! exceptions (`errors.rs`, the one place that maps them), and the GIL released around
+//! every heavy call. One file per core module.
 
+use pyo3::prelude::*;
+
+mod errors;
+mod io;
+mod mesh;
+mod stain;
+
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    errors::register(m)?;
+    m.add_class::<mesh::Topology>()?;
+    m.add_class::<stain::DiffusionStepper>()?;
+    m.add_class::<io::CacheWriter>()?;
+    m.add_class::<io::CacheReader>()?;
+    Ok(())
+}

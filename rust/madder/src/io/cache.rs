@@ -1,1 +1,444 @@
+//! The Madder bake cache: one file per baked object, holding named per-vertex `f32` fields
+//! for a contiguous range of frames.
+//!
+//! ## Layout (version 1, little-endian)
+//! ```text
+//! header   magic  b"MADDERC\0"                 8 bytes
+//!          version u32 = 1
+//!          n_vertices u32, n_fields u32, first_frame i32, n_frames u32
+//!          n_fields × name: 32 bytes, UTF-8, NUL-padded
+//!          header_crc u32                      (CRC-32 of everything above)
+//! frames   n_frames × block, in frame order:
+//!          frame i32, n_fields × n_vertices × f32, block_crc u32 (of frame + data)
+//! ```
+//! Blocks have a fixed size, so frame `f` is at a computed offset and playback reads one
+//! block, not the whole file. Values are kept at full `f32` precision: densities span
+//! orders of magnitude (a faint halo next to a saturated centre), and the shader needs the
+//! faint end.
+//!
+//! ## Safety
+//! [`CacheWriter`] writes to a temporary file next to the target and renames it over the
+//! target only in [`CacheWriter::finish`], after an fsync: a bake that fails or is
+//! cancelled (writer dropped) leaves the previous cache untouched. [`CacheReader`]
+//! validates the header, the file length and each block's checksum, and names the file and
+//! frame in every error, so a truncated or corrupt file is reported, never trusted.
 
+use std::fs::File;
+use std::io::{BufWriter, Read, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+
+use crate::error::CacheError;
+
+pub const MAGIC: &[u8; 8] = b"MADDERC\0";
+pub const VERSION: u32 = 1;
+const NAME_LEN: usize = 32;
+
+/// Streams frames into a new cache file; the target is replaced only on [`finish`](Self::finish).
+pub struct CacheWriter {
+    path: PathBuf,
+    tmp: PathBuf,
+    out: Option<BufWriter<File>>,
+    n_vertices: usize,
+    n_fields: usize,
+    first_frame: i32,
+    n_frames: u32,
+    n_frames_expected: u32,
+}
+
+impl CacheWriter {
+    /// Starts a cache for `n_frames` frames from `first_frame`, with fields `names`.
+    pub fn create(
+        path: impl AsRef<Path>,
+        n_vertices: usize,
+        names: &[&str],
+        first_frame: i32,
+        n_frames: u32,
+    ) -> Result<Self, CacheError> {
+        let path = path.as_ref().to_path_buf();
+        let usage = |reason: String| CacheError::Usage { reason };
+        if names.is_empty() {
+            return Err(usage("a cache needs at least one field".into()));
+        }
+        if let Some(n) = names
+            .iter()
+            .find(|n| n.is_empty() || n.len() > NAME_LEN || n.contains('\0'))
+        {
+            return Err(usage(format!(
+                "field name '{n}' must be 1..={NAME_LEN} bytes without NUL"
+            )));
+        }
+        if n_vertices == 0 || n_vertices > u32::MAX as usize {
+            return Err(usage(format!("vertex count {n_vertices} out of range")));
+        }
+        let mut tmp_name = path.file_name().unwrap_or_default().to_os_string();
+        tmp_name.push(format!(".tmp{}", std::process::id()));
+        let tmp = path.with_file_name(tmp_name);
+        let io = |source| CacheError::Io {
+            path: tmp.clone(),
+            source,
+        };
+        let mut out = BufWriter::new(File::create(&tmp).map_err(io)?);
+        let mut header = Vec::new();
+        header.extend_from_slice(MAGIC);
+        header.extend_from_slice(&VERSION.to_le_bytes());
+        header.extend_from_slice(&(n_vertices as u32).to_le_bytes());
+        header.extend_from_slice(&(names.len() as u32).to_le_bytes());
+        header.extend_from_slice(&first_frame.to_le_bytes());
+        header.extend_from_slice(&n_frames.to_le_bytes());
+        for n in names {
+            let mut field = [0u8; NAME_LEN];
+            field[..n.len()].copy_from_slice(n.as_bytes());
+            header.extend_from_slice(&field);
+        }
+        let crc = crc32fast::hash(&header);
+        header.extend_from_slice(&crc.to_le_bytes());
+        out.write_all(&header).map_err(io)?;
+        Ok(Self {
+            path,
+            tmp,
+            out: Some(out),
+            n_vertices,
+            n_fields: names.len(),
+            first_frame,
+            n_frames: 0,
+            n_frames_expected: n_frames,
+        })
+    }
+
+    /// Appends the next frame: `fields[k]` holds field `k` for every vertex.
+    pub fn push_frame(&mut self, fields: &[&[f32]]) -> Result<(), CacheError> {
+        if self.n_frames >= self.n_frames_expected {
+            return Err(CacheError::Usage {
+                reason: format!("all {} frames are already written", self.n_frames),
+            });
+        }
+        if fields.len() != self.n_fields || fields.iter().any(|f| f.len() != self.n_vertices) {
+            return Err(CacheError::Usage {
+                reason: format!(
+                    "expected {} fields of {} values",
+                    self.n_fields, self.n_vertices
+                ),
+            });
+        }
+        let frame = self.first_frame + self.n_frames as i32;
+        let mut block = Vec::with_capacity(8 + 4 * self.n_fields * self.n_vertices);
+        block.extend_from_slice(&frame.to_le_bytes());
+        for f in fields {
+            for v in f.iter() {
+                block.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        let crc = crc32fast::hash(&block);
+        block.extend_from_slice(&crc.to_le_bytes());
+        let tmp = &self.tmp;
+        let out = self.out.as_mut().expect("writer is open until finish");
+        out.write_all(&block).map_err(|source| CacheError::Io {
+            path: tmp.clone(),
+            source,
+        })?;
+        self.n_frames += 1;
+        Ok(())
+    }
+
+    /// Flushes, syncs and atomically moves the finished file over the target.
+    pub fn finish(mut self) -> Result<PathBuf, CacheError> {
+        if self.n_frames != self.n_frames_expected {
+            return Err(CacheError::Usage {
+                reason: format!(
+                    "{} of {} frames written",
+                    self.n_frames, self.n_frames_expected
+                ),
+            });
+        }
+        let io = |source| CacheError::Io {
+            path: self.tmp.clone(),
+            source,
+        };
+        let out = self.out.take().expect("writer is open until finish");
+        let file = out.into_inner().map_err(|e| io(e.into_error()))?;
+        file.sync_all().map_err(io)?;
+        drop(file);
+        std::fs::rename(&self.tmp, &self.path).map_err(|source| CacheError::Io {
+            path: self.path.clone(),
+            source,
+        })?;
+        Ok(self.path.clone())
+    }
+}
+
+impl Drop for CacheWriter {
+    /// An unfinished writer removes its temporary file; the previous cache stays.
+    fn drop(&mut self) {
+        if self.out.take().is_some() {
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+    }
+}
+
+/// Random access to the frames of a cache file.
+#[derive(Debug)]
+pub struct CacheReader {
+    path: PathBuf,
+    file: File,
+    n_vertices: usize,
+    names: Vec<String>,
+    first_frame: i32,
+    n_frames: u32,
+    header_len: u64,
+}
+
+impl CacheReader {
+    pub fn open(path: impl AsRef<Path>) -> Result<Self, CacheError> {
+        let path = path.as_ref().to_path_buf();
+        let io = |source| CacheError::Io {
+            path: path.clone(),
+            source,
+        };
+        let mut file = File::open(&path).map_err(io)?;
+        let header_err = |reason: &str| CacheError::Header {
+            path: path.clone(),
+            reason: reason.into(),
+        };
+        let mut fixed = [0u8; 28];
+        read_exact_or(&mut file, &mut fixed, || {
+            header_err("file is shorter than the header")
+        })?;
+        if &fixed[..8] != MAGIC {
+            return Err(CacheError::BadMagic { path });
+        }
+        let word = |i: usize| u32::from_le_bytes(fixed[i..i + 4].try_into().unwrap());
+        let version = word(8);
+        if version != VERSION {
+            return Err(CacheError::Version {
+                path,
+                found: version,
+                supported: VERSION,
+            });
+        }
+        let (n_vertices, n_fields, first_frame, n_frames) = (
+            word(12) as usize,
+            word(16) as usize,
+            word(20) as i32,
+            word(24),
+        );
+        if n_vertices == 0 || n_fields == 0 || n_fields > 64 {
+            return Err(header_err("vertex or field count out of range"));
+        }
+        let mut rest = vec![0u8; n_fields * NAME_LEN + 4];
+        read_exact_or(&mut file, &mut rest, || {
+            header_err("file is shorter than the header")
+        })?;
+        let mut header = fixed.to_vec();
+        header.extend_from_slice(&rest[..n_fields * NAME_LEN]);
+        let crc = u32::from_le_bytes(rest[n_fields * NAME_LEN..].try_into().unwrap());
+        if crc32fast::hash(&header) != crc {
+            return Err(header_err("header checksum mismatch"));
+        }
+        let names = rest[..n_fields * NAME_LEN]
+            .chunks(NAME_LEN)
+            .map(|c| {
+                let end = c.iter().position(|&b| b == 0).unwrap_or(NAME_LEN);
+                String::from_utf8(c[..end].to_vec())
+                    .map_err(|_| header_err("field name is not UTF-8"))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let header_len = header.len() as u64 + 4;
+        let reader = Self {
+            path: path.clone(),
+            file,
+            n_vertices,
+            names,
+            first_frame,
+            n_frames,
+            header_len,
+        };
+        let len = reader
+            .file
+            .metadata()
+            .map_err(|source| CacheError::Io {
+                path: reader.path.clone(),
+                source,
+            })?
+            .len();
+        let expected = reader.header_len + reader.block_len() * n_frames as u64;
+        if len < expected {
+            let complete = (len.saturating_sub(reader.header_len) / reader.block_len()) as i32;
+            return Err(CacheError::Truncated {
+                path: reader.path,
+                frame: first_frame + complete,
+            });
+        }
+        if len > expected {
+            return Err(header_err("file is longer than its frames"));
+        }
+        Ok(reader)
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+    pub fn n_vertices(&self) -> usize {
+        self.n_vertices
+    }
+    pub fn field_names(&self) -> &[String] {
+        &self.names
+    }
+    pub fn first_frame(&self) -> i32 {
+        self.first_frame
+    }
+    pub fn n_frames(&self) -> u32 {
+        self.n_frames
+    }
+    pub fn last_frame(&self) -> i32 {
+        self.first_frame + self.n_frames as i32 - 1
+    }
+
+    fn block_len(&self) -> u64 {
+        8 + 4 * (self.names.len() * self.n_vertices) as u64
+    }
+
+    /// Reads field `name` of `frame`, checking the block's checksum.
+    pub fn read(&mut self, frame: i32, name: &str) -> Result<Vec<f32>, CacheError> {
+        let Some(k) = self.names.iter().position(|n| n == name) else {
+            return Err(CacheError::FieldMissing {
+                path: self.path.clone(),
+                field: name.into(),
+            });
+        };
+        if frame < self.first_frame || frame > self.last_frame() {
+            return Err(CacheError::FrameMissing {
+                path: self.path.clone(),
+                frame,
+                first: self.first_frame,
+                last: self.last_frame(),
+            });
+        }
+        let offset = self.header_len + self.block_len() * (frame - self.first_frame) as u64;
+        let mut block = vec![0u8; self.block_len() as usize];
+        let path = self.path.clone();
+        self.file
+            .seek(SeekFrom::Start(offset))
+            .map_err(|source| CacheError::Io {
+                path: path.clone(),
+                source,
+            })?;
+        read_exact_or(&mut self.file, &mut block, || CacheError::Truncated {
+            path: path.clone(),
+            frame,
+        })?;
+        let (body, crc) = block.split_at(block.len() - 4);
+        let stored_frame = i32::from_le_bytes(body[..4].try_into().unwrap());
+        if crc32fast::hash(body) != u32::from_le_bytes(crc.try_into().unwrap())
+            || stored_frame != frame
+        {
+            return Err(CacheError::Checksum { path, frame });
+        }
+        let start = 4 + 4 * k * self.n_vertices;
+        Ok(body[start..start + 4 * self.n_vertices]
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+            .collect())
+    }
+}
+
+fn read_exact_or(
+    file: &mut File,
+    buf: &mut [u8],
+    err: impl FnOnce() -> CacheError,
+) -> Result<(), CacheError> {
+    file.read_exact(buf).map_err(|_| err())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tmpdir(tag: &str) -> PathBuf {
+        let d =
+            std::env::temp_dir().join(format!("madder-cache-test-{tag}-{}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    fn write(path: &Path, scale: f32) {
+        let mut w = CacheWriter::create(path, 3, &["density", "other"], 5, 2).unwrap();
+        for f in 0..2 {
+            let a: Vec<f32> = (0..3).map(|v| scale * (10 * f + v) as f32).collect();
+            let b: Vec<f32> = a.iter().map(|x| -x).collect();
+            w.push_frame(&[&a, &b]).unwrap();
+        }
+        w.finish().unwrap();
+    }
+
+    #[test]
+    fn round_trip_and_errors_name_file_and_frame() {
+        let d = tmpdir("rt");
+        let p = d.join("c.madder");
+        write(&p, 1.0);
+        let mut r = CacheReader::open(&p).unwrap();
+        assert_eq!((r.first_frame(), r.last_frame(), r.n_vertices()), (5, 6, 3));
+        assert_eq!(r.read(6, "density").unwrap(), vec![10.0, 11.0, 12.0]);
+        assert_eq!(r.read(5, "other").unwrap(), vec![0.0, -1.0, -2.0]);
+        assert!(matches!(
+            r.read(7, "density"),
+            Err(CacheError::FrameMissing { frame: 7, .. })
+        ));
+        assert!(matches!(
+            r.read(5, "nope"),
+            Err(CacheError::FieldMissing { .. })
+        ));
+
+        // truncation names the first incomplete frame
+        let bytes = std::fs::read(&p).unwrap();
+        std::fs::write(&p, &bytes[..bytes.len() - 5]).unwrap();
+        let err = CacheReader::open(&p).unwrap_err();
+        assert!(
+            matches!(err, CacheError::Truncated { frame: 6, .. }),
+            "{err}"
+        );
+        assert!(err.to_string().contains("c.madder"));
+
+        // a flipped bit in frame 6 is caught by its checksum
+        let mut bad = bytes.clone();
+        let n = bad.len();
+        bad[n - 10] ^= 0x40;
+        std::fs::write(&p, &bad).unwrap();
+        let mut r = CacheReader::open(&p).unwrap();
+        assert!(r.read(5, "density").is_ok());
+        assert!(matches!(
+            r.read(6, "density"),
+            Err(CacheError::Checksum { frame: 6, .. })
+        ));
+
+        std::fs::write(&p, b"not a cache at all, just text....").unwrap();
+        assert!(matches!(
+            CacheReader::open(&p),
+            Err(CacheError::BadMagic { .. })
+        ));
+    }
+
+    #[test]
+    fn unfinished_writer_keeps_previous_cache() {
+        let d = tmpdir("atomic");
+        let p = d.join("c.madder");
+        write(&p, 1.0);
+        let before = std::fs::read(&p).unwrap();
+        {
+            let mut w = CacheWriter::create(&p, 3, &["density"], 1, 3).unwrap();
+            w.push_frame(&[&[9.0, 9.0, 9.0]]).unwrap();
+            // dropped here: a cancelled bake
+        }
+        assert_eq!(std::fs::read(&p).unwrap(), before);
+        assert_eq!(
+            std::fs::read_dir(&d).unwrap().count(),
+            1,
+            "temporary file removed"
+        );
+        // a finished writer replaces it
+        write(&p, 2.0);
+        assert_eq!(
+            CacheReader::open(&p).unwrap().read(6, "density").unwrap(),
+            vec![20.0, 22.0, 24.0]
+        );
+    }
+}

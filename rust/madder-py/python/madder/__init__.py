@@ -1,0 +1,31 @@
+"""Madder: stain simulation on deforming cloth.
+
+The heavy lifting is in the Rust extension `madder._core`; this package re-exports it and
+adds small bpy-free helpers (array conversion) used by the Blender add-on and the tests.
+"""
+
+from ._core import (
+    CacheReader,
+    CacheWriter,
+    DiffusionStepper,
+    MadderError,
+    Topology,
+    __version__,
+)
+from ._errors import CacheError, MeshError, ParameterError, SolveError
+from .arrays import as_faces, as_positions
+
+__all__ = [
+    "CacheError",
+    "CacheReader",
+    "CacheWriter",
+    "DiffusionStepper",
+    "MadderError",
+    "MeshError",
+    "ParameterError",
+    "SolveError",
+    "Topology",
+    "__version__",
+    "as_faces",
+    "as_positions",
+]
