@@ -1,0 +1,75 @@
+# Madder: every target sets itself up on a fresh machine (Rust, CPython 3.11 and pip only).
+# Re-running is fast when nothing changed: each step is a file target with its inputs.
+
+PYTHON   ?= python3.11
+VENV     := .venv
+PY       := $(VENV)/bin/python
+# maturin finds zig (the manylinux linker, from the ziglang wheel) on PATH
+export PATH := $(abspath $(VENV))/bin:$(PATH)
+# Blender (bpy) must never read or write the user's ~/.config/blender
+export BLENDER_USER_RESOURCES := $(abspath $(VENV))/blender-user
+
+VERSION  := $(shell sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -n1)
+WHEEL    := addon/wheels/madder-$(VERSION)-cp311-abi3-manylinux_2_28_x86_64.whl
+ZIP      := dist/madder-$(VERSION).zip
+WHEELDIR := $(VENV)/madder-wheel
+BLENDER_EXT = $(firstword $(wildcard $(VENV)/lib/python3*/site-packages/bpy/*/scripts/addons_core/bl_pkg/cli/blender_ext.py))
+
+RUST_SRC   := Cargo.toml Cargo.lock pyproject.toml $(shell find rust -name '*.rs' -o -name 'Cargo.toml' -o -name '*.py')
+ADDON_SRC  := $(wildcard addon/*.py) addon/blender_manifest.toml
+
+.PHONY: all venv wheel addon test test-rust test-python test-blender demo bench fixtures clean
+
+all: addon
+
+venv: $(VENV)/.stamp
+$(VENV)/.stamp: tests/requirements.txt
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -r tests/requirements.txt
+	touch $@
+
+wheel: $(WHEEL)
+$(WHEEL): $(VENV)/.stamp $(RUST_SRC)
+	rm -f addon/wheels/*.whl
+	$(VENV)/bin/maturin build --release --zig --compatibility manylinux_2_28 --interpreter $(PY) -o addon/wheels
+	test -f $@
+
+# The wheel unpacked on its own path, for the bpy-free Python tests (the Blender tests use
+# the copy the extension installs, so the venv itself never holds madder).
+$(WHEELDIR)/.stamp: $(WHEEL)
+	rm -rf $(WHEELDIR)
+	$(PY) -m pip install --quiet --no-deps --target $(WHEELDIR) $(WHEEL)
+	touch $@
+
+addon: $(ZIP)
+$(ZIP): $(WHEEL) $(ADDON_SRC)
+	mkdir -p dist
+	rm -f $@
+	$(PY) $(BLENDER_EXT) build --source-dir addon --output-filepath $@
+	$(PY) $(BLENDER_EXT) validate $@
+	@echo "Extension: $@"
+
+test: test-rust test-python test-blender
+
+test-rust:
+	cargo test --release -p madder
+
+test-python: $(WHEELDIR)/.stamp
+	PYTHONPATH=$(abspath $(WHEELDIR)) $(PY) -m pytest -q tests/python
+
+test-blender: $(ZIP)
+	MADDER_ZIP=$(abspath $(ZIP)) $(PY) -m pytest -q tests/blender
+
+demo: $(ZIP)
+	MADDER_ZIP=$(abspath $(ZIP)) $(PY) blend_fixtures/demo.py --out out/demo.png
+
+bench: $(WHEELDIR)/.stamp
+	cargo bench -p madder
+
+fixtures: $(VENV)/.stamp
+	$(PY) blend_fixtures/build_fixtures.py
+	$(PY) blend_fixtures/build_fixtures.py --check
+
+clean:
+	rm -rf $(VENV) dist out addon/wheels target

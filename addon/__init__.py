@@ -1,0 +1,15 @@
+"""Madder: stains on moving cloth. This file only registers the add-on's parts."""
+
+from . import handlers, operators, panels, properties
+
+_modules = (properties, operators, panels, handlers)
+
+
+def register():
+    for m in _modules:
+        m.register()
+
+
+def unregister():
+    for m in reversed(_modules):
+        m.unregister()

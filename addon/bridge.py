@@ -1,0 +1,70 @@
+"""bpy ↔ numpy adapters. Every per-vertex transfer goes through `foreach_get`/`foreach_set`
+on flat numpy buffers; nothing here loops over vertices in Python per frame."""
+
+import numpy as np
+
+STAIN_ATTR = "madder_stain"
+DENSITY_ATTR = "madder_density"
+
+
+def topology_arrays(mesh):
+    """Triangles of `mesh` as (F, 3) uint32, the polygon of each triangle, and the polygon count."""
+    mesh.calc_loop_triangles()
+    n = len(mesh.loop_triangles)
+    faces = np.empty(3 * n, dtype=np.uint32)
+    mesh.loop_triangles.foreach_get("vertices", faces)
+    poly = np.empty(n, dtype=np.uint32)
+    mesh.loop_triangles.foreach_get("polygon_index", poly)
+    return faces.reshape(n, 3), poly, len(mesh.polygons)
+
+
+def world_positions(obj_eval):
+    """World-space vertex positions of an evaluated mesh object, (N, 3) float32."""
+    mesh = obj_eval.data
+    co = np.empty(3 * len(mesh.vertices), dtype=np.float32)
+    mesh.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3)
+    m = np.array(obj_eval.matrix_world, dtype=np.float64)
+    return (co @ m[:3, :3].T + m[:3, 3]).astype(np.float32)
+
+
+def vertex_group_weights(obj, name):
+    """Weights of vertex group `name` per vertex (0 where unassigned), (N,) float32.
+
+    bpy exposes vertex-group membership only per vertex, so this walks the vertices once;
+    it runs once per bake, never per frame."""
+    group = obj.vertex_groups[name]
+    gi = group.index
+    weights = np.zeros(len(obj.data.vertices), dtype=np.float32)
+    for v in obj.data.vertices:
+        for g in v.groups:
+            if g.group == gi:
+                weights[v.index] = g.weight
+    return weights
+
+
+def _point_attribute(mesh, name, data_type):
+    attr = mesh.attributes.get(name)
+    if attr is not None and (attr.data_type != data_type or attr.domain != "POINT"):
+        mesh.attributes.remove(attr)
+        attr = None
+    if attr is None:
+        if data_type == "FLOAT_COLOR":
+            attr = mesh.color_attributes.new(name, data_type, "POINT")
+        else:
+            attr = mesh.attributes.new(name, data_type, "POINT")
+    return attr
+
+
+def write_stain(mesh, density, color):
+    """Writes `madder_density` (float) and `madder_stain` (RGBA: color × coverage, alpha =
+    coverage, coverage = density clamped to [0, 1]) on the POINT domain, then tags the mesh
+    so the depsgraph re-evaluates it (foreach_set alone does not)."""
+    density = np.ascontiguousarray(density, dtype=np.float32)
+    coverage = np.clip(density, 0.0, 1.0)
+    rgba = np.empty((len(density), 4), dtype=np.float32)
+    rgba[:, :3] = coverage[:, None] * np.asarray(color, dtype=np.float32)[None, :3]
+    rgba[:, 3] = coverage
+    _point_attribute(mesh, DENSITY_ATTR, "FLOAT").data.foreach_set("value", density)
+    _point_attribute(mesh, STAIN_ATTR, "FLOAT_COLOR").data.foreach_set("color", rgba.ravel())
+    mesh.update()

@@ -1,0 +1,61 @@
+"""Playback: after every frame change, each enabled object with a bake gets that frame's
+stain written into its mesh attributes (`madder_stain`, `madder_density`)."""
+
+import os
+
+import bpy
+from bpy.app.handlers import persistent
+
+from . import bridge
+
+_readers = {}  # absolute path -> (mtime_ns, size, CacheReader)
+
+
+def _reader(path):
+    import madder
+
+    st = os.stat(path)
+    key = (st.st_mtime_ns, st.st_size)
+    hit = _readers.get(path)
+    if hit is None or hit[:2] != key:
+        _readers[path] = (*key, madder.CacheReader(path))
+    return _readers[path][2]
+
+
+def apply_frame(obj, frame):
+    """Writes `obj`'s baked stain at `frame` (clamped to the baked range) into its mesh.
+    Returns False when there is nothing to show (no bake, or the file is gone)."""
+    settings = obj.madder
+    if not settings.cache_file or obj.mode == "EDIT":
+        return False
+    path = bpy.path.abspath(settings.cache_file)
+    if not os.path.exists(path):
+        return False
+    reader = _reader(path)
+    if reader.n_vertices != len(obj.data.vertices):
+        return False
+    frame = min(max(frame, reader.first_frame), reader.last_frame)
+    bridge.write_stain(obj.data, reader.read(frame, "density"), settings.stain_color)
+    return True
+
+
+@persistent
+def on_frame_change(scene, depsgraph=None):
+    for obj in scene.objects:
+        if obj.type != "MESH" or not obj.madder.enabled:
+            continue
+        try:
+            apply_frame(obj, scene.frame_current)
+        except Exception as e:  # never break playback or a render; say what failed
+            print(f"Madder: cannot show the stain of '{obj.name}' at frame {scene.frame_current}: {e}")
+
+
+def register():
+    if on_frame_change not in bpy.app.handlers.frame_change_post:
+        bpy.app.handlers.frame_change_post.append(on_frame_change)
+
+
+def unregister():
+    if on_frame_change in bpy.app.handlers.frame_change_post:
+        bpy.app.handlers.frame_change_post.remove(on_frame_change)
+    _readers.clear()

@@ -1,0 +1,77 @@
+"""Madder's settings, stored on the object (so they are saved in the .blend)."""
+
+import bpy
+from bpy.props import BoolProperty, FloatProperty, FloatVectorProperty, IntProperty, PointerProperty, StringProperty
+
+# Blender 4.5+ warns when a path property holds a "//" path unless it says it supports them.
+_BLEND_RELATIVE = {"options": {"PATH_SUPPORTS_BLEND_RELATIVE"}} if bpy.app.version >= (4, 5, 0) else {}
+
+
+class MadderObjectSettings(bpy.types.PropertyGroup):
+    enabled: BoolProperty(
+        name="Madder Stain",
+        description="Simulate a stain on this cloth and play it back from the cache",
+        default=False,
+    )
+    source_group: StringProperty(
+        name="Source",
+        description="Vertex group whose weights give the initial stain (1 = fully wet)",
+        default="",
+    )
+    amount: FloatProperty(
+        name="Amount",
+        description="Liquid per unit area where the Source weight is 1 (1 = just saturated; "
+        "more pools and spreads further before it fades)",
+        default=1.0,
+        min=0.0,
+        soft_max=10.0,
+    )
+    diffusion_rate: FloatProperty(
+        name="Diffusion",
+        description="How fast the stain spreads through the fabric (diffusion coefficient, m²/s)",
+        default=0.002,
+        min=0.0,
+        soft_max=0.1,
+        precision=4,
+        step=0.1,
+    )
+    substeps: IntProperty(
+        name="Substeps",
+        description="Implicit steps per frame (positions are interpolated between frames)",
+        default=1,
+        min=1,
+        soft_max=8,
+    )
+    stain_color: FloatVectorProperty(
+        name="Color",
+        description="Color of the stain where it is fully saturated",
+        subtype="COLOR",
+        size=3,
+        min=0.0,
+        max=1.0,
+        default=(0.45, 0.02, 0.08),
+    )
+    cache_dir: StringProperty(
+        name="Cache Folder",
+        description="Folder for the baked stain (relative to the .blend with //)",
+        subtype="DIR_PATH",
+        default="//madder_cache/",
+        **_BLEND_RELATIVE,
+    )
+    cache_file: StringProperty(
+        name="Cache File",
+        description="The baked cache this object plays back (set by Bake)",
+        subtype="FILE_PATH",
+        default="",
+        **_BLEND_RELATIVE,
+    )
+
+
+def register():
+    bpy.utils.register_class(MadderObjectSettings)
+    bpy.types.Object.madder = PointerProperty(type=MadderObjectSettings)
+
+
+def unregister():
+    del bpy.types.Object.madder
+    bpy.utils.unregister_class(MadderObjectSettings)

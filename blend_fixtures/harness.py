@@ -1,0 +1,57 @@
+"""Running the Madder extension inside the `bpy` module (Blender as a Python module).
+
+There is no Blender binary on the build machines, so tests and the demo install the built
+extension zip the way a user would: into a fresh *user* extension repository, with
+Blender's own installer (`bpy.ops.extensions.package_install_files`), enabled on install.
+Import `bpy` only after setting BLENDER_USER_RESOURCES (the Makefile does), so nothing
+touches the user's own Blender configuration."""
+
+import os
+import tempfile
+
+REPO = "madder_test"
+
+
+def install_extension(zip_path, repo_dir=None):
+    """Installs and enables the extension zip; returns the add-on's module name
+    (``bl_ext.<repo>.madder``). Idempotent within one process."""
+    import bpy
+
+    module = f"bl_ext.{REPO}.madder"
+    if module in bpy.context.preferences.addons:
+        return module
+    if not os.path.isfile(zip_path):
+        raise FileNotFoundError(f"extension zip not found: {zip_path} (run `make addon`)")
+    repos = bpy.context.preferences.extensions.repos
+    repo = repos.get(REPO) if hasattr(repos, "get") else next((r for r in repos if r.module == REPO), None)
+    if repo is None:
+        repo_dir = repo_dir or tempfile.mkdtemp(prefix="madder-ext-")
+        repo = repos.new(name=REPO, module=REPO, custom_directory=repo_dir, source="USER")
+    result = bpy.ops.extensions.package_install_files(filepath=zip_path, repo=REPO, enable_on_install=True)
+    if result != {"FINISHED"} or module not in bpy.context.preferences.addons:
+        raise RuntimeError(f"installing {zip_path} failed: {result}")
+    return module
+
+
+def add_stain_shading(material):
+    """Makes `material` show the stain: base colour = cloth × (1 − coverage) + stain colour,
+    read from the `madder_stain` color attribute (RGB premultiplied by its alpha)."""
+    nt = material.node_tree
+    bsdf = next(n for n in nt.nodes if n.type == "BSDF_PRINCIPLED")
+    cloth = tuple(bsdf.inputs["Base Color"].default_value)
+    attr = nt.nodes.new("ShaderNodeAttribute")
+    attr.attribute_name = "madder_stain"
+    attr.attribute_type = "GEOMETRY"
+    keep = nt.nodes.new("ShaderNodeMix")
+    keep.data_type = "RGBA"
+    keep.blend_type = "MIX"
+    keep.inputs["A"].default_value = cloth
+    keep.inputs["B"].default_value = (0.0, 0.0, 0.0, 1.0)
+    nt.links.new(attr.outputs["Alpha"], keep.inputs["Factor"])
+    add = nt.nodes.new("ShaderNodeMix")
+    add.data_type = "RGBA"
+    add.blend_type = "ADD"
+    add.inputs["Factor"].default_value = 1.0
+    nt.links.new(keep.outputs["Result"], add.inputs["A"])
+    nt.links.new(attr.outputs["Color"], add.inputs["B"])
+    nt.links.new(add.outputs["Result"], bsdf.inputs["Base Color"])
