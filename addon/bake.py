@@ -7,7 +7,7 @@ import os
 import bpy
 import numpy as np
 
-from . import bridge
+from . import bridge, handlers
 
 CACHE_EXT = ".madder"
 FIELDS = ["density"]
@@ -75,7 +75,7 @@ def frame_positions(obj, depsgraph, n_vertices, frame):
 
 
 def bake(scene, obj, progress=None):
-    """Bakes `obj` over the scene's frame range. Returns the cache path.
+    """Bakes `obj` over the scene's frame range. Returns `(path, warnings)`.
 
     `progress(done, total)` is called after every frame. On any error the cache writer is
     aborted, so the previous cache file (if any) is left as it was."""
@@ -97,28 +97,34 @@ def bake(scene, obj, progress=None):
         raise BakeError(f"'{obj.name}' has no faces")
     density0 = bridge.vertex_group_weights(obj, settings.source_group) * np.float32(settings.amount)
 
+    topology = _topology(madder, obj, faces, n_vertices, face_polygon, n_polygons)
+    warnings = []
+    n_nonmanifold = len(topology.non_manifold_edges())
+    if n_nonmanifold:
+        warnings.append(f"{n_nonmanifold} non-manifold edges (shared by 3+ faces)")
+
     frame_before = scene.frame_current
     writer = None
     try:
-        topology = madder.Topology(faces, n_vertices, face_polygon, n_polygons)
-        scene.frame_set(first)
-        depsgraph = bpy.context.evaluated_depsgraph_get()
-        pos = frame_positions(obj, depsgraph, n_vertices, first)
-        stepper = madder.DiffusionStepper(topology, pos, density0, settings.diffusion_rate)
-        writer = madder.CacheWriter(path, n_vertices, FIELDS, first, last - first + 1)
-        writer.push_frame([stepper.density])
-        for frame in range(first + 1, last + 1):
-            scene.frame_set(frame)
-            pos = frame_positions(obj, depsgraph, n_vertices, frame)
-            try:
-                stepper.step(pos, 1.0 / fps, settings.substeps)
-            except madder.MadderError as e:
-                raise BakeError(f"'{obj.name}' at frame {frame}: {e}") from e
+        with handlers.suspended():
+            scene.frame_set(first)
+            depsgraph = bpy.context.evaluated_depsgraph_get()
+            pos = frame_positions(obj, depsgraph, n_vertices, first)
+            stepper = madder.DiffusionStepper(topology, pos, density0, settings.diffusion_rate)
+            writer = madder.CacheWriter(path, n_vertices, FIELDS, first, last - first + 1)
             writer.push_frame([stepper.density])
-            if progress:
-                progress(frame - first, last - first)
-        writer.finish()
-        writer = None
+            for frame in range(first + 1, last + 1):
+                scene.frame_set(frame)
+                pos = frame_positions(obj, depsgraph, n_vertices, frame)
+                try:
+                    stepper.step(pos, 1.0 / fps, settings.substeps)
+                except madder.MadderError as e:
+                    raise BakeError(f"'{obj.name}' at frame {frame}: {e}") from e
+                writer.push_frame([stepper.density])
+                if progress:
+                    progress(frame - first, last - first)
+            writer.finish()
+            writer = None
     except madder.MadderError as e:
         raise BakeError(f"'{obj.name}': {e}") from e
     finally:
@@ -126,7 +132,14 @@ def bake(scene, obj, progress=None):
             writer.abort()
         scene.frame_set(frame_before)
     settings.cache_file = stored_path(path)
-    return path
+    return path, warnings
+
+
+def _topology(madder, obj, faces, n_vertices, face_polygon, n_polygons):
+    try:
+        return madder.Topology(faces, n_vertices, face_polygon, n_polygons)
+    except madder.MadderError as e:
+        raise BakeError(f"'{obj.name}': {e}") from e
 
 
 def free(obj):

@@ -9,6 +9,20 @@ from bpy.app.handlers import persistent
 from . import bridge
 
 _readers = {}  # absolute path -> (mtime_ns, size, CacheReader)
+_suspended = 0  # > 0 while a bake walks the frames: playback must not touch the meshes
+
+
+class suspended:
+    """Context manager: no playback while the bake steps through frames (writing attributes
+    would re-tag the cloth being read, and costs time for nothing)."""
+
+    def __enter__(self):
+        global _suspended
+        _suspended += 1
+
+    def __exit__(self, *exc):
+        global _suspended
+        _suspended -= 1
 
 
 def _reader(path):
@@ -41,6 +55,8 @@ def apply_frame(obj, frame):
 
 @persistent
 def on_frame_change(scene, depsgraph=None):
+    if _suspended:
+        return
     for obj in scene.objects:
         if obj.type != "MESH" or not obj.madder.enabled:
             continue

@@ -10,7 +10,7 @@ class MADDER_OT_bake(bpy.types.Operator):
 
     bl_idname = "madder.bake"
     bl_label = "Bake Stain"
-    bl_options = {"REGISTER"}
+    bl_options = {"REGISTER", "UNDO"}
 
     @classmethod
     def poll(cls, context):
@@ -22,7 +22,7 @@ class MADDER_OT_bake(bpy.types.Operator):
         total = max(context.scene.frame_end - context.scene.frame_start, 1)
         wm.progress_begin(0, total)
         try:
-            path = bake.bake(context.scene, obj, progress=lambda done, _: wm.progress_update(done))
+            path, warnings = bake.bake(context.scene, obj, progress=lambda done, _: wm.progress_update(done))
         except bake.BakeError as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
@@ -30,6 +30,8 @@ class MADDER_OT_bake(bpy.types.Operator):
             wm.progress_end()
         obj.madder.enabled = True
         handlers.apply_frame(obj, context.scene.frame_current)
+        for w in warnings:
+            self.report({"WARNING"}, f"Madder: '{obj.name}': {w}")
         self.report({"INFO"}, f"Madder: baked '{obj.name}' to {path}")
         return {"FINISHED"}
 
@@ -39,7 +41,7 @@ class MADDER_OT_free_bake(bpy.types.Operator):
 
     bl_idname = "madder.free_bake"
     bl_label = "Free Bake"
-    bl_options = {"REGISTER"}
+    bl_options = {"REGISTER", "UNDO"}
 
     @classmethod
     def poll(cls, context):

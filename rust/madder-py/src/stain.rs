@@ -1,6 +1,8 @@
 //! `DiffusionStepper`: implicit diffusion on a deforming mesh (core module `stain`).
 
-use numpy::{PyArray1, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{
+    PyArray1, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 
 use crate::errors::{ParameterError, to_py};
@@ -8,9 +10,13 @@ use crate::mesh::{Topology, points};
 
 /// Diffuses a density (per unit area, one value per vertex) while the mesh moves.
 ///
-/// `DiffusionStepper(topology, positions, density, rate, threads=None)`: `positions` is the
-/// `(N, 3)` float32 start pose, `density` a `(N,)` float32 array, `rate` the diffusion
-/// coefficient in m²/s. `threads` caps the worker threads (results do not depend on it).
+/// `DiffusionStepper(topology, positions, density, rate=None, *, face_tensors=None,
+/// face_uv=None, face_angle=None, threads=None)`: `positions` is the `(N, 3)` float32 start
+/// pose, `density` a `(N,)` float32 array. Either `rate`, an isotropic diffusion coefficient
+/// in m²/s, or a woven cloth: `face_tensors` `(F, 3)` float64 `[s11, s12, s22]` in m²/s in
+/// each face's (weft, warp) basis, `face_uv` `(F, 3, 2)` float32 corner UVs (the weft is the
+/// UV u axis) and optionally `face_angle` `(F,)` float32 weft offsets in radians.
+/// `threads` caps the worker threads (results do not depend on it).
 #[pyclass(module = "madder")]
 pub struct DiffusionStepper {
     inner: madder::stain::DiffusionStepper,
@@ -20,15 +26,20 @@ pub struct DiffusionStepper {
 #[pymethods]
 impl DiffusionStepper {
     #[new]
-    #[pyo3(signature = (topology, positions, density, rate, threads=None))]
+    #[pyo3(signature = (topology, positions, density, rate=None, *, face_tensors=None, face_uv=None, face_angle=None, threads=None))]
+    #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
         topology: &Topology,
         positions: PyReadonlyArray2<'_, f32>,
         density: PyReadonlyArray1<'_, f32>,
-        rate: f64,
+        rate: Option<f64>,
+        face_tensors: Option<PyReadonlyArray2<'_, f64>>,
+        face_uv: Option<PyReadonlyArray3<'_, f32>>,
+        face_angle: Option<PyReadonlyArray1<'_, f32>>,
         threads: Option<usize>,
     ) -> PyResult<Self> {
+        let conductivity = conductivity(rate, face_tensors, face_uv, face_angle)?;
         let pos = points(&positions)?;
         let density: Vec<f64> = density.as_array().iter().map(|&d| d as f64).collect();
         let topo = topology.inner.clone();
@@ -42,9 +53,9 @@ impl DiffusionStepper {
                     .map_err(|e| ParameterError::new_err(e.to_string()))?,
             ),
         };
-        let params = madder::stain::DiffusionParams { rate };
-        let build =
-            || madder::stain::DiffusionStepper::new(topo, &pos, density, params, faer::Par::Seq);
+        let build = || {
+            madder::stain::DiffusionStepper::new(topo, &pos, density, conductivity, faer::Par::Seq)
+        };
         let inner = py.detach(|| match &pool {
             Some(p) => p.install(build),
             None => build(),
@@ -86,8 +97,53 @@ impl DiffusionStepper {
         PyArray1::from_vec(py, self.inner.vertex_area().to_vec())
     }
 
+    /// Number of faces whose UVs were degenerate (weft fell back to an edge direction).
+    #[getter]
+    fn degenerate_uv_faces(&self) -> usize {
+        self.inner.degenerate_uv_faces()
+    }
+
     /// Total stain mass `Σ A_i σ_i` (float64).
     fn total_mass(&self) -> f64 {
         self.inner.total_mass()
+    }
+}
+
+fn conductivity(
+    rate: Option<f64>,
+    tensors: Option<PyReadonlyArray2<'_, f64>>,
+    uv: Option<PyReadonlyArray3<'_, f32>>,
+    angle: Option<PyReadonlyArray1<'_, f32>>,
+) -> PyResult<madder::stain::Conductivity> {
+    use madder::stain::{Conductivity, WovenFaces};
+    match (rate, tensors, uv) {
+        (Some(d), None, None) => Ok(Conductivity::Isotropic(d)),
+        (None, Some(t), Some(uv)) => {
+            if t.shape()[1] != 3 || uv.shape()[1..] != [3, 2] {
+                return Err(ParameterError::new_err(format!(
+                    "face_tensors must be (F, 3) and face_uv (F, 3, 2); got {:?} and {:?}",
+                    t.shape(),
+                    uv.shape()
+                )));
+            }
+            let tensor: Vec<[f64; 3]> = t
+                .as_array()
+                .rows()
+                .into_iter()
+                .map(|r| [r[0], r[1], r[2]])
+                .collect();
+            let uv = uv.as_array();
+            let uv: Vec<[[f64; 2]; 3]> = (0..uv.shape()[0])
+                .map(|f| std::array::from_fn(|k| [uv[[f, k, 0]] as f64, uv[[f, k, 1]] as f64]))
+                .collect();
+            let angle = match angle {
+                Some(a) => a.as_array().iter().map(|&x| x as f64).collect(),
+                None => vec![0.0; tensor.len()],
+            };
+            Ok(Conductivity::Woven(WovenFaces { tensor, uv, angle }))
+        }
+        _ => Err(ParameterError::new_err(
+            "give either rate (isotropic) or both face_tensors and face_uv (woven cloth)",
+        )),
     }
 }

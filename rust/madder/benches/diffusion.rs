@@ -8,7 +8,7 @@ use faer::Par;
 use glam::DVec3;
 use madder::mesh::{Geometry, Topology};
 use madder::ops::{PrefactoredSpd, VertexPattern, add_lumped_mass, cotan_stiffness};
-use madder::stain::{DiffusionParams, DiffusionStepper};
+use madder::stain::{Conductivity, DiffusionStepper};
 
 fn grid(nx: usize, ny: usize) -> (Topology, Vec<DVec3>) {
     let idx = |i: usize, j: usize| (i * (nx + 1) + j) as u32;
@@ -20,14 +20,23 @@ fn grid(nx: usize, ny: usize) -> (Topology, Vec<DVec3>) {
         }
     }
     let pos = (0..=ny)
-        .flat_map(|i| (0..=nx).map(move |j| DVec3::new(2.0 * j as f64 / nx as f64, 0.0, 1.2 * i as f64 / ny as f64)))
+        .flat_map(|i| {
+            (0..=nx).map(move |j| {
+                DVec3::new(2.0 * j as f64 / nx as f64, 0.0, 1.2 * i as f64 / ny as f64)
+            })
+        })
         .collect();
-    (Topology::from_triangles((nx + 1) * (ny + 1), faces).unwrap(), pos)
+    (
+        Topology::from_triangles((nx + 1) * (ny + 1), faces).unwrap(),
+        pos,
+    )
 }
 
 /// The flag waving: a travelling wave across the cloth.
 fn wave(rest: &[DVec3], t: f64) -> Vec<DVec3> {
-    rest.iter().map(|p| DVec3::new(p.x, 0.15 * p.x * (4.0 * p.x - 6.0 * t).sin(), p.z)).collect()
+    rest.iter()
+        .map(|p| DVec3::new(p.x, 0.15 * p.x * (4.0 * p.x - 6.0 * t).sin(), p.z))
+        .collect()
 }
 
 fn ms(t: Instant) -> f64 {
@@ -61,11 +70,16 @@ fn bench(nx: usize, ny: usize, frames: usize) {
         solve += ms(t);
     }
     let k = frames as f64;
-    let d0: Vec<f64> = rest.iter().map(|p| (-(p.distance_squared(DVec3::new(1.0, 0.0, 0.6))) / 0.02).exp()).collect();
-    let mut s = DiffusionStepper::new(topo, &rest, d0, DiffusionParams { rate: 0.002 }, Par::Seq).unwrap();
+    let d0: Vec<f64> = rest
+        .iter()
+        .map(|p| (-(p.distance_squared(DVec3::new(1.0, 0.0, 0.6))) / 0.02).exp())
+        .collect();
+    let mut s =
+        DiffusionStepper::new(topo, &rest, d0, Conductivity::Isotropic(0.002), Par::Seq).unwrap();
     let t = Instant::now();
     for f in 1..=frames {
-        s.step(&wave(&rest, f as f64 / 24.0), 1.0 / 24.0, 1).unwrap();
+        s.step(&wave(&rest, f as f64 / 24.0), 1.0 / 24.0, 1)
+            .unwrap();
     }
     let step = ms(t) / k;
     println!(

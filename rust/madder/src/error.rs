@@ -41,6 +41,8 @@ pub enum ParamError {
     },
     #[error("{name} value {index} is not finite")]
     NonFinite { name: &'static str, index: usize },
+    #[error("{name} {index} is not symmetric positive semi-definite")]
+    NotPositiveSemiDefinite { name: &'static str, index: usize },
 }
 
 /// A linear solve that failed (the system was not numerically positive definite).

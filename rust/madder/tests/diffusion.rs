@@ -5,7 +5,7 @@
 use faer::Par;
 use glam::DVec3;
 use madder::mesh::Topology;
-use madder::stain::{DiffusionParams, DiffusionStepper};
+use madder::stain::{Conductivity, DiffusionStepper};
 
 /// Grid of `n×n` quads over `[-half, half]²` (z = 0), quads split along alternating
 /// diagonals; interior vertices jittered by up to `jitter` × spacing with a fixed hash so
@@ -84,7 +84,7 @@ fn mass_is_conserved_to_1e_12_per_step() {
     let (t, pos) = grid(40, 1.0, 0.4);
     let d0 = gaussian(&pos, DVec3::new(0.2, -0.1, 0.0), 0.02);
     let mut s =
-        DiffusionStepper::new(t, &pos, d0, DiffusionParams { rate: 0.05 }, Par::Seq).unwrap();
+        DiffusionStepper::new(t, &pos, d0, Conductivity::Isotropic(0.05), Par::Seq).unwrap();
     let mut before = s.total_mass();
     for _ in 0..50 {
         s.step(&pos, 0.05, 1).unwrap();
@@ -110,7 +110,8 @@ fn gaussian_variance_grows_as_2dt() {
     let (t, pos) = grid(200, 1.0, 0.4);
     let (rate, var0, dt, steps) = (1e-3, 0.0025, 0.02, 50);
     let d0 = gaussian(&pos, DVec3::ZERO, var0);
-    let mut s = DiffusionStepper::new(t, &pos, d0, DiffusionParams { rate }, Par::Seq).unwrap();
+    let mut s =
+        DiffusionStepper::new(t, &pos, d0, Conductivity::Isotropic(rate), Par::Seq).unwrap();
     let (_, cov0) = moments(&pos, s.vertex_area(), s.density());
     for _ in 0..steps {
         s.step(&pos, dt, 1).unwrap();
@@ -143,7 +144,7 @@ fn stretching_mesh_keeps_mass() {
     let (t, rest) = grid(30, 0.5, 0.3);
     let d0 = gaussian(&rest, DVec3::new(0.1, 0.0, 0.0), 0.01);
     let mut s =
-        DiffusionStepper::new(t, &rest, d0, DiffusionParams { rate: 0.01 }, Par::Seq).unwrap();
+        DiffusionStepper::new(t, &rest, d0, Conductivity::Isotropic(0.01), Par::Seq).unwrap();
     let m0 = s.total_mass();
     let area0: f64 = s.vertex_area().iter().sum();
     for k in 1..=40 {
@@ -182,7 +183,7 @@ fn zero_area_faces_give_finite_densities_and_keep_mass() {
     }
     let d0 = gaussian(&pos, DVec3::ZERO, 0.01);
     let mut s =
-        DiffusionStepper::new(t, &pos, d0, DiffusionParams { rate: 0.01 }, Par::Seq).unwrap();
+        DiffusionStepper::new(t, &pos, d0, Conductivity::Isotropic(0.01), Par::Seq).unwrap();
     let m0 = s.total_mass();
     let mut before = m0;
     for _ in 0..20 {
@@ -205,9 +206,8 @@ fn same_bits_on_one_and_two_threads() {
         pool.install(|| {
             let (t, pos) = grid(60, 1.0, 0.4);
             let d0 = gaussian(&pos, DVec3::new(0.3, 0.0, 0.0), 0.02);
-            let mut s =
-                DiffusionStepper::new(t, &pos, d0, DiffusionParams { rate: 0.02 }, Par::Seq)
-                    .unwrap();
+            let mut s = DiffusionStepper::new(t, &pos, d0, Conductivity::Isotropic(0.02), Par::Seq)
+                .unwrap();
             for k in 0..10 {
                 let p: Vec<DVec3> = pos.iter().map(|q| *q * (1.0 + 0.01 * k as f64)).collect();
                 s.step(&p, 0.04, 2).unwrap();
@@ -217,4 +217,67 @@ fn same_bits_on_one_and_two_threads() {
     };
     let (a, b) = (run(1), run(2));
     assert!(a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()));
+}
+
+/// Woven cloth: with the weft along the UV `u` axis rotated by φ on the surface and
+/// `S = diag(4D, D)`, the covariance must grow by exactly `2t R(φ) S R(φ)ᵀ`: long axis at
+/// φ, variance ratio 4 (seed §4.3.3: `S_T = (e, e⊥) S (e, e⊥)ᵀ`).
+#[test]
+fn woven_spreading_follows_the_weft_from_the_uv_layout() {
+    use madder::stain::WovenFaces;
+    let (t, pos) = grid(160, 1.0, 0.4);
+    let (d, var0, dt, steps) = (1e-3, 0.002, 0.02, 40);
+    for phi_deg in [0.0f64, 30.0, 75.0] {
+        let phi = phi_deg.to_radians();
+        // uv = R(−φ) xy, so the u axis points along (cos φ, sin φ) on the surface
+        let (s, c) = phi.sin_cos();
+        let uv: Vec<[[f64; 2]; 3]> = t
+            .faces()
+            .iter()
+            .map(|tri| {
+                tri.map(|v| {
+                    let p = pos[v as usize];
+                    [c * p.x + s * p.y, -s * p.x + c * p.y]
+                })
+            })
+            .collect();
+        let nf = t.n_faces();
+        let woven = WovenFaces {
+            tensor: vec![[4.0 * d, 0.0, d]; nf],
+            uv,
+            angle: vec![0.0; nf],
+        };
+        let d0 = gaussian(&pos, DVec3::ZERO, var0);
+        let mut st =
+            DiffusionStepper::new(t.clone(), &pos, d0, Conductivity::Woven(woven), Par::Seq)
+                .unwrap();
+        let (_, c0) = moments(&pos, st.vertex_area(), st.density());
+        for _ in 0..steps {
+            st.step(&pos, dt, 1).unwrap();
+        }
+        let (_, c1) = moments(&pos, st.vertex_area(), st.density());
+        let (gxx, gyy, gxy) = (c1[0] - c0[0], c1[1] - c0[1], c1[2] - c0[2]);
+        // principal axes of the growth
+        let angle = 0.5 * (2.0 * gxy).atan2(gxx - gyy);
+        let mean = 0.5 * (gxx + gyy);
+        let rad = (0.25 * (gxx - gyy).powi(2) + gxy * gxy).sqrt();
+        let (major, minor) = (mean + rad, mean - rad);
+        let t_total = dt * steps as f64;
+        eprintln!(
+            "φ = {phi_deg:>4}°: long axis at {:.2}°, variance ratio {:.3} (tensor 4), major growth {:.4e} (2·4D·t = {:.4e})",
+            angle.to_degrees(),
+            major / minor,
+            major,
+            8.0 * d * t_total
+        );
+        let mut dangle = (angle - phi).to_degrees();
+        dangle -= 180.0 * (dangle / 180.0).round();
+        assert!(dangle.abs() < 1.0, "long axis off by {dangle}°");
+        assert!(
+            (major / minor / 4.0 - 1.0).abs() < 0.05,
+            "ratio {}",
+            major / minor
+        );
+        assert!((major / (8.0 * d * t_total) - 1.0).abs() < 0.05);
+    }
 }

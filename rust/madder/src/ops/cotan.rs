@@ -21,20 +21,34 @@ pub fn cotan_stiffness(
     pattern: &VertexPattern,
     scale: f64,
 ) -> Vec<f64> {
+    assemble_face_weights(topology, pattern, |f| {
+        geometry.face_cot[f].map(|c| -0.5 * scale * c)
+    })
+}
+
+/// Assembles a stiffness-like matrix from per-face off-diagonal weights: `weights(f)[k]`
+/// is the entry `K_ij` of the edge opposite corner `k` (between corners `k+1`, `k+2`).
+/// Each face adds `−w` to both endpoints' diagonals, so every row sums to zero face by face
+/// (what makes diffusion conserve mass), whatever the weights.
+pub(crate) fn assemble_face_weights(
+    topology: &Topology,
+    pattern: &VertexPattern,
+    weights: impl Fn(usize) -> [f64; 3],
+) -> Vec<f64> {
     let mut values = vec![0.0; pattern.nnz()];
     let (diag, edge) = (pattern.diag_slot(), pattern.edge_slot());
-    for ((fe, cot), tri) in topology
+    for (f, (fe, tri)) in topology
         .face_edges()
         .iter()
-        .zip(&geometry.face_cot)
         .zip(topology.faces())
+        .enumerate()
     {
+        let w = weights(f);
         for k in 0..3 {
-            let w = 0.5 * scale * cot[k];
             let (i, j) = (tri[(k + 1) % 3] as usize, tri[(k + 2) % 3] as usize);
-            values[edge[fe[k] as usize] as usize] -= w;
-            values[diag[i] as usize] += w;
-            values[diag[j] as usize] += w;
+            values[edge[fe[k] as usize] as usize] += w[k];
+            values[diag[i] as usize] -= w[k];
+            values[diag[j] as usize] -= w[k];
         }
     }
     values

@@ -5,10 +5,12 @@
 //! vector of values on that pattern, so a time-stepper rebuilds only values every frame and
 //! the sparse Cholesky factorization ([`PrefactoredSpd`]) reuses its symbolic analysis.
 
+pub mod aniso;
 pub mod cotan;
 pub mod pattern;
 pub mod solve;
 
+pub use aniso::{Tensor2, anisotropic_stiffness, weft_angles, weft_directions};
 pub use cotan::{add_lumped_mass, cotan_stiffness};
 pub use pattern::VertexPattern;
 pub use solve::{PrefactoredSpd, solve_spd};

@@ -1,4 +1,4 @@
-//! Implicit diffusion of a density on a deforming mesh (seed §4.3.3).
+//! Implicit diffusion of a density on a deforming mesh (seed §4.3.3–4.3.4).
 //!
 //! The density `σ` is per unit area and lives on the vertices; the stain *mass* of vertex
 //! `i` is `m_i = A_i σ_i` with `A_i` the lumped area. Liquid soaked into cloth moves with
@@ -10,8 +10,11 @@
 //! (M + h D K) σ' = m,        m_i = A_i^old σ_i,
 //! ```
 //!
-//! with `M` the lumped mass and `K` the cotan stiffness of the new geometry (module
-//! [`crate::ops::cotan`]). Because `1ᵀK = 0`, `Σ_i A_i^new σ'_i = Σ_i m_i`: mass is
+//! with `M` the lumped mass and `K` the stiffness of the new geometry: `D` times the cotan
+//! stiffness for an isotropic [`Conductivity`], or the anisotropic stiffness of a woven
+//! cloth, each face with its fabric tensor in the basis of its weft, the weft recomputed
+//! from the UV layout on the deformed face every step ([`crate::ops::aniso`]). For
+//! `(M + hDK)` the `D` is inside `K`. Because `1ᵀK = 0`, `Σ_i A_i^new σ'_i = Σ_i m_i`: mass is
 //! conserved exactly, up to the rounding of the solve, on any mesh and any motion.
 //! The scheme is unconditionally stable, so `h` can be a whole frame; sub-steps (with
 //! positions interpolated linearly between frames) follow fast deformation more closely.
@@ -29,23 +32,79 @@ use glam::DVec3;
 use crate::error::{Error, ParamError};
 use crate::mesh::geometry::check_positions;
 use crate::mesh::{Geometry, Topology};
-use crate::ops::{PrefactoredSpd, VertexPattern, add_lumped_mass, cotan_stiffness};
+use crate::ops::{
+    PrefactoredSpd, Tensor2, VertexPattern, add_lumped_mass, anisotropic_stiffness,
+    cotan_stiffness, weft_angles,
+};
 
-/// Parameters of isotropic diffusion.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct DiffusionParams {
-    /// Diffusion coefficient `D`, m²/s.
-    pub rate: f64,
+/// How fast the stain diffuses, and in which directions.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Conductivity {
+    /// The same coefficient `D` (m²/s) in every direction.
+    Isotropic(f64),
+    /// A woven cloth: per face, a tensor (m²/s) in the face's (weft, warp) basis.
+    Woven(WovenFaces),
 }
 
-impl DiffusionParams {
-    pub fn validate(&self) -> Result<(), ParamError> {
-        check_range(
-            "diffusion rate",
-            self.rate,
-            self.rate >= 0.0,
-            "finite and ≥ 0",
-        )
+/// Per-face fabric data of a woven cloth.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WovenFaces {
+    /// `[s11, s12, s22]` in the (weft, warp) basis, m²/s; symmetric positive semi-definite.
+    pub tensor: Vec<Tensor2>,
+    /// UV of each face's three corners; the weft is the UV `u` axis.
+    pub uv: Vec<[[f64; 2]; 3]>,
+    /// Angle (radians) added to the weft of each face (a fabric cut on the bias).
+    pub angle: Vec<f64>,
+}
+
+impl Conductivity {
+    fn validate(&self, n_faces: usize) -> Result<(), ParamError> {
+        match self {
+            Conductivity::Isotropic(d) => {
+                check_range("diffusion rate", *d, *d >= 0.0, "finite and ≥ 0")
+            }
+            Conductivity::Woven(w) => {
+                let lengths = [
+                    ("face tensors", w.tensor.len()),
+                    ("face UVs", w.uv.len()),
+                    ("face angles", w.angle.len()),
+                ];
+                for (name, len) in lengths {
+                    if len != n_faces {
+                        return Err(ParamError::Length {
+                            name,
+                            expected: n_faces,
+                            got: len,
+                        });
+                    }
+                }
+                for (f, &[a, b, c]) in w.tensor.iter().enumerate() {
+                    // positive semi-definite: a ≥ 0, c ≥ 0, ac ≥ b² (zero allowed: a barrier)
+                    if !(a >= 0.0 && c >= 0.0 && b.is_finite() && a * c >= b * b * (1.0 - 1e-12)) {
+                        return Err(ParamError::NotPositiveSemiDefinite {
+                            name: "face tensor",
+                            index: f,
+                        });
+                    }
+                }
+                if let Some(f) =
+                    w.uv.iter()
+                        .position(|t| t.iter().flatten().any(|x| !x.is_finite()))
+                {
+                    return Err(ParamError::NonFinite {
+                        name: "face UVs",
+                        index: f,
+                    });
+                }
+                if let Some(f) = w.angle.iter().position(|x| !x.is_finite()) {
+                    return Err(ParamError::NonFinite {
+                        name: "face angles",
+                        index: f,
+                    });
+                }
+                Ok(())
+            }
+        }
     }
 }
 
@@ -53,7 +112,8 @@ impl DiffusionParams {
 #[derive(Debug)]
 pub struct DiffusionStepper {
     topology: Topology,
-    params: DiffusionParams,
+    conductivity: Conductivity,
+    degenerate_uv_faces: usize,
     solver: PrefactoredSpd,
     positions: Vec<DVec3>,
     vertex_area: Vec<f64>,
@@ -67,10 +127,10 @@ impl DiffusionStepper {
         topology: Topology,
         positions: &[P],
         density: Vec<f64>,
-        params: DiffusionParams,
+        conductivity: Conductivity,
         par: Par,
     ) -> Result<Self, Error> {
-        params.validate()?;
+        conductivity.validate(topology.n_faces())?;
         let n = topology.n_vertices();
         if density.len() != n {
             return Err(ParamError::Length {
@@ -89,12 +149,17 @@ impl DiffusionStepper {
         }
         let geometry = Geometry::new(&topology, positions)?;
         let solver = PrefactoredSpd::new(VertexPattern::new(&topology), par)?;
+        let degenerate_uv_faces = match &conductivity {
+            Conductivity::Woven(w) => weft_angles(&topology, &geometry, &w.uv, &w.angle).1,
+            Conductivity::Isotropic(_) => 0,
+        };
         Ok(Self {
+            degenerate_uv_faces,
             loose: topology.loose_vertices(),
             positions: positions.iter().map(|&p| p.into()).collect(),
             vertex_area: geometry.vertex_area,
             topology,
-            params,
+            conductivity,
             solver,
             density,
         })
@@ -112,6 +177,12 @@ impl DiffusionStepper {
     /// Lumped area of every vertex at the current positions.
     pub fn vertex_area(&self) -> &[f64] {
         &self.vertex_area
+    }
+
+    /// Faces whose UV triangle is degenerate at the start pose (their weft falls back to an
+    /// edge direction; see [`crate::ops::aniso`]).
+    pub fn degenerate_uv_faces(&self) -> usize {
+        self.degenerate_uv_faces
     }
 
     /// Total stain mass `Σ A_i σ_i`.
@@ -160,7 +231,15 @@ impl DiffusionStepper {
     fn implicit_step(&mut self, positions: &[DVec3], h: f64) -> Result<(), Error> {
         let geometry = Geometry::new(&self.topology, positions)?;
         let pattern = self.solver.pattern();
-        let mut values = cotan_stiffness(&self.topology, &geometry, pattern, h * self.params.rate);
+        let mut values = match &self.conductivity {
+            Conductivity::Isotropic(d) => {
+                cotan_stiffness(&self.topology, &geometry, pattern, h * d)
+            }
+            Conductivity::Woven(w) => {
+                let (angle, _) = weft_angles(&self.topology, &geometry, &w.uv, &w.angle);
+                anisotropic_stiffness(&self.topology, &geometry, pattern, &angle, &w.tensor, h)
+            }
+        };
         add_lumped_mass(&geometry, pattern, 1.0, &mut values);
         let mut rhs: Vec<f64> = self
             .vertex_area

@@ -4,4 +4,4 @@
 
 pub mod diffuse;
 
-pub use diffuse::{DiffusionParams, DiffusionStepper};
+pub use diffuse::{Conductivity, DiffusionStepper, WovenFaces};
