@@ -1,8 +1,8 @@
 """Madder: stains on moving cloth. This file only registers the add-on's parts."""
 
-from . import handlers, operators, panels, properties
+from . import fabrics, handlers, operators, panels, properties
 
-_modules = (properties, operators, panels, handlers)
+_modules = (properties, fabrics, operators, panels, handlers)
 
 
 def register():

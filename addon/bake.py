@@ -7,7 +7,7 @@ import os
 import bpy
 import numpy as np
 
-from . import bridge, handlers
+from . import bridge, fabrics, handlers
 
 CACHE_EXT = ".madder"
 FIELDS = ["density"]
@@ -102,6 +102,7 @@ def bake(scene, obj, progress=None):
     n_nonmanifold = len(topology.non_manifold_edges())
     if n_nonmanifold:
         warnings.append(f"{n_nonmanifold} non-manifold edges (shared by 3+ faces)")
+    conductivity = _conductivity(madder, obj, topology, face_polygon, warnings)
 
     frame_before = scene.frame_current
     writer = None
@@ -110,7 +111,9 @@ def bake(scene, obj, progress=None):
             scene.frame_set(first)
             depsgraph = bpy.context.evaluated_depsgraph_get()
             pos = frame_positions(obj, depsgraph, n_vertices, first)
-            stepper = madder.DiffusionStepper(topology, pos, density0, settings.diffusion_rate)
+            stepper = madder.DiffusionStepper(topology, pos, density0, **conductivity)
+            if stepper.degenerate_uv_faces:
+                warnings.append(f"{stepper.degenerate_uv_faces} faces have degenerate UVs; their weft follows an edge")
             writer = madder.CacheWriter(path, n_vertices, FIELDS, first, last - first + 1)
             writer.push_frame([stepper.density])
             for frame in range(first + 1, last + 1):
@@ -135,6 +138,26 @@ def bake(scene, obj, progress=None):
     return path, warnings
 
 
+def _conductivity(madder, obj, topology, face_polygon, warnings):
+    """Keyword arguments of the stepper: isotropic `rate`, or the woven faces of the
+    materials' fabrics (then the rest-pose weft is written as `madder_weft` too)."""
+    rate = obj.madder.diffusion_rate
+    try:
+        woven = fabrics.face_conductivity(obj, rate, face_polygon)
+    except ValueError as e:
+        raise BakeError(f"'{obj.name}': {e}") from e
+    if woven is None:
+        return {"rate": rate}
+    uv = bridge.corner_uvs(obj.data)
+    if uv is None:
+        warnings.append("has no UV map to orient its fabrics: baked isotropic (add a UV map for woven spreading)")
+        return {"rate": rate}
+    tensors, angle = woven
+    weft = madder.weft_directions(topology, bridge.rest_positions(obj.data), uv, angle)
+    bridge.write_face_weft(obj.data, face_polygon, weft)
+    return {"face_tensors": tensors, "face_uv": uv, "face_angle": angle}
+
+
 def _topology(madder, obj, faces, n_vertices, face_polygon, n_polygons):
     try:
         return madder.Topology(faces, n_vertices, face_polygon, n_polygons)
@@ -150,7 +173,7 @@ def free(obj):
         os.remove(path)
     settings.cache_file = ""
     if obj.type == "MESH":
-        for name in (bridge.STAIN_ATTR, bridge.DENSITY_ATTR):
+        for name in (bridge.STAIN_ATTR, bridge.DENSITY_ATTR, bridge.WEFT_ATTR):
             attr = obj.data.attributes.get(name)
             if attr is not None:
                 obj.data.attributes.remove(attr)

@@ -5,6 +5,7 @@ import numpy as np
 
 STAIN_ATTR = "madder_stain"
 DENSITY_ATTR = "madder_density"
+WEFT_ATTR = "madder_weft"
 
 
 def topology_arrays(mesh):
@@ -16,6 +17,43 @@ def topology_arrays(mesh):
     poly = np.empty(n, dtype=np.uint32)
     mesh.loop_triangles.foreach_get("polygon_index", poly)
     return faces.reshape(n, 3), poly, len(mesh.polygons)
+
+
+def corner_uvs(mesh):
+    """UVs of each triangle's corners from the active UV map, (F, 3, 2) float32, or None
+    when the mesh has no UV map. Call after `topology_arrays` (it needs loop_triangles)."""
+    layer = mesh.uv_layers.active
+    if layer is None:
+        return None
+    uv = np.empty(2 * len(mesh.loops), dtype=np.float32)
+    layer.data.foreach_get("uv", uv)
+    loops = np.empty(3 * len(mesh.loop_triangles), dtype=np.int64)
+    mesh.loop_triangles.foreach_get("loops", loops)
+    return np.ascontiguousarray(uv.reshape(-1, 2)[loops].reshape(-1, 3, 2))
+
+
+def rest_positions(mesh):
+    """Object-space positions of the original mesh, (N, 3) float32."""
+    co = np.empty(3 * len(mesh.vertices), dtype=np.float32)
+    mesh.vertices.foreach_get("co", co)
+    return co.reshape(-1, 3)
+
+
+def write_face_weft(mesh, face_polygon, weft):
+    """Writes the per-triangle weft `weft` (F, 3) as the FACE-domain vector attribute
+    `madder_weft` (one unit vector per polygon: the normalized sum over its triangles)."""
+    per_poly = np.zeros((len(mesh.polygons), 3))
+    np.add.at(per_poly, face_polygon, weft)
+    norm = np.linalg.norm(per_poly, axis=1, keepdims=True)
+    per_poly = np.divide(per_poly, norm, out=np.zeros_like(per_poly), where=norm > 0).astype(np.float32)
+    attr = mesh.attributes.get(WEFT_ATTR)
+    if attr is not None and (attr.data_type != "FLOAT_VECTOR" or attr.domain != "FACE"):
+        mesh.attributes.remove(attr)
+        attr = None
+    if attr is None:
+        attr = mesh.attributes.new(WEFT_ATTR, "FLOAT_VECTOR", "FACE")
+    attr.data.foreach_set("vector", per_poly.ravel())
+    mesh.update()
 
 
 def world_positions(obj_eval):

@@ -2,6 +2,8 @@
 
 import bpy
 
+from . import fabrics
+
 
 class MADDER_PT_stain(bpy.types.Panel):
     bl_label = "Madder Stain"
@@ -35,9 +37,67 @@ class MADDER_PT_stain(bpy.types.Panel):
             layout.label(text=f"Baked: {s.cache_file}", icon="CHECKMARK")
 
 
+# cell kind → icon for the tile preview (up and down of a thread share its colour)
+_CELL_ICONS = {"W": "SEQUENCE_COLOR_01", "w": "SEQUENCE_COLOR_02", "F": "SEQUENCE_COLOR_05",
+               "f": "SEQUENCE_COLOR_06", ".": "SEQUENCE_COLOR_09"}
+_MAX_PREVIEW = 16
+
+
+class MADDER_PT_fabric(bpy.types.Panel):
+    bl_label = "Madder Fabric"
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "material"
+
+    @classmethod
+    def poll(cls, context):
+        return context.material is not None
+
+    def draw_header(self, context):
+        self.layout.prop(context.material.madder_fabric, "enabled", text="")
+
+    def draw(self, context):
+        fab = context.material.madder_fabric
+        layout = self.layout
+        layout.use_property_split = True
+        layout.active = fab.enabled
+        layout.prop(fab, "weave")
+        if fab.weave == "CUSTOM":
+            layout.prop(fab, "grid")
+        else:
+            layout.prop(fab, "gaps")
+        layout.prop(fab, "speed")
+        layout.prop(fab, "angle")
+        col = layout.column(heading="Permeability", align=True)
+        for pair in fabrics.PAIRS:
+            col.prop(fab, pair)
+        result, error = fabrics.describe(fab)
+        if error:
+            layout.label(text=error, icon="ERROR")
+            return
+        ratio, angle = result
+        layout.label(text=f"Spreads {ratio:.2f}× faster along {angle:+.0f}° from the weft", icon="MOD_CLOTH")
+        try:
+            rows = fabrics.tile_rows(fab)
+        except Exception as e:
+            layout.label(text=str(e), icon="ERROR")
+            return
+        box = layout.box()
+        box.label(text="Tile (red: warp, blue: weft, grey: gap)")
+        grid = box.grid_flow(row_major=True, columns=min(len(rows[0]), _MAX_PREVIEW), even_columns=True, align=True)
+        for row in rows[:_MAX_PREVIEW]:
+            for cell in row[:_MAX_PREVIEW]:
+                grid.label(text="", icon=_CELL_ICONS.get(cell, "QUESTION"))
+
+
+classes = (MADDER_PT_stain, MADDER_PT_fabric)
+
+
 def register():
-    bpy.utils.register_class(MADDER_PT_stain)
+    for c in classes:
+        bpy.utils.register_class(c)
 
 
 def unregister():
-    bpy.utils.unregister_class(MADDER_PT_stain)
+    for c in reversed(classes):
+        bpy.utils.unregister_class(c)

@@ -4,6 +4,7 @@
 //! MadderError
 //! ├── MeshError       (also a ValueError)  bad topology or positions; names face/vertex
 //! ├── ParameterError  (also a ValueError)  out-of-range parameters
+//! ├── FabricError     (also a ValueError)  a weave or cell tensor is invalid; names the cell
 //! ├── SolveError                           a linear solve failed
 //! └── CacheError      (also an OSError)    cache file missing, truncated or corrupt
 //! ```
@@ -25,6 +26,7 @@ import_exception!(madder._errors, MeshError);
 import_exception!(madder._errors, ParameterError);
 import_exception!(madder._errors, SolveError);
 import_exception!(madder._errors, CacheError);
+import_exception!(madder._errors, FabricError);
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("MadderError", m.py().get_type::<MadderError>())
@@ -39,5 +41,6 @@ pub fn to_py(e: impl Into<madder::Error>) -> PyErr {
         madder::Error::Param(_) => ParameterError::new_err(msg),
         madder::Error::Solve(_) => SolveError::new_err(msg),
         madder::Error::Cache(_) => CacheError::new_err(msg),
+        madder::Error::Weave(_) => FabricError::new_err(msg),
     }
 }

@@ -11,14 +11,17 @@ mod errors;
 mod io;
 mod mesh;
 mod stain;
+mod weave;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     errors::register(m)?;
     m.add_class::<mesh::Topology>()?;
+    m.add_function(wrap_pyfunction!(mesh::weft_directions, m)?)?;
     m.add_class::<stain::DiffusionStepper>()?;
     m.add_class::<io::CacheWriter>()?;
     m.add_class::<io::CacheReader>()?;
+    weave::register(m)?;
     Ok(())
 }

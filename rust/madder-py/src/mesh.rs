@@ -119,3 +119,50 @@ pub fn points(a: &PyReadonlyArray2<'_, f32>) -> PyResult<Vec<glam::Vec3>> {
         .map(|r| glam::Vec3::new(r[0], r[1], r[2]))
         .collect())
 }
+
+/// Weft direction of every triangle at `positions`, as `(F, 3)` float32 unit vectors: the
+/// UV u axis on the surface (`face_uv` `(F, 3, 2)` float32), turned by `face_angle`
+/// radians about the face normal.
+#[pyfunction]
+#[pyo3(signature = (topology, positions, face_uv, face_angle=None))]
+pub fn weft_directions<'py>(
+    py: Python<'py>,
+    topology: &Topology,
+    positions: PyReadonlyArray2<'py, f32>,
+    face_uv: numpy::PyReadonlyArray3<'py, f32>,
+    face_angle: Option<PyReadonlyArray1<'py, f32>>,
+) -> PyResult<Bound<'py, PyArray2<f32>>> {
+    let pos: Vec<glam::DVec3> = points(&positions)?
+        .into_iter()
+        .map(glam::DVec3::from)
+        .collect();
+    let t = &topology.inner;
+    madder::mesh::geometry::check_positions(t, &pos).map_err(to_py)?;
+    let uv = face_uv.as_array();
+    if uv.shape() != [t.n_faces(), 3, 2] {
+        return Err(ParameterError::new_err(format!(
+            "face_uv must have shape ({}, 3, 2), got {:?}",
+            t.n_faces(),
+            uv.shape()
+        )));
+    }
+    let uv: Vec<[[f64; 2]; 3]> = (0..t.n_faces())
+        .map(|f| std::array::from_fn(|k| [uv[[f, k, 0]] as f64, uv[[f, k, 1]] as f64]))
+        .collect();
+    let angle: Vec<f64> = match face_angle {
+        Some(a) => a.as_array().iter().map(|&x| x as f64).collect(),
+        None => vec![0.0; t.n_faces()],
+    };
+    if angle.len() != t.n_faces() {
+        return Err(ParameterError::new_err(format!(
+            "face_angle must have {} values",
+            t.n_faces()
+        )));
+    }
+    let w = py.detach(|| madder::ops::weft_directions(t, &pos, &uv, &angle));
+    let flat: Vec<f32> = w
+        .iter()
+        .flat_map(|v| [v.x as f32, v.y as f32, v.z as f32])
+        .collect();
+    PyArray1::from_vec(py, flat).reshape([w.len(), 3])
+}

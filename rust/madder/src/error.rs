@@ -89,6 +89,76 @@ pub enum CacheError {
     Usage { reason: String },
 }
 
+/// Bad weave input or a failed homogenization (module [`crate::weave`]). Cells are named by
+/// tile `row` (0 = bottom, the `y = 0` edge) and `col` (0 = left); lines of a text grid by
+/// their 1-based `line` counted from the top, as an editor shows them.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum WeaveError {
+    #[error("the weave tile is empty (it needs at least one row and one column of cells)")]
+    EmptyTile,
+    #[error("a {width}×{height} weave tile needs {expected} cells, got {got}")]
+    CellCount {
+        width: usize,
+        height: usize,
+        expected: usize,
+        got: usize,
+    },
+    #[error(
+        "weave grid line {line} has {got} cells, but the lines above have {expected} (every line is one row of the tile)"
+    )]
+    RaggedRow {
+        line: usize,
+        expected: usize,
+        got: usize,
+    },
+    #[error(
+        "weave grid line {line}, character {column}: {ch:?} is not a cell (W warp up, w warp down, F weft up, f weft down, . gap)"
+    )]
+    UnknownCell {
+        line: usize,
+        column: usize,
+        ch: char,
+    },
+    #[error("pair coefficient {pair} must be finite and > 0, got {value}")]
+    NonPositiveCoefficient { pair: &'static str, value: f64 },
+    #[error(
+        "cell (row {row}, column {col}) borders a {pair} pair, whose coefficient must be finite and > 0, got {value}"
+    )]
+    CellCoefficient {
+        row: usize,
+        col: usize,
+        pair: &'static str,
+        value: f64,
+    },
+    #[error(
+        "cell (row {row}, column {col}) has diffusion tensor [s11 {s11}, s12 {s12}, s22 {s22}], which is not symmetric positive definite (needs finite entries, s11 > 0 and s11·s22 − s12² > 0)"
+    )]
+    NotPositiveDefinite {
+        row: usize,
+        col: usize,
+        s11: f64,
+        s12: f64,
+        s22: f64,
+    },
+    #[error(
+        "the tile's diffusion tensors span a contrast of {ratio:.3e} (largest over smallest eigenvalue; the smallest is in cell (row {row}, column {col})), beyond the {limit:.0e} that double precision can homogenize"
+    )]
+    Contrast {
+        ratio: f64,
+        limit: f64,
+        row: usize,
+        col: usize,
+    },
+    #[error("homogenization option {name} must be {requirement}, got {value}")]
+    Option {
+        name: &'static str,
+        requirement: &'static str,
+        value: f64,
+    },
+    #[error("homogenization: {0}")]
+    Solve(#[from] SolveError),
+}
+
 /// Any core error. The binding crate maps each variant to a typed Python exception.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
@@ -100,6 +170,8 @@ pub enum Error {
     Solve(#[from] SolveError),
     #[error(transparent)]
     Cache(#[from] CacheError),
+    #[error(transparent)]
+    Weave(#[from] WeaveError),
 }
 
 pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -8,6 +8,8 @@
 //! - [`ops`]: discrete operators on that geometry (cotan stiffness, lumped mass, §4.3.3)
 //!   and a prefactored sparse SPD solver that reuses its symbolic analysis across frames.
 //! - [`stain`]: the stain simulator (§4.3.3 implicit diffusion for now).
+//! - [`weave`]: weave patterns (§2.2.1) and their homogenization into one effective 2×2
+//!   diffusion tensor per fabric (§2.2.2, eqs. 2.3–2.4).
 //! - [`io`]: the Madder cache file.
 //!
 //! Conventions: `f64` inside solves, `f32` for bulk arrays at the boundary, `u32` indices;
@@ -19,5 +21,6 @@ pub mod io;
 pub mod mesh;
 pub mod ops;
 pub mod stain;
+pub mod weave;
 
-pub use error::{CacheError, Error, MeshError, ParamError, Result, SolveError};
+pub use error::{CacheError, Error, MeshError, ParamError, Result, SolveError, WeaveError};

@@ -11,8 +11,13 @@ from ._core import (
     MadderError,
     Topology,
     __version__,
+    ellipse,
+    fabric_tensor,
+    fabric_tile,
+    homogenize,
+    weft_directions,
 )
-from ._errors import CacheError, MeshError, ParameterError, SolveError
+from ._errors import CacheError, FabricError, MeshError, ParameterError, SolveError
 from .arrays import as_faces, as_positions
 
 __all__ = [
@@ -20,6 +25,7 @@ __all__ = [
     "CacheReader",
     "CacheWriter",
     "DiffusionStepper",
+    "FabricError",
     "MadderError",
     "MeshError",
     "ParameterError",
@@ -28,4 +34,9 @@ __all__ = [
     "__version__",
     "as_faces",
     "as_positions",
+    "ellipse",
+    "fabric_tensor",
+    "fabric_tile",
+    "homogenize",
+    "weft_directions",
 ]

@@ -17,3 +17,7 @@ class SolveError(MadderError):
 
 class CacheError(MadderError, OSError):
     """A cache file is missing, truncated or corrupt: the message names file and frame."""
+
+
+class FabricError(MadderError, ValueError):
+    """A weave tile or cell tensor is invalid: the message names the cell."""

@@ -2,8 +2,12 @@
 //! with every frame of its motion ([`Geometry`]). Keeping them apart is what lets the
 //! simulator build sparse patterns and symbolic factorizations once per bake.
 
+pub mod frames;
 pub mod geometry;
+pub mod kabsch;
 pub mod topology;
 
+pub use frames::{Connection, FanKind, OneRings, VertexFrames, Wedge};
 pub use geometry::Geometry;
+pub use kabsch::one_ring_rotations;
 pub use topology::{EdgeKind, Topology};

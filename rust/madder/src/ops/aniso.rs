@@ -77,18 +77,21 @@ pub fn weft_angles(
     (angles, degenerate)
 }
 
-/// 3-D weft direction of every face at `positions` (unit vectors; the edge 0→1 direction
-/// for faces with degenerate UVs). For showing the weft to users.
+/// 3-D weft direction of every face at `positions`, rotated by `offset[f]` about the face
+/// normal (unit vectors; the edge 0→1 direction for faces with degenerate UVs). For
+/// showing the weft to users.
 pub fn weft_directions(
     topology: &Topology,
     positions: &[DVec3],
     uv: &[[[f64; 2]; 3]],
+    offset: &[f64],
 ) -> Vec<DVec3> {
     topology
         .faces()
         .iter()
         .zip(uv)
-        .map(|(tri, uv)| {
+        .zip(offset)
+        .map(|((tri, uv), &angle)| {
             let p = tri.map(|v| positions[v as usize]);
             let u = uv.map(DVec2::from_array);
             let (a, b) = (u[1] - u[0], u[2] - u[0]);
@@ -97,8 +100,11 @@ pub fn weft_directions(
                 ((p[1] - p[0]) * b.y - (p[2] - p[0]) * a.y) / det
             } else {
                 p[1] - p[0]
-            };
-            w.normalize_or_zero()
+            }
+            .normalize_or_zero();
+            let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+            let (s, c) = angle.sin_cos();
+            c * w + s * n.cross(w)
         })
         .collect()
 }
@@ -199,8 +205,12 @@ mod tests {
                 .all(|v| v.abs() < 1e-13)
         );
         // the weft points along +x in 3-D
-        for w in weft_directions(&t, &p, &uv) {
+        for w in weft_directions(&t, &p, &uv, &[0.0; 5]) {
             assert!((w - DVec3::X).length() < 1e-12);
+        }
+        // a quarter-turn offset turns it to +y (faces are counter-clockwise seen from +z)
+        for w in weft_directions(&t, &p, &uv, &[std::f64::consts::FRAC_PI_2; 5]) {
+            assert!((w - DVec3::Y).length() < 1e-12);
         }
     }
 

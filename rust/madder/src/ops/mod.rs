@@ -6,11 +6,15 @@
 //! the sparse Cholesky factorization ([`PrefactoredSpd`]) reuses its symbolic analysis.
 
 pub mod aniso;
+pub mod connection;
 pub mod cotan;
 pub mod pattern;
 pub mod solve;
 
 pub use aniso::{Tensor2, anisotropic_stiffness, weft_angles, weft_directions};
+pub use connection::{
+    BochnerPattern, BochnerSystem, add_lumped_mass_blocks, bochner_stiffness, diffuse_tangent_field,
+};
 pub use cotan::{add_lumped_mass, cotan_stiffness};
 pub use pattern::VertexPattern;
-pub use solve::{PrefactoredSpd, solve_spd};
+pub use solve::{LowerCsc, PrefactoredSpd, solve_spd};

@@ -1,0 +1,144 @@
+"""Fabrics: a Madder fabric on each material, and the per-face conductivity of a cloth.
+
+Each material can carry a woven fabric (a built-in weave or a custom cell grid, with the
+seed's pair coefficients, ch. 2.2.1). Its effective tensor comes from homogenizing the
+tile (Rust, cached there). The tensor gives the *shape* of the spreading (ratio and angle
+of its ellipse): it is normalized to mean eigenvalue 1, then scaled by the object's
+Diffusion rate and the fabric's relative Speed, so one fabric can spread faster than
+another. Every face uses its material's fabric and orients it by its UV layout."""
+
+import math
+
+import bpy
+import numpy as np
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, PointerProperty, StringProperty
+
+WEAVES = [
+    ("PLAIN", "Plain", "Over one, under one"),
+    ("TWILL21", "Twill 2/1", "Diagonal ribs, weft over two"),
+    ("TWILL31", "Twill 3/1", "Denim-like diagonal ribs"),
+    ("SATIN5", "Satin (5-harness)", "Long floats, smooth face"),
+    ("BASKET", "Basket", "Pairs of threads interlaced"),
+    ("CUSTOM", "Custom", "Your own cell grid"),
+]
+PAIRS = ("gap_gap", "weft_weft", "warp_warp", "gap_weft", "gap_warp", "weft_warp")
+PAIR_DEFAULTS = dict(gap_gap=1.0, weft_weft=100.0, warp_warp=500.0, gap_weft=10.0, gap_warp=50.0, weft_warp=200.0)
+
+
+def _coefficient(pair):
+    a, b = pair.split("_")
+    return FloatProperty(
+        name=f"{a.title()}–{b.title()}",
+        description=f"Relative permeability between a {a} cell and a {b} cell",
+        default=PAIR_DEFAULTS[pair],
+        min=0.0,
+        soft_max=1000.0,
+    )
+
+
+class MadderFabric(bpy.types.PropertyGroup):
+    enabled: BoolProperty(
+        name="Madder Fabric",
+        description="Faces with this material are woven: the stain spreads along the threads",
+        default=False,
+    )
+    weave: EnumProperty(name="Weave", items=WEAVES, default="PLAIN")
+    gaps: BoolProperty(
+        name="Gaps",
+        description="Leave gap cells between the yarns of a built-in weave (an open weave)",
+        default=True,
+    )
+    grid: StringProperty(
+        name="Grid",
+        description="Custom tile, rows separated by '/', top row first: W/w warp up/down, "
+        "F/f weft up/down, . gap (e.g. 'Wf/fW')",
+        default="Wf/fW",
+    )
+    gap_gap: _coefficient("gap_gap")
+    weft_weft: _coefficient("weft_weft")
+    warp_warp: _coefficient("warp_warp")
+    gap_weft: _coefficient("gap_weft")
+    gap_warp: _coefficient("gap_warp")
+    weft_warp: _coefficient("weft_warp")
+    speed: FloatProperty(
+        name="Speed",
+        description="How fast this fabric spreads relative to the object's Diffusion rate",
+        default=1.0,
+        min=0.0,
+        soft_max=10.0,
+    )
+    angle: FloatProperty(
+        name="Weft Angle",
+        description="Rotates the weft away from the UV u axis (a fabric cut on the bias)",
+        subtype="ANGLE",
+        default=0.0,
+    )
+
+
+def fabric_key(fabric):
+    """The inputs of the homogenization, as keyword arguments of `madder.fabric_tensor`."""
+    grid = fabric.grid.replace("/", "\n") if fabric.weave == "CUSTOM" else None
+    return dict(weave=fabric.weave, grid=grid, gaps=fabric.gaps, coefficients=tuple(getattr(fabric, p) for p in PAIRS))
+
+
+def effective_tensor(fabric):
+    """Homogenized tensor `[s11, s12, s22]` (weft, warp basis) of the fabric's tile,
+    normalized to mean eigenvalue 1."""
+    import madder
+
+    t = np.asarray(madder.fabric_tensor(**fabric_key(fabric)), dtype=np.float64)
+    return t / (0.5 * (t[0] + t[2]))
+
+
+def face_conductivity(obj, rate, face_polygon):
+    """Per-triangle tensors (F, 3) in m²/s and weft offsets (F,), or None when no material
+    of `obj` has a fabric (the cloth is then isotropic). Raises ValueError naming the
+    material whose fabric is invalid."""
+    mesh = obj.data
+    slots = [s.material for s in obj.material_slots]
+    fabrics = [m.madder_fabric if (m is not None and m.madder_fabric.enabled) else None for m in slots]
+    if not any(fabrics):
+        return None
+    per_slot = np.tile(np.array([rate, 0.0, rate]), (max(len(slots), 1), 1))
+    angle = np.zeros(max(len(slots), 1))
+    for i, fab in enumerate(fabrics):
+        if fab is None:
+            continue
+        try:
+            per_slot[i] = effective_tensor(fab) * rate * fab.speed
+        except Exception as e:
+            raise ValueError(f"material '{slots[i].name}': {e}") from e
+        angle[i] = fab.angle
+    poly_mat = np.empty(len(mesh.polygons), dtype=np.int64)
+    mesh.polygons.foreach_get("material_index", poly_mat)
+    slot = np.clip(poly_mat[face_polygon], 0, len(per_slot) - 1)
+    return per_slot[slot], angle[slot].astype(np.float32)
+
+
+def tile_rows(fabric):
+    """The fabric's tile as rows of characters (top row first), for drawing."""
+    import madder
+
+    key = fabric_key(fabric)
+    return madder.fabric_tile(key["weave"], grid=key["grid"], gaps=key["gaps"])
+
+
+def describe(fabric):
+    """'ratio 3.2 at 0°' for the panel, or the error message."""
+    import madder
+
+    try:
+        ratio, angle = madder.ellipse(effective_tensor(fabric))
+    except Exception as e:
+        return None, str(e)
+    return (ratio, math.degrees(angle)), None
+
+
+def register():
+    bpy.utils.register_class(MadderFabric)
+    bpy.types.Material.madder_fabric = PointerProperty(type=MadderFabric)
+
+
+def unregister():
+    del bpy.types.Material.madder_fabric
+    bpy.utils.unregister_class(MadderFabric)

@@ -1,0 +1,126 @@
+//! Fabrics: weave tiles and their homogenized tensors (core module `weave`).
+
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray3};
+use pyo3::prelude::*;
+
+use crate::errors::{ParameterError, to_py};
+use madder::weave::{PairCoefficients, Tile, Weave};
+
+fn weave_kind(name: &str) -> PyResult<Option<Weave>> {
+    Ok(Some(match name.to_ascii_uppercase().as_str() {
+        "PLAIN" => Weave::Plain,
+        "TWILL21" => Weave::Twill21,
+        "TWILL31" => Weave::Twill31,
+        "SATIN5" => Weave::Satin5,
+        "BASKET" => Weave::Basket,
+        "CUSTOM" => return Ok(None),
+        other => {
+            return Err(ParameterError::new_err(format!(
+                "unknown weave '{other}' (PLAIN, TWILL21, TWILL31, SATIN5, BASKET or CUSTOM)"
+            )));
+        }
+    }))
+}
+
+/// The tile of a built-in weave, or of a custom `grid` (lines top row first: `W`/`w`
+/// warp up/down, `F`/`f` weft up/down, `.` gap).
+fn tile(weave: &str, grid: Option<&str>, gaps: bool) -> PyResult<Tile> {
+    match (weave_kind(weave)?, grid) {
+        (Some(w), _) => Ok(Tile::builtin(w, gaps)),
+        (None, Some(g)) => Tile::parse(g).map_err(to_py),
+        (None, None) => Err(ParameterError::new_err("a CUSTOM weave needs a grid")),
+    }
+}
+
+fn coefficients(c: Option<[f64; 6]>) -> PairCoefficients {
+    match c {
+        None => PairCoefficients::default(),
+        Some([gap_gap, weft_weft, warp_warp, gap_weft, gap_warp, weft_warp]) => PairCoefficients {
+            gap_gap,
+            weft_weft,
+            warp_warp,
+            gap_weft,
+            gap_warp,
+            weft_warp,
+        },
+    }
+}
+
+/// Rows of a weave's tile as text, top row first.
+#[pyfunction]
+#[pyo3(signature = (weave, grid=None, gaps=true))]
+pub fn fabric_tile(weave: &str, grid: Option<&str>, gaps: bool) -> PyResult<Vec<String>> {
+    let t = tile(weave, grid, gaps)?;
+    let (w, h) = (t.width(), t.height());
+    Ok((0..h)
+        .rev()
+        .map(|r| {
+            t.cells()[r * w..(r + 1) * w]
+                .iter()
+                .map(|c| c.to_char())
+                .collect()
+        })
+        .collect())
+}
+
+/// Effective (homogenized) tensor `[s11, s12, s22]` of a weave in the (weft, warp) basis,
+/// from the pair `coefficients` (gap–gap, weft–weft, warp–warp, gap–weft, gap–warp,
+/// weft–warp; the seed's table when omitted). Results are cached in the core.
+#[pyfunction]
+#[pyo3(signature = (weave, grid=None, coefficients=None, gaps=true))]
+pub fn fabric_tensor<'py>(
+    py: Python<'py>,
+    weave: &str,
+    grid: Option<&str>,
+    coefficients: Option<[f64; 6]>,
+    gaps: bool,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let t = tile(weave, grid, gaps)?;
+    let cells =
+        madder::weave::cell_tensors(&t, &self::coefficients(coefficients)).map_err(to_py)?;
+    let eff = py
+        .detach(|| madder::weave::homogenize_cached(t.width(), t.height(), &cells))
+        .map_err(to_py)?;
+    Ok(PyArray1::from_vec(py, eff.to_vec()))
+}
+
+/// Effective tensor of a tile of per-cell tensors, `tensors` `(H, W, 3)` float64, row 0
+/// at the bottom (y = 0).
+#[pyfunction]
+pub fn homogenize<'py>(
+    py: Python<'py>,
+    tensors: PyReadonlyArray3<'py, f64>,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let a = tensors.as_array();
+    let &[h, w, k] = a.shape() else {
+        unreachable!()
+    };
+    if k != 3 {
+        return Err(ParameterError::new_err(format!(
+            "tensors must have shape (H, W, 3), got {:?}",
+            a.shape()
+        )));
+    }
+    let cells: Vec<[f64; 3]> = (0..h * w)
+        .map(|i| std::array::from_fn(|c| a[[i / w, i % w, c]]))
+        .collect();
+    let eff = py
+        .detach(|| madder::weave::homogenize_cached(w, h, &cells))
+        .map_err(to_py)?;
+    Ok(PyArray1::from_vec(py, eff.to_vec()))
+}
+
+/// `(ratio, angle)` of a tensor's ellipse: major/minor eigenvalue ratio and the angle of
+/// the major axis from the weft, radians.
+#[pyfunction]
+pub fn ellipse(tensor: [f64; 3]) -> (f64, f64) {
+    madder::weave::ellipse(tensor)
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(fabric_tile, m)?)?;
+    m.add_function(wrap_pyfunction!(fabric_tensor, m)?)?;
+    m.add_function(wrap_pyfunction!(homogenize, m)?)?;
+    m.add_function(wrap_pyfunction!(ellipse, m)?)?;
+    Ok(())
+}
