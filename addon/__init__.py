@@ -1,8 +1,8 @@
 """Madder: stains on moving cloth. This file only registers the add-on's parts."""
 
-from . import fabrics, handlers, operators, panels, properties
+from . import cli, fabrics, handlers, operators, panels, properties
 
-_modules = (properties, fabrics, operators, panels, handlers)
+_modules = (properties, fabrics, operators, panels, handlers, cli)
 
 
 def register():

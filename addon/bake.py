@@ -74,68 +74,125 @@ def frame_positions(obj, depsgraph, n_vertices, frame):
     return pos
 
 
-def bake(scene, obj, progress=None):
-    """Bakes `obj` over the scene's frame range. Returns `(path, warnings)`.
+class BakeJob:
+    """One object's bake, advanced a frame at a time, so that a modal operator can show
+    progress and cancel between frames, and a script can simply run it to the end.
 
-    `progress(done, total)` is called after every frame. On any error the cache writer is
-    aborted, so the previous cache file (if any) is left as it was."""
-    madder = core()
-    check_object(obj)
-    settings = obj.madder
-    path = cache_path(obj)
-    try:
-        os.makedirs(os.path.dirname(path), exist_ok=True)
-    except OSError as e:
-        raise BakeError(f"'{obj.name}': cannot create the cache folder {os.path.dirname(path)}: {e}") from e
+    Lifecycle: `BakeJob(scene, obj)` checks the input and prepares the topology and the
+    fabric (nothing is written yet); `step()` bakes the next frame and returns False when
+    every frame is done; `finish()` moves the new cache over the old one and records it;
+    `cancel()` (or any error) discards the new cache, so the previous bake stays. Both
+    restore the frame the user was on. Playback is suspended while the job is open.
+    """
 
-    first, last = scene.frame_start, scene.frame_end
-    fps = scene.render.fps / scene.render.fps_base
-    mesh = obj.data
-    faces, face_polygon, n_polygons = bridge.topology_arrays(mesh)
-    n_vertices = len(mesh.vertices)
-    if len(faces) == 0:
-        raise BakeError(f"'{obj.name}' has no faces")
-    density0 = bridge.vertex_group_weights(obj, settings.source_group) * np.float32(settings.amount)
+    def __init__(self, scene, obj, frames=None):
+        self.madder = core()
+        check_object(obj)
+        self.scene, self.obj = scene, obj
+        self.path = cache_path(obj)
+        try:
+            os.makedirs(os.path.dirname(self.path), exist_ok=True)
+        except OSError as e:
+            raise BakeError(f"'{obj.name}': cannot create the cache folder {os.path.dirname(self.path)}: {e}") from e
+        self.first, self.last = frames or (scene.frame_start, scene.frame_end)
+        if self.last < self.first:
+            raise BakeError(f"'{obj.name}': the frame range {self.first}-{self.last} is empty")
+        self.dt = scene.render.fps_base / scene.render.fps
+        mesh = obj.data
+        faces, face_polygon, n_polygons = bridge.topology_arrays(mesh)
+        self.n_vertices = len(mesh.vertices)
+        if len(faces) == 0:
+            raise BakeError(f"'{obj.name}' has no faces")
+        settings = obj.madder
+        self.density0 = bridge.vertex_group_weights(obj, settings.source_group) * np.float32(settings.amount)
+        self.topology = _topology(self.madder, obj, faces, self.n_vertices, face_polygon, n_polygons)
+        self.warnings = []
+        n_nonmanifold = len(self.topology.non_manifold_edges())
+        if n_nonmanifold:
+            self.warnings.append(f"{n_nonmanifold} non-manifold edges (shared by 3+ faces)")
+        self.conductivity = _conductivity(self.madder, obj, self.topology, face_polygon, self.warnings)
+        self.frame = None  # last frame baked
+        self.frame_before = scene.frame_current
+        self.writer = self.stepper = None
+        self._suspend = None
 
-    topology = _topology(madder, obj, faces, n_vertices, face_polygon, n_polygons)
-    warnings = []
-    n_nonmanifold = len(topology.non_manifold_edges())
-    if n_nonmanifold:
-        warnings.append(f"{n_nonmanifold} non-manifold edges (shared by 3+ faces)")
-    conductivity = _conductivity(madder, obj, topology, face_polygon, warnings)
+    @property
+    def total(self):
+        return self.last - self.first + 1
 
-    frame_before = scene.frame_current
-    writer = None
-    try:
-        with handlers.suspended():
-            scene.frame_set(first)
-            depsgraph = bpy.context.evaluated_depsgraph_get()
-            pos = frame_positions(obj, depsgraph, n_vertices, first)
-            stepper = madder.DiffusionStepper(topology, pos, density0, **conductivity)
-            if stepper.degenerate_uv_faces:
-                warnings.append(f"{stepper.degenerate_uv_faces} faces have degenerate UVs; their weft follows an edge")
-            writer = madder.CacheWriter(path, n_vertices, FIELDS, first, last - first + 1)
-            writer.push_frame([stepper.density])
-            for frame in range(first + 1, last + 1):
+    @property
+    def done(self):
+        return 0 if self.frame is None else self.frame - self.first + 1
+
+    def step(self):
+        """Bakes the next frame; returns False once the last frame is in."""
+        madder, obj, scene = self.madder, self.obj, self.scene
+        try:
+            if self.frame is None:
+                self._suspend = handlers.suspended()
+                self._suspend.__enter__()
+                frame = self.first
                 scene.frame_set(frame)
-                pos = frame_positions(obj, depsgraph, n_vertices, frame)
-                try:
-                    stepper.step(pos, 1.0 / fps, settings.substeps)
-                except madder.MadderError as e:
-                    raise BakeError(f"'{obj.name}' at frame {frame}: {e}") from e
-                writer.push_frame([stepper.density])
-                if progress:
-                    progress(frame - first, last - first)
-            writer.finish()
-            writer = None
-    except madder.MadderError as e:
-        raise BakeError(f"'{obj.name}': {e}") from e
-    finally:
-        if writer is not None:
-            writer.abort()
-        scene.frame_set(frame_before)
-    settings.cache_file = stored_path(path)
-    return path, warnings
+                pos = self._positions(frame)
+                self.stepper = madder.DiffusionStepper(self.topology, pos, self.density0, **self.conductivity)
+                if self.stepper.degenerate_uv_faces:
+                    self.warnings.append(
+                        f"{self.stepper.degenerate_uv_faces} faces have degenerate UVs; their weft follows an edge"
+                    )
+                self.writer = madder.CacheWriter(self.path, self.n_vertices, FIELDS, self.first, self.total)
+            else:
+                frame = self.frame + 1
+                scene.frame_set(frame)
+                self.stepper.step(self._positions(frame), self.dt, obj.madder.substeps)
+            self.writer.push_frame([self.stepper.density])
+            self.frame = frame
+        except madder.MadderError as e:
+            self.cancel()
+            raise BakeError(f"'{obj.name}' at frame {self.first if self.frame is None else self.frame + 1}: {e}") from e
+        except BaseException:
+            self.cancel()
+            raise
+        return self.frame < self.last
+
+    def _positions(self, frame):
+        return frame_positions(self.obj, bpy.context.evaluated_depsgraph_get(), self.n_vertices, frame)
+
+    def finish(self):
+        """Replaces the previous cache with the new one; returns its path."""
+        try:
+            self.writer.finish()
+        except self.madder.MadderError as e:
+            self.cancel()
+            raise BakeError(f"'{self.obj.name}': {e}") from e
+        self.writer = None
+        self._close()
+        self.obj.madder.cache_file = stored_path(self.path)
+        return self.path
+
+    def cancel(self):
+        """Discards the new cache (the previous one stays) and restores the frame."""
+        if self.writer is not None:
+            self.writer.abort()
+            self.writer = None
+        self._close()
+
+    def _close(self):
+        if self._suspend is not None:
+            self._suspend.__exit__(None, None, None)
+            self._suspend = None
+            self.scene.frame_set(self.frame_before)
+
+
+def bake(scene, obj, progress=None, frames=None):
+    """Bakes `obj` over the scene's frame range (or `frames=(first, last)`) to the end.
+    Returns `(path, warnings)`. `progress(done, total)` is called after every frame."""
+    job = BakeJob(scene, obj, frames)
+    more = True
+    while more:
+        more = job.step()
+        if progress:
+            progress(job.done, job.total)
+    return job.finish(), job.warnings
 
 
 def _conductivity(madder, obj, topology, face_polygon, warnings):

@@ -1,39 +1,113 @@
-"""Madder's operators. Thin: they check the context, call `bake`, and report."""
+"""Madder's operators. Thin: they pick the objects, drive `bake.BakeJob`s, and report.
+
+Baking runs modal when invoked from the UI (a timer advances one frame per tick, the
+progress bar and status text show how far it is, Esc cancels and keeps the previous
+bake) and blocking when executed from a script or in background mode."""
 
 import bpy
+from bpy.props import BoolProperty
 
 from . import bake, handlers
 
 
+def _targets(context, all_objects):
+    if all_objects:
+        objs = [o for o in context.scene.objects if o.type == "MESH" and o.madder.enabled]
+        if not objs:
+            raise bake.BakeError("no object in the scene has Madder Stain enabled")
+        return objs
+    return [context.object]
+
+
 class MADDER_OT_bake(bpy.types.Operator):
-    """Simulate the stain over the scene's frame range and write it to the cache"""
+    """Simulate the stain over the scene's frame range and write it to the cache (Esc cancels)"""
 
     bl_idname = "madder.bake"
     bl_label = "Bake Stain"
     bl_options = {"REGISTER", "UNDO"}
 
+    all_objects: BoolProperty(
+        name="All Objects",
+        description="Bake every object of the scene that has Madder Stain enabled",
+        default=False,
+    )
+
     @classmethod
     def poll(cls, context):
-        return context.object is not None
+        return context.scene is not None
 
+    # -- blocking: scripts, background mode, the command line
     def execute(self, context):
-        obj = context.object
-        wm = context.window_manager
-        total = max(context.scene.frame_end - context.scene.frame_start, 1)
-        wm.progress_begin(0, total)
         try:
-            path, warnings = bake.bake(context.scene, obj, progress=lambda done, _: wm.progress_update(done))
+            for obj in _targets(context, self.all_objects):
+                path, warnings = bake.bake(context.scene, obj)
+                self._done(context, obj, path, warnings)
         except bake.BakeError as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
-        finally:
-            wm.progress_end()
+        return {"FINISHED"}
+
+    # -- modal: the UI
+    def invoke(self, context, event):
+        if context.window_manager is None or not context.window:
+            return self.execute(context)
+        try:
+            self._queue = _targets(context, self.all_objects)
+        except bake.BakeError as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        self._job = None
+        self._total = len(self._queue)
+        wm = context.window_manager
+        wm.progress_begin(0, 100)
+        self._timer = wm.event_timer_add(0.0, window=context.window)
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        if event.type == "ESC":
+            return self._stop(context, cancelled=True)
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        try:
+            if self._job is None:
+                self._job = bake.BakeJob(context.scene, self._queue[0])
+            if not self._job.step():
+                job, self._job = self._job, None
+                self._queue.pop(0)
+                self._done(context, job.obj, job.finish(), job.warnings)
+                if not self._queue:
+                    return self._stop(context)
+        except bake.BakeError as e:
+            self.report({"ERROR"}, str(e))
+            self._job = None
+            return self._stop(context, cancelled=True)
+        job = self._job
+        if job is not None:
+            finished = self._total - len(self._queue)
+            pct = 100 * (finished + job.done / job.total) / self._total
+            context.window_manager.progress_update(int(pct))
+            context.workspace.status_text_set(
+                f"Madder: baking '{job.obj.name}' frame {job.frame} ({job.done}/{job.total}) — Esc to cancel"
+            )
+        return {"RUNNING_MODAL"}
+
+    def _stop(self, context, cancelled=False):
+        if self._job is not None:
+            self._job.cancel()
+            self.report({"WARNING"}, f"Madder: bake of '{self._job.obj.name}' cancelled; the previous bake is kept")
+        wm = context.window_manager
+        wm.event_timer_remove(self._timer)
+        wm.progress_end()
+        context.workspace.status_text_set(None)
+        return {"CANCELLED"} if cancelled else {"FINISHED"}
+
+    def _done(self, context, obj, path, warnings):
         obj.madder.enabled = True
         handlers.apply_frame(obj, context.scene.frame_current)
         for w in warnings:
             self.report({"WARNING"}, f"Madder: '{obj.name}': {w}")
         self.report({"INFO"}, f"Madder: baked '{obj.name}' to {path}")
-        return {"FINISHED"}
 
 
 class MADDER_OT_free_bake(bpy.types.Operator):

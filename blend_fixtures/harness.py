@@ -12,22 +12,21 @@ import tempfile
 REPO = "madder_test"
 
 
-def install_extension(zip_path, repo_dir=None):
-    """Installs and enables the extension zip; returns the add-on's module name
-    (``bl_ext.<repo>.madder``). Idempotent within one process."""
+def install_extension(zip_path, repo=REPO):
+    """Installs and enables the extension zip into user repository `repo` (created in a
+    temporary folder unless it exists, e.g. Blender's own ``user_default``); returns the
+    add-on's module name (``bl_ext.<repo>.madder``). Idempotent within one process."""
     import bpy
 
-    module = f"bl_ext.{REPO}.madder"
+    module = f"bl_ext.{repo}.madder"
     if module in bpy.context.preferences.addons:
         return module
     if not os.path.isfile(zip_path):
         raise FileNotFoundError(f"extension zip not found: {zip_path} (run `make addon`)")
     repos = bpy.context.preferences.extensions.repos
-    repo = repos.get(REPO) if hasattr(repos, "get") else next((r for r in repos if r.module == REPO), None)
-    if repo is None:
-        repo_dir = repo_dir or tempfile.mkdtemp(prefix="madder-ext-")
-        repo = repos.new(name=REPO, module=REPO, custom_directory=repo_dir, source="USER")
-    result = bpy.ops.extensions.package_install_files(filepath=zip_path, repo=REPO, enable_on_install=True)
+    if not any(r.module == repo for r in repos):
+        repos.new(name=repo, module=repo, custom_directory=tempfile.mkdtemp(prefix="madder-ext-"), source="USER")
+    result = bpy.ops.extensions.package_install_files(filepath=zip_path, repo=repo, enable_on_install=True)
     if result != {"FINISHED"} or module not in bpy.context.preferences.addons:
         raise RuntimeError(f"installing {zip_path} failed: {result}")
     return module

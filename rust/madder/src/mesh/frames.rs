@@ -57,7 +57,8 @@
 //! `2π − γ_c`; boundary corners contribute nothing. Around a closed surface the face
 //! holonomies add up to `Σ_v (2π − γ_v) = 2πχ` (discrete Gauss–Bonnet), and around the
 //! one-ring of a vertex whose neighbours are flat (or on the border) the holonomy is the
-//! vertex's angle defect: both are tested.
+//! vertex's angle defect: the tests check all three (the per-face share, the sum, the
+//! one-ring loop) against angles measured independently on the 3-D positions.
 //!
 //! ## Frames other than the polar ones (§4.4)
 //! The seed measures `α` from `x_i`, which is the reference edge. For comoving–corotating
