@@ -64,8 +64,9 @@ test-blender: $(ZIP)
 demo: $(ZIP)
 	MADDER_ZIP=$(abspath $(ZIP)) $(PY) blend_fixtures/demo.py --out out/demo.png
 
-bench: $(WHEELDIR)/.stamp
+bench: $(ZIP)
 	cargo bench -p madder
+	MADDER_ZIP=$(abspath $(ZIP)) $(PY) tests/bench/bench_playback.py
 
 fixtures: $(VENV)/.stamp
 	$(PY) blend_fixtures/build_fixtures.py

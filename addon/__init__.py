@@ -1,8 +1,8 @@
 """Madder: stains on moving cloth. This file only registers the add-on's parts."""
 
-from . import cli, fabrics, handlers, operators, panels, properties
+from . import cli, fabrics, handlers, operators, panels, properties, shading
 
-_modules = (properties, fabrics, operators, panels, handlers, cli)
+_modules = (properties, fabrics, operators, shading, panels, handlers, cli)
 
 
 def register():

@@ -167,6 +167,11 @@ class BakeJob:
         self.writer = None
         self._close()
         self.obj.madder.cache_file = stored_path(self.path)
+        # Playback writes mesh attributes from frame_change_post; during a render from the
+        # UI, Blender evaluates the scene in a render thread, and "Lock Interface" is what
+        # keeps the two from touching the same data at once (background renders are safe
+        # either way: handlers run between frames on the one thread).
+        self.scene.render.use_lock_interface = True
         return self.path
 
     def cancel(self):
@@ -230,7 +235,7 @@ def free(obj):
         os.remove(path)
     settings.cache_file = ""
     if obj.type == "MESH":
-        for name in (bridge.STAIN_ATTR, bridge.DENSITY_ATTR, bridge.WEFT_ATTR):
+        for name in (bridge.STAIN_ATTR, bridge.DENSITY_ATTR, bridge.WETNESS_ATTR, bridge.WEFT_ATTR):
             attr = obj.data.attributes.get(name)
             if attr is not None:
                 obj.data.attributes.remove(attr)

@@ -5,6 +5,7 @@ import numpy as np
 
 STAIN_ATTR = "madder_stain"
 DENSITY_ATTR = "madder_density"
+WETNESS_ATTR = "madder_wetness"
 WEFT_ATTR = "madder_weft"
 
 
@@ -95,14 +96,17 @@ def _point_attribute(mesh, name, data_type):
 
 
 def write_stain(mesh, density, color):
-    """Writes `madder_density` (float) and `madder_stain` (RGBA: color × coverage, alpha =
-    coverage, coverage = density clamped to [0, 1]) on the POINT domain, then tags the mesh
-    so the depsgraph re-evaluates it (foreach_set alone does not)."""
+    """Writes, on the POINT domain, `madder_density` (float), `madder_stain` (RGBA: color ×
+    coverage, alpha = coverage, coverage = density clamped to [0, 1]) and `madder_wetness`
+    (float; the liquid is the stain until the absorption/evaporation model exists, so it is
+    the coverage), then tags the mesh so the depsgraph re-evaluates it (foreach_set alone
+    does not)."""
     density = np.ascontiguousarray(density, dtype=np.float32)
     coverage = np.clip(density, 0.0, 1.0)
     rgba = np.empty((len(density), 4), dtype=np.float32)
     rgba[:, :3] = coverage[:, None] * np.asarray(color, dtype=np.float32)[None, :3]
     rgba[:, 3] = coverage
     _point_attribute(mesh, DENSITY_ATTR, "FLOAT").data.foreach_set("value", density)
+    _point_attribute(mesh, WETNESS_ATTR, "FLOAT").data.foreach_set("value", coverage)
     _point_attribute(mesh, STAIN_ATTR, "FLOAT_COLOR").data.foreach_set("color", rgba.ravel())
     mesh.update()

@@ -55,6 +55,9 @@ def apply_frame(obj, frame):
 
 @persistent
 def on_frame_change(scene, depsgraph=None):
+    """Runs after every frame change, in the viewport and in renders. It reads no evaluated
+    data (only the cache and the original meshes of `scene`), so it is valid with whichever
+    depsgraph Blender passes, the viewport's or the render's."""
     if _suspended:
         return
     for obj in scene.objects:

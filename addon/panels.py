@@ -34,6 +34,7 @@ class MADDER_PT_stain(bpy.types.Panel):
         row.operator("madder.bake", icon="FILE_CACHE")
         row.operator("madder.free_bake", icon="TRASH", text="Free")
         layout.operator("madder.bake", text="Bake All Stains", icon="SCENE_DATA").all_objects = True
+        layout.operator("madder.add_stain_shader", icon="NODE_MATERIAL")
         if s.cache_file:
             layout.label(text=f"Baked: {s.cache_file}", icon="CHECKMARK")
 

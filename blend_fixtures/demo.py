@@ -2,13 +2,14 @@
 
 Installs the built extension into a fresh user repository (as a user would), opens a copy
 of `flag.blend`, bakes a stain from its `stain_source` vertex group through the add-on's
-operator, and renders a frame with Cycles on the CPU through a material that reads the
-`madder_stain` color attribute."""
+operator, adds the add-on's "Madder Stain" shader to the flag's material, and renders a
+frame with Cycles on the CPU."""
 
 import argparse
 import os
 import shutil
 import sys
+import tempfile
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -29,6 +30,9 @@ def main():
     blend = os.path.join(work, "flag.blend")
     shutil.copyfile(os.path.join(HERE, "flag.blend"), blend)
 
+    # a fresh Blender user folder: Blender keeps an installed wheel whose file name has not
+    # changed, so a reused folder could run a stale build of the same version
+    os.environ["BLENDER_USER_RESOURCES"] = tempfile.mkdtemp(prefix="madder-demo-")
     import bpy
 
     harness.install_extension(os.path.abspath(args.zip))
@@ -49,7 +53,7 @@ def main():
     print(f"demo: baked {frames} frames of '{flag.name}' ({len(flag.data.vertices)} vertices) "
           f"in {time.perf_counter() - t0:.2f} s -> {bpy.path.abspath(flag.madder.cache_file)}")
 
-    harness.add_stain_shading(flag.active_material)
+    bpy.ops.madder.add_stain_shader()
     scene.frame_set(args.frame)
     scene.cycles.samples = 64
     scene.render.filepath = out

@@ -30,27 +30,3 @@ def install_extension(zip_path, repo=REPO):
     if result != {"FINISHED"} or module not in bpy.context.preferences.addons:
         raise RuntimeError(f"installing {zip_path} failed: {result}")
     return module
-
-
-def add_stain_shading(material):
-    """Makes `material` show the stain: base colour = cloth × (1 − coverage) + stain colour,
-    read from the `madder_stain` color attribute (RGB premultiplied by its alpha)."""
-    nt = material.node_tree
-    bsdf = next(n for n in nt.nodes if n.type == "BSDF_PRINCIPLED")
-    cloth = tuple(bsdf.inputs["Base Color"].default_value)
-    attr = nt.nodes.new("ShaderNodeAttribute")
-    attr.attribute_name = "madder_stain"
-    attr.attribute_type = "GEOMETRY"
-    keep = nt.nodes.new("ShaderNodeMix")
-    keep.data_type = "RGBA"
-    keep.blend_type = "MIX"
-    keep.inputs["A"].default_value = cloth
-    keep.inputs["B"].default_value = (0.0, 0.0, 0.0, 1.0)
-    nt.links.new(attr.outputs["Alpha"], keep.inputs["Factor"])
-    add = nt.nodes.new("ShaderNodeMix")
-    add.data_type = "RGBA"
-    add.blend_type = "ADD"
-    add.inputs["Factor"].default_value = 1.0
-    nt.links.new(keep.outputs["Result"], add.inputs["A"])
-    nt.links.new(attr.outputs["Color"], add.inputs["B"])
-    nt.links.new(add.outputs["Result"], bsdf.inputs["Base Color"])
