@@ -4,6 +4,7 @@ previous bake is lost."""
 import os
 
 import bpy
+import numpy as np
 import pytest
 from conftest import make_active
 
@@ -75,3 +76,90 @@ def test_unsaved_file_with_relative_cache_folder(addon):
     plane.madder.source_group = "wet"
     msg = bake_error()
     assert "save the .blend" in msg and plane.name in msg
+
+
+def mesh_object(verts, faces, name="Odd"):
+    """A mesh object from raw data, with a 'wet' group on every vertex."""
+    bpy.ops.wm.read_homefile(use_empty=True)
+    me = bpy.data.meshes.new(name)
+    me.from_pydata(verts, [], faces)
+    me.update()
+    obj = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(obj)
+    make_active(obj)
+    obj.vertex_groups.new(name="wet").add([0], 1.0, "REPLACE")
+    obj.madder.source_group = "wet"
+    obj.madder.cache_dir = bpy.app.tempdir
+    bpy.context.scene.frame_start, bpy.context.scene.frame_end = 1, 5
+    return obj
+
+
+def baked_density(obj):
+    import madder
+
+    r = madder.CacheReader(bpy.path.abspath(obj.madder.cache_file))
+    return r.read(r.last_frame, "density")
+
+
+def test_non_manifold_fin_bakes_with_a_warning(capsys):
+    # three quads share the edge 0–1
+    verts = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (1, -1, 0), (0, -1, 0), (1, 0, 1), (0, 0, 1)]
+    obj = mesh_object(verts, [(0, 1, 2, 3), (1, 0, 5, 4), (0, 1, 6, 7)])
+    assert bpy.ops.madder.bake() == {"FINISHED"}
+    assert "1 non-manifold edges" in capsys.readouterr().out
+    d = baked_density(obj)
+    assert np.isfinite(d).all() and (d[[2, 4, 6]] > 0).all()  # spread into all three sheets
+
+
+def test_ngons_loose_vertices_and_zero_area_faces_bake_finite():
+    # a hexagon n-gon, a quad collapsed to zero area, and a loose vertex (index 10)
+    hexagon = [(np.cos(a), np.sin(a), 0.0) for a in np.linspace(0, 2 * np.pi, 7)[:-1]]
+    collapsed = [(3, 0, 0), (4, 0, 0), (4, 0, 0), (3, 0, 0)]
+    verts = hexagon + collapsed + [(9, 9, 9)]
+    obj = mesh_object(verts, [tuple(range(6)), (6, 7, 8, 9), (0, 1, 6)])
+    assert bpy.ops.madder.bake() == {"FINISHED"}
+    d = baked_density(obj)
+    assert np.isfinite(d).all()
+    assert (d[1:6] > 0).all()  # spread across the n-gon's triangles
+    assert d[10] == 0.0  # the loose vertex carries nothing
+    assert "madder_stain" in obj.data.attributes
+
+
+def test_missing_cache_folder_is_created():
+    obj = mesh_object([(0, 0, 0), (1, 0, 0), (0, 1, 0)], [(0, 1, 2)])
+    obj.madder.cache_dir = os.path.join(bpy.app.tempdir, "does", "not", "exist", "yet")
+    assert bpy.ops.madder.bake() == {"FINISHED"}
+    assert os.path.isfile(bpy.path.abspath(obj.madder.cache_file))
+
+
+def test_unwritable_cache_folder_names_it_and_keeps_the_previous_bake(tmp_path):
+    obj = mesh_object([(0, 0, 0), (1, 0, 0), (0, 1, 0)], [(0, 1, 2)])
+    obj.madder.cache_dir = str(tmp_path / "cache")
+    assert bpy.ops.madder.bake() == {"FINISHED"}
+    path = bpy.path.abspath(obj.madder.cache_file)
+    before = open(path, "rb").read()
+    # a folder that cannot be created: its parent is a regular file (works even as root,
+    # which ignores permission bits)
+    blocker = tmp_path / "blocker"
+    blocker.write_text("not a folder")
+    obj.madder.cache_dir = str(blocker / "cache")
+    msg = bake_error()
+    assert "cannot create the cache folder" in msg and str(blocker) in msg and obj.name in msg
+    assert open(path, "rb").read() == before
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root ignores folder permissions")
+def test_read_only_cache_folder_names_it_and_keeps_the_previous_bake(tmp_path):
+    obj = mesh_object([(0, 0, 0), (1, 0, 0), (0, 1, 0)], [(0, 1, 2)])
+    folder = tmp_path / "cache"
+    obj.madder.cache_dir = str(folder)
+    assert bpy.ops.madder.bake() == {"FINISHED"}
+    path = bpy.path.abspath(obj.madder.cache_file)
+    before = open(path, "rb").read()
+    folder.chmod(0o555)
+    try:
+        msg = bake_error()
+    finally:
+        folder.chmod(0o755)
+    assert str(folder) in msg and obj.name in msg
+    assert open(path, "rb").read() == before
