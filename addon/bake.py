@@ -11,6 +11,7 @@ from . import bridge, fabrics, handlers
 
 CACHE_EXT = ".madder"
 FIELDS = ["density"]
+COLOR_FIELDS = ["color_r", "color_g", "color_b"]
 
 
 class BakeError(Exception):
@@ -46,16 +47,27 @@ def stored_path(path):
     return path
 
 
-def check_object(obj):
+def check_object(obj, sources=()):
     if obj is None or obj.type != "MESH":
         kind = "nothing" if obj is None else f"a {obj.type.lower()}"
         name = "" if obj is None else f"'{obj.name}' "
         raise BakeError(f"Madder bakes mesh objects; {name}is {kind}")
     group = obj.madder.source_group
-    if not group:
-        raise BakeError(f"'{obj.name}': choose a Source vertex group to start the stain from")
-    if group not in obj.vertex_groups:
+    if not group and not sources:
+        raise BakeError(
+            f"'{obj.name}': no liquid: choose a Source vertex group, or mark an object as a Madder Source"
+        )
+    if group and group not in obj.vertex_groups:
         raise BakeError(f"'{obj.name}' has no vertex group '{group}' (the Source)")
+
+
+def source_objects(scene, obj):
+    """The scene's liquid sources (brushes and pours) for cloth `obj`."""
+    sources = [o for o in scene.objects if o.madder_source.is_source and o != obj]
+    for o in sources:
+        if o.type != "MESH":
+            raise BakeError(f"'{o.name}' is marked as a Madder Source but is a {o.type.lower()}, not a mesh")
+    return sources
 
 
 def frame_positions(obj, depsgraph, n_vertices, frame):
@@ -87,7 +99,8 @@ class BakeJob:
 
     def __init__(self, scene, obj, frames=None):
         self.madder = core()
-        check_object(obj)
+        self.sources = source_objects(scene, obj) if obj is not None else []
+        check_object(obj, self.sources)
         self.scene, self.obj = scene, obj
         self.path = cache_path(obj)
         try:
@@ -104,7 +117,12 @@ class BakeJob:
         if len(faces) == 0:
             raise BakeError(f"'{obj.name}' has no faces")
         settings = obj.madder
-        self.density0 = bridge.vertex_group_weights(obj, settings.source_group) * np.float32(settings.amount)
+        if settings.source_group:
+            self.density0 = bridge.vertex_group_weights(obj, settings.source_group) * np.float32(settings.amount)
+        else:
+            self.density0 = np.zeros(self.n_vertices, dtype=np.float32)
+        # with sources, colours can differ: track them (three more right-hand sides)
+        self.fields = FIELDS + (COLOR_FIELDS if self.sources else [])
         self.topology = _topology(self.madder, obj, faces, self.n_vertices, face_polygon, n_polygons)
         self.warnings = []
         n_nonmanifold = len(self.topology.non_manifold_edges())
@@ -135,16 +153,24 @@ class BakeJob:
                 scene.frame_set(frame)
                 pos = self._positions(frame)
                 self.stepper = madder.DiffusionStepper(self.topology, pos, self.density0, **self.conductivity)
+                if self.sources:
+                    tint = np.tile(np.asarray(obj.madder.stain_color, dtype=np.float32), (self.n_vertices, 1))
+                    self.stepper.enable_color(tint)
                 if self.stepper.degenerate_uv_faces:
                     self.warnings.append(
                         f"{self.stepper.degenerate_uv_faces} faces have degenerate UVs; their weft follows an edge"
                     )
-                self.writer = madder.CacheWriter(self.path, self.n_vertices, FIELDS, self.first, self.total)
+                self.writer = madder.CacheWriter(self.path, self.n_vertices, self.fields, self.first, self.total)
             else:
                 frame = self.frame + 1
                 scene.frame_set(frame)
-                self.stepper.step(self._positions(frame), self.dt, obj.madder.substeps)
-            self.writer.push_frame([self.stepper.density])
+                pos = self._positions(frame)
+                self.stepper.step(pos, self.dt, obj.madder.substeps)
+                self._pour(frame, pos)
+            out = [self.stepper.density]
+            if self.sources:
+                out += list(np.ascontiguousarray(self.stepper.color.T))
+            self.writer.push_frame(out)
             self.frame = frame
         except madder.MadderError as e:
             self.cancel()
@@ -153,6 +179,23 @@ class BakeJob:
             self.cancel()
             raise
         return self.frame < self.last
+
+    def _pour(self, frame, pos):
+        """Adds the liquid each source brought during the frame that just ended: `flow × dt`
+        per unit area at contact, fading linearly to zero at the source's reach."""
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        for src in self.sources:
+            s = src.madder_source
+            if s.use_frame_range and not (s.frame_start <= frame <= s.frame_end):
+                continue
+            verts, tris = bridge.world_triangles(src.evaluated_get(depsgraph))
+            if len(tris) == 0:
+                continue
+            d = self.madder.distances_within(pos, verts, tris, s.distance)
+            weight = np.clip(1.0 - d / s.distance, 0.0, 1.0)  # inf → 0
+            if weight.any():
+                delta = (s.amount * self.dt * weight).astype(np.float32)
+                self.stepper.add_liquid(delta, tuple(s.color))
 
     def _positions(self, frame):
         return frame_positions(self.obj, bpy.context.evaluated_depsgraph_get(), self.n_vertices, frame)

@@ -57,6 +57,15 @@ def write_face_weft(mesh, face_polygon, weft):
     mesh.update()
 
 
+def world_triangles(obj_eval):
+    """World-space vertices (M, 3) float32 and triangles (K, 3) uint32 of an evaluated mesh."""
+    mesh = obj_eval.data
+    mesh.calc_loop_triangles()
+    tris = np.empty(3 * len(mesh.loop_triangles), dtype=np.uint32)
+    mesh.loop_triangles.foreach_get("vertices", tris)
+    return world_positions(obj_eval), tris.reshape(-1, 3)
+
+
 def world_positions(obj_eval):
     """World-space vertex positions of an evaluated mesh object, (N, 3) float32."""
     mesh = obj_eval.data
@@ -95,16 +104,18 @@ def _point_attribute(mesh, name, data_type):
     return attr
 
 
-def write_stain(mesh, density, color):
+def write_stain(mesh, density, color, colors=None):
     """Writes, on the POINT domain, `madder_density` (float), `madder_stain` (RGBA: color ×
-    coverage, alpha = coverage, coverage = density clamped to [0, 1]) and `madder_wetness`
+    coverage, alpha = coverage, coverage = density clamped to [0, 1]; the color is `colors`
+    (N, 3) per vertex when the bake tracked colors, else `color`) and `madder_wetness`
     (float; the liquid is the stain until the absorption/evaporation model exists, so it is
     the coverage), then tags the mesh so the depsgraph re-evaluates it (foreach_set alone
     does not)."""
     density = np.ascontiguousarray(density, dtype=np.float32)
     coverage = np.clip(density, 0.0, 1.0)
     rgba = np.empty((len(density), 4), dtype=np.float32)
-    rgba[:, :3] = coverage[:, None] * np.asarray(color, dtype=np.float32)[None, :3]
+    tint = np.asarray(color, dtype=np.float32)[None, :3] if colors is None else colors
+    rgba[:, :3] = coverage[:, None] * tint
     rgba[:, 3] = coverage
     _point_attribute(mesh, DENSITY_ATTR, "FLOAT").data.foreach_set("value", density)
     _point_attribute(mesh, WETNESS_ATTR, "FLOAT").data.foreach_set("value", coverage)

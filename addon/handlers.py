@@ -4,6 +4,7 @@ stain written into its mesh attributes (`madder_stain`, `madder_density`)."""
 import os
 
 import bpy
+import numpy as np
 from bpy.app.handlers import persistent
 
 from . import bridge
@@ -49,7 +50,10 @@ def apply_frame(obj, frame):
     if reader.n_vertices != len(obj.data.vertices):
         return False
     frame = min(max(frame, reader.first_frame), reader.last_frame)
-    bridge.write_stain(obj.data, reader.read(frame, "density"), settings.stain_color)
+    colors = None
+    if "color_r" in reader.fields:
+        colors = np.stack([reader.read(frame, f"color_{c}") for c in "rgb"], axis=1)
+    bridge.write_stain(obj.data, reader.read(frame, "density"), settings.stain_color, colors)
     return True
 
 

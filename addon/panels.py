@@ -39,6 +39,34 @@ class MADDER_PT_stain(bpy.types.Panel):
             layout.label(text=f"Baked: {s.cache_file}", icon="CHECKMARK")
 
 
+class MADDER_PT_source(bpy.types.Panel):
+    bl_label = "Madder Source"
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "physics"
+
+    @classmethod
+    def poll(cls, context):
+        return context.object is not None and context.object.type == "MESH"
+
+    def draw_header(self, context):
+        self.layout.prop(context.object.madder_source, "is_source", text="")
+
+    def draw(self, context):
+        src = context.object.madder_source
+        layout = self.layout
+        layout.use_property_split = True
+        layout.active = src.is_source
+        layout.prop(src, "amount")
+        layout.prop(src, "distance")
+        layout.prop(src, "color")
+        layout.prop(src, "use_frame_range")
+        col = layout.column(align=True)
+        col.active = src.use_frame_range
+        col.prop(src, "frame_start")
+        col.prop(src, "frame_end")
+
+
 # cell kind → icon for the tile preview (up and down of a thread share its colour)
 _CELL_ICONS = {"W": "SEQUENCE_COLOR_01", "w": "SEQUENCE_COLOR_02", "F": "SEQUENCE_COLOR_05",
                "f": "SEQUENCE_COLOR_06", ".": "SEQUENCE_COLOR_09"}
@@ -92,7 +120,7 @@ class MADDER_PT_fabric(bpy.types.Panel):
                 grid.label(text="", icon=_CELL_ICONS.get(cell, "QUESTION"))
 
 
-classes = (MADDER_PT_stain, MADDER_PT_fabric)
+classes = (MADDER_PT_stain, MADDER_PT_source, MADDER_PT_fabric)
 
 
 def register():

@@ -15,7 +15,8 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
     )
     source_group: StringProperty(
         name="Source",
-        description="Vertex group whose weights give the initial stain (1 = fully wet)",
+        description="Vertex group whose weights give the initial stain (1 = fully wet); "
+        "optional when source objects pour liquid on the cloth",
         default="",
     )
     amount: FloatProperty(
@@ -67,11 +68,59 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
     )
 
 
+class MadderSourceSettings(bpy.types.PropertyGroup):
+    """A brush or a pour: a mesh object that adds liquid to every Madder cloth it touches
+    or comes near, frame by frame."""
+
+    is_source: BoolProperty(
+        name="Madder Source",
+        description="This object adds liquid to the cloths it touches or comes near",
+        default=False,
+    )
+    amount: FloatProperty(
+        name="Flow",
+        description="Liquid added per unit area per second where the source touches the cloth "
+        "(1 = saturates in a second)",
+        default=2.0,
+        min=0.0,
+        soft_max=20.0,
+    )
+    distance: FloatProperty(
+        name="Distance",
+        description="Reach of the source: the flow fades from full at contact to zero at this distance",
+        subtype="DISTANCE",
+        unit="LENGTH",
+        default=0.05,
+        min=0.0001,
+        soft_max=1.0,
+    )
+    color: FloatVectorProperty(
+        name="Color",
+        description="Color of this source's liquid",
+        subtype="COLOR",
+        size=3,
+        min=0.0,
+        max=1.0,
+        default=(0.05, 0.08, 0.35),
+    )
+    use_frame_range: BoolProperty(
+        name="Frame Range",
+        description="Pour only between the start and end frames",
+        default=False,
+    )
+    frame_start: IntProperty(name="Start", default=1)
+    frame_end: IntProperty(name="End", default=250)
+
+
 def register():
     bpy.utils.register_class(MadderObjectSettings)
+    bpy.utils.register_class(MadderSourceSettings)
     bpy.types.Object.madder = PointerProperty(type=MadderObjectSettings)
+    bpy.types.Object.madder_source = PointerProperty(type=MadderSourceSettings)
 
 
 def unregister():
+    del bpy.types.Object.madder_source
     del bpy.types.Object.madder
+    bpy.utils.unregister_class(MadderSourceSettings)
     bpy.utils.unregister_class(MadderObjectSettings)

@@ -6,7 +6,7 @@
 //! ├── ParameterError  (also a ValueError)  out-of-range parameters
 //! ├── FabricError     (also a ValueError)  a weave or cell tensor is invalid; names the cell
 //! ├── SolveError                           a linear solve failed
-//! └── CacheError      (also an OSError)    cache file missing, truncated or corrupt
+//! └── CacheError      (also an OSError)    cache or PC2/MDD file missing, truncated or corrupt
 //! ```
 
 use pyo3::exceptions::PyException;
@@ -41,6 +41,7 @@ pub fn to_py(e: impl Into<madder::Error>) -> PyErr {
         madder::Error::Param(_) => ParameterError::new_err(msg),
         madder::Error::Solve(_) => SolveError::new_err(msg),
         madder::Error::Cache(_) => CacheError::new_err(msg),
+        madder::Error::PointCache(_) => CacheError::new_err(msg),
         madder::Error::Weave(_) => FabricError::new_err(msg),
     }
 }

@@ -19,6 +19,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     errors::register(m)?;
     m.add_class::<mesh::Topology>()?;
     m.add_function(wrap_pyfunction!(mesh::weft_directions, m)?)?;
+    m.add_function(wrap_pyfunction!(mesh::distances_within, m)?)?;
     m.add_class::<stain::DiffusionStepper>()?;
     m.add_class::<io::CacheWriter>()?;
     m.add_class::<io::CacheReader>()?;

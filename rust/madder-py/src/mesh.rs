@@ -166,3 +166,47 @@ pub fn weft_directions<'py>(
         .collect();
     PyArray1::from_vec(py, flat).reshape([w.len(), 3])
 }
+
+/// Distance from each of `points` `(N, 3)` float32 to the triangle mesh (`vertices`
+/// `(M, 3)` float32, `triangles` `(K, 3)` uint32), as `(N,)` float32; `inf` where it is
+/// farther than `cutoff`. For liquid sources: how close the brush is to each cloth vertex.
+#[pyfunction]
+pub fn distances_within<'py>(
+    py: Python<'py>,
+    points_: PyReadonlyArray2<'py, f32>,
+    vertices: PyReadonlyArray2<'py, f32>,
+    triangles: PyReadonlyArray2<'py, u32>,
+    cutoff: f64,
+) -> PyResult<Bound<'py, PyArray1<f32>>> {
+    let p: Vec<glam::DVec3> = points(&points_)?
+        .into_iter()
+        .map(glam::DVec3::from)
+        .collect();
+    let v: Vec<glam::DVec3> = points(&vertices)?
+        .into_iter()
+        .map(glam::DVec3::from)
+        .collect();
+    if triangles.shape()[1] != 3 {
+        return Err(ParameterError::new_err(format!(
+            "triangles must have shape (K, 3), got {:?}",
+            triangles.shape()
+        )));
+    }
+    let t: Vec<[u32; 3]> = triangles
+        .as_array()
+        .rows()
+        .into_iter()
+        .map(|r| [r[0], r[1], r[2]])
+        .collect();
+    if let Some(bad) = t.iter().flatten().find(|&&i| i as usize >= v.len()) {
+        return Err(ParameterError::new_err(format!(
+            "triangle vertex {bad} out of range ({} vertices)",
+            v.len()
+        )));
+    }
+    let d = py.detach(|| madder::mesh::proximity::distances_within(&p, &v, &t, cutoff));
+    Ok(PyArray1::from_vec(
+        py,
+        d.into_iter().map(|x| x as f32).collect(),
+    ))
+}

@@ -1,7 +1,8 @@
 //! `DiffusionStepper`: implicit diffusion on a deforming mesh (core module `stain`).
 
 use numpy::{
-    PyArray1, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods,
+    PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
+    PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
 
@@ -101,6 +102,38 @@ impl DiffusionStepper {
     #[getter]
     fn degenerate_uv_faces(&self) -> usize {
         self.inner.degenerate_uv_faces()
+    }
+
+    /// Starts tracking the liquid's colour; `colors` `(N, 3)` float32 is the RGB of the
+    /// liquid now at each vertex. Colours then mix by mass as the liquid spreads.
+    fn enable_color(&mut self, colors: PyReadonlyArray2<'_, f32>) -> PyResult<()> {
+        let c: Vec<[f64; 3]> = points(&colors)?
+            .into_iter()
+            .map(|v| v.as_dvec3().to_array())
+            .collect();
+        self.inner.enable_color(&c).map_err(to_py)
+    }
+
+    /// Adds `delta` `(N,)` float32 liquid per unit area (≥ 0) at every vertex, of colour
+    /// `color` (RGB; required once colour is tracked).
+    #[pyo3(signature = (delta, color=None))]
+    fn add_liquid(
+        &mut self,
+        delta: PyReadonlyArray1<'_, f32>,
+        color: Option<[f64; 3]>,
+    ) -> PyResult<()> {
+        let d: Vec<f64> = delta.as_array().iter().map(|&x| x as f64).collect();
+        self.inner.add_liquid(&d, color).map_err(to_py)
+    }
+
+    /// RGB of the liquid at each vertex `(N, 3)` float32, or None when colour is not tracked.
+    #[getter]
+    fn color<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, numpy::PyArray2<f32>>>> {
+        let Some(c) = self.inner.color() else {
+            return Ok(None);
+        };
+        let flat: Vec<f32> = c.iter().flatten().map(|&x| x as f32).collect();
+        Ok(Some(PyArray1::from_vec(py, flat).reshape([c.len(), 3])?))
     }
 
     /// Total stain mass `Σ A_i σ_i` (float64).

@@ -1,6 +1,6 @@
 //! Fabrics: weave tiles and their homogenized tensors (core module `weave`).
 
-use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray3};
+use numpy::{PyArray1, PyReadonlyArray3};
 use pyo3::prelude::*;
 
 use crate::errors::{ParameterError, to_py};

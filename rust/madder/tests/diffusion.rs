@@ -281,3 +281,76 @@ fn woven_spreading_follows_the_weft_from_the_uv_layout() {
         assert!((major / (8.0 * d * t_total) - 1.0).abs() < 0.05);
     }
 }
+
+/// Colour rides along as three more right-hand sides: the density is unchanged by it,
+/// every channel's colour mass is conserved, and two liquids mix by mass.
+#[test]
+fn coloured_liquids_mix_by_mass() {
+    let (t, pos) = grid(40, 1.0, 0.3);
+    let left = gaussian(&pos, DVec3::new(-0.3, 0.0, 0.0), 0.01);
+    let right = gaussian(&pos, DVec3::new(0.3, 0.0, 0.0), 0.01);
+    let plain_start: Vec<f64> = left.iter().zip(&right).map(|(a, b)| a + b).collect();
+    let mut plain = DiffusionStepper::new(
+        t.clone(),
+        &pos,
+        plain_start,
+        Conductivity::Isotropic(0.02),
+        Par::Seq,
+    )
+    .unwrap();
+    let mut tinted = DiffusionStepper::new(
+        t.clone(),
+        &pos,
+        left.clone(),
+        Conductivity::Isotropic(0.02),
+        Par::Seq,
+    )
+    .unwrap();
+    let red = [1.0, 0.0, 0.0];
+    tinted.enable_color(&vec![red; t.n_vertices()]).unwrap();
+    tinted.add_liquid(&right, Some([0.0, 0.0, 1.0])).unwrap();
+    let channel_mass = |s: &DiffusionStepper, k: usize| -> f64 {
+        let c = s.color().unwrap();
+        s.vertex_area()
+            .iter()
+            .zip(s.density())
+            .zip(&c)
+            .map(|((a, d), c)| a * d * c[k])
+            .sum()
+    };
+    let (r0, b0) = (channel_mass(&tinted, 0), channel_mass(&tinted, 2));
+    for _ in 0..30 {
+        plain.step(&pos, 0.05, 1).unwrap();
+        tinted.step(&pos, 0.05, 1).unwrap();
+    }
+    for (a, b) in plain.density().iter().zip(tinted.density()) {
+        assert!((a - b).abs() < 1e-13, "{a} vs {b}");
+    }
+    assert!((channel_mass(&tinted, 0) / r0 - 1.0).abs() < 1e-12);
+    assert!((channel_mass(&tinted, 2) / b0 - 1.0).abs() < 1e-12);
+    let c = tinted.color().unwrap();
+    let at = |x: f64| {
+        let i = pos
+            .iter()
+            .enumerate()
+            .min_by(|a, b| {
+                (a.1.x - x)
+                    .abs()
+                    .total_cmp(&(b.1.x - x).abs())
+                    .then(a.1.y.abs().total_cmp(&b.1.y.abs()))
+            })
+            .unwrap()
+            .0;
+        c[i]
+    };
+    let (l, m, r) = (at(-0.3), at(0.0), at(0.3));
+    assert!(
+        l[0] > 0.9 && r[2] > 0.9,
+        "each side keeps its colour: {l:?} {r:?}"
+    );
+    assert!(
+        (m[0] - 0.5).abs() < 0.05 && (m[2] - 0.5).abs() < 0.05,
+        "the middle is a half–half mix: {m:?}"
+    );
+    assert!(c.iter().all(|c| c[1].abs() < 1e-12), "no green appears");
+}

@@ -260,7 +260,11 @@ impl CacheReader {
                 source,
             })?
             .len();
-        let expected = reader.header_len + reader.block_len() * n_frames as u64;
+        let expected = reader
+            .block_len()
+            .checked_mul(n_frames as u64)
+            .and_then(|frames| frames.checked_add(reader.header_len))
+            .ok_or_else(|| header_err("declared size overflows 64 bits"))?;
         if len < expected {
             let complete = (len.saturating_sub(reader.header_len) / reader.block_len()) as i32;
             return Err(CacheError::Truncated {

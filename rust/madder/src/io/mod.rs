@@ -1,3 +1,5 @@
-//! Files: the Madder bake cache.
+//! Files: the Madder bake cache, and the PC2/MDD point caches of Blender's Mesh Cache
+//! modifier (positions of a deforming mesh, read per frame).
 
 pub mod cache;
+pub mod point_cache;

@@ -5,6 +5,7 @@
 pub mod frames;
 pub mod geometry;
 pub mod kabsch;
+pub mod proximity;
 pub mod topology;
 
 pub use frames::{Connection, FanKind, OneRings, VertexFrames, Wedge};

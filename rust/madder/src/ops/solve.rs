@@ -59,6 +59,8 @@ pub struct PrefactoredSpd<P: LowerCsc = VertexPattern> {
     symbolic: SymbolicCholesky<u32>,
     l_values: Vec<f64>,
     scratch: MemBuffer,
+    /// Right-hand-side columns the scratch buffer can solve at once.
+    scratch_cols: usize,
     par: Par,
     factorized: bool,
 }
@@ -91,6 +93,7 @@ impl<P: LowerCsc> PrefactoredSpd<P> {
             symbolic,
             l_values,
             scratch,
+            scratch_cols: 1,
             par,
             factorized: false,
         })
@@ -130,19 +133,32 @@ impl<P: LowerCsc> PrefactoredSpd<P> {
         Ok(())
     }
 
-    /// Solves `A x = rhs` in place with the last factorization.
+    /// Solves `A x = rhs` in place with the last factorization. `rhs` holds one or more
+    /// right-hand sides, column-major (`k` columns of `n`), all solved together.
     pub fn solve_in_place(&mut self, rhs: &mut [f64]) {
         assert!(
             self.factorized,
             "solve_in_place called before a successful factorize"
         );
-        assert_eq!(rhs.len(), self.pattern.n());
+        let n = self.pattern.n();
+        assert!(
+            n > 0 && rhs.len() % n == 0,
+            "right-hand side is not a whole number of columns"
+        );
+        let k = rhs.len() / n;
+        if k > self.scratch_cols {
+            let req = self
+                .symbolic
+                .factorize_numeric_llt_scratch::<f64>(self.par, Default::default())
+                .or(self.symbolic.solve_in_place_scratch::<f64>(k, self.par));
+            self.scratch = MemBuffer::new(req);
+            self.scratch_cols = k;
+        }
         let llt = faer::sparse::linalg::cholesky::LltRef::<'_, u32, f64>::new(
             &self.symbolic,
             &self.l_values,
         );
-        let n = rhs.len();
-        let rhs = MatMut::from_column_major_slice_mut(rhs, n, 1);
+        let rhs = MatMut::from_column_major_slice_mut(rhs, n, k);
         llt.solve_in_place_with_conj(Conj::No, rhs, self.par, MemStack::new(&mut self.scratch));
     }
 }

@@ -22,6 +22,13 @@
 //! The sparsity pattern of `M + hDK` is fixed by the topology: the stepper does the
 //! symbolic Cholesky analysis once and only refactorizes numerically each step.
 //!
+//! ## Colour
+//! Sources of different colours mix. Diffusion is linear, so the *colour mass* `σ·c`
+//! (`c` = RGB of the liquid) obeys the same equation as `σ`; the stepper carries it as
+//! three more right-hand sides of the same factorized system, and the colour of the stain
+//! is `(σ·c)/σ`. This is exact mixing at the cost of three triangular solves, not three
+//! more factorizations.
+//!
 //! A vertex with no incident face has no area and no stiffness; its row would be zero.
 //! We put `1` on its diagonal and its own density on the right-hand side, so it keeps its
 //! value and carries no mass.
@@ -118,7 +125,9 @@ pub struct DiffusionStepper {
     positions: Vec<DVec3>,
     vertex_area: Vec<f64>,
     loose: Vec<bool>,
-    density: Vec<f64>,
+    /// Field-major: `fields[k*n..(k+1)*n]` is field `k`; field 0 is the density, fields
+    /// 1–3 (when tinted) the colour mass `σ·(r, g, b)`.
+    fields: Vec<f64>,
 }
 
 impl DiffusionStepper {
@@ -161,7 +170,7 @@ impl DiffusionStepper {
             topology,
             conductivity,
             solver,
-            density,
+            fields: density,
         })
     }
 
@@ -171,7 +180,93 @@ impl DiffusionStepper {
 
     /// Density per unit area at every vertex.
     pub fn density(&self) -> &[f64] {
-        &self.density
+        &self.fields[..self.topology.n_vertices()]
+    }
+
+    /// Starts tracking the colour of the liquid: `colors[i]` is the RGB of the liquid now at
+    /// vertex `i`. Sources added later bring their own colour (see [`Self::add_liquid`]).
+    pub fn enable_color(&mut self, colors: &[[f64; 3]]) -> Result<(), ParamError> {
+        let n = self.topology.n_vertices();
+        if colors.len() != n {
+            return Err(ParamError::Length {
+                name: "colors",
+                expected: n,
+                got: colors.len(),
+            });
+        }
+        if let Some(index) = colors.iter().position(|c| c.iter().any(|x| !x.is_finite())) {
+            return Err(ParamError::NonFinite {
+                name: "colors",
+                index,
+            });
+        }
+        self.fields.truncate(n);
+        for k in 0..3 {
+            let tint: Vec<f64> = (0..n).map(|i| self.fields[i] * colors[i][k]).collect();
+            self.fields.extend(tint);
+        }
+        Ok(())
+    }
+
+    /// `true` once [`Self::enable_color`] was called.
+    pub fn has_color(&self) -> bool {
+        self.fields.len() > self.topology.n_vertices()
+    }
+
+    /// RGB of the liquid at every vertex (`(σ·c)/σ`; black where there is none), or `None`
+    /// when colour is not tracked.
+    pub fn color(&self) -> Option<Vec<[f64; 3]>> {
+        let n = self.topology.n_vertices();
+        self.has_color().then(|| {
+            (0..n)
+                .map(|i| {
+                    let d = self.fields[i];
+                    if d > 1e-300 {
+                        std::array::from_fn(|k| self.fields[(k + 1) * n + i] / d)
+                    } else {
+                        [0.0; 3]
+                    }
+                })
+                .collect()
+        })
+    }
+
+    /// Adds liquid: `delta[i]` more density (per unit area, ≥ 0) at vertex `i`, of colour
+    /// `color` (required when colour is tracked, ignored otherwise).
+    pub fn add_liquid(&mut self, delta: &[f64], color: Option<[f64; 3]>) -> Result<(), ParamError> {
+        let n = self.topology.n_vertices();
+        if delta.len() != n {
+            return Err(ParamError::Length {
+                name: "added liquid",
+                expected: n,
+                got: delta.len(),
+            });
+        }
+        if let Some(index) = delta.iter().position(|d| !(d.is_finite() && *d >= 0.0)) {
+            return Err(ParamError::NonFinite {
+                name: "added liquid (finite, ≥ 0)",
+                index,
+            });
+        }
+        let tint = match (self.has_color(), color) {
+            (false, _) => None,
+            (true, Some(c)) if c.iter().all(|x| x.is_finite()) => Some(c),
+            (true, _) => {
+                return Err(ParamError::NonFinite {
+                    name: "liquid colour",
+                    index: 0,
+                });
+            }
+        };
+        for (i, d) in delta.iter().enumerate() {
+            self.fields[i] += d;
+            if let Some(c) = tint {
+                for k in 0..3 {
+                    self.fields[(k + 1) * n + i] += d * c[k];
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Lumped area of every vertex at the current positions.
@@ -189,7 +284,7 @@ impl DiffusionStepper {
     pub fn total_mass(&self) -> f64 {
         self.vertex_area
             .iter()
-            .zip(&self.density)
+            .zip(self.density())
             .map(|(a, s)| a * s)
             .sum()
     }
@@ -241,19 +336,23 @@ impl DiffusionStepper {
             }
         };
         add_lumped_mass(&geometry, pattern, 1.0, &mut values);
+        // one right-hand side per field: the masses carried by the vertices
+        let n = self.topology.n_vertices();
         let mut rhs: Vec<f64> = self
-            .vertex_area
+            .fields
             .iter()
-            .zip(&self.density)
-            .map(|(a, s)| a * s)
+            .enumerate()
+            .map(|(j, x)| self.vertex_area[j % n] * x)
             .collect();
         for (v, _) in self.loose.iter().enumerate().filter(|(_, l)| **l) {
             values[pattern.diag_slot()[v] as usize] = 1.0;
-            rhs[v] = self.density[v];
+            for k in 0..self.fields.len() / n {
+                rhs[k * n + v] = self.fields[k * n + v];
+            }
         }
         self.solver.factorize(&values)?;
         self.solver.solve_in_place(&mut rhs);
-        self.density = rhs;
+        self.fields = rhs;
         self.vertex_area = geometry.vertex_area;
         Ok(())
     }

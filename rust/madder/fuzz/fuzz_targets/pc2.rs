@@ -1,0 +1,19 @@
+//! The PC2 reader on arbitrary bytes: open (explicitly as PC2, and by sniffing), then
+//! everything `common::exercise` does. Must never panic, abort or allocate beyond the input.
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+use madder::io::point_cache::{Format, PointCache};
+
+mod common;
+
+fuzz_target!(|data: &[u8]| {
+    common::with_file(data, "pc2", |path| {
+        if let Ok(c) = PointCache::open_as(path, Format::Pc2) {
+            common::exercise(c, data);
+        }
+        if let Err(e) = PointCache::open(path) {
+            let _ = e.to_string();
+        }
+    });
+});

@@ -1,0 +1,131 @@
+"""Liquid sources: brushes that add liquid where they touch or come near the cloth, pours
+active over a frame range, and colours that mix."""
+
+import bpy
+import numpy as np
+import pytest
+from conftest import make_active
+
+import madder
+
+FPS = 24
+
+
+def cloth_plane(n=40, size=2.0, frames=(1, 20)):
+    """A still, flat n×n grid in the XY plane (the cloth), no source group."""
+    bpy.ops.wm.read_homefile(use_empty=True)
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = frames
+    scene.render.fps, scene.render.fps_base = FPS, 1.0
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=n, y_subdivisions=n, size=size)
+    cloth = bpy.context.object
+    cloth.name = "Cloth"
+    cloth.madder.enabled = True
+    cloth.madder.diffusion_rate = 0.002
+    cloth.madder.cache_dir = bpy.app.tempdir
+    co = np.empty(3 * len(cloth.data.vertices))
+    cloth.data.vertices.foreach_get("co", co)
+    return cloth, co.reshape(-1, 3)
+
+
+def square_brush(centre, half, height, flow, reach, color=(0.0, 0.0, 1.0)):
+    bpy.ops.mesh.primitive_plane_add(size=2 * half, location=(centre[0], centre[1], height))
+    brush = bpy.context.object
+    brush.name = "Brush"
+    s = brush.madder_source
+    s.is_source, s.amount, s.distance, s.color = True, flow, reach, color
+    return brush
+
+
+def lumped_areas(co, cloth):
+    me = cloth.data
+    me.calc_loop_triangles()
+    t = np.empty(3 * len(me.loop_triangles), dtype=np.int64)
+    me.loop_triangles.foreach_get("vertices", t)
+    t = t.reshape(-1, 3)
+    area = 0.5 * np.linalg.norm(np.cross(co[t[:, 1]] - co[t[:, 0]], co[t[:, 2]] - co[t[:, 0]]), axis=1)
+    out = np.zeros(len(co))
+    for k in range(3):
+        np.add.at(out, t[:, k], area / 3)
+    return out
+
+
+def masses(cloth, areas):
+    r = madder.CacheReader(bpy.path.abspath(cloth.madder.cache_file))
+    return r, np.array([areas @ r.read(f, "density").astype(np.float64) for f in range(r.first_frame, r.last_frame + 1)])
+
+
+def test_pour_adds_exactly_its_flow_during_its_frame_range():
+    cloth, co = cloth_plane()
+    centre, half, height, flow, reach = (0.3, -0.2), 0.25, 0.05, 2.0, 0.1
+    brush = square_brush(centre, half, height, flow, reach)
+    s = brush.madder_source
+    s.use_frame_range, s.frame_start, s.frame_end = True, 5, 12
+    make_active(cloth)
+    assert bpy.ops.madder.bake() == {"FINISHED"}
+    # independent expectation: point-to-rectangle distance, linear fall-off over the reach
+    dx = np.maximum(np.abs(co[:, 0] - centre[0]) - half, 0)
+    dy = np.maximum(np.abs(co[:, 1] - centre[1]) - half, 0)
+    d = np.sqrt(dx**2 + dy**2 + height**2)
+    areas = lumped_areas(co, cloth)
+    per_frame = flow / FPS * (areas @ np.clip(1 - d / reach, 0, 1))
+    _, m = masses(cloth, areas)
+    added = np.diff(m)  # added[k] = liquid brought in frame k+2 (frames 2..20)
+    frames = np.arange(2, 21)
+    active = (frames >= 5) & (frames <= 12)
+    np.testing.assert_allclose(added[active], per_frame, rtol=1e-5)
+    np.testing.assert_allclose(added[~active], 0.0, atol=1e-6 * per_frame)
+    assert m[0] == 0.0
+
+
+def test_brush_stains_only_where_it_comes_near_and_colors_mix():
+    cloth, co = cloth_plane(frames=(1, 24))
+    # red liquid from a vertex group on the left, a blue brush dabbing on the right
+    group = cloth.vertex_groups.new(name="wet")
+    left = np.flatnonzero(np.hypot(co[:, 0] + 0.5, co[:, 1]) < 0.15)
+    group.add(left.tolist(), 1.0, "REPLACE")
+    cloth.madder.source_group = "wet"
+    cloth.madder.stain_color = (1.0, 0.0, 0.0)
+    brush = square_brush((0.5, 0.0), 0.1, 0.5, 4.0, 0.06)
+    brush.location.z = 0.5
+    brush.keyframe_insert("location", frame=1)
+    brush.location.z = 0.02  # comes down to 2 cm above the cloth at frame 8
+    brush.keyframe_insert("location", frame=8)
+    make_active(cloth)
+    assert bpy.ops.madder.bake() == {"FINISHED"}
+    r = madder.CacheReader(bpy.path.abspath(cloth.madder.cache_file))
+    assert r.fields == ["density", "color_r", "color_g", "color_b"]
+    f = r.last_frame
+    d = r.read(f, "density")
+    rgb = np.stack([r.read(f, f"color_{c}") for c in "rgb"], 1)
+    under = np.flatnonzero((np.abs(co[:, 0] - 0.5) < 0.05) & (np.abs(co[:, 1]) < 0.05))
+    far = np.flatnonzero(co[:, 1] > 0.8)
+    assert d[under].min() > 0.1 and d[far].max() < 1e-6 * d.max()
+    assert (rgb[under, 2] > 0.95).all() and (rgb[left, 0] > 0.95).all()
+    # before the brush came within reach, nothing but the red liquid
+    early = r.read(3, "density")
+    assert early[under].max() < 1e-9
+    # playback shows each liquid's own colour
+    bpy.context.scene.frame_set(f)
+    stain = np.empty(4 * len(co), dtype=np.float32)
+    cloth.data.attributes["madder_stain"].data.foreach_get("color", stain)
+    stain = stain.reshape(-1, 4)
+    assert (stain[under, 2] > stain[under, 0]).all() and (stain[left, 0] > stain[left, 2]).all()
+
+
+def test_source_that_is_not_a_mesh_is_named():
+    cloth, _ = cloth_plane()
+    bpy.ops.object.empty_add()
+    empty = bpy.context.object
+    empty.madder_source.is_source = True
+    make_active(cloth)
+    with pytest.raises(RuntimeError) as e:
+        bpy.ops.madder.bake()
+    assert empty.name in str(e.value) and "not a mesh" in str(e.value)
+
+
+def test_no_liquid_at_all_is_explained():
+    cloth, _ = cloth_plane()
+    make_active(cloth)
+    with pytest.raises(RuntimeError, match="no liquid"):
+        bpy.ops.madder.bake()
