@@ -86,6 +86,51 @@ def frame_positions(obj, depsgraph, n_vertices, frame):
     return pos
 
 
+class MotionFile:
+    """Cloth positions from a PC2/MDD file (object space, placed by the object's current
+    transform), sampled at scene frames: PC2 sample `k` is at scene frame `start + k·rate`,
+    MDD sample `k` at `times[k]` seconds, counted from the bake's first frame. Between
+    samples the positions are interpolated linearly; outside the file is an error."""
+
+    def __init__(self, madder, obj, scene, first):
+        path = bpy.path.abspath(obj.madder.motion_file)
+        try:
+            self.cache = madder.PointCache(path)
+            self.cache.check_times()
+        except madder.MadderError as e:
+            raise BakeError(f"'{obj.name}': motion file: {e}") from e
+        if self.cache.n_points != len(obj.data.vertices):
+            raise BakeError(
+                f"'{obj.name}' has {len(obj.data.vertices)} vertices but its motion file {path} has "
+                f"{self.cache.n_points} points"
+            )
+        self.obj, self.path = obj, path
+        times = np.asarray(self.cache.frame_times, dtype=np.float64)
+        if self.cache.time_unit == "second":  # MDD: seconds from the first frame
+            fps = scene.render.fps / scene.render.fps_base
+            times = first + (times - times[0]) * fps
+        self.frames = times  # scene frame of every sample
+        m = np.array(obj.matrix_world, dtype=np.float64)
+        self.rotation, self.offset = m[:3, :3].T, m[:3, 3]
+
+    def positions(self, frame):
+        f = self.frames
+        if not (f[0] - 1e-6 <= frame <= f[-1] + 1e-6):
+            raise BakeError(
+                f"'{self.obj.name}': frame {frame} is outside its motion file {self.path} "
+                f"(frames {f[0]:g}–{f[-1]:g})"
+            )
+        k = int(np.clip(np.searchsorted(f, frame, side="right") - 1, 0, len(f) - 1))
+        try:
+            co = self.cache.read_frame(k).astype(np.float64)
+            if k + 1 < len(f) and frame > f[k]:
+                t = (frame - f[k]) / (f[k + 1] - f[k])
+                co = (1 - t) * co + t * self.cache.read_frame(k + 1)
+        except Exception as e:
+            raise BakeError(f"'{self.obj.name}' at frame {frame}: {e}") from e
+        return (co @ self.rotation + self.offset).astype(np.float32)
+
+
 class BakeJob:
     """One object's bake, advanced a frame at a time, so that a modal operator can show
     progress and cancel between frames, and a script can simply run it to the end.
@@ -129,10 +174,11 @@ class BakeJob:
         if n_nonmanifold:
             self.warnings.append(f"{n_nonmanifold} non-manifold edges (shared by 3+ faces)")
         self.conductivity = _conductivity(self.madder, obj, self.topology, face_polygon, self.warnings)
+        self.motion = MotionFile(self.madder, obj, scene, self.first) if settings.motion_file else None
         self.frame = None  # last frame baked
         self.frame_before = scene.frame_current
         self.writer = self.stepper = None
-        self._suspend = None
+        self._suspended = False
 
     @property
     def total(self):
@@ -147,10 +193,10 @@ class BakeJob:
         madder, obj, scene = self.madder, self.obj, self.scene
         try:
             if self.frame is None:
-                self._suspend = handlers.suspended()
-                self._suspend.__enter__()
+                handlers.suspend()
+                self._suspended = True
                 frame = self.first
-                scene.frame_set(frame)
+                self._goto(frame)
                 pos = self._positions(frame)
                 self.stepper = madder.DiffusionStepper(self.topology, pos, self.density0, **self.conductivity)
                 if self.sources:
@@ -163,7 +209,7 @@ class BakeJob:
                 self.writer = madder.CacheWriter(self.path, self.n_vertices, self.fields, self.first, self.total)
             else:
                 frame = self.frame + 1
-                scene.frame_set(frame)
+                self._goto(frame)
                 pos = self._positions(frame)
                 self.stepper.step(pos, self.dt, obj.madder.substeps)
                 self._pour(frame, pos)
@@ -197,7 +243,15 @@ class BakeJob:
                 delta = (s.amount * self.dt * weight).astype(np.float32)
                 self.stepper.add_liquid(delta, tuple(s.color))
 
+    def _goto(self, frame):
+        """Moves the scene to `frame` unless nothing needs the scene (motion from a file and
+        no sources): then the bake never evaluates it."""
+        if self.motion is None or self.sources:
+            self.scene.frame_set(frame)
+
     def _positions(self, frame):
+        if self.motion is not None:
+            return self.motion.positions(frame)
         return frame_positions(self.obj, bpy.context.evaluated_depsgraph_get(), self.n_vertices, frame)
 
     def finish(self):
@@ -225,10 +279,11 @@ class BakeJob:
         self._close()
 
     def _close(self):
-        if self._suspend is not None:
-            self._suspend.__exit__(None, None, None)
-            self._suspend = None
-            self.scene.frame_set(self.frame_before)
+        if self._suspended:
+            handlers.resume()
+            self._suspended = False
+            if self.scene.frame_current != self.frame_before:
+                self.scene.frame_set(self.frame_before)
 
 
 def bake(scene, obj, progress=None, frames=None):

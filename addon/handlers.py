@@ -13,17 +13,16 @@ _readers = {}  # absolute path -> (mtime_ns, size, CacheReader)
 _suspended = 0  # > 0 while a bake walks the frames: playback must not touch the meshes
 
 
-class suspended:
-    """Context manager: no playback while the bake steps through frames (writing attributes
-    would re-tag the cloth being read, and costs time for nothing)."""
+def suspend():
+    """No playback until the matching `resume()`: a bake steps through frames and must not
+    have the handler rewrite the meshes it is reading (nor spend the time)."""
+    global _suspended
+    _suspended += 1
 
-    def __enter__(self):
-        global _suspended
-        _suspended += 1
 
-    def __exit__(self, *exc):
-        global _suspended
-        _suspended -= 1
+def resume():
+    global _suspended
+    _suspended -= 1
 
 
 def _reader(path):

@@ -29,6 +29,7 @@ class MADDER_PT_stain(bpy.types.Panel):
         layout.prop(s, "diffusion_rate")
         layout.prop(s, "substeps")
         layout.prop(s, "stain_color")
+        layout.prop(s, "motion_file")
         layout.prop(s, "cache_dir")
         row = layout.row(align=True)
         row.operator("madder.bake", icon="FILE_CACHE")

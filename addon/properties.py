@@ -52,6 +52,14 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         max=1.0,
         default=(0.45, 0.02, 0.08),
     )
+    motion_file: StringProperty(
+        name="Motion File",
+        description="Take the cloth's motion from a PC2 or MDD file (object-space positions, "
+        "as the Mesh Cache modifier reads them) instead of evaluating the scene",
+        subtype="FILE_PATH",
+        default="",
+        **_BLEND_RELATIVE,
+    )
     cache_dir: StringProperty(
         name="Cache Folder",
         description="Folder for the baked stain (relative to the .blend with //)",

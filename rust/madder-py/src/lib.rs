@@ -10,6 +10,7 @@ use pyo3::prelude::*;
 mod errors;
 mod io;
 mod mesh;
+mod point_cache;
 mod stain;
 mod weave;
 
@@ -24,5 +25,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<io::CacheWriter>()?;
     m.add_class::<io::CacheReader>()?;
     weave::register(m)?;
+    point_cache::register(m)?;
     Ok(())
 }

@@ -10,7 +10,8 @@
 //! - [`stain`]: the stain simulator (§4.3.3 implicit diffusion for now).
 //! - [`weave`]: weave patterns (§2.2.1) and their homogenization into one effective 2×2
 //!   diffusion tensor per fabric (§2.2.2, eqs. 2.3–2.4).
-//! - [`io`]: the Madder cache file.
+//! - [`io`]: the Madder cache file, and PC2/MDD point caches (the Mesh Cache modifier's
+//!   formats) read and written directly, so exported cloth bakes without a scene.
 //!
 //! Conventions: `f64` inside solves, `f32` for bulk arrays at the boundary, `u32` indices;
 //! every loop that runs in parallel writes disjoint outputs, so results are bit-identical

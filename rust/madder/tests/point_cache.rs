@@ -419,6 +419,16 @@ fn mdd_times_that_do_not_increase_are_accepted_and_reported_on_demand() {
         c.check_times(),
         Err(PointCacheError::Time { frame: 1, .. })
     ));
+    // ... also in a one-frame file, where the rate places nothing (found by fuzz/pc2: the
+    // writer refused what check_times accepted); frame 0 is named
+    let mut b = pc2_fixture()[..32 + 24].to_vec();
+    b[28] = 1;
+    b[24..28].copy_from_slice(&0f32.to_le_bytes());
+    let c = PointCache::open(write_bytes(&d, "one.pc2", &b)).unwrap();
+    assert!(matches!(
+        c.check_times(),
+        Err(PointCacheError::Time { frame: 0, .. })
+    ));
     let mut b = pc2_fixture();
     b[20..24].copy_from_slice(&f32::INFINITY.to_le_bytes());
     let c = PointCache::open(write_bytes(&d, "start.pc2", &b)).unwrap();

@@ -9,6 +9,7 @@ from ._core import (
     CacheWriter,
     DiffusionStepper,
     MadderError,
+    PointCache,
     Topology,
     __version__,
     distances_within,
@@ -17,6 +18,8 @@ from ._core import (
     fabric_tile,
     homogenize,
     weft_directions,
+    write_mdd,
+    write_pc2,
 )
 from ._errors import CacheError, FabricError, MeshError, ParameterError, SolveError
 from .arrays import as_faces, as_positions
@@ -30,6 +33,7 @@ __all__ = [
     "MadderError",
     "MeshError",
     "ParameterError",
+    "PointCache",
     "SolveError",
     "Topology",
     "__version__",
@@ -41,4 +45,6 @@ __all__ = [
     "fabric_tile",
     "homogenize",
     "weft_directions",
+    "write_mdd",
+    "write_pc2",
 ]

@@ -69,5 +69,8 @@ pub fn exercise(mut c: PointCache, data: &[u8]) {
         Timing::Seconds(times) => write_mdd(&out, &times, &frames),
     }
     .expect("a clean file can be rewritten");
-    assert_eq!(std::fs::read(&out).expect("rewritten file"), data[..expected]);
+    assert_eq!(
+        std::fs::read(&out).expect("rewritten file"),
+        data[..expected]
+    );
 }

@@ -70,6 +70,11 @@ impl CacheWriter {
         if n_vertices == 0 || n_vertices > u32::MAX as usize {
             return Err(usage(format!("vertex count {n_vertices} out of range")));
         }
+        if !frame_range_fits(first_frame, n_frames) {
+            return Err(usage(format!(
+                "{n_frames} frames from frame {first_frame} run past the i32 frame range"
+            )));
+        }
         let mut tmp_name = path.file_name().unwrap_or_default().to_os_string();
         tmp_name.push(format!(".tmp{}", std::process::id()));
         let tmp = path.with_file_name(tmp_name);
@@ -120,7 +125,8 @@ impl CacheWriter {
                 ),
             });
         }
-        let frame = self.first_frame + self.n_frames as i32;
+        // fits: the range was checked in create
+        let frame = (self.first_frame as i64 + self.n_frames as i64) as i32;
         let mut block = Vec::with_capacity(8 + 4 * self.n_fields * self.n_vertices);
         block.extend_from_slice(&frame.to_le_bytes());
         for f in fields {
@@ -224,6 +230,9 @@ impl CacheReader {
         if n_vertices == 0 || n_fields == 0 || n_fields > 64 {
             return Err(header_err("vertex or field count out of range"));
         }
+        if !frame_range_fits(first_frame, n_frames) {
+            return Err(header_err("frame range does not fit in i32"));
+        }
         let mut rest = vec![0u8; n_fields * NAME_LEN + 4];
         read_exact_or(&mut file, &mut rest, || {
             header_err("file is shorter than the header")
@@ -266,10 +275,11 @@ impl CacheReader {
             .and_then(|frames| frames.checked_add(reader.header_len))
             .ok_or_else(|| header_err("declared size overflows 64 bits"))?;
         if len < expected {
-            let complete = (len.saturating_sub(reader.header_len) / reader.block_len()) as i32;
+            // complete < n_frames, and the frame range fits in i32 (checked above)
+            let complete = len.saturating_sub(reader.header_len) / reader.block_len();
             return Err(CacheError::Truncated {
                 path: reader.path,
-                frame: first_frame + complete,
+                frame: (first_frame as i64 + complete as i64) as i32,
             });
         }
         if len > expected {
@@ -294,7 +304,8 @@ impl CacheReader {
         self.n_frames
     }
     pub fn last_frame(&self) -> i32 {
-        self.first_frame + self.n_frames as i32 - 1
+        // fits: the range was checked at open
+        (self.first_frame as i64 + self.n_frames as i64 - 1) as i32
     }
 
     fn block_len(&self) -> u64 {
@@ -317,7 +328,8 @@ impl CacheReader {
                 last: self.last_frame(),
             });
         }
-        let offset = self.header_len + self.block_len() * (frame - self.first_frame) as u64;
+        let index = (frame as i64 - self.first_frame as i64) as u64;
+        let offset = self.header_len + self.block_len() * index;
         let mut block = vec![0u8; self.block_len() as usize];
         let path = self.path.clone();
         self.file
@@ -343,6 +355,13 @@ impl CacheReader {
             .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
             .collect())
     }
+}
+
+/// Whether frames `first..first + n` (and `last_frame() = first + n − 1`, also for `n = 0`)
+/// are all representable as `i32`.
+fn frame_range_fits(first: i32, n: u32) -> bool {
+    let last = first as i64 + n as i64 - 1;
+    last <= i32::MAX as i64 && last >= i32::MIN as i64
 }
 
 fn read_exact_or(
@@ -418,6 +437,40 @@ mod tests {
         assert!(matches!(
             CacheReader::open(&p),
             Err(CacheError::BadMagic { .. })
+        ));
+    }
+
+    /// Regression (found by `fuzz/cache_reader`): a header whose frame range or total size
+    /// does not fit overflowed at open; now it is a header error.
+    #[test]
+    fn header_counts_that_overflow_are_header_errors() {
+        let d = tmpdir("overflow");
+        let p = d.join("c.madder");
+        let header = |n_vertices: u32, first_frame: i32, n_frames: u32| {
+            let mut h = MAGIC.to_vec();
+            for w in [VERSION, n_vertices, 1, first_frame as u32, n_frames] {
+                h.extend_from_slice(&w.to_le_bytes());
+            }
+            h.extend_from_slice(&[b'd'; NAME_LEN]);
+            let crc = crc32fast::hash(&h);
+            h.extend_from_slice(&crc.to_le_bytes());
+            h.extend_from_slice(&[0; 64]);
+            h
+        };
+        for (h, why) in [
+            (header(u32::MAX, i32::MIN, u32::MAX), "overflows"),
+            (header(1, i32::MAX - 1, 3), "frame range"),
+            (header(1, i32::MIN, 0), "frame range"),
+        ] {
+            std::fs::write(&p, &h).unwrap();
+            match CacheReader::open(&p) {
+                Err(e @ CacheError::Header { .. }) => assert!(e.to_string().contains(why), "{e}"),
+                other => panic!("expected a header error, got {other:?}"),
+            }
+        }
+        assert!(matches!(
+            CacheWriter::create(&p, 1, &["d"], i32::MAX, 2),
+            Err(CacheError::Usage { .. })
         ));
     }
 
