@@ -177,23 +177,7 @@ impl OneRings {
         let n = topology.n_vertices();
         let faces = topology.faces();
         // vertex → incident (face, corner), in face order
-        let mut corner_ptr = vec![0u32; n + 1];
-        for tri in faces {
-            for &v in tri {
-                corner_ptr[v as usize + 1] += 1;
-            }
-        }
-        for v in 0..n {
-            corner_ptr[v + 1] += corner_ptr[v];
-        }
-        let mut next = corner_ptr[..n].to_vec();
-        let mut corners = vec![(0u32, 0u8); corner_ptr[n] as usize];
-        for (f, tri) in faces.iter().enumerate() {
-            for (k, &v) in tri.iter().enumerate() {
-                corners[next[v as usize] as usize] = (f as u32, k as u8);
-                next[v as usize] += 1;
-            }
-        }
+        let (corner_ptr, corners) = incidence(n, faces);
         // edge lookup: edges are sorted by (a, b), so those starting at a are contiguous
         let edges = topology.edges();
         let mut edge_ptr = vec![0u32; n + 1];
@@ -315,6 +299,29 @@ fn find_edge(edge_ptr: &[u32], edge_end: &[u32], i: u32, j: u32) -> Option<usize
     edge_end[lo..hi].binary_search(&b).ok().map(|k| lo + k)
 }
 
+/// Groups per-face triples of keys (vertices or edges, `< n`) by key with a counting sort:
+/// `items[ptr[k]..ptr[k+1]]` are the `(face, slot)` where key `k` appears, in face order.
+fn incidence(n: usize, per_face: &[[u32; 3]]) -> (Vec<u32>, Vec<(u32, u8)>) {
+    let mut ptr = vec![0u32; n + 1];
+    for t in per_face {
+        for &k in t {
+            ptr[k as usize + 1] += 1;
+        }
+    }
+    for k in 0..n {
+        ptr[k + 1] += ptr[k];
+    }
+    let mut next = ptr[..n].to_vec();
+    let mut items = vec![(0u32, 0u8); ptr[n] as usize];
+    for (f, t) in per_face.iter().enumerate() {
+        for (slot, &k) in t.iter().enumerate() {
+            items[next[k as usize] as usize] = (f as u32, slot as u8);
+            next[k as usize] += 1;
+        }
+    }
+    (ptr, items)
+}
+
 /// Which faces to flip so that every edge shared by exactly two faces is crossed
 /// consistently: a breadth-first walk over faces through such edges, from the
 /// lowest-numbered face of each connected component; each component then keeps the
@@ -324,23 +331,7 @@ fn harmonize_orientation(topology: &Topology) -> Vec<bool> {
     let (faces, face_edges) = (topology.faces(), topology.face_edges());
     let n_edges = topology.n_edges();
     // edge → its incident (face, corner opposite the edge)
-    let mut ptr = vec![0u32; n_edges + 1];
-    for fe in face_edges {
-        for &e in fe {
-            ptr[e as usize + 1] += 1;
-        }
-    }
-    for e in 0..n_edges {
-        ptr[e + 1] += ptr[e];
-    }
-    let mut next = ptr[..n_edges].to_vec();
-    let mut inc = vec![(0u32, 0u8); ptr[n_edges] as usize];
-    for (f, fe) in face_edges.iter().enumerate() {
-        for (k, &e) in fe.iter().enumerate() {
-            inc[next[e as usize] as usize] = (f as u32, k as u8);
-            next[e as usize] += 1;
-        }
-    }
+    let (ptr, inc) = incidence(n_edges, face_edges);
     // the edge as face f walks it, from corner k+1 to corner k+2
     let run = |f: u32, k: u8| {
         let t = faces[f as usize];
