@@ -47,13 +47,7 @@ def write_face_weft(mesh, face_polygon, weft):
     np.add.at(per_poly, face_polygon, weft)
     norm = np.linalg.norm(per_poly, axis=1, keepdims=True)
     per_poly = np.divide(per_poly, norm, out=np.zeros_like(per_poly), where=norm > 0).astype(np.float32)
-    attr = mesh.attributes.get(WEFT_ATTR)
-    if attr is not None and (attr.data_type != "FLOAT_VECTOR" or attr.domain != "FACE"):
-        mesh.attributes.remove(attr)
-        attr = None
-    if attr is None:
-        attr = mesh.attributes.new(WEFT_ATTR, "FLOAT_VECTOR", "FACE")
-    attr.data.foreach_set("vector", per_poly.ravel())
+    _attribute(mesh, WEFT_ATTR, "FLOAT_VECTOR", "FACE").data.foreach_set("vector", per_poly.ravel())
     mesh.update()
 
 
@@ -91,16 +85,15 @@ def vertex_group_weights(obj, name):
     return weights
 
 
-def _point_attribute(mesh, name, data_type):
+def _attribute(mesh, name, data_type, domain="POINT"):
+    """The attribute `name`, (re)created if it is missing or of another type or domain."""
     attr = mesh.attributes.get(name)
-    if attr is not None and (attr.data_type != data_type or attr.domain != "POINT"):
+    if attr is not None and (attr.data_type != data_type or attr.domain != domain):
         mesh.attributes.remove(attr)
         attr = None
     if attr is None:
-        if data_type == "FLOAT_COLOR":
-            attr = mesh.color_attributes.new(name, data_type, "POINT")
-        else:
-            attr = mesh.attributes.new(name, data_type, "POINT")
+        owner = mesh.color_attributes if data_type == "FLOAT_COLOR" else mesh.attributes
+        attr = owner.new(name, data_type, domain)
     return attr
 
 
@@ -117,7 +110,7 @@ def write_stain(mesh, density, color, colors=None):
     tint = np.asarray(color, dtype=np.float32)[None, :3] if colors is None else colors
     rgba[:, :3] = coverage[:, None] * tint
     rgba[:, 3] = coverage
-    _point_attribute(mesh, DENSITY_ATTR, "FLOAT").data.foreach_set("value", density)
-    _point_attribute(mesh, WETNESS_ATTR, "FLOAT").data.foreach_set("value", coverage)
-    _point_attribute(mesh, STAIN_ATTR, "FLOAT_COLOR").data.foreach_set("color", rgba.ravel())
+    _attribute(mesh, DENSITY_ATTR, "FLOAT").data.foreach_set("value", density)
+    _attribute(mesh, WETNESS_ATTR, "FLOAT").data.foreach_set("value", coverage)
+    _attribute(mesh, STAIN_ATTR, "FLOAT_COLOR").data.foreach_set("color", rgba.ravel())
     mesh.update()

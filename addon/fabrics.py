@@ -120,11 +120,13 @@ def tile_rows(fabric):
     import madder
 
     key = fabric_key(fabric)
-    return madder.fabric_tile(key["weave"], grid=key["grid"], gaps=key["gaps"])
+    del key["coefficients"]  # the tile's layout does not depend on them
+    return madder.fabric_tile(**key)
 
 
 def describe(fabric):
-    """'ratio 3.2 at 0°' for the panel, or the error message."""
+    """`((ratio, angle in degrees), None)` of the fabric's ellipse for the panel, or
+    `(None, message)` when the fabric is invalid."""
     import madder
 
     try:

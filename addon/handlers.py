@@ -49,10 +49,9 @@ def apply_frame(obj, frame):
     if reader.n_vertices != len(obj.data.vertices):
         return False
     frame = min(max(frame, reader.first_frame), reader.last_frame)
-    colors = None
-    if "color_r" in reader.fields:
-        colors = np.stack([reader.read(frame, f"color_{c}") for c in "rgb"], axis=1)
-    bridge.write_stain(obj.data, reader.read(frame, "density"), settings.stain_color, colors)
+    block = dict(zip(reader.fields, reader.read_frame(frame)))  # one read for all fields
+    colors = np.stack([block[f"color_{c}"] for c in "rgb"], axis=1) if "color_r" in block else None
+    bridge.write_stain(obj.data, block["density"], settings.stain_color, colors)
     return True
 
 

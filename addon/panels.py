@@ -5,8 +5,9 @@ import bpy
 from . import fabrics
 
 
-class MADDER_PT_stain(bpy.types.Panel):
-    bl_label = "Madder Stain"
+class _PhysicsPanel:
+    """A panel of mesh objects in the Physics properties tab."""
+
     bl_space_type = "PROPERTIES"
     bl_region_type = "WINDOW"
     bl_context = "physics"
@@ -14,6 +15,10 @@ class MADDER_PT_stain(bpy.types.Panel):
     @classmethod
     def poll(cls, context):
         return context.object is not None and context.object.type == "MESH"
+
+
+class MADDER_PT_stain(_PhysicsPanel, bpy.types.Panel):
+    bl_label = "Madder Stain"
 
     def draw_header(self, context):
         self.layout.prop(context.object.madder, "enabled", text="")
@@ -40,15 +45,8 @@ class MADDER_PT_stain(bpy.types.Panel):
             layout.label(text=f"Baked: {s.cache_file}", icon="CHECKMARK")
 
 
-class MADDER_PT_source(bpy.types.Panel):
+class MADDER_PT_source(_PhysicsPanel, bpy.types.Panel):
     bl_label = "Madder Source"
-    bl_space_type = "PROPERTIES"
-    bl_region_type = "WINDOW"
-    bl_context = "physics"
-
-    @classmethod
-    def poll(cls, context):
-        return context.object is not None and context.object.type == "MESH"
 
     def draw_header(self, context):
         self.layout.prop(context.object.madder_source, "is_source", text="")

@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use numpy::{PyArray1, PyReadonlyArray1};
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1};
 use pyo3::prelude::*;
 
 use crate::errors::{CacheError, to_py};
@@ -82,6 +82,19 @@ impl CacheReader {
         Ok(Self {
             inner: madder::io::cache::CacheReader::open(path).map_err(to_py)?,
         })
+    }
+
+    /// Every field of `frame` with one read and checksum, as a `(n_fields, n_vertices)`
+    /// float32 array (rows in the order of `fields`).
+    fn read_frame<'py>(
+        &mut self,
+        py: Python<'py>,
+        frame: i32,
+    ) -> PyResult<Bound<'py, numpy::PyArray2<f32>>> {
+        let (k, n) = (self.inner.field_names().len(), self.inner.n_vertices());
+        let inner = &mut self.inner;
+        let v = py.detach(|| inner.read_frame(frame)).map_err(to_py)?;
+        PyArray1::from_vec(py, v).reshape([k, n])
     }
 
     /// Field `field` at `frame`, as a float32 array of one value per vertex.

@@ -320,6 +320,21 @@ impl CacheReader {
                 field: name.into(),
             });
         };
+        let body = self.read_block(frame)?;
+        Ok(decode(
+            &body[4 + 4 * k * self.n_vertices..][..4 * self.n_vertices],
+        ))
+    }
+
+    /// Reads every field of `frame` with one read and one checksum: field `k` is
+    /// `values[k * n_vertices..(k + 1) * n_vertices]`, in the order of [`Self::field_names`].
+    pub fn read_frame(&mut self, frame: i32) -> Result<Vec<f32>, CacheError> {
+        let body = self.read_block(frame)?;
+        Ok(decode(&body[4..]))
+    }
+
+    /// The checked body (frame number + field data) of `frame`'s block.
+    fn read_block(&mut self, frame: i32) -> Result<Vec<u8>, CacheError> {
         if frame < self.first_frame || frame > self.last_frame() {
             return Err(CacheError::FrameMissing {
                 path: self.path.clone(),
@@ -342,18 +357,14 @@ impl CacheReader {
             path: path.clone(),
             frame,
         })?;
-        let (body, crc) = block.split_at(block.len() - 4);
-        let stored_frame = i32::from_le_bytes(body[..4].try_into().unwrap());
-        if crc32fast::hash(body) != u32::from_le_bytes(crc.try_into().unwrap())
+        let crc = block.split_off(block.len() - 4);
+        let stored_frame = i32::from_le_bytes(block[..4].try_into().unwrap());
+        if crc32fast::hash(&block) != u32::from_le_bytes(crc[..].try_into().unwrap())
             || stored_frame != frame
         {
             return Err(CacheError::Checksum { path, frame });
         }
-        let start = 4 + 4 * k * self.n_vertices;
-        Ok(body[start..start + 4 * self.n_vertices]
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
-            .collect())
+        Ok(block)
     }
 }
 
@@ -362,6 +373,13 @@ impl CacheReader {
 fn frame_range_fits(first: i32, n: u32) -> bool {
     let last = first as i64 + n as i64 - 1;
     last <= i32::MAX as i64 && last >= i32::MIN as i64
+}
+
+fn decode(bytes: &[u8]) -> Vec<f32> {
+    bytes
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+        .collect()
 }
 
 fn read_exact_or(
@@ -402,6 +420,10 @@ mod tests {
         assert_eq!((r.first_frame(), r.last_frame(), r.n_vertices()), (5, 6, 3));
         assert_eq!(r.read(6, "density").unwrap(), vec![10.0, 11.0, 12.0]);
         assert_eq!(r.read(5, "other").unwrap(), vec![0.0, -1.0, -2.0]);
+        assert_eq!(
+            r.read_frame(6).unwrap(),
+            [r.read(6, "density").unwrap(), r.read(6, "other").unwrap()].concat()
+        );
         assert!(matches!(
             r.read(7, "density"),
             Err(CacheError::FrameMissing { frame: 7, .. })
