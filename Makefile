@@ -64,9 +64,11 @@ test-blender: $(ZIP)
 demo: $(ZIP)
 	MADDER_ZIP=$(abspath $(ZIP)) $(PY) blend_fixtures/demo.py --out out/demo.png
 
-bench: $(ZIP)
+bench: $(ZIP) $(WHEELDIR)/.stamp
 	cargo bench -p madder
 	MADDER_ZIP=$(abspath $(ZIP)) $(PY) tests/bench/bench_playback.py
+	PYTHONPATH=$(abspath $(WHEELDIR)) $(PY) tests/bench/bench_dynamic_paint.py --size 316 --frames 12
+	PYTHONPATH=$(abspath $(WHEELDIR)) $(PY) tests/bench/bench_dynamic_paint.py --size 100 --frames 12
 
 fixtures: $(VENV)/.stamp
 	$(PY) blend_fixtures/build_fixtures.py

@@ -7,11 +7,10 @@ import os
 import bpy
 import numpy as np
 
-from . import bridge, fabrics, handlers
+from . import bridge, fabrics, handlers, properties
 
 CACHE_EXT = ".madder"
-FIELDS = ["density"]
-COLOR_FIELDS = ["color_r", "color_g", "color_b"]
+FIELDS, COLOR_FIELDS = bridge.FIELDS, bridge.COLOR_FIELDS
 
 
 class BakeError(Exception):
@@ -140,7 +139,13 @@ class BakeJob:
     every frame is done; `finish()` moves the new cache over the old one and records it;
     `cancel()` (or any error) discards the new cache, so the previous bake stays. Both
     restore the frame the user was on. Playback is suspended while the job is open.
-    """
+
+    The first frame builds the simulator (`madder.Simulator`: rest pose = the mesh's own
+    vertices, placed in world space; first pose = the frame's positions), spills the
+    initial wetness of the Source group (weight × Amount of the object's liquid) and
+    starts its splash. Every later frame steps the simulator to the frame's positions,
+    then lets each source pour what it brought during that frame (and splash, the first
+    time it pours). Each frame's densities go to the cache (`FIELDS`, kg/m²)."""
 
     def __init__(self, scene, obj, frames=None):
         self.madder = core()
@@ -162,11 +167,8 @@ class BakeJob:
         if len(faces) == 0:
             raise BakeError(f"'{obj.name}' has no faces")
         settings = obj.madder
-        if settings.source_group:
-            self.density0 = bridge.vertex_group_weights(obj, settings.source_group) * np.float32(settings.amount)
-        else:
-            self.density0 = np.zeros(self.n_vertices, dtype=np.float32)
-        # with sources, colours can differ: track them (three more right-hand sides)
+        self.wet0 = bridge.vertex_group_weights(obj, settings.source_group) if settings.source_group else None
+        # with sources, colours can differ: track them (three more fields)
         self.fields = FIELDS + (COLOR_FIELDS if self.sources else [])
         self.topology = _topology(self.madder, obj, faces, self.n_vertices, face_polygon, n_polygons)
         self.warnings = []
@@ -174,10 +176,14 @@ class BakeJob:
         if n_nonmanifold:
             self.warnings.append(f"{n_nonmanifold} non-manifold edges (shared by 3+ faces)")
         self.conductivity = _conductivity(self.madder, obj, self.topology, face_polygon, self.warnings)
+        self.references = properties.references(settings, [o.madder_source for o in self.sources], spill=self.wet0 is not None)
+        if self.references[0] == 0.0:
+            self.warnings.append("its liquid has no solute (concentration 0): it wets the cloth but leaves no stain")
         self.motion = MotionFile(self.madder, obj, scene, self.first) if settings.motion_file else None
         self.frame = None  # last frame baked
         self.frame_before = scene.frame_current
-        self.writer = self.stepper = None
+        self.writer = self.sim = None
+        self.splashed = set()  # sources whose splash is done
         self._suspended = False
 
     @property
@@ -190,7 +196,7 @@ class BakeJob:
 
     def step(self):
         """Bakes the next frame; returns False once the last frame is in."""
-        madder, obj, scene = self.madder, self.obj, self.scene
+        madder, obj = self.madder, self.obj
         try:
             if self.frame is None:
                 handlers.suspend()
@@ -198,25 +204,17 @@ class BakeJob:
                 frame = self.first
                 self._goto(frame)
                 pos = self._positions(frame)
-                self.stepper = madder.DiffusionStepper(self.topology, pos, self.density0, **self.conductivity)
-                if self.sources:
-                    tint = np.tile(np.asarray(obj.madder.stain_color, dtype=np.float32), (self.n_vertices, 1))
-                    self.stepper.enable_color(tint)
-                if self.stepper.degenerate_uv_faces:
-                    self.warnings.append(
-                        f"{self.stepper.degenerate_uv_faces} faces have degenerate UVs; their weft follows an edge"
-                    )
+                self.sim = madder.Simulator(self.topology, self._rest(), pos, **simulator_settings(self.scene, obj),
+                                            **self.conductivity)
+                self._spill(pos)
                 self.writer = madder.CacheWriter(self.path, self.n_vertices, self.fields, self.first, self.total)
             else:
                 frame = self.frame + 1
                 self._goto(frame)
                 pos = self._positions(frame)
-                self.stepper.step(pos, self.dt, obj.madder.substeps)
+                self.sim.step(pos, self.dt)
                 self._pour(frame, pos)
-            out = [self.stepper.density]
-            if self.sources:
-                out += list(np.ascontiguousarray(self.stepper.color.T))
-            self.writer.push_frame(out)
+            self.writer.push_frame(self._outputs())
             self.frame = frame
         except madder.MadderError as e:
             self.cancel()
@@ -226,22 +224,48 @@ class BakeJob:
             raise
         return self.frame < self.last
 
+    def _outputs(self):
+        """This frame's cache fields: total solute, liquid and deposit densities (kg/m²),
+        and the solute's colour when sources may mix colours."""
+        sim = self.sim
+        out = [np.ascontiguousarray(sim.stain()[:, 3]), sim.wetness(), sim.deposit()]
+        if self.sources:
+            out += list(np.ascontiguousarray(sim.solute_color().T))
+        return out
+
+    def _spill(self, pos):
+        """The initial wetness: the Source group's weights × Amount of the object's liquid,
+        and its splash (outward from the weighted centroid of the wet area)."""
+        s = self.obj.madder
+        if self.wet0 is None or not self.wet0.any():
+            return
+        self.sim.add_liquid((self.wet0 * s.amount).astype(np.float32), s.concentration, tuple(s.stain_color))
+        if s.splash_speed > 0.0:
+            w = self.wet0.astype(np.float64)
+            centre = tuple((w @ pos.astype(np.float64)) / w.sum())
+            self.sim.splash(centre, s.splash_speed, s.splash_seed, self.wet0)
+
     def _pour(self, frame, pos):
         """Adds the liquid each source brought during the frame that just ended: `flow × dt`
-        per unit area at contact, fading linearly to zero at the source's reach."""
+        per unit area at contact, fading linearly to zero at the source's reach. The first
+        time a source pours, its splash starts from the source's origin."""
         depsgraph = bpy.context.evaluated_depsgraph_get()
         for src in self.sources:
             s = src.madder_source
             if s.use_frame_range and not (s.frame_start <= frame <= s.frame_end):
                 continue
-            verts, tris = bridge.world_triangles(src.evaluated_get(depsgraph))
+            src_eval = src.evaluated_get(depsgraph)
+            verts, tris = bridge.world_triangles(src_eval)
             if len(tris) == 0:
                 continue
             d = self.madder.distances_within(pos, verts, tris, s.distance)
-            weight = np.clip(1.0 - d / s.distance, 0.0, 1.0)  # inf → 0
-            if weight.any():
-                delta = (s.amount * self.dt * weight).astype(np.float32)
-                self.stepper.add_liquid(delta, tuple(s.color))
+            weight = np.clip(1.0 - d / s.distance, 0.0, 1.0).astype(np.float32)  # inf → 0
+            if not weight.any():
+                continue
+            self.sim.add_liquid((s.amount * self.dt * weight).astype(np.float32), s.concentration, tuple(s.color))
+            if s.splash_speed > 0.0 and src.name not in self.splashed:
+                self.splashed.add(src.name)
+                self.sim.splash(tuple(src_eval.matrix_world.translation), s.splash_speed, s.splash_seed, weight)
 
     def _goto(self, frame):
         """Moves the scene to `frame` unless nothing needs the scene (motion from a file and
@@ -254,6 +278,21 @@ class BakeJob:
             return self.motion.positions(frame)
         return frame_positions(self.obj, bpy.context.evaluated_depsgraph_get(), self.n_vertices, frame)
 
+    def _rest(self):
+        """The rest pose: the mesh's own (undeformed) vertices, placed in world space by the
+        object's transform at the first frame (or the motion file's placement)."""
+        co = bridge.rest_positions(self.obj.data).astype(np.float64)
+        if self.motion is not None:
+            rotation, offset = self.motion.rotation, self.motion.offset
+        else:
+            m = np.array(self.obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).matrix_world, dtype=np.float64)
+            rotation, offset = m[:3, :3].T, m[:3, 3]
+        rest = (co @ rotation + offset).astype(np.float32)
+        bad = np.flatnonzero(~np.isfinite(rest).all(axis=1))
+        if bad.size:
+            raise BakeError(f"'{self.obj.name}': vertex {bad[0]} has a non-finite rest position")
+        return rest
+
     def finish(self):
         """Replaces the previous cache with the new one; returns its path."""
         try:
@@ -264,6 +303,7 @@ class BakeJob:
         self.writer = None
         self._close()
         self.obj.madder.cache_file = stored_path(self.path)
+        self.obj.madder.bake_references = self.references
         # Playback writes mesh attributes from frame_change_post; during a render from the
         # UI, Blender evaluates the scene in a render thread, and "Lock Interface" is what
         # keeps the two from touching the same data at once (background renders are safe
@@ -286,6 +326,29 @@ class BakeJob:
                 self.scene.frame_set(self.frame_before)
 
 
+def simulator_settings(scene, obj):
+    """Keyword arguments of `madder.Simulator` from the object's settings (SI units) and
+    the scene's gravity (off when either the scene's or the object's Gravity is off)."""
+    s = obj.madder
+    return dict(
+        color=tuple(s.stain_color),
+        gravity=tuple(scene.gravity),
+        viscosity=s.viscosity,
+        friction=s.friction,
+        absorption=s.absorption,
+        saturation=s.saturation,
+        adsorption=s.adsorption,
+        capacity=s.capacity,
+        evaporation=s.evaporation,
+        evaporation_boundary=s.evaporation_boundary,
+        substeps=s.substeps,
+        use_gravity=bool(s.use_gravity and scene.use_gravity),
+        use_rectilinear=s.use_rectilinear,
+        use_coriolis=s.use_coriolis,
+        momentum_advection=s.momentum_advection,
+    )
+
+
 def bake(scene, obj, progress=None, frames=None):
     """Bakes `obj` over the scene's frame range (or `frames=(first, last)`) to the end.
     Returns `(path, warnings)`. `progress(done, total)` is called after every frame."""
@@ -299,7 +362,7 @@ def bake(scene, obj, progress=None, frames=None):
 
 
 def _conductivity(madder, obj, topology, face_polygon, warnings):
-    """Keyword arguments of the stepper: isotropic `rate`, or the woven faces of the
+    """Keyword arguments of the simulator: isotropic `diffusion`, or the woven faces of the
     materials' fabrics (then the rest-pose weft is written as `madder_weft` too)."""
     rate = obj.madder.diffusion_rate
     try:
@@ -307,12 +370,15 @@ def _conductivity(madder, obj, topology, face_polygon, warnings):
     except ValueError as e:
         raise BakeError(f"'{obj.name}': {e}") from e
     if woven is None:
-        return {"rate": rate}
+        return {"diffusion": rate}
     uv = bridge.corner_uvs(obj.data)
     if uv is None:
         warnings.append("has no UV map to orient its fabrics: baked isotropic (add a UV map for woven spreading)")
-        return {"rate": rate}
+        return {"diffusion": rate}
     tensors, angle = woven
+    degenerate = bridge.degenerate_uv_faces(uv)
+    if degenerate:
+        warnings.append(f"{degenerate} faces have degenerate UVs; their weft follows an edge")
     weft = madder.weft_directions(topology, bridge.rest_positions(obj.data), uv, angle)
     bridge.write_face_weft(obj.data, face_polygon, weft)
     return {"face_tensors": tensors, "face_uv": uv, "face_angle": angle}
@@ -332,8 +398,9 @@ def free(obj):
     if path and os.path.exists(path):
         os.remove(path)
     settings.cache_file = ""
+    settings.bake_references = (0.0, 0.0, 0.0)
     if obj.type == "MESH":
-        for name in (bridge.STAIN_ATTR, bridge.DENSITY_ATTR, bridge.WETNESS_ATTR, bridge.WEFT_ATTR):
+        for name in bridge.ATTRIBUTES:
             attr = obj.data.attributes.get(name)
             if attr is not None:
                 obj.data.attributes.remove(attr)

@@ -4,9 +4,17 @@ on flat numpy buffers; nothing here loops over vertices in Python per frame."""
 import numpy as np
 
 STAIN_ATTR = "madder_stain"
-DENSITY_ATTR = "madder_density"
 WETNESS_ATTR = "madder_wetness"
+DEPOSIT_ATTR = "madder_deposit"
 WEFT_ATTR = "madder_weft"
+LEGACY_DENSITY_ATTR = "madder_density"  # written by Madder before the full simulator
+# cache fields, per vertex and frame (float32): total solute (dissolved + absorbed +
+# adsorbed), liquid (free + absorbed solvent) and adsorbed solute (the deposit), in kg/m²;
+# with sources, also the solute's colour (the mass-weighted mix of the liquids)
+FIELDS = ["solute", "wetness", "deposit"]
+COLOR_FIELDS = ["color_r", "color_g", "color_b"]
+# every attribute a bake or playback may have written (Free Bake removes them)
+ATTRIBUTES = (STAIN_ATTR, WETNESS_ATTR, DEPOSIT_ATTR, WEFT_ATTR, LEGACY_DENSITY_ATTR)
 
 
 def topology_arrays(mesh):
@@ -97,20 +105,41 @@ def _attribute(mesh, name, data_type, domain="POINT"):
     return attr
 
 
-def write_stain(mesh, density, color, colors=None):
-    """Writes, on the POINT domain, `madder_density` (float), `madder_stain` (RGBA: color ×
-    coverage, alpha = coverage, coverage = density clamped to [0, 1]; the color is `colors`
-    (N, 3) per vertex when the bake tracked colors, else `color`) and `madder_wetness`
-    (float; the liquid is the stain until the absorption/evaporation model exists, so it is
-    the coverage), then tags the mesh so the depsgraph re-evaluates it (foreach_set alone
-    does not)."""
-    density = np.ascontiguousarray(density, dtype=np.float32)
-    coverage = np.clip(density, 0.0, 1.0)
-    rgba = np.empty((len(density), 4), dtype=np.float32)
+def normalized(density, reference):
+    """`density / reference` clamped to [0, 1], float32 (all 0 when `reference` is 0)."""
+    if reference <= 0.0:
+        return np.zeros(len(density), dtype=np.float32)
+    return np.clip(np.asarray(density, dtype=np.float32) / np.float32(reference), 0.0, 1.0)
+
+
+def write_stain(mesh, solute, wetness, deposit, references, color, colors=None):
+    """Writes one frame of a bake on the POINT domain, from its raw densities (kg/m²:
+    total `solute`, liquid `wetness`, adsorbed `deposit`) and the `references` (solute,
+    liquid, deposit; kg/m²) that read as full:
+
+    - `madder_stain` (FLOAT_COLOR): RGB = solute colour × coverage, alpha = coverage, with
+      coverage = solute / reference clamped to [0, 1] (premultiplied, for an "over" mix).
+      The colour is `colors` (N, 3) per vertex when the bake tracked colours, else `color`.
+    - `madder_wetness` (FLOAT): liquid / saturation, clamped to [0, 1] (1: the fibres are
+      full; free liquid pooled on top reads 1 as well).
+    - `madder_deposit` (FLOAT): adsorbed solute / capacity, clamped to [0, 1].
+
+    Then tags the mesh so the depsgraph re-evaluates it (foreach_set alone does not)."""
+    coverage = normalized(solute, references[0])
+    rgba = np.empty((len(coverage), 4), dtype=np.float32)
     tint = np.asarray(color, dtype=np.float32)[None, :3] if colors is None else colors
     rgba[:, :3] = coverage[:, None] * tint
     rgba[:, 3] = coverage
-    _attribute(mesh, DENSITY_ATTR, "FLOAT").data.foreach_set("value", density)
-    _attribute(mesh, WETNESS_ATTR, "FLOAT").data.foreach_set("value", coverage)
     _attribute(mesh, STAIN_ATTR, "FLOAT_COLOR").data.foreach_set("color", rgba.ravel())
+    _attribute(mesh, WETNESS_ATTR, "FLOAT").data.foreach_set("value", normalized(wetness, references[1]))
+    _attribute(mesh, DEPOSIT_ATTR, "FLOAT").data.foreach_set("value", normalized(deposit, references[2]))
     mesh.update()
+
+
+def degenerate_uv_faces(uv):
+    """How many triangles of `uv` (F, 3, 2) have degenerate UVs (no weft direction; the
+    simulator then takes an edge), by the core's test |det| ≤ 1e-12·|a|·|b|."""
+    uv = np.asarray(uv, dtype=np.float64)
+    a, b = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    det = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return int(np.count_nonzero(~(np.abs(det) > 1e-12 * np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))))

@@ -1,5 +1,6 @@
 """Playback: after every frame change, each enabled object with a bake gets that frame's
-stain written into its mesh attributes (`madder_stain`, `madder_density`)."""
+stain written into its mesh attributes (`madder_stain`, `madder_wetness`,
+`madder_deposit`; see `bridge.write_stain`)."""
 
 import os
 
@@ -7,7 +8,7 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
-from . import bridge
+from . import bridge, properties
 
 _readers = {}  # absolute path -> (mtime_ns, size, CacheReader)
 _suspended = 0  # > 0 while a bake walks the frames: playback must not touch the meshes
@@ -48,10 +49,16 @@ def apply_frame(obj, frame):
     reader = _reader(path)
     if reader.n_vertices != len(obj.data.vertices):
         return False
+    missing = [f for f in bridge.FIELDS if f not in reader.fields]
+    if missing:
+        raise ValueError(f"{path} has no '{missing[0]}' field (baked by an older Madder?): bake again")
     frame = min(max(frame, reader.first_frame), reader.last_frame)
     block = dict(zip(reader.fields, reader.read_frame(frame)))  # one read for all fields
-    colors = np.stack([block[f"color_{c}"] for c in "rgb"], axis=1) if "color_r" in block else None
-    bridge.write_stain(obj.data, block["density"], settings.stain_color, colors)
+    colors = np.stack([block[f] for f in bridge.COLOR_FIELDS], axis=1) if "color_r" in block else None
+    refs = tuple(settings.bake_references)
+    if not any(refs):  # a cache made outside a bake (a script): the object's own settings
+        refs = properties.references(settings)
+    bridge.write_stain(obj.data, block["solute"], block["wetness"], block["deposit"], refs, settings.stain_color, colors)
     return True
 
 

@@ -24,18 +24,10 @@ class MADDER_PT_stain(_PhysicsPanel, bpy.types.Panel):
         self.layout.prop(context.object.madder, "enabled", text="")
 
     def draw(self, context):
-        obj = context.object
-        s = obj.madder
+        s = context.object.madder
         layout = self.layout
         layout.use_property_split = True
         layout.active = s.enabled
-        layout.prop_search(s, "source_group", obj, "vertex_groups")
-        layout.prop(s, "amount")
-        layout.prop(s, "diffusion_rate")
-        layout.prop(s, "substeps")
-        layout.prop(s, "stain_color")
-        layout.prop(s, "motion_file")
-        layout.prop(s, "cache_dir")
         row = layout.row(align=True)
         row.operator("madder.bake", icon="FILE_CACHE")
         row.operator("madder.free_bake", icon="TRASH", text="Free")
@@ -43,6 +35,81 @@ class MADDER_PT_stain(_PhysicsPanel, bpy.types.Panel):
         layout.operator("madder.add_stain_shader", icon="NODE_MATERIAL")
         if s.cache_file:
             layout.label(text=f"Baked: {s.cache_file}", icon="CHECKMARK")
+
+
+class _StainSubPanel(_PhysicsPanel):
+    bl_parent_id = "MADDER_PT_stain"
+
+    def layout_of(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.active = context.object.madder.enabled
+        return layout, context.object.madder
+
+
+class MADDER_PT_stain_liquid(_StainSubPanel, bpy.types.Panel):
+    bl_label = "Liquid"
+
+    def draw(self, context):
+        layout, s = self.layout_of(context)
+        layout.prop(s, "liquid")
+        layout.prop_search(s, "source_group", context.object, "vertex_groups")
+        col = layout.column()
+        col.active = bool(s.source_group)
+        col.prop(s, "amount")
+        layout.prop(s, "stain_color")
+        layout.prop(s, "concentration")
+        layout.prop(s, "diffusion_rate")
+        col = layout.column(heading="Splash", align=True)
+        col.active = bool(s.source_group)
+        col.prop(s, "splash_speed", text="Speed")
+        col.prop(s, "splash_seed", text="Seed")
+
+
+class MADDER_PT_stain_forces(_StainSubPanel, bpy.types.Panel):
+    bl_label = "Forces"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout, s = self.layout_of(context)
+        col = layout.column(heading="Forces", align=True)
+        row = col.row()
+        row.prop(s, "use_gravity")
+        if not context.scene.use_gravity:
+            row.label(text="Scene gravity is off", icon="INFO")
+        col.prop(s, "use_rectilinear")
+        col.prop(s, "use_coriolis")
+        layout.prop(s, "friction")
+        layout.prop(s, "viscosity")
+        layout.prop(s, "momentum_advection")
+
+
+class MADDER_PT_stain_interactions(_StainSubPanel, bpy.types.Panel):
+    bl_label = "Interactions"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout, s = self.layout_of(context)
+        col = layout.column(align=True)
+        col.prop(s, "absorption")
+        col.prop(s, "saturation")
+        col = layout.column(align=True)
+        col.prop(s, "adsorption")
+        col.prop(s, "capacity")
+        col = layout.column(align=True)
+        col.prop(s, "evaporation")
+        col.prop(s, "evaporation_boundary")
+
+
+class MADDER_PT_stain_cache(_StainSubPanel, bpy.types.Panel):
+    bl_label = "Cache"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout, s = self.layout_of(context)
+        layout.prop(s, "substeps")
+        layout.prop(s, "motion_file")
+        layout.prop(s, "cache_dir")
 
 
 class MADDER_PT_source(_PhysicsPanel, bpy.types.Panel):
@@ -56,9 +123,14 @@ class MADDER_PT_source(_PhysicsPanel, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         layout.active = src.is_source
+        layout.prop(src, "liquid")
         layout.prop(src, "amount")
-        layout.prop(src, "distance")
         layout.prop(src, "color")
+        layout.prop(src, "concentration")
+        layout.prop(src, "distance")
+        col = layout.column(heading="Splash", align=True)
+        col.prop(src, "splash_speed", text="Speed")
+        col.prop(src, "splash_seed", text="Seed")
         layout.prop(src, "use_frame_range")
         col = layout.column(align=True)
         col.active = src.use_frame_range
@@ -119,7 +191,15 @@ class MADDER_PT_fabric(bpy.types.Panel):
                 grid.label(text="", icon=_CELL_ICONS.get(cell, "QUESTION"))
 
 
-classes = (MADDER_PT_stain, MADDER_PT_source, MADDER_PT_fabric)
+classes = (
+    MADDER_PT_stain,
+    MADDER_PT_stain_liquid,
+    MADDER_PT_stain_forces,
+    MADDER_PT_stain_interactions,
+    MADDER_PT_stain_cache,
+    MADDER_PT_source,
+    MADDER_PT_fabric,
+)
 
 
 def register():

@@ -1,10 +1,116 @@
-"""Madder's settings, stored on the object (so they are saved in the .blend)."""
+"""Madder's settings, stored on the object (so they are saved in the .blend).
+
+Units are SI throughout, as in the Rust core: densities (liquid or solute per unit area
+of cloth) in kg/m², rates in 1/s, diffusion and viscosity in m²/s. The defaults are the
+core's defaults (`StainParams::default`, `InteractionRates::default`: water on a light
+cotton cloth)."""
 
 import bpy
-from bpy.props import BoolProperty, FloatProperty, FloatVectorProperty, IntProperty, PointerProperty, StringProperty
+from bpy.props import (
+    BoolProperty,
+    EnumProperty,
+    FloatProperty,
+    FloatVectorProperty,
+    IntProperty,
+    PointerProperty,
+    StringProperty,
+)
 
 # Blender 4.5+ warns when a path property holds a "//" path unless it says it supports them.
 _BLEND_RELATIVE = {"options": {"PATH_SUPPORTS_BLEND_RELATIVE"}} if bpy.app.version >= (4, 5, 0) else {}
+
+# Liquid presets. Order-of-magnitude estimates, not measurements (the seed gives only the
+# evaporation boundary coefficient, 1.2); they make the four liquids behave differently
+# in the ways one expects, and are meant to be tuned. What a preset sets is the liquid:
+# its solute (colour, concentration) and how that solute and its solvent interact with
+# the fibres. The cloth's own properties (saturation, friction) and the flow
+# (diffusion, viscosity) are left alone.
+#
+# - Water: no solute (concentration 0, so it leaves no stain, only wetness), a white-ish
+#   colour for completeness, no adsorption; the core's default rates (it wicks into thin
+#   cotton in about 0.5 s, K_p = 2 /s; dries at 5e-5 kg/(m²·s), still room air).
+# - Red wine: about 2 % dissolved solids by mass (extract: sugars, acids, tannins,
+#   anthocyanins), deep red (0.30, 0.02, 0.07). Anthocyanins and tannins bind strongly
+#   to cellulose: fast adsorption (K_d = 0.5 /s), the default capacity. The ethanol
+#   makes it evaporate a little faster than water (6e-5).
+# - Coffee: about 1.2 % dissolved solids (a typical brew's TDS), brown (0.25, 0.13, 0.05).
+#   Its particles bind weakly (K_d = 0.05 /s, capacity 1e-3), so they stay in the liquid,
+#   are carried to the rim where it evaporates fastest and dry there: the halo (coffee
+#   ring). A stronger rim evaporation (boundary coefficient 1.5) makes that visible; the
+#   ring itself comes from the model (eq. 4.8 and drying in place).
+# - Ink: about 5 % dye, blue-black (0.04, 0.05, 0.15). Surfactants make it wick faster
+#   (K_p = 3 /s), dyes are made to bind: fast adsorption (K_d = 1 /s) and a high
+#   capacity (5e-3 kg/m²); humectants (glycols) slow its drying (4e-5).
+LIQUIDS = {
+    "WATER": dict(
+        stain_color=(0.90, 0.93, 0.95), concentration=0.0, absorption=2.0, adsorption=0.0,
+        capacity=2e-3, evaporation=5e-5, evaporation_boundary=1.2,
+    ),
+    "RED_WINE": dict(
+        stain_color=(0.30, 0.02, 0.07), concentration=0.02, absorption=2.0, adsorption=0.5,
+        capacity=2e-3, evaporation=6e-5, evaporation_boundary=1.2,
+    ),
+    "COFFEE": dict(
+        stain_color=(0.25, 0.13, 0.05), concentration=0.012, absorption=2.0, adsorption=0.05,
+        capacity=1e-3, evaporation=5e-5, evaporation_boundary=1.5,
+    ),
+    "INK": dict(
+        stain_color=(0.04, 0.05, 0.15), concentration=0.05, absorption=3.0, adsorption=1.0,
+        capacity=5e-3, evaporation=4e-5, evaporation_boundary=1.2,
+    ),
+}
+LIQUID_ITEMS = [
+    ("CUSTOM", "Custom", "Your own values (any change to a preset's value switches to Custom)"),
+    ("WATER", "Water", "No solute: wets the cloth, leaves no stain"),
+    ("RED_WINE", "Red Wine", "Deep red, binds strongly to the fibres"),
+    ("COFFEE", "Coffee", "Brown, binds weakly: dries into a ring at the rim"),
+    ("INK", "Ink", "Blue-black, concentrated, wicks and binds fast"),
+]
+# what a source's preset sets (the rates belong to the cloth it pours on)
+SOURCE_PRESET_KEYS = ("concentration", "stain_color")
+
+_applying = False  # True while a preset writes its values (they must not switch it to Custom)
+
+
+def _apply_preset(settings, values):
+    global _applying
+    _applying = True
+    try:
+        for key, value in values.items():
+            setattr(settings, key, value)
+    finally:
+        _applying = False
+
+
+def _liquid_update(self, context):
+    if self.liquid != "CUSTOM":
+        _apply_preset(self, LIQUIDS[self.liquid])
+
+
+def _source_liquid_update(self, context):
+    if self.liquid != "CUSTOM":
+        values = LIQUIDS[self.liquid]
+        _apply_preset(self, {("color" if k == "stain_color" else k): values[k] for k in SOURCE_PRESET_KEYS})
+
+
+def _mark_custom(self, context):
+    """A preset's value was edited by hand: the liquid is no longer the preset."""
+    if not _applying and self.liquid != "CUSTOM":
+        self.liquid = "CUSTOM"
+
+
+def _rate(name, description, default, soft_max, precision=3, step=1.0, preset=False, **kw):
+    return FloatProperty(
+        name=name,
+        description=description,
+        default=default,
+        min=0.0,
+        soft_max=soft_max,
+        precision=precision,
+        step=step,
+        update=_mark_custom if preset else None,
+        **kw,
+    )
 
 
 class MadderObjectSettings(bpy.types.PropertyGroup):
@@ -13,45 +119,152 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         description="Simulate a stain on this cloth and play it back from the cache",
         default=False,
     )
+
+    # -- Liquid: what is spilled, and how much
+    liquid: EnumProperty(
+        name="Liquid",
+        description="Preset that sets the solute's color and concentration and how the liquid "
+        "soaks in, binds to the fibres and dries",
+        items=LIQUID_ITEMS,
+        default="CUSTOM",
+        update=_liquid_update,
+    )
     source_group: StringProperty(
         name="Source",
-        description="Vertex group whose weights give the initial stain (1 = fully wet); "
+        description="Vertex group whose weights give the initial wetness (weight × Amount); "
         "optional when source objects pour liquid on the cloth",
         default="",
     )
     amount: FloatProperty(
-        name="Amount",
-        description="Liquid per unit area where the Source weight is 1 (1 = just saturated; "
-        "more pools and spreads further before it fades)",
-        default=1.0,
+        name="Amount (kg/m²)",
+        description="Liquid spilled per unit area where the Source weight is 1, kg/m² "
+        "(the fibres hold Saturation; the rest is free liquid that flows and spreads)",
+        default=0.5,
         min=0.0,
-        soft_max=10.0,
-    )
-    diffusion_rate: FloatProperty(
-        name="Diffusion",
-        description="How fast the stain spreads through the fabric (diffusion coefficient, m²/s)",
-        default=0.002,
-        min=0.0,
-        soft_max=0.1,
-        precision=4,
-        step=0.1,
-    )
-    substeps: IntProperty(
-        name="Substeps",
-        description="Implicit steps per frame (positions are interpolated between frames)",
-        default=1,
-        min=1,
-        soft_max=8,
+        soft_max=5.0,
+        precision=3,
     )
     stain_color: FloatVectorProperty(
         name="Color",
-        description="Color of the stain where it is fully saturated",
+        description="Color of the liquid's solute (the stain where it is fully stained)",
         subtype="COLOR",
         size=3,
         min=0.0,
         max=1.0,
-        default=(0.45, 0.02, 0.08),
+        default=(0.45, 0.05, 0.1),
+        update=_mark_custom,
     )
+    concentration: _rate(
+        "Concentration (kg/kg)",
+        "Solute (what stains) per kg of solvent, kg/kg: 0 is clear water",
+        0.05, 0.2, precision=3, step=0.1, preset=True, max=1.0,
+    )
+    splash_speed: FloatProperty(
+        name="Splash Speed",
+        description="Initial outgoing speed of the spilled liquid, away from the centroid of the "
+        "wet area, with a random jitter (0 = no splash)",
+        unit="VELOCITY",
+        default=0.0,
+        min=0.0,
+        soft_max=5.0,
+    )
+    splash_seed: IntProperty(
+        name="Splash Seed",
+        description="Random seed of the splash (the same seed gives the same splash)",
+        default=0,
+        min=0,
+    )
+
+    # -- Flow: spreading through the fabric and moving on it
+    diffusion_rate: _rate(
+        "Diffusion (m²/s)",
+        "How fast the liquid spreads through the fabric (diffusion coefficient of the densities, m²/s)",
+        0.002, 0.05, precision=4, step=0.1,
+    )
+    viscosity: _rate(
+        "Viscosity (m²/s)",
+        "Kinematic viscosity of the liquid's flow, m²/s: smooths its velocity",
+        1e-4, 1e-2, precision=5, step=0.01,
+    )
+    friction: _rate(
+        "Friction (1/s)",
+        "Drag of the fibres on the flowing liquid, 1/s (its speed decays as e^(−friction·t); "
+        "0 = frictionless). Terminal speed under gravity g is g/friction",
+        20.0, 200.0, precision=2,
+    )
+
+    # -- Forces
+    use_gravity: BoolProperty(
+        name="Gravity",
+        description="The scene's gravity pulls the liquid downhill along the cloth "
+        "(also off when the scene's Gravity is off)",
+        default=True,
+    )
+    use_rectilinear: BoolProperty(
+        name="Acceleration",
+        description="The cloth's acceleration pushes the liquid (rectilinear fictitious force): "
+        "a cloth that jerks sideways leaves its liquid behind",
+        default=True,
+    )
+    use_coriolis: BoolProperty(
+        name="Coriolis",
+        description="The cloth's rotation turns the flowing liquid (Coriolis force): on a spinning "
+        "cloth the liquid keeps its straight path in space",
+        default=True,
+    )
+    momentum_advection: BoolProperty(
+        name="Momentum Advection",
+        description="Carry the velocity with the liquid's momentum instead of semi-Lagrangian "
+        "advection (seed §4.3.2): the liquid's front keeps its speed better",
+        default=False,
+    )
+
+    # -- Interactions with the fibres (seed §4.5)
+    absorption: _rate(
+        "Absorption (1/s)",
+        "How fast the fibres soak up free liquid toward Saturation, 1/s",
+        2.0, 20.0, preset=True,
+    )
+    saturation: _rate(
+        "Saturation (kg/m²)",
+        "Liquid the fibres can hold per unit area, kg/m² (about the fabric's own weight per m²); "
+        "a spot holding this much reads as fully wet",
+        0.1, 1.0, precision=3,
+    )
+    adsorption: _rate(
+        "Adsorption (1/s)",
+        "How fast the solute binds to the fibres toward Capacity, 1/s (Langmuir): the permanent mark",
+        0.1, 5.0, preset=True,
+    )
+    capacity: _rate(
+        "Capacity (kg/m²)",
+        "Most solute the fibres can bind per unit area, kg/m²",
+        2e-3, 0.02, precision=4, step=0.01, preset=True,
+    )
+    evaporation: _rate(
+        "Evaporation (kg/m²/s)",
+        "Liquid evaporated per unit area and second, kg/(m²·s) (5e-5: a saturated cotton cloth "
+        "dries in about half an hour in room air)",
+        5e-5, 1e-3, precision=6, step=0.001, preset=True,
+    )
+    evaporation_boundary: FloatProperty(
+        name="Rim Evaporation",
+        description="How many times faster the rim of the wet area evaporates (≥ 1; 1.2 in the "
+        "seed). Higher values leave a darker ring of solute at the rim",
+        default=1.2,
+        min=1.0,
+        soft_max=3.0,
+        update=_mark_custom,
+    )
+    substeps: IntProperty(
+        name="Substeps",
+        description="Simulation steps per frame (positions are interpolated between frames)",
+        default=1,
+        min=1,
+        soft_max=8,
+    )
+
+    # -- Cache
     motion_file: StringProperty(
         name="Motion File",
         description="Take the cloth's motion from a PC2 or MDD file (object-space positions, "
@@ -74,6 +287,14 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         default="",
         **_BLEND_RELATIVE,
     )
+    bake_references: FloatVectorProperty(
+        name="Bake References",
+        description="Densities (kg/m²) that read as full in playback, recorded by the bake: "
+        "solute (concentration × saturation), liquid (saturation) and deposit (capacity)",
+        size=3,
+        default=(0.0, 0.0, 0.0),
+        options={"HIDDEN"},
+    )
 
 
 class MadderSourceSettings(bpy.types.PropertyGroup):
@@ -85,13 +306,27 @@ class MadderSourceSettings(bpy.types.PropertyGroup):
         description="This object adds liquid to the cloths it touches or comes near",
         default=False,
     )
+    liquid: EnumProperty(
+        name="Liquid",
+        description="Preset that sets this source's color and concentration (how the liquid "
+        "interacts with the fibres is set on the cloth)",
+        items=LIQUID_ITEMS,
+        default="CUSTOM",
+        update=_source_liquid_update,
+    )
     amount: FloatProperty(
-        name="Flow",
-        description="Liquid added per unit area per second where the source touches the cloth "
-        "(1 = saturates in a second)",
-        default=2.0,
+        name="Flow (kg/m²/s)",
+        description="Liquid added per unit area per second where the source touches the cloth, "
+        "kg/(m²·s) (0.1 fills a cloth of Saturation 0.1 kg/m² in a second)",
+        default=0.2,
         min=0.0,
-        soft_max=20.0,
+        soft_max=5.0,
+        precision=3,
+    )
+    concentration: _rate(
+        "Concentration (kg/kg)",
+        "Solute (what stains) per kg of this source's liquid, kg/kg: 0 is clear water",
+        0.05, 0.2, precision=3, step=0.1, preset=True, max=1.0,
     )
     distance: FloatProperty(
         name="Distance",
@@ -104,12 +339,28 @@ class MadderSourceSettings(bpy.types.PropertyGroup):
     )
     color: FloatVectorProperty(
         name="Color",
-        description="Color of this source's liquid",
+        description="Color of this source's solute",
         subtype="COLOR",
         size=3,
         min=0.0,
         max=1.0,
         default=(0.05, 0.08, 0.35),
+        update=_mark_custom,
+    )
+    splash_speed: FloatProperty(
+        name="Splash Speed",
+        description="When this source first adds liquid, the liquid leaves it outward at this "
+        "speed, with a random jitter (0 = no splash)",
+        unit="VELOCITY",
+        default=0.0,
+        min=0.0,
+        soft_max=5.0,
+    )
+    splash_seed: IntProperty(
+        name="Splash Seed",
+        description="Random seed of the splash (the same seed gives the same splash)",
+        default=0,
+        min=0,
     )
     use_frame_range: BoolProperty(
         name="Frame Range",
@@ -118,6 +369,21 @@ class MadderSourceSettings(bpy.types.PropertyGroup):
     )
     frame_start: IntProperty(name="Start", default=1)
     frame_end: IntProperty(name="End", default=250)
+
+
+def references(settings, sources=(), spill=True):
+    """The densities (kg/m²) that playback reads as full, `(solute, liquid, deposit)`, for
+    an object's `settings` and the `sources` (their `madder_source` settings) of a bake:
+
+    - solute: `saturation × c`, `c` the largest concentration among the liquids of the
+      bake (the object's own spill if `spill`, and each source's): a spot whose fibres are
+      saturated with the strongest liquid reads as fully stained. 0 when no liquid has
+      any solute (then nothing can stain).
+    - liquid: `saturation`: fibres holding all the liquid they can read as fully wet.
+    - deposit: `capacity`: fibres that bound all the solute they can read as fully marked.
+    """
+    c = max([settings.concentration] * bool(spill) + [s.concentration for s in sources], default=0.0)
+    return (settings.saturation * c, settings.saturation, settings.capacity)
 
 
 def register():

@@ -6,14 +6,16 @@ The group takes the material's Base Color and Roughness and returns them stained
     color  = base · (1 − coverage) + stain          (madder_stain: RGB = color × coverage,
                                                      alpha = coverage: premultiplied "over")
     color *= 1 − darkening · wetness                (wet fabric looks darker)
+    color *= 1 − deposit darkening · deposit        (bound dye is a little darker still)
     rough  = mix(roughness, wet roughness, wetness) (and shinier)
 
-with `coverage` and `wetness` read from the `madder_stain` and `madder_wetness`
-attributes (0 where an object has none, so the group is harmless on unbaked objects)."""
+with `coverage`, `wetness` and `deposit` read from the `madder_stain`, `madder_wetness`
+and `madder_deposit` attributes (each in [0, 1]; 0 where an object has none, so the
+group is harmless on unbaked objects)."""
 
 import bpy
 
-from .bridge import STAIN_ATTR, WETNESS_ATTR
+from .bridge import DEPOSIT_ATTR, STAIN_ATTR, WETNESS_ATTR
 
 GROUP = "Madder Stain"
 
@@ -45,6 +47,7 @@ def stain_group():
     _socket(group, "Roughness", "INPUT", "NodeSocketFloat", 0.5, 0.0, 1.0)
     _socket(group, "Wet Darkening", "INPUT", "NodeSocketFloat", 0.35, 0.0, 1.0)
     _socket(group, "Wet Roughness", "INPUT", "NodeSocketFloat", 0.25, 0.0, 1.0)
+    _socket(group, "Deposit Darkening", "INPUT", "NodeSocketFloat", 0.15, 0.0, 1.0)
     _socket(group, "Base Color", "OUTPUT", "NodeSocketColor")
     _socket(group, "Roughness", "OUTPUT", "NodeSocketFloat")
     nodes, links = group.nodes, group.links
@@ -53,6 +56,8 @@ def stain_group():
     stain.attribute_name = STAIN_ATTR
     wet = nodes.new("ShaderNodeAttribute")
     wet.attribute_name = WETNESS_ATTR
+    deposit = nodes.new("ShaderNodeAttribute")
+    deposit.attribute_name = DEPOSIT_ATTR
     # base · (1 − coverage) + stain
     keep = _mix(nodes, "RGBA")
     keep.inputs["B"].default_value = (0.0, 0.0, 0.0, 1.0)
@@ -72,14 +77,24 @@ def stain_group():
     dark.inputs["B"].default_value = (0.0, 0.0, 0.0, 1.0)
     links.new(amount.outputs["Value"], dark.inputs["Factor"])
     links.new(over.outputs["Result"], dark.inputs["A"])
-    links.new(dark.outputs["Result"], gout.inputs["Base Color"])
+    # and with the deposit: multiply by (1 − deposit darkening · deposit)
+    mark = nodes.new("ShaderNodeMath")
+    mark.operation = "MULTIPLY"
+    mark.use_clamp = True
+    links.new(gin.outputs["Deposit Darkening"], mark.inputs[0])
+    links.new(deposit.outputs["Fac"], mark.inputs[1])
+    marked = _mix(nodes, "RGBA")
+    marked.inputs["B"].default_value = (0.0, 0.0, 0.0, 1.0)
+    links.new(mark.outputs["Value"], marked.inputs["Factor"])
+    links.new(dark.outputs["Result"], marked.inputs["A"])
+    links.new(marked.outputs["Result"], gout.inputs["Base Color"])
     # roughness towards the wet roughness
     rough = _mix(nodes, "FLOAT")
     links.new(wet.outputs["Fac"], rough.inputs["Factor"])
     links.new(gin.outputs["Roughness"], rough.inputs["A"])
     links.new(gin.outputs["Wet Roughness"], rough.inputs["B"])
     links.new(rough.outputs["Result"], gout.inputs["Roughness"])
-    for i, n in enumerate((gin, stain, wet, keep, over, amount, dark, rough, gout)):
+    for i, n in enumerate((gin, stain, wet, deposit, keep, over, amount, dark, mark, marked, rough, gout)):
         n.location = (200 * i, 0)
     return group
 

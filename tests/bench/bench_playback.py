@@ -29,10 +29,11 @@ def main():
     n = len(obj.data.vertices)
     frames = 30
     path = os.path.join(tempfile.mkdtemp(), "bench.madder")
-    w = madder.CacheWriter(path, n, ["density"], 1, frames)
+    fields = ["solute", "wetness", "deposit"]  # what a bake writes (addon/bridge.py FIELDS)
+    w = madder.CacheWriter(path, n, fields, 1, frames)
     rng = np.random.default_rng(1)
     for _ in range(frames):
-        w.push_frame([rng.random(n, dtype=np.float32)])
+        w.push_frame([rng.random(n, dtype=np.float32) * 0.01 for _ in fields])
     w.finish()
     obj.madder.enabled = True
     obj.madder.cache_file = path
@@ -48,7 +49,7 @@ def main():
         return statistics.median(times)
 
     reader = madder.CacheReader(path)
-    t_read = median_ms(lambda f: reader.read(f, "density"))
+    t_read = median_ms(lambda f: reader.read_frame(f))
     t_apply = median_ms(lambda f: handlers.apply_frame(obj, f))
     t_handler = median_ms(lambda f: bpy.context.scene.frame_set(f))
     print(f"playback of one frame on a {n}-vertex mesh ({os.cpu_count()} cores), median over {3 * frames} frames:")

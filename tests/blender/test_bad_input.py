@@ -90,15 +90,18 @@ def mesh_object(verts, faces, name="Odd"):
     obj.vertex_groups.new(name="wet").add([0], 1.0, "REPLACE")
     obj.madder.source_group = "wet"
     obj.madder.cache_dir = bpy.app.tempdir
+    # nothing evaporates: the thin film that spreads farthest is kept, not dried away
+    obj.madder.evaporation = 0.0
     bpy.context.scene.frame_start, bpy.context.scene.frame_end = 1, 5
     return obj
 
 
-def baked_density(obj):
+def baked_liquid(obj):
+    """Liquid density (kg/m²) at the last frame."""
     import madder
 
     r = madder.CacheReader(bpy.path.abspath(obj.madder.cache_file))
-    return r.read(r.last_frame, "density")
+    return r.read(r.last_frame, "wetness")
 
 
 def test_non_manifold_fin_bakes_with_a_warning(capsys):
@@ -107,7 +110,7 @@ def test_non_manifold_fin_bakes_with_a_warning(capsys):
     obj = mesh_object(verts, [(0, 1, 2, 3), (1, 0, 5, 4), (0, 1, 6, 7)])
     assert bpy.ops.madder.bake() == {"FINISHED"}
     assert "1 non-manifold edges" in capsys.readouterr().out
-    d = baked_density(obj)
+    d = baked_liquid(obj)
     assert np.isfinite(d).all() and (d[[2, 4, 6]] > 0).all()  # spread into all three sheets
 
 
@@ -118,7 +121,7 @@ def test_ngons_loose_vertices_and_zero_area_faces_bake_finite():
     verts = hexagon + collapsed + [(9, 9, 9)]
     obj = mesh_object(verts, [tuple(range(6)), (6, 7, 8, 9), (0, 1, 6)])
     assert bpy.ops.madder.bake() == {"FINISHED"}
-    d = baked_density(obj)
+    d = baked_liquid(obj)
     assert np.isfinite(d).all()
     assert (d[1:6] > 0).all()  # spread across the n-gon's triangles
     assert d[10] == 0.0  # the loose vertex carries nothing
@@ -163,3 +166,27 @@ def test_read_only_cache_folder_names_it_and_keeps_the_previous_bake(tmp_path):
         folder.chmod(0o755)
     assert str(folder) in msg and obj.name in msg
     assert open(path, "rb").read() == before
+
+
+def test_parameter_out_of_range_is_named_and_keeps_the_previous_bake(open_fixture):
+    """The panel's limits keep parameters in range, but a script, a driver or an old file
+    can bypass them (an ID property written directly): the simulator's own check names
+    the parameter, and nothing is lost."""
+    scene = open_fixture("flag.blend")
+    flag, path, before = baked_flag()
+    flag.madder["friction"] = -5.0  # bypasses the property's min, as a script could
+    msg = bake_error()
+    assert "Flag" in msg and "frame 1" in msg and "friction" in msg and "-5" in msg
+    assert open(path, "rb").read() == before
+    del flag.madder["friction"]
+    flag.madder["evaporation_boundary"] = 0.5
+    msg = bake_error()
+    assert "evaporation boundary" in msg and "≥ 1" in msg
+    assert open(path, "rb").read() == before
+    del flag.madder["evaporation_boundary"]
+    scene.gravity = (0.0, float("nan"), -9.81)  # the scene's gravity, e.g. from a driver
+    msg = bake_error()
+    assert "Flag" in msg and "gravity" in msg
+    assert open(path, "rb").read() == before
+    assert scene.frame_current == 1
+    assert not [f for f in os.listdir(os.path.dirname(path)) if ".tmp" in f]

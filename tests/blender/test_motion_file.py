@@ -22,8 +22,9 @@ def flag_motion(scene, flag):
 
 
 def last_density(obj):
+    """Solute density (kg/m²) at the last frame."""
     r = madder.CacheReader(bpy.path.abspath(obj.madder.cache_file))
-    return r.read(r.last_frame, "density")
+    return r.read(r.last_frame, "solute")
 
 
 @pytest.fixture
@@ -46,22 +47,33 @@ def test_pc2_and_mdd_motion_bake_like_the_scene(flag_and_motion, tmp_path):
     for name in ("flag.pc2", "flag.mdd"):
         flag.madder.motion_file = str(tmp_path / name)
         assert bpy.ops.madder.bake() == {"FINISHED"}
-        np.testing.assert_allclose(last_density(flag), from_scene, atol=2e-6, err_msg=name)
+        np.testing.assert_allclose(last_density(flag), from_scene, atol=2e-6 * from_scene.max(), err_msg=name)
     # and the still scene alone gives a different stain (the file really drove the motion)
     flag.madder.motion_file = ""
     assert bpy.ops.madder.bake() == {"FINISHED"}
-    assert np.abs(last_density(flag) - from_scene).max() > 1e-3
+    assert np.abs(last_density(flag) - from_scene).max() > 1e-3 * from_scene.max()
 
 
 def test_half_sampled_pc2_is_interpolated(flag_and_motion, tmp_path):
-    scene, flag, motion, from_scene = flag_and_motion
-    # every other frame only, rate 2: the odd... even frames are interpolated
-    madder.write_pc2(str(tmp_path / "half.pc2"), motion[::2], start=float(scene.frame_start), rate=2.0)
-    flag.madder.motion_file = str(tmp_path / "half.pc2")
+    scene, flag, motion, _ = flag_and_motion
     scene.frame_end = scene.frame_start + 2 * (len(motion[::2]) - 1)
-    assert bpy.ops.madder.bake() == {"FINISHED"}
-    d = last_density(flag)
-    assert np.isfinite(d).all() and np.abs(d - from_scene).max() < 0.05
+
+    def bake_with(path):
+        flag.madder.motion_file = path
+        assert bpy.ops.madder.bake() == {"FINISHED"}
+        return last_density(flag).astype(np.float64)
+
+    still = bake_with("")  # no cloth any more: the flag hangs still
+    madder.write_pc2(str(tmp_path / "full.pc2"), motion, start=float(scene.frame_start), rate=1.0)
+    full = bake_with(str(tmp_path / "full.pc2"))
+    # every other frame only, rate 2: the even frames are interpolated
+    madder.write_pc2(str(tmp_path / "half.pc2"), motion[::2], start=float(scene.frame_start), rate=2.0)
+    half = bake_with(str(tmp_path / "half.pc2"))
+    assert np.isfinite(half).all()
+    # the interpolated motion is not the full one (its acceleration comes in jolts at the
+    # samples, and the liquid feels it), but it is much closer to it than no motion
+    err, off = np.abs(half - full).sum(), np.abs(still - full).sum()
+    assert err < 0.5 * off, (err, off)
 
 
 def test_bad_motion_files_are_named_and_keep_the_previous_bake(flag_and_motion, tmp_path):

@@ -44,7 +44,8 @@ def test_animation_render_shows_each_frames_stain(open_fixture, tmp_path):
     disk = make_active(bpy.data.objects["Disk"])
     disk.animation_data_clear()
     disk.madder.source_group = "stain_source"
-    disk.madder.amount = 3.0
+    disk.madder.liquid = "RED_WINE"
+    disk.madder.amount = 1.0
     disk.madder.diffusion_rate = 0.004
     scene.frame_start, scene.frame_end = 1, 100
     assert bpy.ops.madder.bake() == {"FINISHED"}

@@ -11,6 +11,7 @@ mod errors;
 mod io;
 mod mesh;
 mod point_cache;
+mod simulate;
 mod stain;
 mod weave;
 
@@ -22,6 +23,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(mesh::weft_directions, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::distances_within, m)?)?;
     m.add_class::<stain::DiffusionStepper>()?;
+    m.add_class::<simulate::Simulator>()?;
     m.add_class::<io::CacheWriter>()?;
     m.add_class::<io::CacheReader>()?;
     weave::register(m)?;

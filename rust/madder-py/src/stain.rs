@@ -142,7 +142,7 @@ impl DiffusionStepper {
     }
 }
 
-fn conductivity(
+pub(crate) fn conductivity(
     rate: Option<f64>,
     tensors: Option<PyReadonlyArray2<'_, f64>>,
     uv: Option<PyReadonlyArray3<'_, f32>>,

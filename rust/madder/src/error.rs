@@ -52,6 +52,10 @@ pub enum SolveError {
     NotPositiveDefinite { pivot: usize, n: usize },
     #[error("the linear solver ran out of memory")]
     OutOfMemory,
+    #[error(
+        "the iterative solver did not converge in {iterations} iterations (relative residual {residual:e})"
+    )]
+    NotConverged { iterations: usize, residual: f64 },
 }
 
 /// Reading or writing a Madder cache file.

@@ -6,12 +6,14 @@
 //! the sparse Cholesky factorization ([`PrefactoredSpd`]) reuses its symbolic analysis.
 
 pub mod aniso;
+pub mod cg;
 pub mod connection;
 pub mod cotan;
 pub mod pattern;
 pub mod solve;
 
 pub use aniso::{Tensor2, anisotropic_stiffness, weft_angles, weft_directions};
+pub use cg::WarmCg;
 pub use connection::{
     BochnerPattern, BochnerSystem, add_lumped_mass_blocks, bochner_stiffness, diffuse_tangent_field,
 };

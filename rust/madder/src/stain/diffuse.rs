@@ -65,7 +65,35 @@ pub struct WovenFaces {
 }
 
 impl Conductivity {
-    fn validate(&self, n_faces: usize) -> Result<(), ParamError> {
+    /// The stiffness `scale · K_S` on `pattern` for this geometry: `D` times the cotan
+    /// stiffness, or the anisotropic stiffness with the weft recomputed from the UVs on
+    /// the deformed faces.
+    pub fn stiffness(
+        &self,
+        topology: &Topology,
+        geometry: &Geometry,
+        pattern: &VertexPattern,
+        scale: f64,
+    ) -> Vec<f64> {
+        match self {
+            Conductivity::Isotropic(d) => cotan_stiffness(topology, geometry, pattern, scale * d),
+            Conductivity::Woven(w) => {
+                let (angle, _) = weft_angles(topology, geometry, &w.uv, &w.angle);
+                anisotropic_stiffness(topology, geometry, pattern, &angle, &w.tensor, scale)
+            }
+        }
+    }
+
+    /// Faces whose UVs are degenerate (the weft falls back to an edge), at `geometry`.
+    pub fn degenerate_uv_faces(&self, topology: &Topology, geometry: &Geometry) -> usize {
+        match self {
+            Conductivity::Woven(w) => weft_angles(topology, geometry, &w.uv, &w.angle).1,
+            Conductivity::Isotropic(_) => 0,
+        }
+    }
+
+    /// Checks the rate or the per-face data (lengths, finiteness, tensors PSD).
+    pub fn validate(&self, n_faces: usize) -> Result<(), ParamError> {
         match self {
             Conductivity::Isotropic(d) => {
                 check_range("diffusion rate", *d, *d >= 0.0, "finite and ≥ 0")
@@ -158,10 +186,7 @@ impl DiffusionStepper {
         }
         let geometry = Geometry::new(&topology, positions)?;
         let solver = PrefactoredSpd::new(VertexPattern::new(&topology), par)?;
-        let degenerate_uv_faces = match &conductivity {
-            Conductivity::Woven(w) => weft_angles(&topology, &geometry, &w.uv, &w.angle).1,
-            Conductivity::Isotropic(_) => 0,
-        };
+        let degenerate_uv_faces = conductivity.degenerate_uv_faces(&topology, &geometry);
         Ok(Self {
             degenerate_uv_faces,
             loose: topology.loose_vertices(),
@@ -326,15 +351,9 @@ impl DiffusionStepper {
     fn implicit_step(&mut self, positions: &[DVec3], h: f64) -> Result<(), Error> {
         let geometry = Geometry::new(&self.topology, positions)?;
         let pattern = self.solver.pattern();
-        let mut values = match &self.conductivity {
-            Conductivity::Isotropic(d) => {
-                cotan_stiffness(&self.topology, &geometry, pattern, h * d)
-            }
-            Conductivity::Woven(w) => {
-                let (angle, _) = weft_angles(&self.topology, &geometry, &w.uv, &w.angle);
-                anisotropic_stiffness(&self.topology, &geometry, pattern, &angle, &w.tensor, h)
-            }
-        };
+        let mut values = self
+            .conductivity
+            .stiffness(&self.topology, &geometry, pattern, h);
         add_lumped_mass(&geometry, pattern, 1.0, &mut values);
         // one right-hand side per field: the masses carried by the vertices
         let n = self.topology.n_vertices();
@@ -358,7 +377,7 @@ impl DiffusionStepper {
     }
 }
 
-fn check_range(
+pub(crate) fn check_range(
     name: &'static str,
     value: f64,
     ok: bool,

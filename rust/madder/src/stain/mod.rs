@@ -1,7 +1,15 @@
-//! The stain simulator (seed chapter 4). This first slice is the implicit diffusion of a
-//! density on a deforming mesh (§4.3.3); advection, body forces and interactions
-//! (§4.3.1, §4.4, §4.5) come with the full simulator.
+//! The stain simulator (seed chapter 4): the split step of §4.3 — body forces (§4.4),
+//! advection (§4.3.1–4.3.2), diffusion (§4.3.3–4.3.4) and stain–surface interactions
+//! (§4.5) — on a deforming mesh. [`Simulator`] runs it; [`DiffusionStepper`] is the
+//! diffusion alone (the first slice, kept for the fabric experiments).
 
+pub mod advect;
 pub mod diffuse;
+pub mod forces;
+pub mod interact;
+pub mod simulate;
 
 pub use diffuse::{Conductivity, DiffusionStepper, WovenFaces};
+pub use forces::Forces;
+pub use interact::{Fields, InteractionRates};
+pub use simulate::{Profile, Simulator, StainParams, Totals};

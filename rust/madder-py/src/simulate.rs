@@ -1,0 +1,334 @@
+//! `Simulator`: the full stain simulator of chapter 4 (core module `stain::simulate`).
+
+use glam::{DVec2, DVec3};
+use numpy::{
+    PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
+    PyUntypedArrayMethods,
+};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use crate::errors::{ParameterError, to_py};
+use crate::mesh::{Topology, points};
+use crate::stain::conductivity;
+
+/// Simulates a liquid stain on a moving cloth: velocity, free and absorbed solvent,
+/// dissolved, absorbed and adsorbed solute (seed chapter 4).
+///
+/// `Simulator(topology, rest, positions, *, diffusion=None, face_tensors=None,
+/// face_uv=None, face_angle=None, color=(0.45, 0.05, 0.1), gravity=(0, 0, -9.81),
+/// viscosity=..., friction=..., absorption=..., saturation=..., adsorption=...,
+/// capacity=..., evaporation=..., evaporation_boundary=1.2, substeps=1, use_gravity=True,
+/// use_rectilinear=True, use_coriolis=True, momentum_advection=False, threads=None)`.
+///
+/// `topology` is a `Topology` or an `(F, 3)` uint32 face array; `rest` and `positions`
+/// `(N, 3)` float32 world positions (rest pose; first frame). The densities diffuse
+/// isotropically at `diffusion` m²/s, or per face along the weave (`face_tensors`
+/// `(F, 3)` float64 in m²/s, `face_uv` `(F, 3, 2)`, `face_angle` `(F,)`, as for
+/// `DiffusionStepper`); the default is isotropic, 0.002 m²/s.
+/// Units are SI: densities in kg/m², rates in 1/s, evaporation in kg/(m²·s).
+/// `threads` caps the worker threads; results do not depend on it.
+#[pyclass(module = "madder")]
+pub struct Simulator {
+    inner: madder::stain::Simulator,
+    pool: Option<rayon::ThreadPool>,
+}
+
+impl Simulator {
+    fn run<T: Send>(
+        &mut self,
+        py: Python<'_>,
+        f: impl FnOnce(&mut madder::stain::Simulator) -> T + Send,
+    ) -> T {
+        let Self { inner, pool } = self;
+        py.detach(|| match pool {
+            Some(p) => p.install(|| f(inner)),
+            None => f(inner),
+        })
+    }
+}
+
+fn f64s(a: &PyReadonlyArray1<'_, f32>) -> Vec<f64> {
+    a.as_array().iter().map(|&x| x as f64).collect()
+}
+
+fn dpoints(a: &PyReadonlyArray2<'_, f32>) -> PyResult<Vec<DVec3>> {
+    Ok(points(a)?.into_iter().map(|p| p.as_dvec3()).collect())
+}
+
+fn out1<'py>(py: Python<'py>, v: &[f64]) -> Bound<'py, PyArray1<f32>> {
+    PyArray1::from_vec(py, v.iter().map(|&x| x as f32).collect())
+}
+
+fn out2<'py, const K: usize>(
+    py: Python<'py>,
+    v: impl ExactSizeIterator<Item = [f64; K]>,
+) -> PyResult<Bound<'py, PyArray2<f32>>> {
+    let n = v.len();
+    let flat: Vec<f32> = v.flat_map(|a| a.map(|x| x as f32)).collect();
+    Ok(PyArray1::from_vec(py, flat).reshape([n, K])?)
+}
+
+#[pymethods]
+impl Simulator {
+    #[new]
+    #[pyo3(signature = (topology, rest, positions, *, diffusion=None, face_tensors=None,
+        face_uv=None, face_angle=None, color=(0.45, 0.05, 0.1), gravity=(0.0, 0.0, -9.81),
+        viscosity=None, friction=None, absorption=None, saturation=None, adsorption=None,
+        capacity=None, evaporation=None, evaporation_boundary=None, substeps=1,
+        use_gravity=true, use_rectilinear=true, use_coriolis=true, momentum_advection=false,
+        threads=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        topology: &Bound<'_, PyAny>,
+        rest: PyReadonlyArray2<'_, f32>,
+        positions: PyReadonlyArray2<'_, f32>,
+        diffusion: Option<f64>,
+        face_tensors: Option<PyReadonlyArray2<'_, f64>>,
+        face_uv: Option<PyReadonlyArray3<'_, f32>>,
+        face_angle: Option<PyReadonlyArray1<'_, f32>>,
+        color: (f64, f64, f64),
+        gravity: (f64, f64, f64),
+        viscosity: Option<f64>,
+        friction: Option<f64>,
+        absorption: Option<f64>,
+        saturation: Option<f64>,
+        adsorption: Option<f64>,
+        capacity: Option<f64>,
+        evaporation: Option<f64>,
+        evaporation_boundary: Option<f64>,
+        substeps: u32,
+        use_gravity: bool,
+        use_rectilinear: bool,
+        use_coriolis: bool,
+        momentum_advection: bool,
+        threads: Option<usize>,
+    ) -> PyResult<Self> {
+        let rest = dpoints(&rest)?;
+        let pos = dpoints(&positions)?;
+        let topo = if let Ok(t) = topology.cast::<Topology>() {
+            t.get().inner.clone()
+        } else {
+            let faces: PyReadonlyArray2<'_, u32> = topology.extract().map_err(|_| {
+                ParameterError::new_err(
+                    "topology must be a madder.Topology or an (F, 3) uint32 face array",
+                )
+            })?;
+            if faces.shape()[1] != 3 {
+                return Err(ParameterError::new_err(format!(
+                    "faces must have shape (F, 3), got {:?}",
+                    faces.shape()
+                )));
+            }
+            let tris = faces
+                .as_array()
+                .rows()
+                .into_iter()
+                .map(|r| [r[0], r[1], r[2]])
+                .collect();
+            madder::mesh::Topology::from_triangles(rest.len(), tris).map_err(to_py)?
+        };
+        let conductivity = if diffusion.is_none() && face_tensors.is_none() {
+            conductivity(Some(0.002), None, None, None)?
+        } else {
+            conductivity(diffusion, face_tensors, face_uv, face_angle)?
+        };
+        let mut params = madder::stain::StainParams::default();
+        params.gravity = DVec3::new(gravity.0, gravity.1, gravity.2);
+        params.forces = madder::stain::Forces {
+            gravity: use_gravity,
+            rectilinear: use_rectilinear,
+            coriolis: use_coriolis,
+        };
+        params.momentum_advection = momentum_advection;
+        params.substeps = substeps;
+        let set = |slot: &mut f64, v: Option<f64>| {
+            if let Some(v) = v {
+                *slot = v;
+            }
+        };
+        set(&mut params.viscosity, viscosity);
+        set(&mut params.friction, friction);
+        let r = &mut params.interaction;
+        set(&mut r.absorption, absorption);
+        set(&mut r.saturation, saturation);
+        set(&mut r.adsorption, adsorption);
+        set(&mut r.capacity, capacity);
+        set(&mut r.evaporation, evaporation);
+        set(&mut r.evaporation_boundary, evaporation_boundary);
+        let pool = match threads {
+            None => None,
+            Some(0) => return Err(ParameterError::new_err("threads must be ≥ 1")),
+            Some(n) => Some(
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(n)
+                    .build()
+                    .map_err(|e| ParameterError::new_err(e.to_string()))?,
+            ),
+        };
+        let solute_color = [color.0, color.1, color.2];
+        let build = || {
+            madder::stain::Simulator::new(
+                topo,
+                &rest,
+                &pos,
+                conductivity,
+                params,
+                solute_color,
+                faer::Par::Seq,
+            )
+        };
+        let inner = py.detach(|| match &pool {
+            Some(p) => p.install(build),
+            None => build(),
+        });
+        Ok(Self {
+            inner: inner.map_err(to_py)?,
+            pool,
+        })
+    }
+
+    /// Advances one frame: the cloth moves to `positions` ((N, 3) float32) over `dt`
+    /// seconds. `after`, the positions one frame later when known, makes the cloth's
+    /// acceleration second-order accurate (and right at the first frame). Releases the
+    /// GIL. On error the simulator stays at the previous frame.
+    #[pyo3(signature = (positions, dt, after=None))]
+    fn step(
+        &mut self,
+        py: Python<'_>,
+        positions: PyReadonlyArray2<'_, f32>,
+        dt: f64,
+        after: Option<PyReadonlyArray2<'_, f32>>,
+    ) -> PyResult<()> {
+        let pos = dpoints(&positions)?;
+        let after = after.as_ref().map(dpoints).transpose()?;
+        self.run(py, |s| s.step(&pos, dt, after.as_deref()))
+            .map_err(to_py)
+    }
+
+    /// Pours `solvent` ((N,) float32, kg/m², ≥ 0) at every vertex, with `concentration`
+    /// kg of solute per kg of solvent, of `color` (RGB; default the liquid's colour).
+    #[pyo3(signature = (solvent, concentration=0.05, color=None))]
+    fn add_liquid(
+        &mut self,
+        solvent: PyReadonlyArray1<'_, f32>,
+        concentration: f64,
+        color: Option<[f64; 3]>,
+    ) -> PyResult<()> {
+        let d = f64s(&solvent);
+        self.inner
+            .add_liquid(&d, concentration, color)
+            .map_err(to_py)
+    }
+
+    /// A splash: a random outgoing velocity (m/s) away from `center` (world), for the
+    /// vertices with `weights` > 0 ((N,) float32, scaling the speed), reproducible from
+    /// `seed`.
+    fn splash(
+        &mut self,
+        center: (f64, f64, f64),
+        speed: f64,
+        seed: u64,
+        weights: PyReadonlyArray1<'_, f32>,
+    ) -> PyResult<()> {
+        let w = f64s(&weights);
+        let c = DVec3::new(center.0, center.1, center.2);
+        self.inner.splash(c, speed, seed, &w).map_err(to_py)
+    }
+
+    /// Liquid (free + absorbed solvent) per unit area, kg/m², `(N,)` float32.
+    fn wetness<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f32>> {
+        out1(py, &self.inner.wetness())
+    }
+
+    /// The stain for shading, `(N, 4)` float32: RGB = solute colour × total solute
+    /// density (kg/m²), A = total solute density.
+    fn stain<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        let s = self.inner.solute_density();
+        let c = self.inner.solute_color();
+        out2(
+            py,
+            s.iter()
+                .zip(c)
+                .map(|(&s, c)| [c[0] * s, c[1] * s, c[2] * s, s]),
+        )
+    }
+
+    /// Adsorbed solute per unit area (the permanent deposit), kg/m², `(N,)` float32.
+    fn deposit<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f32>> {
+        out1(py, &self.inner.deposit())
+    }
+
+    /// Solute colour at every vertex (mass-weighted mix), `(N, 3)` float32.
+    fn solute_color<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        out2(py, self.inner.solute_color().into_iter())
+    }
+
+    /// Densities (kg/m², float64) of every field: a dict with `free_solvent`, `solute`,
+    /// `absorbed_solvent`, `absorbed_solute`, `adsorbed`.
+    fn densities<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let f = self.inner.fields();
+        let d = PyDict::new(py);
+        for (name, m) in [
+            ("free_solvent", &f.free_solvent),
+            ("solute", &f.solute),
+            ("absorbed_solvent", &f.absorbed_solvent),
+            ("absorbed_solute", &f.absorbed_solute),
+            ("adsorbed", &f.adsorbed),
+        ] {
+            d.set_item(name, PyArray1::from_vec(py, self.inner.density(m)))?;
+        }
+        Ok(d)
+    }
+
+    /// Totals over the mesh, kg (float64): `solvent` (free + absorbed), `solute` (all
+    /// three kinds), `evaporated` (since the start).
+    fn totals<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let t = self.inner.totals();
+        let d = PyDict::new(py);
+        d.set_item("solvent", t.solvent)?;
+        d.set_item("solute", t.solute)?;
+        d.set_item("evaporated", t.evaporated)?;
+        Ok(d)
+    }
+
+    /// Velocity as world vectors, m/s, `(N, 3)` float32.
+    #[getter]
+    fn velocity<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        out2(py, self.inner.velocity_world().into_iter().map(|v| v.to_array()))
+    }
+
+    /// Sets the velocity from world vectors ((N, 3) float32, projected on each vertex's
+    /// tangent plane).
+    #[setter]
+    fn set_velocity(&mut self, velocity: PyReadonlyArray2<'_, f32>) -> PyResult<()> {
+        let w = dpoints(&velocity)?;
+        let frames = self.inner.frames();
+        if w.len() != frames.len() {
+            return Err(ParameterError::new_err(format!(
+                "velocity has {} rows, the mesh {} vertices",
+                w.len(),
+                frames.len()
+            )));
+        }
+        let local: Vec<DVec2> = w
+            .iter()
+            .enumerate()
+            .map(|(i, v)| frames.to_local(i, *v))
+            .collect();
+        self.inner.set_velocity(local).map_err(to_py)
+    }
+
+    /// Lumped vertex areas at the current frame, m², float64.
+    #[getter]
+    fn vertex_area<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_vec(py, self.inner.vertex_area().to_vec())
+    }
+
+    /// Simulated time, s.
+    #[getter]
+    fn time(&self) -> f64 {
+        self.inner.time()
+    }
+}

@@ -1,0 +1,1023 @@
+//! Advection of the velocity and of the densities (seed §4.3.1–4.3.2).
+//!
+//! The velocity is one 2-D vector `u_i` per vertex in the vertex frame `F_i`
+//! ([`crate::mesh::frames`]); the densities (solvent, solute, colour) are carried as
+//! masses per vertex, `m_i = A_i σ_i`, with `A_i` the lumped area (one third of the
+//! one-ring's area) that the diffusion ([`super::diffuse`]) uses as its mass matrix.
+//!
+//! ## Velocity: semi-Lagrangian back-trace with strip following (§4.3.1)
+//! For each vertex `i` the foot of the characteristic is the point `p = −h u_i`, written in
+//! the `(x, y)` coordinates of `F_i`. The one-ring is flattened by the geodesic polar map
+//! of [`Connection`]: spoke `j` is laid at
+//!
+//! ```text
+//! P_j = |e_ij| (cos(α_ij + δ_i), sin(α_ij + δ_i)),
+//! ```
+//!
+//! (true spoke length, rescaled polar angle `α_ij`, frame offset `δ_i`), `i` at the origin.
+//! The wedge `(i, j, k)` (spokes `j`, `k` in counter-clockwise order) that contains the
+//! direction of `p` is the one with `P_j` strictly to the right of the ray `0 → p` and `P_k`
+//! on or to its left (`p × P_j < 0 ≤ p × P_k`) and a convex layout (`P_j × P_k > 0`). If
+//! `p` lies in the layout triangle `(0, P_j, P_k)` with barycentric coordinates
+//! `(λ_i, λ_j, λ_k)`, the new velocity is the seed's
+//!
+//! ```text
+//! u_i' = λ_i u_i + λ_j R_ij u_j + λ_k R_ik u_k,
+//! ```
+//!
+//! with `R_ij` of eq. 4.4. Otherwise the segment leaves through the far edge `(j, k)` and we
+//! *follow the strip* ("it is possible to extend the method … by following the strip of
+//! the triangles traversed"): the triangle on the other side of the crossed edge `(r, l)`
+//! is unfolded into the same plane from its intrinsic edge lengths, and the straight
+//! segment continues, as many triangles as needed. The unfolding is an isometry anchored
+//! at the crossing point `X = P_r + f (P_l − P_r)`: with `L = |e_rl|`, `t` the unit layout
+//! direction of `r → l` and `n` its normal towards the far side,
+//!
+//! ```text
+//! r* = X − f L t,   P_c = r* + x t + y n,   x = (L_rc² − L_lc² + L²) / 2L,   y = 2 A_rlc / L,
+//! ```
+//!
+//! so the crossing keeps its fraction `f` along the edge. Where the polar map is exact
+//! (flat and developable cloth: angle sum `2π`, or border vertices, which are not
+//! rescaled) `r* = P_r` up to rounding and the strip is the exact development of the
+//! surface. Around a curved vertex the rescaled first triangle cannot be congruent to the
+//! true one (`|P_j − P_k| ≠ |e_jk|`); anchoring at `X` keeps the travelled distance exact
+//! and confines the distortion to triangles that touch `j` or `k`.
+//!
+//! A vertex `c` placed by the unfolding carries its velocity into `F_i` with the rotation
+//! that maps its polar directions onto the layout: the layout angle of the edge `c → m`
+//! minus its polar angle `α_cm + δ_c`, for `m = r` and `m = l`, averaged (the two differ by
+//! `(s_c − 1) φ_c`, the holonomy share of the corner at a curved `c`; they agree on
+//! developable cloth). For `j` and `k` of the first triangle this formula is eq. 4.4
+//! itself (`α_ij + δ_i + π − (α_ji + δ_j) = θ_ij`), so `R_ij` is taken from the
+//! [`Connection`] and the one-ring case is bit-identical to the seed's formula. A vertex
+//! keeps the rotation it was given when first placed while the strip passes it.
+//!
+//! The walk is the "straight walk" of point location: each new vertex is classified once
+//! as left or right of the line `0 → p`, the exit edge is the one whose endpoints are on
+//! opposite sides, and `p` is in the current triangle iff it is not beyond the exit edge
+//! (`(P_l − P_r) × (p − P_r) ≥ 0`). A vertex within [`SIDE_TOLERANCE`] (relative, an angle)
+//! of the line counts as *on* it, and points on the line are all put on the same side: a
+//! consistent symbolic perturbation of the line, so a segment through a vertex (common on
+//! regular grids) walks around it instead of getting stuck. Which side matters only for a
+//! segment running exactly along a border edge: with "on the line = left" the perturbed
+//! segment runs along the border with the cloth on its right; if no wedge of `i` then
+//! contains the direction (the cloth is on the left), the walk is redone with "on the
+//! line = right". A segment along a straight border (a wind parallel to the hem) thus
+//! follows the border instead of stopping at `i` or crossing the border edge at an
+//! arbitrary point.
+//!
+//! It stops, and interpolates linearly along the edge at the crossing point, when it
+//! meets a **border** (an edge with one face: the fluid cannot come from outside the
+//! cloth) or a **non-manifold** edge (no unique continuation), and after
+//! [`MAX_CROSSINGS`] crossings (only reachable with `h|u|` hundreds of edge lengths).
+//! A vertex whose direction lies in no wedge under either rule (a boundary vertex whose
+//! back-trace leaves the cloth at once, a loose vertex) keeps `u_i`: the border point is the vertex itself. A zero
+//! velocity returns `u_i` exactly.
+//!
+//! *Irregular vertices* (bow-ties, non-manifold spokes) use the fallback polar layout of
+//! [`Connection`] (fans side by side, not rescaled) and the first wedge, in fan order,
+//! that contains the direction; the strip then stops at the first non-manifold edge.
+//! *Degenerate layouts*: a wedge whose layout is not convex (a collapsed face, or a
+//! rescaled tip angle ≥ π at a very sharp cone vertex) is skipped; a triangle whose layout
+//! has zero or non-finite determinant, or an edge of zero length, ends the walk at the
+//! last crossing point (for the first triangle: the vertex, giving `u_i`). Barycentric
+//! coordinates are clamped to `[0, 1]` and renormalized, which only removes rounding.
+//! No NaN is produced from finite input.
+//!
+//! ## Densities: finite-volume upwind on the median dual (§4.3.1)
+//! The seed's flux `F_ij = σ↑ (u_ij · e_ij) w_ij` uses the cotan weight `w_ij`, which is
+//! negative across an edge whose opposite angles sum to more than π (obtuse cloth
+//! triangles: the circumcentres, hence the Voronoi dual face, fall on the wrong side of
+//! the edge). The flux then runs against the velocity, the vertex chosen as upwind gives
+//! a negative amount, and the other one can go negative: the tests reproduce it (density
+//! `−2·10⁹` after 200 steps of a rotating flow on a sheared grid). Choosing the donor by
+//! the sign of `F_ij` instead would restore positivity but not consistency: the Voronoi
+//! cells of such a mesh overlap, do not have the lumped areas `A_i` of the diffusion, and
+//! move mass against the flow. We use the **median (barycentric) dual** instead.
+//! In a triangle `T = (i, j, k)` the dual face between `i` and `j` is the segment from the
+//! edge midpoint `m_ij` to the centroid `c_T`; its area vector (length × in-plane normal,
+//! oriented from `i` towards `j`) is
+//!
+//! ```text
+//! S_ij^T = (c_T − m_ij) × n̂_T,    n̂_T = e_ij × e_ik / |e_ij × e_ik|,
+//! S_ij^T · e_ij = ⅓ n̂_T · (e_ij × e_ik) = ⅔ A_T > 0,
+//! ```
+//!
+//! (because `c_T − m_ij = ⅓ (p_k − m_ij)` and `e_ij × (m_ij − p_i) = 0`): the dual face always
+//! separates `i` from `j` the right way round, on any triangle. The median cells are the
+//! three quadrilaterals `(p_i, m_ij, c_T, m_ik)` of area `A_T / 3` each, so the dual cell
+//! of `i` has exactly the lumped area `A_i` of the diffusion's mass matrix. Around an
+//! interior vertex, `S_ij^T + S_ik^T = ½ (p_k − p_j) × n̂_T`, which sums to zero around the
+//! closed fan on a flat mesh: the cells are closed, a constant velocity has zero net
+//! flux. The volume flux from `i` to `j` (m²/s) is
+//!
+//! ```text
+//! Φ_ij = Σ_{T ∋ ij} u_ij · S_ij^T,      u_ij = ½ (F_i u_i + F_j u_j)   (3-D, the seed's u_ij),
+//! ```
+//!
+//! computed once per edge, so `Φ_ji = −Φ_ij` exactly. A face with
+//! `|e_ij × e_ik| ≤` [`FLAT_FACE_REL`]` · ℓ_max²` (its normal is rounding noise) gets
+//! `S = 0`: no flux through it, which is still conservative.
+//!
+//! ### Upwind transfers, sub-cycling and the limiter
+//! Across each edge the donor is the cell the flux through the dual face comes from, the
+//! upwind cell (`Φ_ab > 0`: `a` gives to `b`; for a velocity along the edge that is the
+//! end it points away from, as `S · e > 0`). Every transfer is then a non-negative amount
+//! taken from a non-negative mass, whatever the triangles' angles. In a
+//! step `h` it gives the fraction `h |Φ_ab| / A_donor` of its current mass: the seed's
+//! `h/A_i F_ij` with `σ↑ = m_donor / A_donor`. Each transfer is subtracted from the donor
+//! and added to the receiver, so mass is conserved up to rounding. Vertex `i` gives away
+//! `θ_i = h Σ_out |Φ| / A_i` of its mass (its Courant number). Positivity needs
+//! `θ_i ≤ 1`; we sub-cycle the step into `n = ⌈max_i θ_i / 0.9⌉` equal sub-steps (at most
+//! [`MAX_SUBSTEPS`]) with the fluxes fixed, so each sub-step gives at most 90% away (a
+//! margin that keeps `m − Σ transfers ≥ 0` in floating point, where `Σ φ ≤ 0.9` leaves
+//! room for any rounding, and keeps the scheme away from the `θ = 1` limit). If
+//! `θ_i / n` still exceeds 1 (the cap was hit, or `A_i = 0` with outflow), the
+//! **limiter** scales that vertex's outflows down so they sum to exactly 1: it gives all
+//! it has, split in proportion to `|Φ|` (this under-transports at that vertex, the price
+//! of positivity at a huge step). Only then can rounding leave `m − Σ transfers` a few
+//! ulps below zero; that remainder is clamped to 0. With
+//! `m_i' = m_i (1 − Σ_out φ) + Σ_in φ m_j`, `Σ_out φ ≤ 1` and non-negative input, every
+//! output is non-negative.
+//!
+//! The plan ([`UpwindPlan`]) stores the fractions and is applied to every transported
+//! field (solvent, solute, colour masses): the solute moves with the solvent, so the
+//! concentration of a uniform solution stays uniform. Per-edge transfers are computed in
+//! parallel, then each vertex gathers its incident edges in edge order: results do not
+//! depend on the thread count.
+//!
+//! ## Momentum advection (§4.3.2)
+//! The alternative of §4.3.2 moves the momentum `p_i = m_i u_i` with the same transfers as
+//! the solvent: a transfer of fraction `φ` of the donor's mass takes `φ p_donor` with it,
+//! which arrives in the receiver's frame as `R_{recv,donor} φ p_donor`. After all sub-steps
+//! `u_i' = p_i' / m_i'`, a convex combination of transported velocities. Where `m_i'` is
+//! at most [`MOMENTUM_MIN_MASS_REL`] of the largest mass (a dry vertex), the velocity is
+//! undefined and the semi-Lagrangian value is returned instead. On a flat mesh `R`
+//! preserves world vectors, so the total world momentum is conserved.
+
+use glam::{DMat2, DVec2, DVec3};
+use rayon::prelude::*;
+
+use crate::error::ParamError;
+use crate::mesh::{Connection, EdgeKind, Geometry, OneRings, Topology, VertexFrames};
+
+/// Most triangle crossings of one back-trace. Reached only when `h|u|` spans hundreds of
+/// edges; the trace then stops at its last crossing point.
+pub const MAX_CROSSINGS: usize = 256;
+
+/// Largest number of sub-steps of one upwind step; beyond it the limiter keeps masses
+/// non-negative.
+pub const MAX_SUBSTEPS: usize = 64;
+
+/// Largest fraction of its mass a vertex gives away in one sub-step before sub-cycling.
+pub const SUBSTEP_COURANT: f64 = 0.9;
+
+/// A face whose `|e_ij × e_ik|` is below this fraction of its longest squared edge (the
+/// sine of its largest angle, roughly) has a normal dominated by rounding (`≈ 10⁻¹⁶ ℓ²`
+/// absolute error, so more than `10⁻⁴` relative below this bound): its dual area vectors
+/// are set to zero.
+pub const FLAT_FACE_REL: f64 = 1e-12;
+
+/// Relative tolerance (an angle, in radians) within which a point counts as lying on the
+/// line of the back-trace. The layout positions carry rounding errors of order
+/// `10⁻¹⁶ × (number of unfoldings)` relative; a segment running along a straight border
+/// must see the border vertices *on* its line, whatever the rounding, to follow it.
+pub const SIDE_TOLERANCE: f64 = 1e-12;
+
+/// Solvent mass, relative to the largest mass before the step, below which the momentum
+/// velocity is not formed. The momentum of a vertex carries an absolute rounding error of
+/// a few `10⁻¹⁶` times the mass that passed through it; above this bound that error is
+/// below `10⁻³` of the velocity.
+pub const MOMENTUM_MIN_MASS_REL: f64 = 1e-12;
+
+// ---------------------------------------------------------------------------------------
+// velocity
+
+/// A vertex placed in the layout plane of the back-trace.
+#[derive(Clone, Copy)]
+struct Placed {
+    v: usize,
+    p: DVec2,
+    /// Its side of the line `0 → foot` ([`Trace::side`]), computed once.
+    side: f64,
+    /// Rotation from `F_v` into the layout (= `F_i`) coordinates.
+    q: DMat2,
+}
+
+/// Semi-Lagrangian advection of the velocity over `h` (see the module doc): the value at
+/// the foot `−h u_i` of every vertex's characteristic, interpolated in the flattened
+/// one-ring and, beyond it, along the unfolded strip of triangles. Loose vertices and zero
+/// velocities keep their value.
+///
+/// # Panics
+/// If `rings`, `geometry`, `connection` or `velocity` do not belong to `topology`'s vertices
+/// (a programming error).
+pub fn advect_velocity(
+    topology: &Topology,
+    rings: &OneRings,
+    geometry: &Geometry,
+    connection: &Connection,
+    velocity: &[DVec2],
+    h: f64,
+) -> Vec<DVec2> {
+    let n = topology.n_vertices();
+    assert_eq!(rings.n_vertices(), n, "rings of another topology");
+    assert_eq!(velocity.len(), n, "one velocity per vertex");
+    assert_eq!(
+        geometry.vertex_area.len(),
+        n,
+        "geometry of another topology"
+    );
+    (0..n)
+        .into_par_iter()
+        .map(|i| back_trace(topology, rings, geometry, connection, velocity, h, i))
+        .collect()
+}
+
+fn back_trace(
+    topology: &Topology,
+    rings: &OneRings,
+    geometry: &Geometry,
+    connection: &Connection,
+    velocity: &[DVec2],
+    h: f64,
+    i: usize,
+) -> DVec2 {
+    let u_i = velocity[i];
+    let target = -h * u_i;
+    if target == DVec2::ZERO || !target.is_finite() {
+        return u_i;
+    }
+    let trace = Trace {
+        topology,
+        rings,
+        geometry,
+        connection,
+        velocity,
+        target,
+        scale: target.length(),
+    };
+    // a segment along a border spoke leaves the fan with one tie-breaking rule and runs
+    // along the border with the other: try both (see the module doc)
+    [true, false]
+        .into_iter()
+        .find_map(|ties_left| trace.walk(i, ties_left))
+        .unwrap_or(u_i)
+}
+
+/// One back-trace: the mesh, the field and the foot `target` in the layout of `F_i`.
+struct Trace<'a> {
+    topology: &'a Topology,
+    rings: &'a OneRings,
+    geometry: &'a Geometry,
+    connection: &'a Connection,
+    velocity: &'a [DVec2],
+    target: DVec2,
+    scale: f64,
+}
+
+impl Trace<'_> {
+    /// Side of `p` with respect to the line `0 → target` (positive on the left), snapped
+    /// to 0 within [`SIDE_TOLERANCE`].
+    fn side(&self, p: DVec2) -> f64 {
+        let s = self.target.perp_dot(p);
+        if s.abs() <= SIDE_TOLERANCE * self.scale * p.length() {
+            0.0
+        } else {
+            s
+        }
+    }
+
+    fn value(&self, a: &Placed) -> DVec2 {
+        a.q * self.velocity[a.v]
+    }
+
+    /// The walk from vertex `i` with points on the line counted as left (`ties_left`) or
+    /// right; `None` if no wedge of `i` contains the direction of the foot.
+    fn walk(&self, i: usize, ties_left: bool) -> Option<DVec2> {
+        let (rings, connection, target) = (self.rings, self.connection, self.target);
+        let is_left = |s: f64| if ties_left { s >= 0.0 } else { s > 0.0 };
+        // first triangle: the wedge whose sector contains the direction of `target`
+        let spokes = rings.spokes(i);
+        let spoke_edges = rings.spoke_edges(i);
+        let alpha = connection.polar_angles(i);
+        let delta = connection.frame_offset(i);
+        let place = |s: u32| {
+            let s = s as usize;
+            let len = self.geometry.edge_length[spoke_edges[s] as usize];
+            let a = alpha[s] + delta;
+            len * DVec2::new(a.cos(), a.sin())
+        };
+        let (wedge, pj, pk) = rings.wedges(i).iter().find_map(|w| {
+            let (pa, pb) = (place(w.from), place(w.to));
+            (pa.perp_dot(pb) > 0.0 && !is_left(self.side(pa)) && is_left(self.side(pb)))
+                .then_some((w, pa, pb))
+        })?;
+        let rot = |s: u32| {
+            let r = connection.edge_rotation(spoke_edges[s as usize] as usize);
+            if i < spokes[s as usize] as usize {
+                r
+            } else {
+                r.transpose()
+            }
+        };
+        let mut behind = Placed {
+            v: i,
+            p: DVec2::ZERO,
+            side: 0.0,
+            q: DMat2::IDENTITY,
+        };
+        let mut right = Placed {
+            v: spokes[wedge.from as usize] as usize,
+            p: pj,
+            side: self.side(pj),
+            q: rot(wedge.from),
+        };
+        let mut left = Placed {
+            v: spokes[wedge.to as usize] as usize,
+            p: pk,
+            side: self.side(pk),
+            q: rot(wedge.to),
+        };
+        let mut face = wedge.face as usize;
+        // value at the last entry point, for the degenerate fallbacks
+        let mut entry = self.value(&behind);
+
+        for crossing in 0..=MAX_CROSSINGS {
+            let (pr, pl) = (right.p, left.p);
+            if (pl - pr).perp_dot(target - pr) >= 0.0 {
+                // the foot is in the current triangle (behind, right, left)
+                return Some(match barycentric(behind.p, pr, pl, target) {
+                    Some([a, b, c]) => {
+                        a * self.value(&behind) + b * self.value(&right) + c * self.value(&left)
+                    }
+                    None => entry,
+                });
+            }
+            // the segment crosses the edge (right, left) at fraction f from `right`
+            // (right.side ≤ 0 ≤ left.side, not both 0)
+            let f = (-right.side / (left.side - right.side)).clamp(0.0, 1.0);
+            let at_crossing = self.value(&right).lerp(self.value(&left), f);
+            if crossing == MAX_CROSSINGS {
+                return Some(at_crossing);
+            }
+            entry = at_crossing;
+            let Some((g, c)) = self.across(face, &right, &left, f) else {
+                return Some(at_crossing);
+            };
+            face = g;
+            if is_left(c.side) {
+                behind = left;
+                left = c;
+            } else {
+                behind = right;
+                right = c;
+            }
+        }
+        unreachable!("the loop returns at its last crossing")
+    }
+
+    /// Unfolds the face across edge `(r, l)` of `face` (see the module doc): its index and its
+    /// third vertex, placed in the layout. `None` at a border or non-manifold edge, or if the
+    /// geometry is too degenerate to place it.
+    fn across(&self, face: usize, r: &Placed, l: &Placed, f: f64) -> Option<(usize, Placed)> {
+        let (topology, rings, geometry, connection) =
+            (self.topology, self.rings, self.geometry, self.connection);
+        let local_l = rings.spokes(r.v).iter().position(|&s| s as usize == l.v)?;
+        let e = rings.spoke_edges(r.v)[local_l] as usize;
+        if topology.edge_kind(e) != EdgeKind::Interior {
+            return None;
+        }
+        let g = rings.wedges(r.v).iter().find_map(|w| {
+            (w.face as usize != face && (w.from as usize == local_l || w.to as usize == local_l))
+                .then_some(w.face as usize)
+        })?;
+        let tri = topology.faces()[g];
+        let corner = |v: usize| tri.iter().position(|&x| x as usize == v);
+        let (kr, kl) = (corner(r.v)?, corner(l.v)?);
+        let kc = 3 - kr - kl;
+        let c = tri[kc] as usize;
+        let fe = topology.face_edges()[g];
+        let len = |k: usize| geometry.edge_length[fe[k] as usize];
+        let (l_rl, l_lc, l_rc) = (geometry.edge_length[e], len(kr), len(kl));
+        let d = l.p - r.p;
+        let t = d.normalize_or_zero();
+        if l_rl.is_nan() || l_rl <= 0.0 || t == DVec2::ZERO {
+            return None;
+        }
+        let n = DVec2::new(t.y, -t.x);
+        let x = (l_rc * l_rc - l_lc * l_lc + l_rl * l_rl) / (2.0 * l_rl);
+        let y = 2.0 * geometry.face_area[g] / l_rl;
+        let r_star = r.p + f * d - f * l_rl * t;
+        let l_star = r_star + l_rl * t;
+        let p = r_star + x * t + y * n;
+        if !p.is_finite() {
+            return None;
+        }
+        // rotation F_c → layout from the directions of c → r and c → l
+        let spokes_c = rings.spokes(c);
+        let alpha_c = connection.polar_angles(c);
+        let delta_c = connection.frame_offset(c);
+        let turn = |m: usize, pm: DVec2| {
+            let k = spokes_c.iter().position(|&s| s as usize == m)?;
+            let dir = pm - p;
+            Some(dir.y.atan2(dir.x) - (alpha_c[k] + delta_c))
+        };
+        let (a_r, a_l) = (turn(r.v, r_star)?, turn(l.v, l_star)?);
+        let angle = a_r + 0.5 * wrap_angle(a_l - a_r);
+        Some((
+            g,
+            Placed {
+                v: c,
+                p,
+                side: self.side(p),
+                q: DMat2::from_angle(angle),
+            },
+        ))
+    }
+}
+
+/// Barycentric coordinates of `p` in the triangle `(a, b, c)`, clamped to `[0, 1]` and
+/// renormalized; `None` if the triangle is degenerate.
+fn barycentric(a: DVec2, b: DVec2, c: DVec2, p: DVec2) -> Option<[f64; 3]> {
+    let (v0, v1, w) = (b - a, c - a, p - a);
+    let det = v0.perp_dot(v1);
+    if det == 0.0 || !det.is_finite() {
+        return None;
+    }
+    let lb = w.perp_dot(v1) / det;
+    let lc = v0.perp_dot(w) / det;
+    let l = [1.0 - lb - lc, lb, lc].map(|x| x.max(0.0));
+    let sum = l[0] + l[1] + l[2];
+    let out = l.map(|x| x / sum);
+    (sum > 0.0 && out.iter().all(|x| x.is_finite())).then_some(out)
+}
+
+/// `a` wrapped to `(−π, π]`.
+fn wrap_angle(a: f64) -> f64 {
+    use std::f64::consts::{PI, TAU};
+    let r = (a + PI).rem_euclid(TAU) - PI;
+    if r == -PI { PI } else { r }
+}
+
+// ---------------------------------------------------------------------------------------
+// densities
+
+/// Volume flux `Φ_ab` (m²/s) from `a` to `b` through the median-dual faces of every edge
+/// `(a, b)` of [`Topology::edges`], `a < b` (see the module doc). `velocity` is per vertex
+/// in `frames`.
+///
+/// # Panics
+/// If `positions`, `frames` or `velocity` do not have one entry per vertex.
+pub fn dual_fluxes(
+    topology: &Topology,
+    positions: &[DVec3],
+    frames: &VertexFrames,
+    velocity: &[DVec2],
+) -> Vec<f64> {
+    let n = topology.n_vertices();
+    assert_eq!(positions.len(), n, "one position per vertex");
+    assert_eq!(frames.len(), n, "one frame per vertex");
+    assert_eq!(velocity.len(), n, "one velocity per vertex");
+    let world: Vec<DVec3> = (0..n)
+        .into_par_iter()
+        .map(|i| frames.to_world(i, velocity[i]))
+        .collect();
+    let per_face: Vec<[f64; 3]> = topology
+        .faces()
+        .par_iter()
+        .map(|tri| face_fluxes(tri.map(|v| v as usize), positions, &world))
+        .collect();
+    // gather per edge in face order (deterministic)
+    let mut flux = vec![0.0; topology.n_edges()];
+    for (fe, contrib) in topology.face_edges().iter().zip(&per_face) {
+        for k in 0..3 {
+            flux[fe[k] as usize] += contrib[k];
+        }
+    }
+    flux
+}
+
+/// `u_ab · S_ab^T` for the edge opposite each corner `k` of a face, from its lower- to its
+/// higher-numbered vertex.
+fn face_fluxes(tri: [usize; 3], pos: &[DVec3], world: &[DVec3]) -> [f64; 3] {
+    let p = tri.map(|v| pos[v]);
+    let normal = (p[1] - p[0]).cross(p[2] - p[0]);
+    let longest = (0..3)
+        .map(|k| p[(k + 1) % 3].distance_squared(p[(k + 2) % 3]))
+        .fold(0.0, f64::max);
+    let area2 = normal.length();
+    if area2.is_nan() || area2 <= FLAT_FACE_REL * longest {
+        return [0.0; 3];
+    }
+    let unit = normal / area2;
+    let centroid = (p[0] + p[1] + p[2]) / 3.0;
+    std::array::from_fn(|k| {
+        let (mut a, mut b) = ((k + 1) % 3, (k + 2) % 3);
+        if tri[a] > tri[b] {
+            std::mem::swap(&mut a, &mut b);
+        }
+        let mid = 0.5 * (p[a] + p[b]);
+        let mut s = (centroid - mid).cross(unit);
+        if s.dot(p[b] - p[a]) < 0.0 {
+            s = -s;
+        }
+        0.5 * (world[tri[a]] + world[tri[b]]).dot(s)
+    })
+}
+
+/// The upwind transport plan of one step `h`: which endpoint donates across each edge and
+/// what fraction of the donor's mass it gives per sub-step (see the module doc).
+#[derive(Debug, Clone)]
+pub struct UpwindPlan {
+    /// Per edge: `true` if `a` (the lower-numbered end) donates.
+    donor_is_a: Vec<bool>,
+    /// Per edge: fraction of the donor's mass given per sub-step.
+    fraction: Vec<f64>,
+    substeps: usize,
+    max_courant: f64,
+    n_limited: usize,
+    /// Vertex → incident edges, in edge order (CSR).
+    inc_ptr: Vec<u32>,
+    inc_edge: Vec<u32>,
+}
+
+impl UpwindPlan {
+    /// Fractions `h |Φ| / (n A_donor)` for `n` sub-steps, with the sub-cycling and limiter
+    /// of the module doc. `vertex_area` are the dual (lumped) areas `A_i`, `flux` the
+    /// output of [`dual_fluxes`].
+    ///
+    /// Fails on wrong lengths, a non-finite flux or area, a negative area, or an `h` that
+    /// is negative or not finite.
+    pub fn new(
+        topology: &Topology,
+        vertex_area: &[f64],
+        flux: &[f64],
+        h: f64,
+    ) -> Result<Self, ParamError> {
+        let (n, n_edges) = (topology.n_vertices(), topology.n_edges());
+        if vertex_area.len() != n {
+            return Err(ParamError::Length {
+                name: "vertex_area",
+                expected: n,
+                got: vertex_area.len(),
+            });
+        }
+        if flux.len() != n_edges {
+            return Err(ParamError::Length {
+                name: "flux",
+                expected: n_edges,
+                got: flux.len(),
+            });
+        }
+        if !(h.is_finite() && h >= 0.0) {
+            return Err(ParamError::OutOfRange {
+                name: "h",
+                requirement: "finite and ≥ 0",
+                value: h,
+            });
+        }
+        if let Some(index) = flux.iter().position(|x| !x.is_finite()) {
+            return Err(ParamError::NonFinite {
+                name: "flux",
+                index,
+            });
+        }
+        if let Some(index) = vertex_area.iter().position(|x| !x.is_finite()) {
+            return Err(ParamError::NonFinite {
+                name: "vertex_area",
+                index,
+            });
+        }
+        if let Some(&value) = vertex_area.iter().find(|&&a| a < 0.0) {
+            return Err(ParamError::OutOfRange {
+                name: "vertex_area",
+                requirement: "≥ 0",
+                value,
+            });
+        }
+        let edges = topology.edges();
+        let donor_is_a: Vec<bool> = flux.iter().map(|&x| x > 0.0).collect();
+        let donor = |e: usize| edges[e][usize::from(!donor_is_a[e])] as usize;
+
+        // vertex → incident edges, in edge order
+        let mut inc_ptr = vec![0u32; n + 1];
+        for &[a, b] in edges {
+            inc_ptr[a as usize + 1] += 1;
+            inc_ptr[b as usize + 1] += 1;
+        }
+        for v in 0..n {
+            inc_ptr[v + 1] += inc_ptr[v];
+        }
+        let mut next = inc_ptr[..n].to_vec();
+        let mut inc_edge = vec![0u32; inc_ptr[n] as usize];
+        for (e, &[a, b]) in edges.iter().enumerate() {
+            for v in [a as usize, b as usize] {
+                inc_edge[next[v] as usize] = e as u32;
+                next[v] += 1;
+            }
+        }
+
+        // total outflow per vertex (gathered in edge order) and its Courant number
+        let outflow: Vec<f64> = (0..n)
+            .into_par_iter()
+            .map(|v| {
+                inc_edge[inc_ptr[v] as usize..inc_ptr[v + 1] as usize]
+                    .iter()
+                    .filter(|&&e| donor(e as usize) == v)
+                    .map(|&e| flux[e as usize].abs())
+                    .sum()
+            })
+            .collect();
+        let courant: Vec<f64> = outflow
+            .iter()
+            .zip(vertex_area)
+            .map(|(&o, &a)| {
+                if o == 0.0 || h == 0.0 {
+                    0.0
+                } else if a > 0.0 {
+                    h * o / a
+                } else {
+                    f64::INFINITY
+                }
+            })
+            .collect();
+        // vertices without area are left to the limiter, not to the sub-step count
+        let max_courant = courant
+            .iter()
+            .copied()
+            .filter(|c| c.is_finite())
+            .fold(0.0, f64::max);
+        let substeps = ((max_courant / SUBSTEP_COURANT).ceil() as usize).clamp(1, MAX_SUBSTEPS);
+        let limited: Vec<bool> = courant.iter().map(|&c| c / substeps as f64 > 1.0).collect();
+        let n_limited = limited.iter().filter(|&&l| l).count();
+        let fraction = (0..n_edges)
+            .map(|e| {
+                let (d, phi) = (donor(e), flux[e].abs());
+                if phi == 0.0 || h == 0.0 {
+                    0.0
+                } else if limited[d] {
+                    phi / outflow[d]
+                } else {
+                    h * phi / (substeps as f64 * vertex_area[d])
+                }
+            })
+            .collect();
+        Ok(Self {
+            donor_is_a,
+            fraction,
+            substeps,
+            max_courant: courant.iter().copied().fold(0.0, f64::max),
+            n_limited,
+            inc_ptr,
+            inc_edge,
+        })
+    }
+
+    /// Number of equal sub-steps the step is cut into.
+    pub fn substeps(&self) -> usize {
+        self.substeps
+    }
+
+    /// Largest Courant number `θ_i = h Σ_out |Φ| / A_i` of the whole step (infinite if a
+    /// vertex without area has outflow).
+    pub fn max_courant(&self) -> f64 {
+        self.max_courant
+    }
+
+    /// Number of vertices whose outflows the limiter scaled down.
+    pub fn n_limited(&self) -> usize {
+        self.n_limited
+    }
+
+    fn incident(&self, v: usize) -> &[u32] {
+        &self.inc_edge[self.inc_ptr[v] as usize..self.inc_ptr[v + 1] as usize]
+    }
+
+    fn donor(&self, edges: &[[u32; 2]], e: usize) -> usize {
+        edges[e][usize::from(!self.donor_is_a[e])] as usize
+    }
+
+    /// One sub-step of a mass field: per-edge transfers, then a gather per vertex in edge
+    /// order. Returns the transfers too (momentum advection reuses them).
+    fn substep(&self, edges: &[[u32; 2]], mass: &[f64]) -> Vec<f64> {
+        let transfer: Vec<f64> = (0..edges.len())
+            .into_par_iter()
+            .map(|e| self.fraction[e] * mass[self.donor(edges, e)])
+            .collect();
+        (0..mass.len())
+            .into_par_iter()
+            .map(|v| {
+                let (mut out, mut inflow) = (0.0, 0.0);
+                for &e in self.incident(v) {
+                    let e = e as usize;
+                    if self.donor(edges, e) == v {
+                        out += transfer[e];
+                    } else {
+                        inflow += transfer[e];
+                    }
+                }
+                (mass[v] - out).max(0.0) + inflow
+            })
+            .collect()
+    }
+
+    fn check(&self, topology: &Topology, len: usize) {
+        assert_eq!(
+            self.fraction.len(),
+            topology.n_edges(),
+            "plan of another topology"
+        );
+        assert_eq!(len, topology.n_vertices(), "one value per vertex");
+    }
+
+    /// Moves one mass field (kg per vertex, not density) by the plan: every sub-step, each
+    /// transfer is subtracted from its donor and added to its receiver. Conservative up to
+    /// rounding; non-negative input gives non-negative output.
+    ///
+    /// # Panics
+    /// If `mass` does not have one value per vertex of `topology`, the plan's topology.
+    pub fn transport(&self, topology: &Topology, mass: &mut [f64]) {
+        self.check(topology, mass.len());
+        let edges = topology.edges();
+        let mut m = mass.to_vec();
+        for _ in 0..self.substeps {
+            m = self.substep(edges, &m);
+        }
+        mass.copy_from_slice(&m);
+    }
+
+    /// Moves several fields (solvent, solute, colour masses) with the same fractions, each
+    /// exactly as [`UpwindPlan::transport`] would.
+    pub fn transport_all(&self, topology: &Topology, fields: &mut [&mut [f64]]) {
+        for field in fields.iter_mut() {
+            self.transport(topology, field);
+        }
+    }
+
+    /// Velocities after moving the momentum `m_i u_i` with the same transfers as the solvent
+    /// (§4.3.2, see the module doc): a transfer of fraction `φ` of the donor's mass takes
+    /// `φ` of its momentum, turned into the receiver's frame by `R_ij`; after all sub-steps
+    /// `u_i' = p_i' / m_i'`. Where `m_i'` is at most [`MOMENTUM_MIN_MASS_REL`] times the
+    /// largest `solvent_before` (or zero), `fallback[i]` (the semi-Lagrangian value) is
+    /// returned. `solvent_before` are the solvent masses before this step's transport.
+    ///
+    /// # Panics
+    /// If any per-vertex slice does not have one value per vertex of `topology`.
+    pub fn momentum_velocity(
+        &self,
+        topology: &Topology,
+        connection: &Connection,
+        solvent_before: &[f64],
+        velocity: &[DVec2],
+        fallback: &[DVec2],
+    ) -> Vec<DVec2> {
+        self.check(topology, solvent_before.len());
+        self.check(topology, velocity.len());
+        self.check(topology, fallback.len());
+        let edges = topology.edges();
+        let mut mass = solvent_before.to_vec();
+        let mut momentum: Vec<DVec2> = mass.iter().zip(velocity).map(|(&m, &u)| m * u).collect();
+        for _ in 0..self.substeps {
+            let carried: Vec<DVec2> = (0..edges.len())
+                .into_par_iter()
+                .map(|e| self.fraction[e] * momentum[self.donor(edges, e)])
+                .collect();
+            momentum = (0..mass.len())
+                .into_par_iter()
+                .map(|v| {
+                    let (mut out, mut inflow) = (DVec2::ZERO, DVec2::ZERO);
+                    for &e in self.incident(v) {
+                        let e = e as usize;
+                        let d = self.donor(edges, e);
+                        if d == v {
+                            out += carried[e];
+                        } else {
+                            let r = connection.edge_rotation(e);
+                            let r = if v < d { r } else { r.transpose() };
+                            inflow += r * carried[e];
+                        }
+                    }
+                    (momentum[v] - out) + inflow
+                })
+                .collect();
+            mass = self.substep(edges, &mass);
+        }
+        let scale = solvent_before.iter().copied().fold(0.0, f64::max);
+        let floor = MOMENTUM_MIN_MASS_REL * scale;
+        (0..mass.len())
+            .into_par_iter()
+            .map(|v| {
+                let u = momentum[v] / mass[v];
+                if mass[v] > floor && mass[v] > 0.0 && u.is_finite() {
+                    u
+                } else {
+                    fallback[v]
+                }
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    struct Mesh {
+        t: Topology,
+        p: Vec<DVec3>,
+        rings: OneRings,
+        geometry: Geometry,
+        frames: VertexFrames,
+        connection: Connection,
+    }
+
+    fn mesh(n: usize, faces: Vec<[u32; 3]>, p: Vec<DVec3>) -> Mesh {
+        let t = Topology::from_triangles(n, faces).unwrap();
+        let rings = OneRings::new(&t);
+        let geometry = Geometry::new(&t, &p).unwrap();
+        let frames = VertexFrames::new(&rings, &p).unwrap();
+        let connection = Connection::new(&t, &rings, &geometry, &frames, &p);
+        Mesh {
+            t,
+            p,
+            rings,
+            geometry,
+            frames,
+            connection,
+        }
+    }
+
+    fn advect(m: &Mesh, u: &[DVec2], h: f64) -> Vec<DVec2> {
+        advect_velocity(&m.t, &m.rings, &m.geometry, &m.connection, u, h)
+    }
+
+    #[test]
+    fn median_dual_area_vectors_have_two_thirds_of_the_area_along_their_edge() {
+        let tri = [0usize, 1, 2];
+        let pos = [
+            DVec3::new(0.1, -0.2, 0.3),
+            DVec3::new(1.3, 0.1, -0.2),
+            DVec3::new(-0.4, 0.9, 0.5),
+        ];
+        let area = 0.5 * (pos[1] - pos[0]).cross(pos[2] - pos[0]).length();
+        let centroid = (pos[0] + pos[1] + pos[2]) / 3.0;
+        // S of each edge, read off with unit velocities along the axes
+        let s: Vec<[f64; 3]> = [DVec3::X, DVec3::Y, DVec3::Z]
+            .iter()
+            .map(|&w| face_fluxes(tri, &pos, &[w; 3]))
+            .collect();
+        let [sx, sy, sz] = [&s[0], &s[1], &s[2]];
+        for k in 0..3 {
+            let sk = DVec3::new(sx[k], sy[k], sz[k]);
+            let (a, b) = ((k + 1) % 3, (k + 2) % 3);
+            let (a, b) = (a.min(b), a.max(b));
+            let e = pos[b] - pos[a];
+            let mid = 0.5 * (pos[a] + pos[b]);
+            assert!((sk.dot(e) - 2.0 * area / 3.0).abs() < 1e-15, "edge {k}");
+            assert!((sk.length() - (centroid - mid).length()).abs() < 1e-15);
+            assert!(
+                sk.dot(centroid - mid).abs() < 1e-15,
+                "normal to the dual face"
+            );
+        }
+        // a collapsed face carries no flux
+        let flat = [DVec3::ZERO, DVec3::X, DVec3::new(0.5, 0.0, 0.0)];
+        assert_eq!(face_fluxes(tri, &flat, &[DVec3::ONE; 3]), [0.0; 3]);
+    }
+
+    #[test]
+    fn zero_velocity_and_loose_vertices_keep_their_value() {
+        // a fan of 6 around vertex 0, plus a loose vertex 7
+        let mut p = vec![DVec3::ZERO];
+        for k in 0..6 {
+            let a = std::f64::consts::TAU * k as f64 / 6.0;
+            p.push(DVec3::new(a.cos(), a.sin(), 0.0));
+        }
+        p.push(DVec3::new(5.0, 5.0, 0.0));
+        let faces = (0..6).map(|k| [0, 1 + k, 1 + (k + 1) % 6]).collect();
+        let m = mesh(8, faces, p);
+        let mut u = vec![DVec2::new(0.3, -0.1); 8];
+        u[0] = DVec2::ZERO;
+        u[7] = DVec2::new(1.7, 2.5);
+        let out = advect(&m, &u, 0.4);
+        assert_eq!(out[0], DVec2::ZERO);
+        assert_eq!(out[7], u[7]);
+        assert!(out.iter().all(|v| v.is_finite()));
+    }
+
+    #[test]
+    fn irregular_and_degenerate_meshes_stay_finite() {
+        // bow-tie at vertex 0, a fin of three faces on edge 5–6, a collapsed face 5–6–9
+        let p = vec![
+            DVec3::ZERO,
+            DVec3::new(1.0, 0.2, 0.0),
+            DVec3::new(0.8, 1.0, 0.0),
+            DVec3::new(-1.0, -0.1, 0.0),
+            DVec3::new(-0.7, -1.0, 0.0),
+            DVec3::new(2.0, 0.0, 0.0),
+            DVec3::new(3.0, 0.0, 0.0),
+            DVec3::new(2.5, 1.0, 0.0),
+            DVec3::new(2.5, -1.0, 0.3),
+            DVec3::new(2.5, 0.0, 0.0),
+            DVec3::new(2.5, 0.0, 1.0),
+        ];
+        let faces = vec![
+            [0, 1, 2],
+            [0, 3, 4],
+            [1, 5, 2],
+            [5, 6, 7],
+            [6, 5, 8],
+            [5, 6, 10],
+            [5, 9, 7],
+            [9, 6, 7],
+            [5, 6, 9],
+        ];
+        let m = mesh(11, faces, p);
+        assert_eq!(m.rings.kind(0), crate::mesh::FanKind::Irregular);
+        assert_eq!(m.geometry.n_degenerate_faces, 1);
+        for (k, h) in [0.1, 1.0, 30.0].into_iter().enumerate() {
+            let u: Vec<DVec2> = (0..11)
+                .map(|i| DVec2::new((i as f64 + k as f64).sin(), (2.0 * i as f64).cos()))
+                .collect();
+            let out = advect(&m, &u, h);
+            assert!(out.iter().all(|v| v.is_finite()), "h = {h}: {out:?}");
+            // interpolation never leaves the range of the (rotated) values
+            let umax = u.iter().map(|v| v.length()).fold(0.0, f64::max);
+            assert!(out.iter().all(|v| v.length() <= umax * (1.0 + 1e-12)));
+            let flux = dual_fluxes(&m.t, &m.p, &m.frames, &u);
+            assert!(flux.iter().all(|x| x.is_finite()));
+            let plan = UpwindPlan::new(&m.t, &m.geometry.vertex_area, &flux, h).unwrap();
+            let mut mass: Vec<f64> = (0..11).map(|i| 1.0 + i as f64).collect();
+            let before = mass.clone();
+            plan.transport(&m.t, &mut mass);
+            assert!(mass.iter().all(|&x| x >= 0.0));
+            let (s0, s1): (f64, f64) = (before.iter().sum(), mass.iter().sum());
+            assert!((s1 - s0).abs() < 1e-14 * s0);
+            let mom = plan.momentum_velocity(&m.t, &m.connection, &before, &u, &out);
+            assert!(mom.iter().all(|v| v.is_finite()));
+        }
+    }
+
+    #[test]
+    fn bad_plan_parameters_are_named() {
+        let t = Topology::from_triangles(3, vec![[0, 1, 2]]).unwrap();
+        let area = [1.0; 3];
+        let flux = [0.1, -0.2, 0.0];
+        assert!(UpwindPlan::new(&t, &area, &flux, 0.1).is_ok());
+        assert_eq!(
+            UpwindPlan::new(&t, &area[..2], &flux, 0.1).unwrap_err(),
+            ParamError::Length {
+                name: "vertex_area",
+                expected: 3,
+                got: 2
+            }
+        );
+        assert_eq!(
+            UpwindPlan::new(&t, &area, &flux[..1], 0.1).unwrap_err(),
+            ParamError::Length {
+                name: "flux",
+                expected: 3,
+                got: 1
+            }
+        );
+        assert!(matches!(
+            UpwindPlan::new(&t, &area, &flux, -1.0),
+            Err(ParamError::OutOfRange { name: "h", .. })
+        ));
+        assert!(matches!(
+            UpwindPlan::new(&t, &area, &flux, f64::NAN),
+            Err(ParamError::OutOfRange { name: "h", .. })
+        ));
+        assert_eq!(
+            UpwindPlan::new(&t, &area, &[0.0, f64::INFINITY, 0.0], 0.1).unwrap_err(),
+            ParamError::NonFinite {
+                name: "flux",
+                index: 1
+            }
+        );
+        assert!(matches!(
+            UpwindPlan::new(&t, &[1.0, -1.0, 1.0], &flux, 0.1),
+            Err(ParamError::OutOfRange {
+                name: "vertex_area",
+                ..
+            })
+        ));
+    }
+
+    #[test]
+    fn a_vertex_without_area_gives_all_it_has() {
+        let t = Topology::from_triangles(3, vec![[0, 1, 2]]).unwrap();
+        // edges (0,1), (0,2), (1,2): vertex 0 donates on both its edges, 1 to 2
+        let plan = UpwindPlan::new(&t, &[0.0, 1.0, 1.0], &[1.0, 3.0, 0.5], 0.1).unwrap();
+        assert_eq!(plan.n_limited(), 1);
+        assert!(plan.max_courant().is_infinite());
+        assert_eq!(plan.substeps(), 1);
+        let mut mass = vec![2.0, 1.0, 0.0];
+        plan.transport(&t, &mut mass);
+        assert_eq!(mass[0], 0.0);
+        assert!((mass[1] - (1.0 + 0.5 - 0.05)).abs() < 1e-15);
+        assert!((mass[2] - (1.5 + 0.05)).abs() < 1e-15);
+    }
+}

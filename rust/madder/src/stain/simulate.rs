@@ -1,0 +1,891 @@
+//! The split-step stain simulator on a deforming mesh (seed §4.3, Fig. 1.3; eqs. 4.1–4.10).
+//!
+//! State per vertex: the tangent velocity `u_i` (in the comoving–corotating frame `F_i`,
+//! [`super::forces`]), the free solvent `σ_f` and the solute dissolved in it `σ_s` (which
+//! flow), the absorbed solvent `σ_p` and absorbed solute (held in the fibres), and the
+//! adsorbed solute (the permanent deposit). Densities are per unit area; the simulator
+//! stores **masses** `m_i = A_i σ_i` (`A_i` the lumped vertex area) because the liquid in
+//! a cloth moves with the cloth: when the mesh stretches, the masses ride on the
+//! vertices and the densities are re-read on the new areas. Total solute is then a plain
+//! sum that only rounding can change.
+//!
+//! One frame `t → t + H` is `S` sub-steps of `h = H/S`, the positions interpolated
+//! linearly between the two frames. Each sub-step, on the geometry at its end:
+//!
+//! 1. **Forces** (§4.4): `u += h·a` with `a` the tangential gravity and rectilinear force
+//!    in `F_i`, then the Coriolis rotation (exact, [`super::forces::apply_coriolis`]) with
+//!    the frames' angular velocity over the sub-step, then friction `u ← e^{−k h} u` — the
+//!    drag of the fibres on the liquid (`k = 0` is the seed's frictionless liquid; the
+//!    exponential is the exact solution of `u̇ = −k u`, stable for any `h`).
+//! 2. **Advection** (§4.3.1): the velocity semi-Lagrangian, then the densities by
+//!    upwind finite volumes ([`super::advect`]); or, with `momentum_advection`, the
+//!    velocity follows the solvent's momentum (§4.3.2). The densities move with the
+//!    time-centred velocity `½(u^n + u^{n+1})` (start and end of the sub-step): with the
+//!    end velocity alone (the plain split step) a liquid accelerating from rest travels
+//!    `(n+1)/n` times `½at²` after `n` steps — 12 % too far after 8 frames — and with the
+//!    average it travels exactly `½at²`.
+//! 3. **Diffusion** (§4.3.3–4.3.4): `(M + h K_S) σ' = m` for the free solvent and the
+//!    dissolved solute (and their colour), `K_S` the stiffness of the fabric tensor in
+//!    each face's weft basis; the velocity by the connection (Bochner) Laplacian of the
+//!    viscosity, eq. 4.6. Both by warm-started CG ([`crate::ops::WarmCg`]).
+//! 4. **Interactions** (§4.5): absorption, adsorption, evaporation ([`super::interact`]).
+//!
+//! ## Conservation and sign (why the clamps are safe)
+//! The system conserves mass exactly (`1ᵀ(M + hK) = 1ᵀM`) and CG to its tolerance; after
+//! each solve the field is rescaled by `Σm / Σm'` so that the total is restored to
+//! rounding (a relative correction ≤ 1e-12, proportional, so it keeps zeros and signs).
+//! The FEM stiffness is not an M-matrix on obtuse triangles or with strongly anisotropic
+//! tensors, so implicit diffusion can leave a tiny negative mass just outside a sharp
+//! front. Those deficits are filled from the vertex's positive neighbours, in proportion
+//! to their masses (a conservative local redistribution), and anything left — only if
+//! the neighbours hold less than the deficit — from all positive vertices in proportion.
+//! So every density stays `≥ 0` and every total is kept. Advection is non-negative and
+//! conservative by construction ([`super::advect`]); so are the interactions.
+//!
+//! For the velocity's Bochner Laplacian the edge weights are clamped at zero: with
+//! negative (non-Delaunay) weights `K_∇` can be indefinite ([`crate::ops::connection`]),
+//! and the velocity diffusion is a viscosity, whose job is smoothing; clamping makes it
+//! positive semi-definite on every mesh (the scalar diffusion of the densities keeps the
+//! consistent weights).
+//!
+//! ## Failure
+//! [`Simulator::step`] works on a copy of the state and commits it only when the whole
+//! frame succeeded: an error (bad positions naming the vertex, a solver failure) leaves
+//! the simulator at the last good frame.
+
+use std::time::Instant;
+
+use faer::Par;
+use glam::{DVec2, DVec3};
+use rayon::prelude::*;
+
+use super::advect::{UpwindPlan, advect_velocity, dual_fluxes};
+use super::diffuse::{Conductivity, check_range};
+use super::forces::{
+    Forces, angular_velocity, apply_coriolis, body_acceleration, corotating_frames,
+    frame_acceleration, rest_frames,
+};
+use super::interact::{Fields, InteractionRates, exposure, interact};
+use crate::error::{Error, ParamError};
+use crate::mesh::geometry::check_positions;
+use crate::mesh::{Connection, Geometry, OneRings, Topology, VertexFrames};
+use crate::ops::{
+    BochnerPattern, VertexPattern, WarmCg, add_lumped_mass, add_lumped_mass_blocks,
+    bochner_stiffness, cotan_stiffness,
+};
+
+/// A vertex is "dry" for the evaporation boundary rule (eq. 4.8) below this liquid
+/// density, kg/m² (1 g/m², a film of water 1 µm thick).
+pub const DRY_DENSITY: f64 = 1e-3;
+
+/// Physical parameters of the liquid and the cloth (SI units).
+#[derive(Debug, Clone, PartialEq)]
+pub struct StainParams {
+    /// Gravitational acceleration, world coordinates, m/s².
+    pub gravity: DVec3,
+    /// Which body forces act.
+    pub forces: Forces,
+    /// Advect the velocity with the solvent's momentum (§4.3.2) instead of
+    /// semi-Lagrangian.
+    pub momentum_advection: bool,
+    /// Kinematic viscosity of the velocity diffusion, m²/s (`S_v = ν I`).
+    pub viscosity: f64,
+    /// Drag of the fibres on the liquid, 1/s (`u̇ = −k u`; 0 = frictionless).
+    pub friction: f64,
+    /// Absorption, adsorption and evaporation rates (§4.5).
+    pub interaction: InteractionRates,
+    /// Sub-steps per frame.
+    pub substeps: u32,
+}
+
+impl Default for StainParams {
+    fn default() -> Self {
+        Self {
+            gravity: DVec3::new(0.0, 0.0, -9.81),
+            forces: Forces::default(),
+            momentum_advection: false,
+            viscosity: 1e-4,
+            friction: 20.0,
+            interaction: InteractionRates::default(),
+            substeps: 1,
+        }
+    }
+}
+
+impl StainParams {
+    /// Checks every parameter, naming the first one out of range.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        if let Some(k) = (0..3).find(|&k| !self.gravity[k].is_finite()) {
+            return Err(ParamError::NonFinite {
+                name: "gravity",
+                index: k,
+            });
+        }
+        check_range("viscosity", self.viscosity, self.viscosity >= 0.0, "finite and ≥ 0")?;
+        check_range("friction", self.friction, self.friction >= 0.0, "finite and ≥ 0")?;
+        check_range(
+            "substeps",
+            self.substeps as f64,
+            self.substeps >= 1,
+            "at least 1",
+        )?;
+        self.interaction.validate()
+    }
+}
+
+/// Everything that changes during a bake (committed frame by frame).
+#[derive(Debug, Clone)]
+struct State {
+    positions: Vec<DVec3>,
+    previous: Option<Vec<DVec3>>,
+    frames: VertexFrames,
+    vertex_area: Vec<f64>,
+    velocity: Vec<DVec2>,
+    fields: Fields,
+    /// Densities of the diffusing fields at the last solve (CG warm start).
+    warm: Vec<f64>,
+    evaporated: f64,
+    time: f64,
+}
+
+/// Totals over the mesh (kg), for conservation checks and reports.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Totals {
+    /// Free + absorbed solvent.
+    pub solvent: f64,
+    /// Dissolved + absorbed + adsorbed solute.
+    pub solute: f64,
+    /// Solvent evaporated since the start.
+    pub evaporated: f64,
+}
+
+/// The stain simulator of chapter 4 on one cloth.
+#[derive(Debug)]
+pub struct Simulator {
+    topology: Topology,
+    rings: OneRings,
+    rest: Vec<DVec3>,
+    rest_frames: VertexFrames,
+    conductivity: Conductivity,
+    params: StainParams,
+    pattern: VertexPattern,
+    bochner: BochnerPattern,
+    scalar_cg: WarmCg,
+    vector_cg: WarmCg,
+    boundary: Vec<bool>,
+    loose: Vec<bool>,
+    solute_color: [f64; 3],
+    state: State,
+    profile: Profile,
+}
+
+/// Wall-clock seconds spent in each phase since the simulator was built (for benchmarks).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Profile {
+    /// Geometry, comoving–corotating frames (Kabsch) and the connection.
+    pub geometry: f64,
+    /// Body forces.
+    pub forces: f64,
+    /// Velocity and density advection.
+    pub advection: f64,
+    /// Density diffusion (assembly and CG).
+    pub diffusion: f64,
+    /// Velocity diffusion (Bochner assembly and CG).
+    pub viscosity: f64,
+    /// Interactions.
+    pub interaction: f64,
+    /// Sub-steps taken.
+    pub substeps: usize,
+}
+
+impl Simulator {
+    /// A dry cloth at rest: `rest` positions define the rest frames `F̄_i`, `positions`
+    /// is the first frame. `conductivity` is the fabric's diffusion of the densities
+    /// (`S_f`); `solute_color` the colour of the liquid's solute.
+    pub fn new(
+        topology: Topology,
+        rest: &[DVec3],
+        positions: &[DVec3],
+        conductivity: Conductivity,
+        params: StainParams,
+        solute_color: [f64; 3],
+        par: Par,
+    ) -> Result<Self, Error> {
+        params.validate()?;
+        conductivity.validate(topology.n_faces())?;
+        if let Some(index) = solute_color.iter().position(|c| !c.is_finite()) {
+            return Err(ParamError::NonFinite {
+                name: "solute colour",
+                index,
+            }
+            .into());
+        }
+        check_positions(&topology, rest)?;
+        check_positions(&topology, positions)?;
+        let _ = par; // the per-element loops use the rayon pool; the CG is sequential
+        let n = topology.n_vertices();
+        let rings = OneRings::new(&topology);
+        let rest_frames = rest_frames(&rings, rest)?;
+        let frames = corotating_frames(&topology, &rest_frames, rest, positions)?;
+        let geometry = Geometry::new(&topology, positions)?;
+        let pattern = VertexPattern::new(&topology);
+        let bochner = BochnerPattern::new(&pattern);
+        let scalar_cg = WarmCg::new(&pattern);
+        let vector_cg = WarmCg::new(&bochner);
+        Ok(Self {
+            boundary: topology.boundary_vertices(),
+            loose: topology.loose_vertices(),
+            rest: rest.to_vec(),
+            rest_frames,
+            conductivity,
+            params,
+            pattern,
+            bochner,
+            scalar_cg,
+            vector_cg,
+            solute_color,
+            state: State {
+                positions: positions.to_vec(),
+                previous: None,
+                frames,
+                vertex_area: geometry.vertex_area,
+                velocity: vec![DVec2::ZERO; n],
+                fields: Fields::zeros(n),
+                warm: Vec::new(),
+                evaporated: 0.0,
+                time: 0.0,
+            },
+            rings,
+            topology,
+            profile: Profile::default(),
+        })
+    }
+
+    pub fn topology(&self) -> &Topology {
+        &self.topology
+    }
+    /// Time spent per phase so far.
+    pub fn profile(&self) -> Profile {
+        self.profile
+    }
+    pub fn params(&self) -> &StainParams {
+        &self.params
+    }
+    /// Simulated time since the start, s.
+    pub fn time(&self) -> f64 {
+        self.state.time
+    }
+    /// Lumped vertex areas of the current frame, m².
+    pub fn vertex_area(&self) -> &[f64] {
+        &self.state.vertex_area
+    }
+    /// Per-vertex masses, kg.
+    pub fn fields(&self) -> &Fields {
+        &self.state.fields
+    }
+    /// Velocities in the vertex frames, m/s.
+    pub fn velocity(&self) -> &[DVec2] {
+        &self.state.velocity
+    }
+    /// The vertex frames of the current frame (columns `x, y, z`).
+    pub fn frames(&self) -> &VertexFrames {
+        &self.state.frames
+    }
+    /// Velocities as world vectors, m/s.
+    pub fn velocity_world(&self) -> Vec<DVec3> {
+        (0..self.state.velocity.len())
+            .map(|i| self.state.frames.to_world(i, self.state.velocity[i]))
+            .collect()
+    }
+    /// Replaces the velocity field (frame components), e.g. an initial condition.
+    pub fn set_velocity(&mut self, velocity: Vec<DVec2>) -> Result<(), ParamError> {
+        self.check_len("velocity", velocity.len())?;
+        if let Some(index) = velocity.iter().position(|u| !u.is_finite()) {
+            return Err(ParamError::NonFinite {
+                name: "velocity",
+                index,
+            });
+        }
+        self.state.velocity = velocity;
+        Ok(())
+    }
+
+    /// Density `mass / A_i` of a mass field (0 where a vertex has no area).
+    pub fn density(&self, mass: &[f64]) -> Vec<f64> {
+        mass.iter()
+            .zip(&self.state.vertex_area)
+            .map(|(m, a)| if *a > 0.0 { m / a } else { 0.0 })
+            .collect()
+    }
+
+    /// Liquid density (free + absorbed solvent), kg/m².
+    pub fn wetness(&self) -> Vec<f64> {
+        let f = &self.state.fields;
+        let wet: Vec<f64> = f
+            .free_solvent
+            .iter()
+            .zip(&f.absorbed_solvent)
+            .map(|(a, b)| a + b)
+            .collect();
+        self.density(&wet)
+    }
+
+    /// Total solute density (dissolved + absorbed + adsorbed), kg/m².
+    pub fn solute_density(&self) -> Vec<f64> {
+        let f = &self.state.fields;
+        let s: Vec<f64> = (0..f.solute.len())
+            .map(|i| f.solute[i] + f.absorbed_solute[i] + f.adsorbed[i])
+            .collect();
+        self.density(&s)
+    }
+
+    /// Adsorbed solute density (the permanent deposit), kg/m².
+    pub fn deposit(&self) -> Vec<f64> {
+        self.density(&self.state.fields.adsorbed)
+    }
+
+    /// Colour of the solute at every vertex (mass-weighted mix of the liquids poured;
+    /// the liquid's colour where there is no solute).
+    pub fn solute_color(&self) -> Vec<[f64; 3]> {
+        let f = &self.state.fields;
+        match (&f.color_free, &f.color_held) {
+            (Some(cf), Some(ch)) => (0..f.solute.len())
+                .map(|i| {
+                    let s = f.solute[i] + f.absorbed_solute[i] + f.adsorbed[i];
+                    if s > 1e-300 {
+                        std::array::from_fn(|k| (cf[i][k] + ch[i][k]) / s)
+                    } else {
+                        self.solute_color
+                    }
+                })
+                .collect(),
+            _ => vec![self.solute_color; f.solute.len()],
+        }
+    }
+
+    /// Totals over the mesh (sums in vertex order).
+    pub fn totals(&self) -> Totals {
+        let f = &self.state.fields;
+        Totals {
+            solvent: f.total_solvent(),
+            solute: f.total_solute(),
+            evaporated: self.state.evaporated,
+        }
+    }
+
+    fn check_len(&self, name: &'static str, got: usize) -> Result<(), ParamError> {
+        let expected = self.topology.n_vertices();
+        if got == expected {
+            Ok(())
+        } else {
+            Err(ParamError::Length {
+                name,
+                expected,
+                got,
+            })
+        }
+    }
+
+    /// Pours liquid: `solvent[i]` kg/m² of solvent at vertex `i`, carrying
+    /// `concentration` kg of solute per kg of solvent, of `color` (default: the liquid's).
+    /// A colour different from the liquid's switches on per-vertex colour tracking.
+    pub fn add_liquid(
+        &mut self,
+        solvent: &[f64],
+        concentration: f64,
+        color: Option<[f64; 3]>,
+    ) -> Result<(), ParamError> {
+        self.check_len("added solvent", solvent.len())?;
+        if let Some(index) = solvent.iter().position(|d| !(d.is_finite() && *d >= 0.0)) {
+            return Err(ParamError::NonFinite {
+                name: "added solvent (finite, ≥ 0)",
+                index,
+            });
+        }
+        check_range(
+            "concentration",
+            concentration,
+            concentration >= 0.0,
+            "finite and ≥ 0",
+        )?;
+        let color = color.unwrap_or(self.solute_color);
+        if let Some(index) = color.iter().position(|c| !c.is_finite()) {
+            return Err(ParamError::NonFinite {
+                name: "liquid colour",
+                index,
+            });
+        }
+        if color != self.solute_color {
+            self.enable_color();
+        }
+        let area = &self.state.vertex_area;
+        let f = &mut self.state.fields;
+        for (i, &d) in solvent.iter().enumerate() {
+            let m = d * area[i];
+            f.free_solvent[i] += m;
+            f.solute[i] += m * concentration;
+            if let Some(cf) = f.color_free.as_mut() {
+                for k in 0..3 {
+                    cf[i][k] += m * concentration * color[k];
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Tracks colour per vertex from now on (colour masses = solute × liquid colour).
+    fn enable_color(&mut self) {
+        let f = &mut self.state.fields;
+        if f.color_free.is_some() {
+            return;
+        }
+        let c = self.solute_color;
+        f.color_free = Some(f.solute.iter().map(|s| c.map(|x| x * s)).collect());
+        f.color_held = Some(
+            (0..f.solute.len())
+                .map(|i| c.map(|x| x * (f.absorbed_solute[i] + f.adsorbed[i])))
+                .collect(),
+        );
+    }
+
+    /// A splash (seed Fig. 4.3): adds a random outgoing velocity around `center` (world)
+    /// to every vertex with `weight > 0`: the tangential direction away from the centre,
+    /// turned by a random angle in ±0.5 rad, times `speed · weight` and a random factor in
+    /// [0.5, 1.5). Random numbers come from `seed` and the vertex index only, so a splash
+    /// is the same on any number of threads and any machine.
+    pub fn splash(
+        &mut self,
+        center: DVec3,
+        speed: f64,
+        seed: u64,
+        weight: &[f64],
+    ) -> Result<(), ParamError> {
+        self.check_len("splash weights", weight.len())?;
+        check_range("splash speed", speed, speed >= 0.0, "finite and ≥ 0")?;
+        if !center.is_finite() {
+            return Err(ParamError::NonFinite {
+                name: "splash centre",
+                index: 0,
+            });
+        }
+        if let Some(index) = weight.iter().position(|w| !(w.is_finite() && *w >= 0.0)) {
+            return Err(ParamError::NonFinite {
+                name: "splash weights (finite, ≥ 0)",
+                index,
+            });
+        }
+        let st = &mut self.state;
+        let (frames, positions) = (&st.frames, &st.positions);
+        st.velocity
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(i, u)| {
+                if weight[i] <= 0.0 {
+                    return;
+                }
+                let mut rng = SplitMix64(seed ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+                let (r1, r2, r3) = (rng.unit(), rng.unit(), rng.unit());
+                let out = frames.to_local(i, positions[i] - center);
+                let dir = if out.length() > 0.0 {
+                    out.normalize()
+                } else {
+                    DVec2::from_angle(std::f64::consts::TAU * r3)
+                };
+                let turned = DVec2::from_angle(r1 - 0.5).rotate(dir);
+                *u += turned * (speed * weight[i] * (0.5 + r2));
+            });
+        Ok(())
+    }
+
+    /// Advances one frame to `positions` over `dt` seconds in `params.substeps`
+    /// sub-steps. `after`, if known, is the frame after `positions` (one more `dt`
+    /// later): the rectilinear force then uses the frame interval's mean acceleration
+    /// `½(p̈_k + p̈_{k+1})` (second order) instead of `p̈_k`, and the first frame gets its
+    /// acceleration from the motion instead of assuming none. On error the simulator
+    /// stays at the previous frame.
+    pub fn step(
+        &mut self,
+        positions: &[DVec3],
+        dt: f64,
+        after: Option<&[DVec3]>,
+    ) -> Result<(), Error> {
+        check_range("time step", dt, dt > 0.0, "finite and > 0")?;
+        check_positions(&self.topology, positions)?;
+        if let Some(a) = after {
+            check_positions(&self.topology, a)?;
+        }
+        let mut state = self.state.clone();
+        let cur = state.positions.clone();
+        let acceleration = if self.params.forces.rectilinear {
+            // p̈ at the start of the interval: centred; at the very first frame, the
+            // forward difference if the frame after is known, else zero (the cloth is
+            // taken to have moved uniformly before the bake)
+            let start = match (&state.previous, after) {
+                (Some(prev), _) => frame_acceleration(prev, &cur, positions, dt),
+                (None, Some(a)) => frame_acceleration(&cur, positions, a, dt),
+                (None, None) => vec![DVec3::ZERO; cur.len()],
+            };
+            match after {
+                Some(a) => frame_acceleration(&cur, positions, a, dt)
+                    .iter()
+                    .zip(&start)
+                    .map(|(e, s)| 0.5 * (*e + *s))
+                    .collect(),
+                None => start,
+            }
+        } else {
+            vec![DVec3::ZERO; cur.len()]
+        };
+        let s_count = self.params.substeps;
+        let h = dt / s_count as f64;
+        for s in 1..=s_count {
+            let q: Vec<DVec3> = if s == s_count {
+                positions.to_vec()
+            } else {
+                let t = s as f64 / s_count as f64;
+                cur.iter()
+                    .zip(positions)
+                    .map(|(a, b)| a.lerp(*b, t))
+                    .collect()
+            };
+            self.substep(&mut state, &q, h, &acceleration)?;
+        }
+        state.previous = Some(cur);
+        state.positions = positions.to_vec();
+        self.state = state;
+        Ok(())
+    }
+
+    fn substep(
+        &mut self,
+        st: &mut State,
+        q: &[DVec3],
+        h: f64,
+        acceleration: &[DVec3],
+    ) -> Result<(), Error> {
+        let mut clock = Instant::now();
+        let mut lap = |slot: &mut f64| {
+            let now = Instant::now();
+            *slot += (now - clock).as_secs_f64();
+            clock = now;
+        };
+        let mut prof = self.profile;
+        let p = self.params.clone();
+        let topo = &self.topology;
+        let geometry = Geometry::new(topo, q)?;
+        let frames = corotating_frames(topo, &self.rest_frames, &self.rest, q)?;
+        let connection = Connection::new(topo, &self.rings, &geometry, &frames, q);
+        lap(&mut prof.geometry);
+
+        // the velocity at the start of the sub-step, for the time-centred flux below
+        let start_velocity = st.velocity.clone();
+        // 1. body forces (§4.4): half kick, Coriolis rotation, half kick, then friction
+        let kick = (p.forces.gravity || p.forces.rectilinear)
+            .then(|| body_acceleration(&frames, acceleration, p.gravity, p.forces));
+        let half_kick = |velocity: &mut [DVec2]| {
+            if let Some(a) = &kick {
+                velocity
+                    .par_iter_mut()
+                    .zip(a)
+                    .for_each(|(u, a)| *u += (0.5 * h) * *a);
+            }
+        };
+        half_kick(&mut st.velocity);
+        if p.forces.coriolis {
+            let omega = angular_velocity(&st.frames, &frames, h);
+            apply_coriolis(&omega, h, &mut st.velocity);
+        }
+        half_kick(&mut st.velocity);
+        if p.friction > 0.0 {
+            let damp = (-p.friction * h).exp();
+            st.velocity.par_iter_mut().for_each(|u| *u *= damp);
+        }
+        for (v, _) in self.loose.iter().enumerate().filter(|(_, l)| **l) {
+            st.velocity[v] = DVec2::ZERO;
+        }
+
+        lap(&mut prof.forces);
+        // 2. advection (§4.3.1–4.3.2)
+        let advected = advect_velocity(topo, &self.rings, &geometry, &connection, &st.velocity, h);
+        let centred: Vec<DVec2> = advected
+            .par_iter()
+            .zip(&start_velocity)
+            .map(|(a, b)| 0.5 * (*a + *b))
+            .collect();
+        let flux = dual_fluxes(topo, q, &frames, &centred);
+        let plan = UpwindPlan::new(topo, &geometry.vertex_area, &flux, h)?;
+        let solvent_before = st.fields.free_solvent.clone();
+        {
+            let f = &mut st.fields;
+            let mut color = f.color_free.as_ref().map(|c| split_rgb(c));
+            let mut fields: Vec<&mut [f64]> = vec![&mut f.free_solvent, &mut f.solute];
+            if let Some(c) = color.as_mut() {
+                fields.extend(c.iter_mut().map(|v| v.as_mut_slice()));
+            }
+            plan.transport_all(topo, &mut fields);
+            if let (Some(c), Some(cf)) = (color, f.color_free.as_mut()) {
+                merge_rgb(&c, cf);
+            }
+        }
+        st.velocity = if p.momentum_advection {
+            plan.momentum_velocity(
+                topo,
+                &connection,
+                &solvent_before,
+                &st.velocity,
+                &advected,
+            )
+        } else {
+            advected
+        };
+
+        lap(&mut prof.advection);
+        // 3. diffusion (§4.3.3–4.3.4, eq. 4.6)
+        self.diffuse_densities(st, &geometry, h)?;
+        lap(&mut prof.diffusion);
+        if p.viscosity > 0.0 {
+            self.diffuse_velocity(st, &geometry, &connection, h)?;
+        }
+        lap(&mut prof.viscosity);
+
+        // 4. interactions (§4.5)
+        let topo = &self.topology;
+        let wet: Vec<f64> = (0..st.vertex_area.len())
+            .map(|i| {
+                let a = geometry.vertex_area[i];
+                let m = st.fields.free_solvent[i] + st.fields.absorbed_solvent[i];
+                if a > 0.0 { m / a } else { 0.0 }
+            })
+            .collect();
+        let exposed = exposure(
+            topo,
+            &self.boundary,
+            &wet,
+            DRY_DENSITY,
+            p.interaction.evaporation_boundary,
+        );
+        st.evaporated += interact(
+            &p.interaction,
+            &geometry.vertex_area,
+            &exposed,
+            h,
+            &mut st.fields,
+        )?;
+
+        st.frames = frames;
+        st.vertex_area = geometry.vertex_area;
+        st.time += h;
+        lap(&mut prof.interaction);
+        prof.substeps += 1;
+        self.profile = prof;
+        Ok(())
+    }
+
+    /// `(M + h K_S) σ' = m` for every flowing field, then the exact mass restoration and
+    /// the non-negativity repair of the module doc.
+    fn diffuse_densities(
+        &mut self,
+        st: &mut State,
+        geometry: &Geometry,
+        h: f64,
+    ) -> Result<(), Error> {
+        let n = self.topology.n_vertices();
+        let mut values = self
+            .conductivity
+            .stiffness(&self.topology, geometry, &self.pattern, h);
+        add_lumped_mass(geometry, &self.pattern, 1.0, &mut values);
+        for (v, _) in self.loose.iter().enumerate().filter(|(_, l)| **l) {
+            values[self.pattern.diag_slot()[v] as usize] = 1.0;
+        }
+        let f = &mut st.fields;
+        let mut color = f.color_free.as_ref().map(|c| split_rgb(c));
+        let mut fields: Vec<&mut Vec<f64>> = vec![&mut f.free_solvent, &mut f.solute];
+        if let Some(c) = color.as_mut() {
+            fields.extend(c.iter_mut());
+        }
+        let rhs: Vec<f64> = fields.iter().flat_map(|m| m.iter().copied()).collect();
+        if st.warm.len() != rhs.len() {
+            // first solve, or colour just switched on: start from the densities
+            st.warm = rhs
+                .iter()
+                .enumerate()
+                .map(|(k, m)| {
+                    let a = geometry.vertex_area[k % n];
+                    if a > 0.0 { m / a } else { 0.0 }
+                })
+                .collect();
+        }
+        self.scalar_cg.solve(&values, &rhs, &mut st.warm)?;
+        for (k, m) in fields.iter_mut().enumerate() {
+            let before: f64 = m.iter().sum();
+            let sigma = &st.warm[k * n..(k + 1) * n];
+            for i in 0..n {
+                m[i] = if self.loose[i] {
+                    m[i]
+                } else {
+                    geometry.vertex_area[i] * sigma[i]
+                };
+            }
+            repair_negative(&self.topology, m);
+            let after: f64 = m.iter().sum();
+            if after > 0.0 && before > 0.0 {
+                let scale = before / after;
+                m.iter_mut().for_each(|x| *x *= scale);
+            }
+        }
+        if let (Some(c), Some(cf)) = (color, f.color_free.as_mut()) {
+            merge_rgb(&c, cf);
+        }
+        Ok(())
+    }
+
+    /// Eq. 4.6 with clamped (non-negative) edge weights: `(M ⊗ I + h ν K_∇) u' = (M ⊗ I) u`.
+    fn diffuse_velocity(
+        &mut self,
+        st: &mut State,
+        geometry: &Geometry,
+        connection: &Connection,
+        h: f64,
+    ) -> Result<(), Error> {
+        let mut stiffness = cotan_stiffness(
+            &self.topology,
+            geometry,
+            &self.pattern,
+            h * self.params.viscosity,
+        );
+        clamp_weights(&self.pattern, &mut stiffness);
+        let mut values = bochner_stiffness(&self.pattern, &self.bochner, &stiffness, connection);
+        add_lumped_mass_blocks(geometry, &self.bochner, 1.0, &mut values);
+        let n = self.topology.n_vertices();
+        let mut rhs = Vec::with_capacity(2 * n);
+        let mut x = Vec::with_capacity(2 * n);
+        for (i, u) in st.velocity.iter().enumerate() {
+            let a = geometry.vertex_area[i];
+            rhs.extend([a * u.x, a * u.y]);
+            x.extend([u.x, u.y]);
+        }
+        for (v, _) in self.loose.iter().enumerate().filter(|(_, l)| **l) {
+            let d = self.bochner.diag_slot()[v];
+            values[d[0] as usize] = 1.0;
+            values[d[1] as usize] = 1.0;
+            rhs[2 * v] = st.velocity[v].x;
+            rhs[2 * v + 1] = st.velocity[v].y;
+        }
+        // interleaved (x, y) per vertex is one column of the 2N system
+        self.vector_cg.solve(&values, &rhs, &mut x)?;
+        for (i, u) in st.velocity.iter_mut().enumerate() {
+            *u = DVec2::new(x[2 * i], x[2 * i + 1]);
+        }
+        Ok(())
+    }
+}
+
+/// Makes a scalar stiffness an M-matrix: positive off-diagonal entries (negative edge
+/// weights) are dropped and each diagonal recomputed so rows still sum to zero.
+fn clamp_weights(pattern: &VertexPattern, values: &mut [f64]) {
+    let n = pattern.n();
+    let mut diag = vec![0.0; n];
+    let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
+    for j in 0..n {
+        for s in cp[j]..cp[j + 1] {
+            let i = ri[s as usize] as usize;
+            if i == j {
+                continue;
+            }
+            let v = &mut values[s as usize];
+            if *v > 0.0 {
+                *v = 0.0;
+            }
+            diag[i] -= *v;
+            diag[j] -= *v;
+        }
+    }
+    for (j, d) in diag.into_iter().enumerate() {
+        values[pattern.diag_slot()[j] as usize] = d;
+    }
+}
+
+/// Fills negative masses from positive neighbours (in proportion to their masses), then
+/// from all positive vertices if the neighbours cannot cover the deficit; conservative,
+/// sequential (deterministic), and a no-op when nothing is negative.
+fn repair_negative(topology: &Topology, mass: &mut [f64]) {
+    if !mass.iter().any(|&m| m < 0.0) {
+        return;
+    }
+    let mut leftover = 0.0;
+    let edges = topology.edges();
+    // neighbours via the sorted edge list: a vertex's edges (a = v) are contiguous, the
+    // others (b = v) are found by a one-off adjacency built on demand
+    let n = mass.len();
+    let mut ptr = vec![0usize; n + 1];
+    for &[a, b] in edges {
+        ptr[a as usize + 1] += 1;
+        ptr[b as usize + 1] += 1;
+    }
+    for v in 0..n {
+        ptr[v + 1] += ptr[v];
+    }
+    let mut next = ptr[..n].to_vec();
+    let mut nbr = vec![0u32; ptr[n]];
+    for &[a, b] in edges {
+        nbr[next[a as usize]] = b;
+        next[a as usize] += 1;
+        nbr[next[b as usize]] = a;
+        next[b as usize] += 1;
+    }
+    for i in 0..n {
+        if mass[i] >= 0.0 {
+            continue;
+        }
+        let deficit = -mass[i];
+        mass[i] = 0.0;
+        let ring = &nbr[ptr[i]..ptr[i + 1]];
+        let pool: f64 = ring.iter().map(|&j| mass[j as usize].max(0.0)).sum();
+        let take = deficit.min(pool);
+        if take > 0.0 {
+            let frac = take / pool;
+            for &j in ring {
+                let m = &mut mass[j as usize];
+                if *m > 0.0 {
+                    *m -= *m * frac;
+                }
+            }
+        }
+        leftover += deficit - take;
+    }
+    if leftover > 0.0 {
+        let pool: f64 = mass.iter().filter(|m| **m > 0.0).sum();
+        if pool > 0.0 {
+            let keep = (1.0 - leftover / pool).max(0.0);
+            mass.iter_mut().for_each(|m| *m *= keep);
+        }
+    }
+}
+
+fn split_rgb(c: &[[f64; 3]]) -> [Vec<f64>; 3] {
+    std::array::from_fn(|k| c.iter().map(|x| x[k]).collect())
+}
+
+fn merge_rgb(c: &[Vec<f64>; 3], out: &mut [[f64; 3]]) {
+    for (i, o) in out.iter_mut().enumerate() {
+        *o = [c[0][i], c[1][i], c[2][i]];
+    }
+}
+
+/// splitmix64 (Steele, Lea & Flood 2014): a tiny, well-mixed generator, enough for
+/// reproducible jitter; one per vertex, seeded from the splash seed and the index.
+struct SplitMix64(u64);
+
+impl SplitMix64 {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    /// Uniform in [0, 1).
+    fn unit(&mut self) -> f64 {
+        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
