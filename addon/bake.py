@@ -184,6 +184,8 @@ class BakeJob:
         self.frame_before = scene.frame_current
         self.writer = self.sim = None
         self.splashed = set()  # sources whose splash is done
+        self._ahead = None  # (frame, positions, contacts) evaluated one frame early
+        self._evaluating = self.first  # the frame being read, for error messages
         self._suspended = False
 
     @property
@@ -202,6 +204,7 @@ class BakeJob:
                 handlers.suspend()
                 self._suspended = True
                 frame = self.first
+                self._evaluating = frame
                 self._goto(frame)
                 pos = self._positions(frame)
                 self.sim = madder.Simulator(self.topology, self._rest(), pos, **simulator_settings(self.scene, obj),
@@ -210,15 +213,22 @@ class BakeJob:
                 self.writer = madder.CacheWriter(self.path, self.n_vertices, self.fields, self.first, self.total)
             else:
                 frame = self.frame + 1
-                self._goto(frame)
-                pos = self._positions(frame)
-                self.sim.step(pos, self.dt)
-                self._pour(frame, pos)
+                pos, contacts = self._visit(frame)
+                # one frame ahead, so the cloth's acceleration over [frame − 1, frame] is
+                # centred (and right at the first frame); every frame is still evaluated
+                # once, in order
+                after = None
+                if frame < self.last:
+                    self._ahead = (frame + 1, *self._visit(frame + 1))
+                    after = self._ahead[1]
+                self._evaluating = frame
+                self.sim.step(pos, self.dt, after=after)
+                self._pour(contacts)
             self.writer.push_frame(self._outputs())
             self.frame = frame
         except madder.MadderError as e:
             self.cancel()
-            raise BakeError(f"'{obj.name}' at frame {self.first if self.frame is None else self.frame + 1}: {e}") from e
+            raise BakeError(f"'{obj.name}' at frame {self._evaluating}: {e}") from e
         except BaseException:
             self.cancel()
             raise
@@ -245,11 +255,25 @@ class BakeJob:
             centre = tuple((w @ pos.astype(np.float64)) / w.sum())
             self.sim.splash(centre, s.splash_speed, s.splash_seed, self.wet0)
 
-    def _pour(self, frame, pos):
-        """Adds the liquid each source brought during the frame that just ended: `flow × dt`
-        per unit area at contact, fading linearly to zero at the source's reach. The first
-        time a source pours, its splash starts from the source's origin."""
+    def _visit(self, frame):
+        """Positions at `frame` and what the sources bring there (from the lookahead when
+        the previous step already visited it)."""
+        self._evaluating = frame
+        if self._ahead is not None and self._ahead[0] == frame:
+            _, pos, contacts = self._ahead
+            self._ahead = None
+            return pos, contacts
+        self._goto(frame)
+        pos = self._positions(frame)
+        return pos, self._contacts(frame, pos)
+
+    def _contacts(self, frame, pos):
+        """Per active source at `frame`: its pour weights on the cloth (1 at contact, fading
+        linearly to 0 at its reach) and its origin (the splash centre)."""
+        if not self.sources:
+            return []
         depsgraph = bpy.context.evaluated_depsgraph_get()
+        out = []
         for src in self.sources:
             s = src.madder_source
             if s.use_frame_range and not (s.frame_start <= frame <= s.frame_end):
@@ -260,12 +284,20 @@ class BakeJob:
                 continue
             d = self.madder.distances_within(pos, verts, tris, s.distance)
             weight = np.clip(1.0 - d / s.distance, 0.0, 1.0).astype(np.float32)  # inf → 0
-            if not weight.any():
-                continue
+            if weight.any():
+                out.append((src, weight, tuple(src_eval.matrix_world.translation)))
+        return out
+
+    def _pour(self, contacts):
+        """Adds the liquid each source brought during the frame that just ended: `flow × dt`
+        per unit area times its weights. The first time a source pours, its splash starts
+        from the source's origin."""
+        for src, weight, origin in contacts:
+            s = src.madder_source
             self.sim.add_liquid((s.amount * self.dt * weight).astype(np.float32), s.concentration, tuple(s.color))
             if s.splash_speed > 0.0 and src.name not in self.splashed:
                 self.splashed.add(src.name)
-                self.sim.splash(tuple(src_eval.matrix_world.translation), s.splash_speed, s.splash_seed, weight)
+                self.sim.splash(origin, s.splash_speed, s.splash_seed, weight)
 
     def _goto(self, frame):
         """Moves the scene to `frame` unless nothing needs the scene (motion from a file and

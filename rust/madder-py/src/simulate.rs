@@ -296,7 +296,13 @@ impl Simulator {
     /// Velocity as world vectors, m/s, `(N, 3)` float32.
     #[getter]
     fn velocity<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f32>>> {
-        out2(py, self.inner.velocity_world().into_iter().map(|v| v.to_array()))
+        out2(
+            py,
+            self.inner
+                .velocity_world()
+                .into_iter()
+                .map(|v| v.to_array()),
+        )
     }
 
     /// Sets the velocity from world vectors ((N, 3) float32, projected on each vertex's

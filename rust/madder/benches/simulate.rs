@@ -62,18 +62,21 @@ fn bench(nx: usize, ny: usize, frames: usize) {
     let t = Instant::now();
     for f in 1..=frames {
         let after = wave(&rest, (f + 1) as f64 * dt);
-        sim.step(&wave(&rest, f as f64 * dt), dt, Some(&after)).unwrap();
+        sim.step(&wave(&rest, f as f64 * dt), dt, Some(&after))
+            .unwrap();
     }
     let total = t.elapsed().as_secs_f64() * 1e3 / frames as f64;
     let p = sim.profile();
     let per = |s: f64| s * 1e3 / frames as f64;
     println!(
-        "{n:>7} vertices, {frames} frames: {total:7.2} ms/frame (setup {setup:.0} ms) = geometry+frames+connection {:.2}, forces {:.2}, advection {:.2}, density diffusion {:.2}, velocity diffusion {:.2}, interactions {:.2}",
+        "{n:>7} vertices, {frames} frames: {total:7.2} ms/frame (setup {setup:.0} ms) = geometry+frames+connection {:.2}, forces {:.2}, advection {:.2}, density diffusion {:.2} ({:.1} CG it.), velocity diffusion {:.2} ({:.1} CG it.), interactions {:.2}",
         per(p.geometry),
         per(p.forces),
         per(p.advection),
         per(p.diffusion),
+        p.density_iterations as f64 / frames as f64,
         per(p.viscosity),
+        p.velocity_iterations as f64 / frames as f64,
         per(p.interaction),
     );
 }
@@ -83,6 +86,183 @@ fn main() {
         "full stain simulator on a waving flag grid, {} rayon threads (1 sub-step per frame, all physics on)",
         rayon::current_num_threads()
     );
+    if std::env::var("MADDER_BENCH_PARTS").is_ok() {
+        parts(127, 77, 50);
+        cg_ab(127, 77, 20);
+        return;
+    }
     bench(127, 77, 48); // ≈ 10k vertices
     bench(407, 245, 12); // ≈ 100k vertices
+}
+
+#[allow(dead_code)]
+fn parts(nx: usize, ny: usize, reps: usize) {
+    use madder::mesh::{Connection, Geometry, OneRings, VertexFrames, one_ring_rotations};
+    use madder::stain::advect::{UpwindPlan, advect_velocity, dual_fluxes};
+    let (topo, rest) = grid(nx, ny);
+    let q = wave(&rest, 0.3);
+    let rings = OneRings::new(&topo);
+    let rf = VertexFrames::new(&rings, &rest).unwrap();
+    let time = |name: &str, f: &mut dyn FnMut()| {
+        let t = Instant::now();
+        for _ in 0..reps {
+            f();
+        }
+        println!(
+            "  {name:<28} {:7.3} ms",
+            t.elapsed().as_secs_f64() * 1e3 / reps as f64
+        );
+    };
+    let mut g = Geometry::new(&topo, &q).unwrap();
+    time("geometry", &mut || g = Geometry::new(&topo, &q).unwrap());
+    let mut rot = Vec::new();
+    time("kabsch rotations", &mut || {
+        rot = one_ring_rotations(&topo, &rest, &q).unwrap()
+    });
+    let mut fr = rf.clone();
+    time("frames rotated", &mut || fr = rf.rotated(&rot));
+    let mut con = Connection::new(&topo, &rings, &g, &fr, &q);
+    time("connection", &mut || {
+        con = Connection::new(&topo, &rings, &g, &fr, &q)
+    });
+    let u: Vec<glam::DVec2> = (0..topo.n_vertices())
+        .map(|i| glam::DVec2::new(0.1, 0.05 * (i as f64).sin()))
+        .collect();
+    let mut a = Vec::new();
+    time("advect velocity", &mut || {
+        a = advect_velocity(&topo, &rings, &g, &con, &u, 1.0 / 24.0)
+    });
+    let mut fl = Vec::new();
+    time("dual fluxes", &mut || fl = dual_fluxes(&topo, &q, &fr, &a));
+    let mut m: Vec<f64> = (0..topo.n_vertices()).map(|i| (i % 7) as f64).collect();
+    time("plan + transport 2 fields", &mut || {
+        let plan = UpwindPlan::new(&topo, &g.vertex_area, &fl, 1.0 / 24.0).unwrap();
+        let mut m2 = m.clone();
+        plan.transport_all(&topo, &mut [&mut m, &mut m2]);
+    });
+}
+
+#[allow(dead_code)]
+fn cg_ab(nx: usize, ny: usize, reps: usize) {
+    use madder::mesh::Geometry;
+    use madder::ops::{VertexPattern, WarmCg, add_lumped_mass, cotan_stiffness};
+    let (topo, rest) = grid(nx, ny);
+    let n = topo.n_vertices();
+    let q = wave(&rest, 0.3);
+    let g = Geometry::new(&topo, &q).unwrap();
+    let pattern = VertexPattern::new(&topo);
+    let mut v = cotan_stiffness(&topo, &g, &pattern, 0.002 / 24.0);
+    add_lumped_mass(&g, &pattern, 1.0, &mut v);
+    let b: Vec<f64> = (0..2 * n)
+        .map(|i| {
+            let p = rest[i % n];
+            (-(p.distance_squared(DVec3::new(1.0, 0.0, 0.8))) / 0.02).exp()
+                * g.vertex_area[i % n]
+                * if i < n { 1.0 } else { 0.05 }
+        })
+        .collect();
+    let mut cg = WarmCg::new(&pattern).with_tolerance(1e-10);
+    for round in 0..3 {
+        let t = Instant::now();
+        let mut it = 0;
+        for _ in 0..reps {
+            let mut x = vec![0.0; 2 * n];
+            cg.solve(&v, &b, &mut x).unwrap();
+            it += cg.last_iterations;
+        }
+        let block = t.elapsed().as_secs_f64() * 1e3 / reps as f64;
+        let t = Instant::now();
+        let mut it1 = 0;
+        for _ in 0..reps {
+            for c in 0..2 {
+                let mut x = vec![0.0; n];
+                cg.solve(&v, &b[c * n..(c + 1) * n], &mut x).unwrap();
+                it1 += cg.last_iterations;
+            }
+        }
+        let sep = t.elapsed().as_secs_f64() * 1e3 / reps as f64;
+        // hand-written Jacobi-PCG on the full CSR, same stopping rule
+        let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
+        // full CSR
+        let mut rows: Vec<Vec<(usize, usize)>> = vec![Vec::new(); n];
+        for j in 0..n {
+            for s in cp[j]..cp[j + 1] {
+                let i = ri[s as usize] as usize;
+                rows[i].push((j, s as usize));
+                if i != j {
+                    rows[j].push((i, s as usize));
+                }
+            }
+        }
+        let mut ptr = vec![0usize];
+        let mut col = Vec::new();
+        let mut slot = Vec::new();
+        for r in &mut rows {
+            r.sort();
+            for &(c, s) in r.iter() {
+                col.push(c);
+                slot.push(s);
+            }
+            ptr.push(col.len());
+        }
+        let t = Instant::now();
+        let mut it2 = 0;
+        for _ in 0..reps {
+            for c in 0..2 {
+                let full: Vec<f64> = slot.iter().map(|&s| v[s]).collect();
+                let inv: Vec<f64> = (0..n)
+                    .map(|i| 1.0 / v[pattern.diag_slot()[i] as usize])
+                    .collect();
+                let bb = &b[c * n..(c + 1) * n];
+                let mut x = vec![0.0; n];
+                let matvec = |p: &[f64], out: &mut [f64]| {
+                    for i in 0..n {
+                        let mut acc = 0.0;
+                        for k in ptr[i]..ptr[i + 1] {
+                            acc += full[k] * p[col[k]];
+                        }
+                        out[i] = acc;
+                    }
+                };
+                let mut r = vec![0.0; n];
+                matvec(&x, &mut r);
+                for i in 0..n {
+                    r[i] = bb[i] - r[i];
+                }
+                let bnorm = bb.iter().map(|v| v * v).sum::<f64>().sqrt();
+                let mut z: Vec<f64> = (0..n).map(|i| r[i] * inv[i]).collect();
+                let mut p = z.clone();
+                let mut rz: f64 = (0..n).map(|i| r[i] * z[i]).sum();
+                let mut ap = vec![0.0; n];
+                for _ in 0..2000 {
+                    let rn = r.iter().map(|v| v * v).sum::<f64>().sqrt();
+                    if rn <= 1e-10 * bnorm {
+                        break;
+                    }
+                    it2 += 1;
+                    matvec(&p, &mut ap);
+                    let alpha = rz / (0..n).map(|i| p[i] * ap[i]).sum::<f64>();
+                    for i in 0..n {
+                        x[i] += alpha * p[i];
+                        r[i] -= alpha * ap[i];
+                        z[i] = r[i] * inv[i];
+                    }
+                    let rz2: f64 = (0..n).map(|i| r[i] * z[i]).sum();
+                    let beta = rz2 / rz;
+                    rz = rz2;
+                    for i in 0..n {
+                        p[i] = z[i] + beta * p[i];
+                    }
+                }
+                std::hint::black_box(&x);
+            }
+        }
+        let own = t.elapsed().as_secs_f64() * 1e3 / reps as f64;
+        println!(
+            "round {round}: block {block:.2} ms ({} it), separate {sep:.2} ms ({} it), hand-written {own:.2} ms ({} it)",
+            it / reps,
+            it1 / reps,
+            it2 / reps
+        );
+    }
 }

@@ -33,6 +33,13 @@ pub enum ParamError {
         requirement: &'static str,
         value: f64,
     },
+    #[error("{name} at vertex {index} must be {requirement}, got {value}")]
+    OutOfRangeAt {
+        name: &'static str,
+        index: usize,
+        requirement: &'static str,
+        value: f64,
+    },
     #[error("{name} has {got} values, expected {expected}")]
     Length {
         name: &'static str,
