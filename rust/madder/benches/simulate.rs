@@ -69,13 +69,12 @@ fn bench(nx: usize, ny: usize, frames: usize) {
     let p = sim.profile();
     let per = |s: f64| s * 1e3 / frames as f64;
     println!(
-        "{n:>7} vertices, {frames} frames: {total:7.2} ms/frame (setup {setup:.0} ms) = geometry+frames+connection {:.2}, forces {:.2}, advection {:.2}, density diffusion {:.2} ({:.1} CG it.), velocity diffusion {:.2} ({:.1} CG it.), interactions {:.2}",
+        "{n:>7} vertices, {frames} frames: {total:7.2} ms/frame (setup {setup:.0} ms) = geometry+frames+connection {:.2}, forces {:.2}, advection {:.2}, diffusion {:.2} (density {:.1} + velocity {:.1} CG it.), interactions {:.2}",
         per(p.geometry),
         per(p.forces),
         per(p.advection),
         per(p.diffusion),
         p.density_iterations as f64 / frames as f64,
-        per(p.viscosity),
         p.velocity_iterations as f64 / frames as f64,
         per(p.interaction),
     );

@@ -13,9 +13,10 @@
 //!
 //! [`WarmCg`] expands the lower-triangle pattern ([`LowerCsc`]) once into the full
 //! symmetric CSC that faer's matrix-free CG multiplies with, with the lower slot of every
-//! full entry, so each solve only gathers values. The CG runs with `Par::Seq`: its
+//! full entry, so each solve only gathers values. Each CG runs with `Par::Seq`: its
 //! reductions are then in a fixed order and the result is bit-identical whatever the
-//! number of threads (the rest of the step is parallel over elements instead).
+//! number of threads. The parallelism is across right-hand sides instead: the columns
+//! (solvent and solute, colour) are solved side by side on the rayon pool.
 //!
 //! Each right-hand side column (solvent, solute, colour) is solved on its own, from its
 //! own warm start, so a field a thousand times smaller than another still gets its own
@@ -30,6 +31,7 @@ use faer::matrix_free::conjugate_gradient::{
 };
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
 use faer::{Col, MatMut, MatRef, Par};
+use rayon::prelude::*;
 
 use super::solve::LowerCsc;
 use crate::error::SolveError;
@@ -54,7 +56,8 @@ pub struct WarmCg {
     /// Slot of each diagonal entry in the lower-triangle values.
     diag: Vec<u32>,
     full: Vec<f64>,
-    scratch: MemBuffer,
+    /// One workspace per right-hand side column.
+    scratch: Vec<MemBuffer>,
     tolerance: f64,
     /// Iterations of the last solve, summed over its columns.
     pub last_iterations: usize,
@@ -103,14 +106,13 @@ impl WarmCg {
         let slot: Vec<u32> = entries.iter().map(|e| e.2).collect();
         let symbolic = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
         let full = vec![0.0; slot.len()];
-        let scratch = MemBuffer::new(cg_scratch(&symbolic, &full, n));
         Self {
             n,
             symbolic,
             slot,
             diag,
             full,
-            scratch,
+            scratch: Vec::new(),
             tolerance: RELATIVE_TOLERANCE,
             last_iterations: 0,
         }
@@ -151,31 +153,46 @@ impl WarmCg {
         let mut params = CgParams::<f64>::default();
         params.rel_tolerance = self.tolerance;
         params.max_iters = MAX_ITERATIONS;
+        let k = b.len() / n;
+        while self.scratch.len() < k {
+            self.scratch
+                .push(MemBuffer::new(cg_scratch(&self.symbolic, &self.full, n)));
+        }
+        // columns are independent sequential solves: run them side by side on the rayon
+        // pool (each column's arithmetic is the same whatever the thread count)
+        let results: Vec<Result<usize, SolveError>> = b
+            .par_chunks_exact(n)
+            .zip(x.par_chunks_exact_mut(n))
+            .zip(self.scratch[..k].par_iter_mut())
+            .map(|((bc, xc), scratch)| {
+                if bc.iter().all(|&v| v == 0.0) {
+                    xc.fill(0.0);
+                    return Ok(0);
+                }
+                conjugate_gradient(
+                    MatMut::from_column_major_slice_mut(xc, n, 1),
+                    precond,
+                    a,
+                    MatRef::from_column_major_slice(bc, n, 1),
+                    params,
+                    |_| {},
+                    Par::Seq,
+                    MemStack::new(scratch),
+                )
+                .map(|info| info.iter_count)
+                .map_err(|e| match e {
+                    CgError::NoConvergence { rel_residual, .. } => SolveError::NotConverged {
+                        iterations: MAX_ITERATIONS,
+                        residual: rel_residual,
+                    },
+                    // CG only sees a non-positive curvature, not where: no pivot to name
+                    _ => SolveError::NotPositiveDefinite { pivot: 0, n },
+                })
+            })
+            .collect();
         self.last_iterations = 0;
-        for (bc, xc) in b.chunks_exact(n).zip(x.chunks_exact_mut(n)) {
-            if bc.iter().all(|&v| v == 0.0) {
-                xc.fill(0.0);
-                continue;
-            }
-            let info = conjugate_gradient(
-                MatMut::from_column_major_slice_mut(xc, n, 1),
-                precond,
-                a,
-                MatRef::from_column_major_slice(bc, n, 1),
-                params,
-                |_| {},
-                Par::Seq,
-                MemStack::new(&mut self.scratch),
-            )
-            .map_err(|e| match e {
-                CgError::NoConvergence { rel_residual, .. } => SolveError::NotConverged {
-                    iterations: MAX_ITERATIONS,
-                    residual: rel_residual,
-                },
-                // CG only sees a non-positive curvature, not where: no pivot to name
-                _ => SolveError::NotPositiveDefinite { pivot: 0, n },
-            })?;
-            self.last_iterations += info.iter_count;
+        for r in results {
+            self.last_iterations += r?;
         }
         Ok(())
     }
