@@ -13,6 +13,7 @@ mod mesh;
 mod point_cache;
 mod simulate;
 mod stain;
+mod threads;
 mod weave;
 
 #[pymodule]

@@ -11,6 +11,7 @@ use pyo3::types::PyDict;
 use crate::errors::{ParameterError, to_py};
 use crate::mesh::{Topology, points};
 use crate::stain::conductivity;
+use crate::threads::Pool;
 
 /// Simulates a liquid stain on a moving cloth: velocity, free and absorbed solvent,
 /// dissolved, absorbed and adsorbed solute (seed chapter 4).
@@ -31,7 +32,7 @@ use crate::stain::conductivity;
 #[pyclass(module = "madder")]
 pub struct Simulator {
     inner: madder::stain::Simulator,
-    pool: Option<rayon::ThreadPool>,
+    pool: Pool,
 }
 
 impl Simulator {
@@ -41,10 +42,7 @@ impl Simulator {
         f: impl FnOnce(&mut madder::stain::Simulator) -> T + Send,
     ) -> T {
         let Self { inner, pool } = self;
-        py.detach(|| match pool {
-            Some(p) => p.install(|| f(inner)),
-            None => f(inner),
-        })
+        pool.run(py, || f(inner))
     }
 }
 
@@ -157,18 +155,9 @@ impl Simulator {
         set(&mut r.capacity, capacity);
         set(&mut r.evaporation, evaporation);
         set(&mut r.evaporation_boundary, evaporation_boundary);
-        let pool = match threads {
-            None => None,
-            Some(0) => return Err(ParameterError::new_err("threads must be ≥ 1")),
-            Some(n) => Some(
-                rayon::ThreadPoolBuilder::new()
-                    .num_threads(n)
-                    .build()
-                    .map_err(|e| ParameterError::new_err(e.to_string()))?,
-            ),
-        };
+        let pool = Pool::new(threads)?;
         let solute_color = [color.0, color.1, color.2];
-        let build = || {
+        let inner = pool.run(py, || {
             madder::stain::Simulator::new(
                 topo,
                 &rest,
@@ -178,10 +167,6 @@ impl Simulator {
                 solute_color,
                 faer::Par::Seq,
             )
-        };
-        let inner = py.detach(|| match &pool {
-            Some(p) => p.install(build),
-            None => build(),
         });
         Ok(Self {
             inner: inner.map_err(to_py)?,

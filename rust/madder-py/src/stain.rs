@@ -8,6 +8,7 @@ use pyo3::prelude::*;
 
 use crate::errors::{ParameterError, to_py};
 use crate::mesh::{Topology, points};
+use crate::threads::Pool;
 
 /// Diffuses a density (per unit area, one value per vertex) while the mesh moves.
 ///
@@ -21,7 +22,7 @@ use crate::mesh::{Topology, points};
 #[pyclass(module = "madder")]
 pub struct DiffusionStepper {
     inner: madder::stain::DiffusionStepper,
-    pool: Option<rayon::ThreadPool>,
+    pool: Pool,
 }
 
 #[pymethods]
@@ -44,22 +45,9 @@ impl DiffusionStepper {
         let pos = points(&positions)?;
         let density: Vec<f64> = density.as_array().iter().map(|&d| d as f64).collect();
         let topo = topology.inner.clone();
-        let pool = match threads {
-            None => None,
-            Some(0) => return Err(ParameterError::new_err("threads must be ≥ 1")),
-            Some(n) => Some(
-                rayon::ThreadPoolBuilder::new()
-                    .num_threads(n)
-                    .build()
-                    .map_err(|e| ParameterError::new_err(e.to_string()))?,
-            ),
-        };
-        let build = || {
+        let pool = Pool::new(threads)?;
+        let inner = pool.run(py, || {
             madder::stain::DiffusionStepper::new(topo, &pos, density, conductivity, faer::Par::Seq)
-        };
-        let inner = py.detach(|| match &pool {
-            Some(p) => p.install(build),
-            None => build(),
         });
         Ok(Self {
             inner: inner.map_err(to_py)?,
@@ -79,11 +67,8 @@ impl DiffusionStepper {
     ) -> PyResult<()> {
         let pos = points(&positions)?;
         let Self { inner, pool } = self;
-        py.detach(|| match pool {
-            Some(p) => p.install(|| inner.step(&pos, dt, substeps)),
-            None => inner.step(&pos, dt, substeps),
-        })
-        .map_err(to_py)
+        pool.run(py, || inner.step(&pos, dt, substeps))
+            .map_err(to_py)
     }
 
     /// Density per unit area at every vertex, as a new float32 array.

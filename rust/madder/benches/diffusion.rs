@@ -7,7 +7,7 @@ use std::time::Instant;
 use faer::Par;
 use glam::DVec3;
 use madder::mesh::{Geometry, Topology};
-use madder::ops::{PrefactoredSpd, VertexPattern, add_lumped_mass, cotan_stiffness};
+use madder::ops::{PrefactoredSpd, VertexPattern, WarmCg, add_lumped_mass, cotan_stiffness};
 use madder::stain::{Conductivity, DiffusionStepper};
 
 fn grid(nx: usize, ny: usize) -> (Topology, Vec<DVec3>) {
@@ -95,81 +95,32 @@ fn bench(nx: usize, ny: usize, frames: usize) {
 /// from the previous frame's solution, instead of refactorizing: the comparison issue 3
 /// asks for. Also reports CG's mass defect, since CG conserves mass only to its tolerance.
 fn bench_cg(nx: usize, ny: usize, frames: usize, rel_tol: f64) {
-    use faer::dyn_stack::{MemBuffer, MemStack};
-    use faer::matrix_free::conjugate_gradient::{
-        CgParams, conjugate_gradient, conjugate_gradient_scratch,
-    };
-    use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
-    use faer::{Col, Mat};
-
     let (topo, rest) = grid(nx, ny);
     let n = topo.n_vertices();
     let pattern = VertexPattern::new(&topo);
-    // full symmetric CSC once, with the lower-pattern slot of every entry
-    let mut entries: Vec<(u32, u32, u32)> = Vec::with_capacity(2 * pattern.nnz());
-    for j in 0..n {
-        for s in pattern.col_ptr()[j]..pattern.col_ptr()[j + 1] {
-            let i = pattern.row_idx()[s as usize];
-            entries.push((j as u32, i, s));
-            if i as usize != j {
-                entries.push((i, j as u32, s));
-            }
-        }
-    }
-    entries.sort_unstable();
-    let mut col_ptr = vec![0usize; n + 1];
-    for &(c, _, _) in &entries {
-        col_ptr[c as usize + 1] += 1;
-    }
-    for j in 0..n {
-        col_ptr[j + 1] += col_ptr[j];
-    }
-    let row_idx: Vec<usize> = entries.iter().map(|e| e.1 as usize).collect();
-    let slot: Vec<usize> = entries.iter().map(|e| e.2 as usize).collect();
-    let sym = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
-    let d0: Vec<f64> = rest
+    let mut cg = WarmCg::new(&pattern).with_tolerance(rel_tol);
+    let mut density: Vec<f64> = rest
         .iter()
         .map(|p| (-(p.distance_squared(DVec3::new(1.0, 0.0, 0.6))) / 0.02).exp())
         .collect();
     let mut g = Geometry::new(&topo, &rest).unwrap();
-    let mut density = Col::<f64>::from_fn(n, |i| d0[i]);
-    let mut x = Mat::<f64>::zeros(n, 1);
     let (mut t_total, mut iters, mut worst_mass) = (0.0, 0usize, 0.0f64);
-    let mut params = CgParams::<f64>::default();
-    params.rel_tolerance = rel_tol;
-    params.max_iters = 10_000;
     for f in 1..=frames {
         let t = Instant::now();
         let p = wave(&rest, f as f64 / 24.0);
         let g_new = Geometry::new(&topo, &p).unwrap();
         let mut v = cotan_stiffness(&topo, &g_new, &pattern, 0.002 / 24.0);
         add_lumped_mass(&g_new, &pattern, 1.0, &mut v);
-        let full: Vec<f64> = slot.iter().map(|&s| v[s]).collect();
-        let a = SparseColMatRef::new(sym.as_ref(), &full);
-        let precond =
-            Col::<f64>::from_fn(n, |i| 1.0 / v[pattern.diag_slot()[i] as usize]).into_diagonal();
-        let rhs = Mat::<f64>::from_fn(n, 1, |i, _| g.vertex_area[i] * density[i]);
-        for i in 0..n {
-            x[(i, 0)] = density[i]; // warm start: the previous frame's density
-        }
-        let mut mem = MemBuffer::new(conjugate_gradient_scratch(precond.as_ref(), a, 1, Par::Seq));
-        let info = conjugate_gradient(
-            x.as_mut(),
-            precond.as_ref(),
-            a,
-            rhs.as_ref(),
-            params,
-            |_| {},
-            Par::Seq,
-            MemStack::new(&mut mem),
-        )
-        .unwrap();
+        let rhs: Vec<f64> = (0..n).map(|i| g.vertex_area[i] * density[i]).collect();
+        // warm start: the previous frame's density
+        let mut x = density.clone();
+        cg.solve(&v, &rhs, &mut x).unwrap();
         t_total += ms(t);
-        iters += info.iter_count;
-        let m_before: f64 = (0..n).map(|i| g.vertex_area[i] * density[i]).sum();
-        density = Col::from_fn(n, |i| x[(i, 0)]);
-        let m_after: f64 = (0..n).map(|i| g_new.vertex_area[i] * density[i]).sum();
+        iters += cg.last_iterations;
+        let m_before: f64 = rhs.iter().sum();
+        let m_after: f64 = (0..n).map(|i| g_new.vertex_area[i] * x[i]).sum();
         worst_mass = worst_mass.max(((m_after - m_before) / m_before).abs());
+        density = x;
         g = g_new;
     }
     println!(
