@@ -161,6 +161,9 @@ pub struct OneRings {
     kind: Vec<FanKind>,
     edge_ptr: Vec<u32>,
     edge_end: Vec<u32>,
+    /// Per edge `(a, b)`: the index of its spoke among the spokes of `a` and of `b`
+    /// (global, into the per-spoke arrays; `u32::MAX` if the edge is in no fan).
+    edge_spoke: Vec<[u32; 2]>,
     reversing: Vec<u32>,
 }
 
@@ -235,6 +238,15 @@ impl OneRings {
         reversing.sort_unstable();
         reversing.dedup();
 
+        // a vertex's spokes are distinct neighbours, so every edge is met once per end
+        let mut edge_spoke = vec![[u32::MAX; 2]; edges.len()];
+        for v in 0..n {
+            for s in spoke_ptr[v]..spoke_ptr[v + 1] {
+                let e = spoke_edge[s as usize] as usize;
+                edge_spoke[e][usize::from(edges[e][0] as usize != v)] = s;
+            }
+        }
+
         Self {
             wedge_ptr,
             wedges,
@@ -244,6 +256,7 @@ impl OneRings {
             kind,
             edge_ptr,
             edge_end,
+            edge_spoke,
             reversing,
         }
     }
@@ -595,12 +608,21 @@ fn tangent_direction(e: DVec3, z: DVec3) -> Option<DVec3> {
     (le > 0.0 && lt > SPOKE_MIN_SINE * le).then(|| t / lt)
 }
 
-/// Tip angle of corner `k` of face `f` from the intrinsic edge lengths.
-fn tip_angle(topology: &Topology, geometry: &Geometry, f: usize, k: usize) -> f64 {
-    let fe = topology.face_edges()[f];
-    let l = |c: usize| geometry.edge_length[fe[c % 3] as usize];
-    let (a, b, c) = (l(k), l(k + 1), l(k + 2));
-    (4.0 * geometry.face_area[f]).atan2(b * b + c * c - a * a)
+/// Tip angles of the three corners of every face from the intrinsic edge lengths (in
+/// parallel; each corner's angle is computed once and read by the fan of its vertex).
+fn tip_angles(topology: &Topology, geometry: &Geometry) -> Vec<[f64; 3]> {
+    topology
+        .face_edges()
+        .par_iter()
+        .zip(&geometry.face_area)
+        .map(|(fe, &area)| {
+            let l = |c: usize| geometry.edge_length[fe[c % 3] as usize];
+            std::array::from_fn(|k| {
+                let (a, b, c) = (l(k), l(k + 1), l(k + 2));
+                (4.0 * area).atan2(b * b + c * c - a * a)
+            })
+        })
+        .collect()
 }
 
 /// The discrete connection of §4.3.1: polar angles `α_ij` per spoke and connection angles
@@ -614,6 +636,8 @@ pub struct Connection {
     angle_sum: Vec<f64>,
     offset: Vec<f64>,
     theta: Vec<f64>,
+    /// `(cos θ_ab, sin θ_ab)` per edge: the rotation, computed once per frame.
+    cos_sin: Vec<[f64; 2]>,
     edge_ptr: Vec<u32>,
     edge_end: Vec<u32>,
 }
@@ -636,48 +660,49 @@ impl Connection {
         assert_eq!(rings.n_vertices(), n, "rings of another topology");
         assert_eq!(frames.len(), n, "one frame per vertex");
         assert_eq!(positions.len(), n, "one position per vertex");
-        let per_vertex: Vec<(Vec<f64>, f64, f64)> = (0..n)
+        let tip = tip_angles(topology, geometry);
+        // polar angles written in place: one slice of the flat array per vertex
+        let mut alpha = vec![f64::NAN; rings.spoke_vertex.len()];
+        let mut slices: Vec<&mut [f64]> = Vec::with_capacity(n);
+        let mut rest = alpha.as_mut_slice();
+        for v in 0..n {
+            let (head, tail) = rest.split_at_mut(rings.spokes(v).len());
+            slices.push(head);
+            rest = tail;
+        }
+        let (angle_sum, offset): (Vec<f64>, Vec<f64>) = slices
             .into_par_iter()
-            .map(|v| {
-                let (alpha, gamma) = polar_map(topology, geometry, rings, v);
-                let offset = frame_offset(rings, v, &alpha, &frames.frame[v], positions);
-                (alpha, gamma, offset)
+            .enumerate()
+            .map(|(v, alpha)| {
+                let gamma = polar_map(rings, &tip, v, alpha);
+                let offset = frame_offset(rings, v, alpha, &frames.frame[v], positions);
+                (gamma, offset)
             })
-            .collect();
-        let mut alpha = Vec::with_capacity(rings.spoke_vertex.len());
-        let mut angle_sum = Vec::with_capacity(n);
-        let mut offset = Vec::with_capacity(n);
-        for (a, g, o) in per_vertex {
-            alpha.extend(a);
-            angle_sum.push(g);
-            offset.push(o);
-        }
-        // angle of each edge in the frame of each endpoint (first meeting of the spoke)
+            .unzip();
+        // θ_ab from the angle of each edge in the frame of each endpoint, and its rotation
         let edges = topology.edges();
-        let mut end_angle = vec![[f64::NAN; 2]; edges.len()];
-        for (v, &delta) in offset.iter().enumerate() {
-            let base = rings.spoke_offset(v);
-            for (k, &e) in rings.spoke_edges(v).iter().enumerate() {
-                let side = usize::from(edges[e as usize][0] as usize != v);
-                let slot = &mut end_angle[e as usize][side];
-                if slot.is_nan() {
-                    *slot = alpha[base + k] + delta;
-                }
-            }
-        }
-        let theta = end_angle
-            .iter()
-            .map(|&[a, b]| {
-                debug_assert!(a.is_finite() && b.is_finite(), "every edge is in a fan");
-                wrap_angle(a - b + PI)
+        let (theta, cos_sin): (Vec<f64>, Vec<[f64; 2]>) = edges
+            .par_iter()
+            .zip(&rings.edge_spoke)
+            .map(|(&[a, b], &[sa, sb])| {
+                let angle = |v: u32, s: u32| match alpha.get(s as usize) {
+                    Some(&x) => x + offset[v as usize],
+                    None => f64::NAN,
+                };
+                let (ta, tb) = (angle(a, sa), angle(b, sb));
+                debug_assert!(ta.is_finite() && tb.is_finite(), "every edge is in a fan");
+                let theta = wrap_angle(ta - tb + PI);
+                let (sin, cos) = theta.sin_cos();
+                (theta, [cos, sin])
             })
-            .collect();
+            .unzip();
         Self {
             alpha,
             spoke_ptr: rings.spoke_ptr.clone(),
             angle_sum,
             offset,
             theta,
+            cos_sin,
             edge_ptr: rings.edge_ptr.clone(),
             edge_end: rings.edge_end.clone(),
         }
@@ -705,9 +730,16 @@ impl Connection {
         &self.theta
     }
 
-    /// `R_ab` of edge `e = (a, b)`, `a < b` (transport from `F_b` to `F_a`).
+    /// `(cos θ_ab, sin θ_ab)` of every edge (the entries of [`Self::edge_rotation`]).
+    pub fn edge_cos_sin(&self) -> &[[f64; 2]] {
+        &self.cos_sin
+    }
+
+    /// `R_ab` of edge `e = (a, b)`, `a < b` (transport from `F_b` to `F_a`); the same
+    /// matrix as `DMat2::from_angle(θ_ab)`, from the stored cosine and sine.
     pub fn edge_rotation(&self, e: usize) -> DMat2 {
-        DMat2::from_angle(self.theta[e])
+        let [c, s] = self.cos_sin[e];
+        DMat2::from_cols_array(&[c, s, -s, c])
     }
 
     /// `θ_ij` for neighbours `i`, `j` (`None` if they share no edge; `0` if `i == j`).
@@ -736,20 +768,15 @@ impl Connection {
     }
 }
 
-/// Polar angles of the spokes of `v` and the tip-angle sum `γ_v`.
-fn polar_map(
-    topology: &Topology,
-    geometry: &Geometry,
-    rings: &OneRings,
-    v: usize,
-) -> (Vec<f64>, f64) {
-    let mut alpha = vec![f64::NAN; rings.spokes(v).len()];
+/// Polar angles of the spokes of `v` (into `alpha`, NaN on entry) and the tip-angle sum
+/// `γ_v` (returned).
+fn polar_map(rings: &OneRings, tip: &[[f64; 3]], v: usize, alpha: &mut [f64]) -> f64 {
     let mut running = 0.0;
     for w in rings.wedges(v) {
         if alpha[w.from as usize].is_nan() {
             alpha[w.from as usize] = running;
         }
-        running += tip_angle(topology, geometry, w.face as usize, w.corner as usize);
+        running += tip[w.face as usize][w.corner as usize];
         if alpha[w.to as usize].is_nan() {
             alpha[w.to as usize] = running;
         }
@@ -759,7 +786,7 @@ fn polar_map(
         let s = TAU / gamma;
         alpha.iter_mut().for_each(|a| *a *= s);
     }
-    (alpha, gamma)
+    gamma
 }
 
 /// Angle `δ_v` of the reference spoke in `frame` (see the module doc): measured on the

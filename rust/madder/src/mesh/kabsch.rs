@@ -158,10 +158,79 @@ fn outer(a: DVec3, b: DVec3) -> DMat3 {
     DMat3::from_cols(a * b.x, a * b.y, a * b.z)
 }
 
+/// The neighbours of every vertex in the order the rotations sum over them (that of
+/// [`Topology::edges`], fixed by the topology): built once per mesh, so that a bake's
+/// per-frame rotations ([`RingAdjacency::rotations`]) only read it.
+#[derive(Debug, Clone)]
+pub struct RingAdjacency {
+    ptr: Vec<u32>,
+    nbr: Vec<u32>,
+}
+
+impl RingAdjacency {
+    /// The vertex adjacency of `topology` from its sorted edge list.
+    pub fn new(topology: &Topology) -> Self {
+        let n = topology.n_vertices();
+        let mut ptr = vec![0u32; n + 1];
+        for &[a, b] in topology.edges() {
+            ptr[a as usize + 1] += 1;
+            ptr[b as usize + 1] += 1;
+        }
+        for v in 0..n {
+            ptr[v + 1] += ptr[v];
+        }
+        let mut next = ptr[..n].to_vec();
+        let mut nbr = vec![0u32; ptr[n] as usize];
+        for &[a, b] in topology.edges() {
+            nbr[next[a as usize] as usize] = b;
+            next[a as usize] += 1;
+            nbr[next[b as usize] as usize] = a;
+            next[b as usize] += 1;
+        }
+        Self { ptr, nbr }
+    }
+
+    pub fn n_vertices(&self) -> usize {
+        self.ptr.len() - 1
+    }
+
+    /// Neighbours of `v` (each vertex sharing an edge with it), in edge order.
+    pub fn neighbours(&self, v: usize) -> &[u32] {
+        &self.nbr[self.ptr[v] as usize..self.ptr[v + 1] as usize]
+    }
+
+    /// `U_i` of vertex `i` (see [`one_ring_rotations`]); positions are not checked.
+    pub fn rotation(&self, rest: &[DVec3], current: &[DVec3], i: usize) -> DMat3 {
+        let h = self.neighbours(i).iter().fold(DMat3::ZERO, |h, &j| {
+            let j = j as usize;
+            h + outer(current[j] - current[i], rest[j] - rest[i])
+        });
+        rotation_from_covariance(h)
+    }
+
+    /// `U_i` of every vertex, as [`one_ring_rotations`] but without re-checking the
+    /// positions (the caller has). Parallel over vertices, deterministic.
+    ///
+    /// # Panics
+    /// If `rest` or `current` does not have one position per vertex.
+    pub fn rotations(&self, rest: &[DVec3], current: &[DVec3]) -> Vec<DMat3> {
+        let n = self.n_vertices();
+        assert!(
+            rest.len() == n && current.len() == n,
+            "one position per vertex"
+        );
+        (0..n)
+            .into_par_iter()
+            .map(|i| self.rotation(rest, current, i))
+            .collect()
+    }
+}
+
 /// `U_i` of every vertex: the rotation that best aligns its rest one-ring
 /// `(v̄_j − v̄_i)` to its current one-ring `(v_j − v_i)` (identity for loose vertices).
 /// Parallel over vertices, deterministic. Fails if either position array has the wrong
-/// length or a non-finite entry.
+/// length or a non-finite entry. (A bake keeps a [`RingAdjacency`] instead of rebuilding
+/// it every frame.)
 pub fn one_ring_rotations(
     topology: &Topology,
     rest: &[DVec3],
@@ -169,36 +238,7 @@ pub fn one_ring_rotations(
 ) -> Result<Vec<DMat3>, MeshError> {
     check_positions(topology, rest)?;
     check_positions(topology, current)?;
-    let n = topology.n_vertices();
-    // vertex adjacency from the sorted edge list (neighbour order fixed by the topology)
-    let mut ptr = vec![0u32; n + 1];
-    for &[a, b] in topology.edges() {
-        ptr[a as usize + 1] += 1;
-        ptr[b as usize + 1] += 1;
-    }
-    for v in 0..n {
-        ptr[v + 1] += ptr[v];
-    }
-    let mut next = ptr[..n].to_vec();
-    let mut nbr = vec![0u32; ptr[n] as usize];
-    for &[a, b] in topology.edges() {
-        nbr[next[a as usize] as usize] = b;
-        next[a as usize] += 1;
-        nbr[next[b as usize] as usize] = a;
-        next[b as usize] += 1;
-    }
-    Ok((0..n)
-        .into_par_iter()
-        .map(|i| {
-            let h = nbr[ptr[i] as usize..ptr[i + 1] as usize]
-                .iter()
-                .fold(DMat3::ZERO, |h, &j| {
-                    let j = j as usize;
-                    h + outer(current[j] - current[i], rest[j] - rest[i])
-                });
-            rotation_from_covariance(h)
-        })
-        .collect())
+    Ok(RingAdjacency::new(topology).rotations(rest, current))
 }
 
 #[cfg(test)]

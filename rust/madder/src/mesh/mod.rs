@@ -10,5 +10,5 @@ pub mod topology;
 
 pub use frames::{Connection, FanKind, OneRings, VertexFrames, Wedge};
 pub use geometry::Geometry;
-pub use kabsch::one_ring_rotations;
+pub use kabsch::{RingAdjacency, one_ring_rotations};
 pub use topology::{EdgeKind, Topology};

@@ -200,15 +200,15 @@ pub fn bochner_stiffness(
         values[d[0] as usize] = k;
         values[d[1] as usize] = k;
     }
-    for ((&s, b), &theta) in scalar
+    for ((&s, b), cos_sin) in scalar
         .edge_slot()
         .iter()
         .zip(pattern.edge_slot())
-        .zip(connection.edge_angles())
+        .zip(connection.edge_cos_sin())
     {
         // block (b, a) = K_ab R_ba = K_ab R_abᵀ = K [c s; −s c]
         let k = stiffness[s as usize];
-        let (sin, cos) = theta.sin_cos();
+        let [cos, sin] = *cos_sin;
         values[b[0] as usize] = k * cos;
         values[b[1] as usize] = -k * sin;
         values[b[2] as usize] = k * sin;

@@ -306,11 +306,19 @@ impl Trace<'_> {
         let place = |s: u32| {
             let s = s as usize;
             let len = self.geometry.edge_length[spoke_edges[s] as usize];
-            let a = alpha[s] + delta;
-            len * DVec2::new(a.cos(), a.sin())
+            let (sin, cos) = (alpha[s] + delta).sin_cos();
+            len * DVec2::new(cos, sin)
         };
+        // consecutive wedges of a fan share a spoke: place each spoke once
+        let mut last = (u32::MAX, DVec2::ZERO);
         let (wedge, pj, pk) = rings.wedges(i).iter().find_map(|w| {
-            let (pa, pb) = (place(w.from), place(w.to));
+            let pa = if last.0 == w.from {
+                last.1
+            } else {
+                place(w.from)
+            };
+            let pb = place(w.to);
+            last = (w.to, pb);
             (pa.perp_dot(pb) > 0.0 && !is_left(self.side(pa)) && is_left(self.side(pb)))
                 .then_some((w, pa, pb))
         })?;

@@ -44,7 +44,7 @@ use glam::{DMat3, DVec2, DVec3};
 use rayon::prelude::*;
 
 use crate::error::MeshError;
-use crate::mesh::{OneRings, Topology, VertexFrames, one_ring_rotations};
+use crate::mesh::{OneRings, RingAdjacency, Topology, VertexFrames, one_ring_rotations};
 
 /// Which body forces act (each can be switched off, as in the seed's Figs. 4.1/4.2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -78,6 +78,33 @@ pub fn corotating_frames(
     Ok(rest_frames.rotated(&rotation))
 }
 
+/// [`corotating_frames`] with the adjacency built once per mesh and positions already
+/// checked: each frame `U_i F̄_i` in one parallel pass (the same values).
+///
+/// # Panics
+/// If `rest_frames`, `rest` or `current` does not have one entry per vertex.
+pub fn corotating_frames_with(
+    adjacency: &RingAdjacency,
+    rest_frames: &VertexFrames,
+    rest: &[DVec3],
+    current: &[DVec3],
+) -> VertexFrames {
+    let n = adjacency.n_vertices();
+    assert!(
+        rest.len() == n && current.len() == n,
+        "one position per vertex"
+    );
+    assert_eq!(rest_frames.len(), n, "one frame per vertex");
+    VertexFrames {
+        frame: rest_frames
+            .frame
+            .par_iter()
+            .enumerate()
+            .map(|(i, f)| adjacency.rotation(rest, current, i) * *f)
+            .collect(),
+    }
+}
+
 /// The rest frames `F̄_i` (seed §4.3.1 frames of the rest positions).
 pub fn rest_frames(rings: &OneRings, rest: &[DVec3]) -> Result<VertexFrames, MeshError> {
     VertexFrames::new(rings, rest)
@@ -92,33 +119,42 @@ pub fn angular_velocity(before: &VertexFrames, after: &VertexFrames, h: f64) -> 
         .frame
         .par_iter()
         .zip(&after.frame)
-        .map(|(a, b)| {
-            let q: DMat3 = a.transpose() * *b;
-            // axial vector of (Q − Qᵀ)/2 = sin ϑ · axis
-            let s = 0.5
-                * DVec3::new(
-                    q.y_axis.z - q.z_axis.y,
-                    q.z_axis.x - q.x_axis.z,
-                    q.x_axis.y - q.y_axis.x,
-                );
-            let sin = s.length();
-            let cos = (0.5 * (q.x_axis.x + q.y_axis.y + q.z_axis.z - 1.0)).clamp(-1.0, 1.0);
-            let angle = sin.atan2(cos);
-            // ϑ / sin ϑ → 1 as ϑ → 0 (below 1e-8 the ratio is 1 to rounding)
-            let scale = if sin > 1e-8 { angle / sin } else { 1.0 };
-            s * (scale / h)
-        })
+        .map(|(a, b)| frame_angular_velocity(a, b, h))
         .collect()
+}
+
+/// `ω` of one frame turning from `a` to `b` in `h` (see [`angular_velocity`]).
+pub fn frame_angular_velocity(a: &DMat3, b: &DMat3, h: f64) -> DVec3 {
+    let q: DMat3 = a.transpose() * *b;
+    // axial vector of (Q − Qᵀ)/2 = sin ϑ · axis
+    let s = 0.5
+        * DVec3::new(
+            q.y_axis.z - q.z_axis.y,
+            q.z_axis.x - q.x_axis.z,
+            q.x_axis.y - q.y_axis.x,
+        );
+    let sin = s.length();
+    let cos = (0.5 * (q.x_axis.x + q.y_axis.y + q.z_axis.z - 1.0)).clamp(-1.0, 1.0);
+    let angle = sin.atan2(cos);
+    // ϑ / sin ϑ → 1 as ϑ → 0 (below 1e-8 the ratio is 1 to rounding)
+    let scale = if sin > 1e-8 { angle / sin } else { 1.0 };
+    s * (scale / h)
 }
 
 /// Rotates every velocity by `−2 ω_z h`: the exact solution of `u̇ = −2 ω × u` restricted
 /// to the tangent plane over a step `h` (`omega` in frame coordinates).
 pub fn apply_coriolis(omega: &[DVec3], h: f64, velocity: &mut [DVec2]) {
     assert_eq!(omega.len(), velocity.len());
-    velocity.par_iter_mut().zip(omega).for_each(|(u, w)| {
-        let (sin, cos) = (-2.0 * w.z * h).sin_cos();
-        *u = DVec2::new(cos * u.x - sin * u.y, sin * u.x + cos * u.y);
-    });
+    velocity
+        .par_iter_mut()
+        .zip(omega)
+        .for_each(|(u, w)| *u = coriolis_turn(*w, h, *u));
+}
+
+/// `u` turned by `−2 ω_z h` (one vertex of [`apply_coriolis`]).
+pub fn coriolis_turn(omega: DVec3, h: f64, u: DVec2) -> DVec2 {
+    let (sin, cos) = (-2.0 * omega.z * h).sin_cos();
+    DVec2::new(cos * u.x - sin * u.y, sin * u.x + cos * u.y)
 }
 
 /// Centred second difference `(next − 2 cur + prev) / H²` per vertex (world coordinates).
@@ -139,16 +175,19 @@ pub fn body_acceleration(
     gravity: DVec3,
     forces: Forces,
 ) -> Vec<DVec2> {
-    let g = if forces.gravity { gravity } else { DVec3::ZERO };
     frames
         .frame
         .par_iter()
         .zip(acceleration)
-        .map(|(f, &a)| {
-            let world = if forces.rectilinear { g - a } else { g };
-            frames_local(f, world)
-        })
+        .map(|(f, &a)| frame_body_acceleration(f, a, gravity, forces))
         .collect()
+}
+
+/// One vertex of [`body_acceleration`]: frame `f`, its acceleration `a` (world).
+pub fn frame_body_acceleration(f: &DMat3, a: DVec3, gravity: DVec3, forces: Forces) -> DVec2 {
+    let g = if forces.gravity { gravity } else { DVec3::ZERO };
+    let world = if forces.rectilinear { g - a } else { g };
+    frames_local(f, world)
 }
 
 fn frames_local(f: &DMat3, w: DVec3) -> DVec2 {

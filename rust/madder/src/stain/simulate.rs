@@ -62,13 +62,13 @@ use rayon::prelude::*;
 use super::advect::{UpwindPlan, advect_velocity, dual_fluxes};
 use super::diffuse::{Conductivity, check_range};
 use super::forces::{
-    Forces, angular_velocity, apply_coriolis, body_acceleration, corotating_frames,
-    frame_acceleration, rest_frames,
+    Forces, coriolis_turn, corotating_frames_with, frame_acceleration, frame_angular_velocity,
+    frame_body_acceleration, rest_frames,
 };
 use super::interact::{Fields, InteractionRates, exposure, interact};
 use crate::error::{Error, ParamError};
 use crate::mesh::geometry::check_positions;
-use crate::mesh::{Connection, Geometry, OneRings, Topology, VertexFrames};
+use crate::mesh::{Connection, Geometry, OneRings, RingAdjacency, Topology, VertexFrames};
 use crate::ops::{
     BochnerPattern, VertexPattern, WarmCg, add_lumped_mass, add_lumped_mass_blocks,
     bochner_stiffness, cotan_stiffness,
@@ -183,6 +183,8 @@ pub struct Totals {
 pub struct Simulator {
     topology: Topology,
     rings: OneRings,
+    /// Vertex neighbours in edge order (the Kabsch sums, the negative-mass repair).
+    adjacency: RingAdjacency,
     rest: Vec<DVec3>,
     rest_frames: VertexFrames,
     conductivity: Conductivity,
@@ -246,8 +248,9 @@ impl Simulator {
         let _ = par; // the per-element loops use the rayon pool; the CG is sequential
         let n = topology.n_vertices();
         let rings = OneRings::new(&topology);
+        let adjacency = RingAdjacency::new(&topology);
         let rest_frames = rest_frames(&rings, rest)?;
-        let frames = corotating_frames(&topology, &rest_frames, rest, positions)?;
+        let frames = corotating_frames_with(&adjacency, &rest_frames, rest, positions);
         let geometry = Geometry::new(&topology, positions)?;
         let pattern = VertexPattern::new(&topology);
         let bochner = BochnerPattern::new(&pattern);
@@ -276,6 +279,7 @@ impl Simulator {
                 time: 0.0,
             },
             rings,
+            adjacency,
             topology,
             profile: Profile::default(),
         })
@@ -530,6 +534,18 @@ impl Simulator {
         dt: f64,
         after: Option<&[DVec3]>,
     ) -> Result<(), Error> {
+        // run the frame on a thread of the rayon pool: the many short parallel loops of a
+        // step then start from a worker (work stealing) instead of each handing its work
+        // over from outside the pool and blocking the caller until it is done
+        rayon::scope(|_| self.step_in_pool(positions, dt, after))
+    }
+
+    fn step_in_pool(
+        &mut self,
+        positions: &[DVec3],
+        dt: f64,
+        after: Option<&[DVec3]>,
+    ) -> Result<(), Error> {
         check_range("time step", dt, dt > 0.0, "finite and > 0")?;
         check_positions(&self.topology, positions)?;
         if let Some(a) = after {
@@ -594,36 +610,41 @@ impl Simulator {
         let p = self.params.clone();
         let topo = &self.topology;
         let geometry = Geometry::new(topo, q)?;
-        let frames = corotating_frames(topo, &self.rest_frames, &self.rest, q)?;
+        let frames = corotating_frames_with(&self.adjacency, &self.rest_frames, &self.rest, q);
         let connection = Connection::new(topo, &self.rings, &geometry, &frames, q);
         lap(&mut prof.geometry);
 
         // the velocity at the start of the sub-step, for the time-centred flux below
         let start_velocity = st.velocity.clone();
-        // 1. body forces (§4.4): half kick, Coriolis rotation, half kick, then friction
-        let kick = (p.forces.gravity || p.forces.rectilinear)
-            .then(|| body_acceleration(&frames, acceleration, p.gravity, p.forces));
-        let half_kick = |velocity: &mut [DVec2]| {
-            if let Some(a) = &kick {
-                velocity
-                    .par_iter_mut()
-                    .zip(a)
-                    .for_each(|(u, a)| *u += (0.5 * h) * *a);
-            }
-        };
-        half_kick(&mut st.velocity);
-        if p.forces.coriolis {
-            let omega = angular_velocity(&st.frames, &frames, h);
-            apply_coriolis(&omega, h, &mut st.velocity);
-        }
-        half_kick(&mut st.velocity);
-        if p.friction > 0.0 {
-            let damp = (-p.friction * h).exp();
-            st.velocity.par_iter_mut().for_each(|u| *u *= damp);
-        }
-        for (v, _) in self.loose.iter().enumerate().filter(|(_, l)| **l) {
-            st.velocity[v] = DVec2::ZERO;
-        }
+        // 1. body forces (§4.4): half kick, Coriolis rotation, half kick, then friction;
+        // loose vertices are held at rest. One pass, vertex by vertex.
+        let kicks = p.forces.gravity || p.forces.rectilinear;
+        let damp = (p.friction > 0.0).then(|| (-p.friction * h).exp());
+        let (old_frames, loose) = (&st.frames.frame, &self.loose);
+        st.velocity
+            .par_iter_mut()
+            .zip(&frames.frame)
+            .enumerate()
+            .for_each(|(i, (u, f))| {
+                let kick = kicks.then(|| {
+                    (0.5 * h) * frame_body_acceleration(f, acceleration[i], p.gravity, p.forces)
+                });
+                if let Some(k) = kick {
+                    *u += k;
+                }
+                if p.forces.coriolis {
+                    *u = coriolis_turn(frame_angular_velocity(&old_frames[i], f, h), h, *u);
+                }
+                if let Some(k) = kick {
+                    *u += k;
+                }
+                if let Some(damp) = damp {
+                    *u *= damp;
+                }
+                if loose[i] {
+                    *u = DVec2::ZERO;
+                }
+            });
 
         lap(&mut prof.forces);
         // 2. advection (§4.3.1–4.3.2)
@@ -635,7 +656,8 @@ impl Simulator {
             .collect();
         let flux = dual_fluxes(topo, q, &frames, &centred);
         let plan = UpwindPlan::new(topo, &geometry.vertex_area, &flux, h)?;
-        let solvent_before = st.fields.free_solvent.clone();
+        // the momentum advection needs the solvent before its transport
+        let solvent_before = p.momentum_advection.then(|| st.fields.free_solvent.clone());
         {
             let f = &mut st.fields;
             let mut color = f.color_free.as_ref().map(|c| split_rgb(c));
@@ -648,10 +670,11 @@ impl Simulator {
                 merge_rgb(&c, cf);
             }
         }
-        st.velocity = if p.momentum_advection {
-            plan.momentum_velocity(topo, &connection, &solvent_before, &st.velocity, &advected)
-        } else {
-            advected
+        st.velocity = match solvent_before {
+            Some(before) => {
+                plan.momentum_velocity(topo, &connection, &before, &st.velocity, &advected)
+            }
+            None => advected,
         };
 
         lap(&mut prof.advection);
@@ -659,6 +682,7 @@ impl Simulator {
         // independent systems, solved side by side
         let ops = Ops {
             topology: &self.topology,
+            adjacency: &self.adjacency,
             pattern: &self.pattern,
             bochner: &self.bochner,
             loose: &self.loose,
@@ -724,6 +748,7 @@ impl Simulator {
 /// The fixed operators the diffusion steps read.
 struct Ops<'a> {
     topology: &'a Topology,
+    adjacency: &'a RingAdjacency,
     pattern: &'a VertexPattern,
     bochner: &'a BochnerPattern,
     loose: &'a [bool],
@@ -773,7 +798,7 @@ fn diffuse_densities(
                 m[i] = geometry.vertex_area[i] * sigma[i];
             }
         }
-        repair_negative(ops.topology, m);
+        repair_negative(ops.adjacency, m);
         let after: f64 = m.iter().sum();
         if after > 0.0 && before > 0.0 {
             let scale = before / after;
@@ -851,38 +876,19 @@ fn clamp_weights(pattern: &VertexPattern, values: &mut [f64]) {
 /// Fills negative masses from positive neighbours (in proportion to their masses), then
 /// from all positive vertices if the neighbours cannot cover the deficit; conservative,
 /// sequential (deterministic), and a no-op when nothing is negative.
-fn repair_negative(topology: &Topology, mass: &mut [f64]) {
+fn repair_negative(adjacency: &RingAdjacency, mass: &mut [f64]) {
     if !mass.iter().any(|&m| m < 0.0) {
         return;
     }
     let mut leftover = 0.0;
-    let edges = topology.edges();
-    // neighbours via the sorted edge list: a vertex's edges (a = v) are contiguous, the
-    // others (b = v) are found by a one-off adjacency built on demand
     let n = mass.len();
-    let mut ptr = vec![0usize; n + 1];
-    for &[a, b] in edges {
-        ptr[a as usize + 1] += 1;
-        ptr[b as usize + 1] += 1;
-    }
-    for v in 0..n {
-        ptr[v + 1] += ptr[v];
-    }
-    let mut next = ptr[..n].to_vec();
-    let mut nbr = vec![0u32; ptr[n]];
-    for &[a, b] in edges {
-        nbr[next[a as usize]] = b;
-        next[a as usize] += 1;
-        nbr[next[b as usize]] = a;
-        next[b as usize] += 1;
-    }
     for i in 0..n {
         if mass[i] >= 0.0 {
             continue;
         }
         let deficit = -mass[i];
         mass[i] = 0.0;
-        let ring = &nbr[ptr[i]..ptr[i + 1]];
+        let ring = adjacency.neighbours(i);
         let pool: f64 = ring.iter().map(|&j| mass[j as usize].max(0.0)).sum();
         let take = deficit.min(pool);
         if take > 0.0 {
