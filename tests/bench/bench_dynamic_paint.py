@@ -194,7 +194,7 @@ def bench_madder(flag, positions, reps):
     times, t_new, wet = [], [], None
     for _ in range(reps):
         t = time.perf_counter()
-        sim = madder.Simulator(faces, rest, positions[0], gravity=(0.0, 0.0, -9.81), diffusion=0.002)
+        sim = madder.Simulator(faces, rest, positions[0], gravity=(0.0, 0.0, -9.81))  # default physics
         sim.add_liquid(solvent, concentration=0.05, color=(0.5, 0.05, 0.1))
         t_new.append(1e3 * (time.perf_counter() - t))
         for k in range(1, len(positions)):
@@ -204,7 +204,7 @@ def bench_madder(flag, positions, reps):
             sim.step(frame_pos, dt, after=after_pos)
             wet, _stain, _deposit = sim.wetness(), sim.stain(), sim.deposit()
             times.append(1e3 * (time.perf_counter() - t))
-    return times, statistics.median(t_new), int((np.asarray(wet) > 1e-3).sum())
+    return times, statistics.median(t_new), int((np.asarray(wet) > 1e-3).sum()), sim.profile()
 
 
 def main():
@@ -260,11 +260,20 @@ def main():
         print("  WARNING: Dynamic Paint painted nothing; the comparison is against a no-op")
     if result is None:
         return
-    times, t_new, wet = result
+    times, t_new, wet, prof = result
     t_m = statistics.median(times)
     ratio = t_m / t_dp
     row("Madder Simulator() + add_liquid (once)", f"{t_new:8.2f} ms")
     row("Madder step + wetness/stain/deposit", f"{t_m:8.2f} ms", f"   ({wet} vertices wetter than 1 g/m²)")
+    k = max(prof["substeps"], 1)  # the last repetition's sub-steps
+    phases = ", ".join(f"{p} {1e3 * prof[p] / k:.1f}" for p in ("geometry", "forces", "advection", "diffusion", "interaction"))
+    row("  of which, per frame (ms, last repetition)", "", f" {phases}")
+    row(
+        "  CG iterations / transport cycles per frame",
+        "",
+        f" density {prof['density_iterations'] / k:.1f}, velocity {prof['velocity_iterations'] / k:.1f}; "
+        f"{prof['transport_cycles'] / k:.1f}",
+    )
     verdict = "holds" if ratio <= 1.0 / TARGET else "NOT met"
     row("ratio Madder / Dynamic Paint", f"{ratio:8.3f}", f"   (target ≤ 1/{TARGET:g} = {1 / TARGET:.3f}: {verdict})")
 

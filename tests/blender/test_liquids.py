@@ -23,7 +23,7 @@ PRESETS = {
 }
 # StainParams::default and InteractionRates::default in the Rust core, and the binding's
 # default isotropic diffusion
-RUST_DEFAULTS = dict(diffusion_rate=0.002, viscosity=1e-4, friction=20.0, absorption=2.0, saturation=0.1,
+RUST_DEFAULTS = dict(diffusion_rate=2e-4, viscosity=1e-4, friction=50.0, absorption=2.0, saturation=0.1,
                      adsorption=0.1, capacity=2e-3, evaporation=5e-5, evaporation_boundary=1.2, substeps=1)
 
 
@@ -170,7 +170,9 @@ def test_gravity_moves_the_stain_downhill(open_fixture, gravity, use_gravity, sc
         assert np.abs(moved).max() < 2e-3, moved  # diffusion alone keeps the centroid
     else:
         along = moved @ np.array(expected)
-        assert along > 0.05, moved  # several centimetres in one second
+        # centimetres in one second (terminal speed g/friction, 0.2 m/s under 1 g, for
+        # the liquid the fibres have not soaked up), 5× the bound without gravity
+        assert along > 0.01, moved
         assert np.abs(moved - along * np.array(expected)).max() < 0.1 * along, moved
 
 

@@ -26,7 +26,8 @@ use crate::threads::Pool;
 /// `(N, 3)` float32 world positions (rest pose; first frame). The densities diffuse
 /// isotropically at `diffusion` m²/s, or per face along the weave (`face_tensors`
 /// `(F, 3)` float64 in m²/s, `face_uv` `(F, 3, 2)`, `face_angle` `(F,)`, as for
-/// `DiffusionStepper`); the default is isotropic, 0.002 m²/s.
+/// `DiffusionStepper`); the default is isotropic, 2e-4 m²/s (wicking in cotton, whose
+/// front advances about a centimetre in the first second: `D ≈ L²/2t`).
 /// Units are SI: densities in kg/m², rates in 1/s, evaporation in kg/(m²·s).
 /// `threads` caps the worker threads; results do not depend on it.
 #[pyclass(module = "madder")]
@@ -128,7 +129,7 @@ impl Simulator {
             madder::mesh::Topology::from_triangles(rest.len(), tris).map_err(to_py)?
         };
         let conductivity = if diffusion.is_none() && face_tensors.is_none() {
-            conductivity(Some(0.002), None, None, None)?
+            conductivity(Some(2e-4), None, None, None)?
         } else {
             conductivity(diffusion, face_tensors, face_uv, face_angle)?
         };
@@ -315,6 +316,32 @@ impl Simulator {
     #[getter]
     fn vertex_area<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
         PyArray1::from_vec(py, self.inner.vertex_area().to_vec())
+    }
+
+    /// Wall-clock seconds per phase since the simulator was built, and counters: a dict
+    /// with `geometry`, `forces`, `advection`, `diffusion`, `interaction` (s),
+    /// `substeps`, `density_iterations`, `velocity_iterations`, `transport_cycles`.
+    fn profile<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let p = self.inner.profile();
+        let d = PyDict::new(py);
+        for (k, v) in [
+            ("geometry", p.geometry),
+            ("forces", p.forces),
+            ("advection", p.advection),
+            ("diffusion", p.diffusion),
+            ("interaction", p.interaction),
+        ] {
+            d.set_item(k, v)?;
+        }
+        for (k, v) in [
+            ("substeps", p.substeps),
+            ("density_iterations", p.density_iterations),
+            ("velocity_iterations", p.velocity_iterations),
+            ("transport_cycles", p.transport_cycles),
+        ] {
+            d.set_item(k, v)?;
+        }
+        Ok(d)
     }
 
     /// Simulated time, s.

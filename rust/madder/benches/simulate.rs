@@ -47,7 +47,7 @@ fn bench(nx: usize, ny: usize, frames: usize) {
         topo,
         &rest,
         &wave(&rest, 0.0),
-        Conductivity::Isotropic(0.002),
+        Conductivity::Isotropic(2e-4), // the add-on's default
         StainParams::default(),
         [0.4, 0.05, 0.1],
         Par::Seq,
