@@ -168,24 +168,21 @@ pub struct RingAdjacency {
 }
 
 impl RingAdjacency {
-    /// The vertex adjacency of `topology` from its sorted edge list.
+    /// The vertex adjacency of `topology`: each vertex's neighbours in the order of its
+    /// incident edges ([`Topology::vertex_edges`]).
     pub fn new(topology: &Topology) -> Self {
         let n = topology.n_vertices();
-        let mut ptr = vec![0u32; n + 1];
-        for &[a, b] in topology.edges() {
-            ptr[a as usize + 1] += 1;
-            ptr[b as usize + 1] += 1;
-        }
+        let mut ptr = Vec::with_capacity(n + 1);
+        let mut nbr = Vec::with_capacity(2 * topology.n_edges());
+        ptr.push(0u32);
         for v in 0..n {
-            ptr[v + 1] += ptr[v];
-        }
-        let mut next = ptr[..n].to_vec();
-        let mut nbr = vec![0u32; ptr[n] as usize];
-        for &[a, b] in topology.edges() {
-            nbr[next[a as usize] as usize] = b;
-            next[a as usize] += 1;
-            nbr[next[b as usize] as usize] = a;
-            next[b as usize] += 1;
+            nbr.extend(
+                topology
+                    .vertex_edges(v)
+                    .iter()
+                    .map(|&e| topology.other_end(e as usize, v)),
+            );
+            ptr.push(nbr.len() as u32);
         }
         Self { ptr, nbr }
     }

@@ -34,6 +34,9 @@ pub struct Topology {
     /// Blender polygon index of every triangle (identity when built from triangles).
     face_polygon: Vec<u32>,
     n_polygons: usize,
+    /// Vertex → incident edges (increasing edge index), compressed.
+    vertex_edge_ptr: Vec<u32>,
+    vertex_edge: Vec<u32>,
 }
 
 impl Topology {
@@ -99,6 +102,7 @@ impl Topology {
             edge_face_count[e] += 1;
             face_edges[slot as usize / 3][slot as usize % 3] = e as u32;
         }
+        let (vertex_edge_ptr, vertex_edge) = incidence(n_vertices, &edges);
         Ok(Self {
             n_vertices,
             faces,
@@ -107,7 +111,20 @@ impl Topology {
             edge_face_count,
             face_polygon,
             n_polygons,
+            vertex_edge_ptr,
+            vertex_edge,
         })
+    }
+
+    /// The edges incident to vertex `v`, in increasing edge order.
+    pub fn vertex_edges(&self, v: usize) -> &[u32] {
+        &self.vertex_edge[self.vertex_edge_ptr[v] as usize..self.vertex_edge_ptr[v + 1] as usize]
+    }
+
+    /// The end of edge `e` that is not `v` (`v` must be an end of `e`).
+    pub fn other_end(&self, e: usize, v: usize) -> u32 {
+        let [a, b] = self.edges[e];
+        if a as usize == v { b } else { a }
     }
 
     pub fn n_vertices(&self) -> usize {
@@ -231,4 +248,26 @@ mod tests {
         let t = Topology::from_triangles(4, vec![[0, 1, 2]]).unwrap();
         assert_eq!(t.loose_vertices(), vec![false, false, false, true]);
     }
+}
+
+/// Vertex → incident edge lists (counting sort over the edges, so each list is in
+/// increasing edge order).
+fn incidence(n: usize, edges: &[[u32; 2]]) -> (Vec<u32>, Vec<u32>) {
+    let mut ptr = vec![0u32; n + 1];
+    for &[a, b] in edges {
+        ptr[a as usize + 1] += 1;
+        ptr[b as usize + 1] += 1;
+    }
+    for v in 0..n {
+        ptr[v + 1] += ptr[v];
+    }
+    let mut next = ptr[..n].to_vec();
+    let mut list = vec![0u32; ptr[n] as usize];
+    for (e, &[a, b]) in edges.iter().enumerate() {
+        for v in [a as usize, b as usize] {
+            list[next[v] as usize] = e as u32;
+            next[v] += 1;
+        }
+    }
+    (ptr, list)
 }

@@ -546,9 +546,6 @@ pub struct UpwindPlan {
     substeps: usize,
     max_courant: f64,
     n_limited: usize,
-    /// Vertex → incident edges, in edge order (CSR).
-    inc_ptr: Vec<u32>,
-    inc_edge: Vec<u32>,
 }
 
 impl UpwindPlan {
@@ -609,29 +606,12 @@ impl UpwindPlan {
         let donor_is_a: Vec<bool> = flux.iter().map(|&x| x > 0.0).collect();
         let donor = |e: usize| edges[e][usize::from(!donor_is_a[e])] as usize;
 
-        // vertex → incident edges, in edge order
-        let mut inc_ptr = vec![0u32; n + 1];
-        for &[a, b] in edges {
-            inc_ptr[a as usize + 1] += 1;
-            inc_ptr[b as usize + 1] += 1;
-        }
-        for v in 0..n {
-            inc_ptr[v + 1] += inc_ptr[v];
-        }
-        let mut next = inc_ptr[..n].to_vec();
-        let mut inc_edge = vec![0u32; inc_ptr[n] as usize];
-        for (e, &[a, b]) in edges.iter().enumerate() {
-            for v in [a as usize, b as usize] {
-                inc_edge[next[v] as usize] = e as u32;
-                next[v] += 1;
-            }
-        }
-
         // total outflow per vertex (gathered in edge order) and its Courant number
         let outflow: Vec<f64> = (0..n)
             .into_par_iter()
             .map(|v| {
-                inc_edge[inc_ptr[v] as usize..inc_ptr[v + 1] as usize]
+                topology
+                    .vertex_edges(v)
                     .iter()
                     .filter(|&&e| donor(e as usize) == v)
                     .map(|&e| flux[e as usize].abs())
@@ -678,8 +658,6 @@ impl UpwindPlan {
             substeps,
             max_courant: courant.iter().copied().fold(0.0, f64::max),
             n_limited,
-            inc_ptr,
-            inc_edge,
         })
     }
 
@@ -699,17 +677,14 @@ impl UpwindPlan {
         self.n_limited
     }
 
-    fn incident(&self, v: usize) -> &[u32] {
-        &self.inc_edge[self.inc_ptr[v] as usize..self.inc_ptr[v + 1] as usize]
-    }
-
     fn donor(&self, edges: &[[u32; 2]], e: usize) -> usize {
         edges[e][usize::from(!self.donor_is_a[e])] as usize
     }
 
     /// One sub-step of a mass field: per-edge transfers, then a gather per vertex in edge
     /// order. Returns the transfers too (momentum advection reuses them).
-    fn substep(&self, edges: &[[u32; 2]], mass: &[f64]) -> Vec<f64> {
+    fn substep(&self, topology: &Topology, mass: &[f64]) -> Vec<f64> {
+        let edges = topology.edges();
         let transfer: Vec<f64> = (0..edges.len())
             .into_par_iter()
             .map(|e| self.fraction[e] * mass[self.donor(edges, e)])
@@ -718,7 +693,7 @@ impl UpwindPlan {
             .into_par_iter()
             .map(|v| {
                 let (mut out, mut inflow) = (0.0, 0.0);
-                for &e in self.incident(v) {
+                for &e in topology.vertex_edges(v) {
                     let e = e as usize;
                     if self.donor(edges, e) == v {
                         out += transfer[e];
@@ -748,10 +723,9 @@ impl UpwindPlan {
     /// If `mass` does not have one value per vertex of `topology`, the plan's topology.
     pub fn transport(&self, topology: &Topology, mass: &mut [f64]) {
         self.check(topology, mass.len());
-        let edges = topology.edges();
         let mut m = mass.to_vec();
         for _ in 0..self.substeps {
-            m = self.substep(edges, &m);
+            m = self.substep(topology, &m);
         }
         mass.copy_from_slice(&m);
     }
@@ -796,7 +770,7 @@ impl UpwindPlan {
                 .into_par_iter()
                 .map(|v| {
                     let (mut out, mut inflow) = (DVec2::ZERO, DVec2::ZERO);
-                    for &e in self.incident(v) {
+                    for &e in topology.vertex_edges(v) {
                         let e = e as usize;
                         let d = self.donor(edges, e);
                         if d == v {
@@ -810,7 +784,7 @@ impl UpwindPlan {
                     (momentum[v] - out) + inflow
                 })
                 .collect();
-            mass = self.substep(edges, &mass);
+            mass = self.substep(topology, &mass);
         }
         let scale = solvent_before.iter().copied().fold(0.0, f64::max);
         let floor = MOMENTUM_MIN_MASS_REL * scale;
