@@ -34,10 +34,10 @@ _BLEND_RELATIVE = {"options": {"PATH_SUPPORTS_BLEND_RELATIVE"}} if bpy.app.versi
 #   to cellulose: fast adsorption (K_d = 0.5 /s), the default capacity. The ethanol
 #   makes it evaporate a little faster than water (6e-5).
 # - Coffee: about 1.2 % dissolved solids (a typical brew's TDS), brown (0.25, 0.13, 0.05).
-#   Its particles bind weakly (K_d = 0.05 /s, capacity 1e-3), so they stay in the liquid,
-#   are carried to the rim where it evaporates fastest and dry there: the halo (coffee
-#   ring). A stronger rim evaporation (boundary coefficient 1.5) makes that visible; the
-#   ring itself comes from the model (eq. 4.8 and drying in place).
+#   Its particles bind weakly (K_d = 0.05 /s, capacity 1e-3), so they stay in the liquid
+#   longer, and its rim evaporates faster (boundary coefficient 1.5). A real coffee ring
+#   needs the capillary flow toward a drying rim, which the model does not have (see
+#   rust/madder/src/stain/interact.rs): do not expect a ring from this preset alone.
 # - Ink: about 5 % dye, blue-black (0.04, 0.05, 0.15). Surfactants make it wick faster
 #   (K_p = 3 /s), dyes are made to bind: fast adsorption (K_d = 1 /s) and a high
 #   capacity (5e-3 kg/m²); humectants (glycols) slow its drying (4e-5).
@@ -63,7 +63,7 @@ LIQUID_ITEMS = [
     ("CUSTOM", "Custom", "Your own values (any change to a preset's value switches to Custom)"),
     ("WATER", "Water", "No solute: wets the cloth, leaves no stain"),
     ("RED_WINE", "Red Wine", "Deep red, binds strongly to the fibres"),
-    ("COFFEE", "Coffee", "Brown, binds weakly: dries into a ring at the rim"),
+    ("COFFEE", "Coffee", "Brown, binds weakly to the fibres, dries faster at the rim"),
     ("INK", "Ink", "Blue-black, concentrated, wicks and binds fast"),
 ]
 # what a source's preset sets (the rates belong to the cloth it pours on)

@@ -101,9 +101,12 @@
 //! because their exposed area is larger. [`exposure`] marks a vertex exposed when it is
 //! wet (`wet_i > threshold`) and either lies on the border of the mesh or has a dry
 //! neighbour (`wet_j ≤ threshold`, neighbours by mesh edge): the rim of the wet region.
-//! The rim of a stain therefore dries faster than its middle; as it dries, the dissolved
-//! solute there is left behind, dries in place and is deposited, while the liquid inside
-//! is still spreading — the halo (coffee) ring of Fig. 4.6.
+//! The rim of a stain therefore dries faster than its middle, and the dissolved solute
+//! there dries in place first. (Whether that is enough for the halo ring of Fig. 4.6 is
+//! not established: in the runs tried so far the deposit of a drying blob falls off
+//! monotonically from its centre. The physical coffee ring comes from the capillary flow
+//! that carries solute to an evaporating, pinned rim, and the seed's model — external
+//! pressure ignored, solute diffusing down its own gradient — has no such flow.)
 //!
 //! ## Deviations from the seed
 //! - **Exact exponential integrator** instead of implicit Euler
@@ -260,7 +263,7 @@ impl Fields {
 /// exposed, `1` elsewhere. A vertex is exposed when it is wet (`wet[i] > threshold`) and
 /// lies on the mesh border (`boundary[i]`, e.g. [`Topology::boundary_vertices`]) or has a
 /// dry neighbour (`wet[j] ≤ threshold`) across a mesh edge. Dry vertices get `1` (they have
-/// nothing to evaporate). The rim of a stain thus dries faster: the halo ring (module doc).
+/// nothing to evaporate). The rim of a stain thus dries faster (module doc).
 ///
 /// # Panics
 /// If `boundary` or `wet` does not have one value per vertex of `topology`.
