@@ -65,7 +65,7 @@ fn out2<'py, const K: usize>(
 ) -> PyResult<Bound<'py, PyArray2<f32>>> {
     let n = v.len();
     let flat: Vec<f32> = v.flat_map(|a| a.map(|x| x as f32)).collect();
-    Ok(PyArray1::from_vec(py, flat).reshape([n, K])?)
+    PyArray1::from_vec(py, flat).reshape([n, K])
 }
 
 #[pymethods]
@@ -133,15 +133,17 @@ impl Simulator {
         } else {
             conductivity(diffusion, face_tensors, face_uv, face_angle)?
         };
-        let mut params = madder::stain::StainParams::default();
-        params.gravity = DVec3::new(gravity.0, gravity.1, gravity.2);
-        params.forces = madder::stain::Forces {
-            gravity: use_gravity,
-            rectilinear: use_rectilinear,
-            coriolis: use_coriolis,
+        let mut params = madder::stain::StainParams {
+            gravity: DVec3::new(gravity.0, gravity.1, gravity.2),
+            forces: madder::stain::Forces {
+                gravity: use_gravity,
+                rectilinear: use_rectilinear,
+                coriolis: use_coriolis,
+            },
+            momentum_advection,
+            substeps,
+            ..Default::default()
         };
-        params.momentum_advection = momentum_advection;
-        params.substeps = substeps;
         let set = |slot: &mut f64, v: Option<f64>| {
             if let Some(v) = v {
                 *slot = v;
