@@ -48,7 +48,11 @@ fn bench(nx: usize, ny: usize, frames: usize) {
         &rest,
         &wave(&rest, 0.0),
         Conductivity::Isotropic(2e-4), // the add-on's default
-        StainParams::default(),
+        StainParams {
+            // MADDER_BENCH_WHOLE: step the whole mesh (no active region)
+            active_region: std::env::var("MADDER_BENCH_WHOLE").is_err(),
+            ..Default::default()
+        },
         [0.4, 0.05, 0.1],
         Par::Seq,
     )
@@ -84,7 +88,7 @@ fn bench(nx: usize, ny: usize, frames: usize) {
         (h ^ b).wrapping_mul(0x0100_0000_01b3)
     });
     println!(
-        "{n:>7} vertices, {frames} frames: {total:7.2} ms/frame (setup {setup:.0} ms) = geometry+frames+connection {:.2}, forces {:.2}, advection {:.2}, diffusion {:.2} (density {:.1} + velocity {:.1} CG it.), interactions {:.2}; state checksum {checksum:016x}",
+        "{n:>7} vertices, {frames} frames: {total:7.2} ms/frame (setup {setup:.0} ms) = geometry+frames+connection {:.2}, forces {:.2}, advection {:.2}, diffusion {:.2} (density {:.1} + velocity {:.1} CG it.), interactions {:.2}; active {:.1} % of the vertices ({} rebuilds); state checksum {checksum:016x}",
         per(p.geometry),
         per(p.forces),
         per(p.advection),
@@ -92,6 +96,8 @@ fn bench(nx: usize, ny: usize, frames: usize) {
         p.density_iterations as f64 / frames as f64,
         p.velocity_iterations as f64 / frames as f64,
         per(p.interaction),
+        100.0 * p.active_vertices as f64 / (p.substeps * n) as f64,
+        p.region_rebuilds,
     );
 }
 

@@ -131,6 +131,7 @@ fn ideal(forces: Forces) -> StainParams {
         friction: 0.0,
         interaction: no_interaction(),
         substeps: 1,
+        active_region: true,
     }
 }
 
@@ -753,6 +754,7 @@ fn full_params(momentum_advection: bool, substeps: u32) -> StainParams {
             evaporation_boundary: 1.2,
         },
         substeps,
+        active_region: true,
     }
 }
 
@@ -1142,6 +1144,170 @@ fn one_and_two_threads_give_bit_identical_fields() {
     assert!(
         run_m(1) == run_m(2),
         "momentum advection differs between 1 and 2 threads"
+    );
+}
+
+// ---------------------------------------------------------------------------------------
+// 7b. active region
+
+/// A blob spreading on the waving, stretching cloth for `steps` steps, with or without
+/// the active region, with `forces` (and the default viscosity, friction, interactions).
+/// Calls `check(sim, before)` after every step with the fields before it.
+fn region_run(
+    active_region: bool,
+    forces: Forces,
+    interaction: &InteractionRates,
+    steps: usize,
+    mut check: impl FnMut(&Simulator, &Fields),
+) -> Simulator {
+    let (topo, rest, at) = waving(40);
+    let dt = 1.0 / 30.0;
+    let params = StainParams {
+        forces,
+        active_region,
+        interaction: *interaction,
+        ..Default::default()
+    };
+    let mut sim = simulator(
+        &topo,
+        &rest,
+        &at(0.0),
+        Conductivity::Isotropic(5e-4),
+        params,
+    );
+    sim.add_liquid(
+        &gaussian(&rest, DVec2::new(-0.2, 0.3), 0.08, 0.4),
+        0.03,
+        None,
+    )
+    .unwrap();
+    for k in 1..=steps {
+        let before = sim.fields().clone();
+        let t = k as f64 * dt;
+        sim.step(&at(t), dt, Some(&at(t + dt))).unwrap();
+        assert_sane(&sim, &format!("step {k}"));
+        check(&sim, &before);
+    }
+    sim
+}
+
+#[test]
+fn the_active_region_matches_the_whole_mesh_and_never_misses_liquid() {
+    let whole = region_run(false, NO_FORCES, &no_interaction(), 200, |sim, _| {
+        assert!(sim.active_region().is_none())
+    });
+    let mut smallest = usize::MAX;
+    let mut largest = 0;
+    let active = region_run(true, NO_FORCES, &no_interaction(), 200, |sim, before| {
+        let mask = sim.active_region().expect("active region on");
+        let count = mask.iter().filter(|a| **a).count();
+        smallest = smallest.min(count);
+        largest = largest.max(count);
+        let f = sim.fields();
+        for (name, now, was) in [
+            ("free solvent", &f.free_solvent, &before.free_solvent),
+            ("solute", &f.solute, &before.solute),
+        ] {
+            for i in (0..mask.len()).filter(|&i| !mask[i]) {
+                assert!(
+                    now[i] <= was[i],
+                    "{name} grew outside the region at vertex {i}: {} -> {}",
+                    was[i],
+                    now[i]
+                );
+            }
+        }
+    });
+    let n = whole.topology().n_vertices();
+    assert!(
+        0 < smallest && largest < n,
+        "the region is neither empty nor the whole mesh ({smallest}..{largest} of {n})"
+    );
+    let (a, b) = (active.totals(), whole.totals());
+    assert!(
+        rel(a.solute, b.solute) <= 1e-12,
+        "solute {} vs {}",
+        a.solute,
+        b.solute
+    );
+    assert!(
+        rel(a.solvent, b.solvent) <= 1e-12,
+        "solvent {} vs {}",
+        a.solvent,
+        b.solvent
+    );
+    for (name, x, y) in [
+        ("solute", active.solute_density(), whole.solute_density()),
+        ("wetness", active.wetness(), whole.wetness()),
+    ] {
+        let peak = y.iter().copied().fold(0.0, f64::max);
+        let diff = x
+            .iter()
+            .zip(&y)
+            .map(|(p, q)| (p - q).abs())
+            .fold(0.0, f64::max);
+        assert!(
+            diff <= 1e-9 * peak,
+            "{name}: max difference {diff:e} of peak {peak:e}"
+        );
+        eprintln!(
+            "{name}: max difference {:.1e} of the peak; region {smallest}..{largest} of {n} vertices",
+            diff / peak
+        );
+    }
+}
+
+#[test]
+fn the_active_region_with_forces_conserves_and_never_misses_liquid() {
+    let mut largest = 0;
+    let active = region_run(
+        true,
+        ALL_FORCES,
+        &InteractionRates::default(),
+        200,
+        |sim, before| {
+            let mask = sim.active_region().expect("active region on");
+            largest = largest.max(mask.iter().filter(|a| **a).count());
+            let f = sim.fields();
+            for i in (0..mask.len()).filter(|&i| !mask[i]) {
+                assert!(f.free_solvent[i] <= before.free_solvent[i], "vertex {i}");
+                assert!(f.solute[i] <= before.solute[i], "vertex {i}");
+            }
+        },
+    );
+    let whole = region_run(
+        false,
+        ALL_FORCES,
+        &InteractionRates::default(),
+        200,
+        |_, _| {},
+    );
+    let (a, b) = (active.totals(), whole.totals());
+    assert!(
+        rel(a.solute, b.solute) <= 1e-12,
+        "solute {} vs {}",
+        a.solute,
+        b.solute
+    );
+    // with evaporation the wet edge is sharp (a vertex holding less than a step's
+    // evaporation is drained to zero), and the whole-mesh step leaks ~1e-10 of the peak per
+    // step past the region into the dry cloth, where it evaporates; the region keeps it
+    // (module doc). Measured 1.4e-5 of the peak after 200 steps here.
+    let (x, y) = (active.solute_density(), whole.solute_density());
+    let peak = y.iter().copied().fold(0.0, f64::max);
+    let diff = x
+        .iter()
+        .zip(&y)
+        .map(|(p, q)| (p - q).abs())
+        .fold(0.0, f64::max);
+    assert!(
+        diff <= 1e-4 * peak,
+        "max solute density difference {diff:e} of peak {peak:e}"
+    );
+    eprintln!(
+        "with forces: max solute density difference {:.1e} of the peak; region up to {largest} of {} vertices",
+        diff / peak,
+        x.len()
     );
 }
 

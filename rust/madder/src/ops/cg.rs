@@ -90,16 +90,21 @@ impl WarmCg {
     pub fn new<P: LowerCsc>(pattern: &P) -> Self {
         let n = pattern.n();
         let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
-        let mut entries: Vec<(u32, u32, u32)> = Vec::with_capacity(2 * pattern.nnz());
         let mut diag = vec![u32::MAX; n];
+        // entries of the full matrix per column: its upper part (the lower entries of the
+        // rows above) and its own lower column
+        let mut col_ptr = vec![0u32; n + 1];
+        let mut sorted = true;
         for j in 0..n {
-            for s in cp[j]..cp[j + 1] {
-                let i = ri[s as usize];
-                entries.push((j as u32, i, s));
-                if i as usize == j {
-                    diag[j] = s;
+            let (lo, hi) = (cp[j] as usize, cp[j + 1] as usize);
+            for s in lo..hi {
+                let i = ri[s] as usize;
+                sorted &= i >= j && (s == lo || ri[s - 1] < ri[s]);
+                col_ptr[j + 1] += 1;
+                if i != j {
+                    col_ptr[i + 1] += 1;
                 } else {
-                    entries.push((i, j as u32, s));
+                    diag[j] = s as u32;
                 }
             }
         }
@@ -107,16 +112,47 @@ impl WarmCg {
             diag.iter().all(|&d| d != u32::MAX),
             "pattern lacks a diagonal entry"
         );
-        entries.sort_unstable();
-        let mut col_ptr = vec![0u32; n + 1];
-        for &(c, _, _) in &entries {
-            col_ptr[c as usize + 1] += 1;
-        }
         for j in 0..n {
             col_ptr[j + 1] += col_ptr[j];
         }
-        let row_idx: Vec<u32> = entries.iter().map(|e| e.1).collect();
-        let slot: Vec<u32> = entries.iter().map(|e| e.2).collect();
+        let nnz = col_ptr[n] as usize;
+        let (row_idx, slot) = if sorted {
+            // lower columns with increasing rows: filling column by column puts every full
+            // column in increasing row order (its upper rows j < c arrive while j
+            // increases, then its own rows ≥ c), as the sort below would, in O(nnz)
+            let mut next: Vec<u32> = col_ptr[..n].to_vec();
+            let (mut row_idx, mut slot) = (vec![0u32; nnz], vec![0u32; nnz]);
+            for j in 0..n {
+                for s in cp[j]..cp[j + 1] {
+                    let i = ri[s as usize] as usize;
+                    let k = next[j] as usize;
+                    (row_idx[k], slot[k]) = (i as u32, s);
+                    next[j] += 1;
+                    if i != j {
+                        let k = next[i] as usize;
+                        (row_idx[k], slot[k]) = (j as u32, s);
+                        next[i] += 1;
+                    }
+                }
+            }
+            (row_idx, slot)
+        } else {
+            let mut entries: Vec<(u32, u32, u32)> = Vec::with_capacity(nnz);
+            for j in 0..n {
+                for s in cp[j]..cp[j + 1] {
+                    let i = ri[s as usize];
+                    entries.push((j as u32, i, s));
+                    if i as usize != j {
+                        entries.push((i, j as u32, s));
+                    }
+                }
+            }
+            entries.sort_unstable();
+            (
+                entries.iter().map(|e| e.1).collect(),
+                entries.iter().map(|e| e.2).collect(),
+            )
+        };
         let full = vec![0.0; slot.len()];
         Self {
             n,

@@ -229,9 +229,62 @@ pub fn advect_velocity(
         n,
         "geometry of another topology"
     );
+    advect_velocity_where(topology, rings, geometry, connection, velocity, h, None)
+}
+
+/// [`advect_velocity`] on the vertices where `active` is `true` only (the simulator's
+/// active region); the others keep their velocity. Each traced vertex gets exactly the
+/// value [`advect_velocity`] gives it.
+///
+/// # Panics
+/// As [`advect_velocity`], and if `active` does not have one entry per vertex.
+pub fn advect_velocity_in(
+    topology: &Topology,
+    rings: &OneRings,
+    geometry: &Geometry,
+    connection: &Connection,
+    velocity: &[DVec2],
+    h: f64,
+    active: &[bool],
+) -> Vec<DVec2> {
+    assert_eq!(active.len(), topology.n_vertices(), "one flag per vertex");
+    advect_velocity_where(
+        topology,
+        rings,
+        geometry,
+        connection,
+        velocity,
+        h,
+        Some(active),
+    )
+}
+
+fn advect_velocity_where(
+    topology: &Topology,
+    rings: &OneRings,
+    geometry: &Geometry,
+    connection: &Connection,
+    velocity: &[DVec2],
+    h: f64,
+    active: Option<&[bool]>,
+) -> Vec<DVec2> {
+    let n = topology.n_vertices();
+    assert_eq!(rings.n_vertices(), n, "rings of another topology");
+    assert_eq!(velocity.len(), n, "one velocity per vertex");
+    assert_eq!(
+        geometry.vertex_area.len(),
+        n,
+        "geometry of another topology"
+    );
     (0..n)
         .into_par_iter()
-        .map(|i| back_trace(topology, rings, geometry, connection, velocity, h, i))
+        .map(|i| {
+            if active.is_none_or(|a| a[i]) {
+                back_trace(topology, rings, geometry, connection, velocity, h, i)
+            } else {
+                velocity[i]
+            }
+        })
         .collect()
 }
 
@@ -675,6 +728,23 @@ impl UpwindPlan {
     /// Number of vertices whose outflows the limiter scaled down.
     pub fn n_limited(&self) -> usize {
         self.n_limited
+    }
+
+    /// Stops every transfer across an edge with an end outside `active` (the simulator's
+    /// active region): the transport is then closed inside the region (conservative and
+    /// non-negative as before) and leaves every vertex outside it unchanged. The sub-step
+    /// count and the other fractions are kept, so inside the region the transport is the
+    /// whole-mesh one.
+    ///
+    /// # Panics
+    /// If `active` does not have one entry per vertex of `topology`, the plan's topology.
+    pub fn restrict_to(&mut self, topology: &Topology, active: &[bool]) {
+        self.check(topology, active.len());
+        for (f, &[a, b]) in self.fraction.iter_mut().zip(topology.edges()) {
+            if !(active[a as usize] && active[b as usize]) {
+                *f = 0.0;
+            }
+        }
     }
 
     fn donor(&self, edges: &[[u32; 2]], e: usize) -> usize {
