@@ -1,6 +1,8 @@
 //! `make bench`: time per frame of the full stain simulator (forces, advection, diffusion
 //! of the densities and of the velocity, interactions) on a waving-flag grid, split into
-//! its phases. Prints figures; asserts nothing about time.
+//! its phases. Prints figures; asserts nothing about time. `MADDER_BENCH_WHOLE=1` steps
+//! the whole mesh (no active region), `MADDER_BENCH_SMALL=1` only the 10k case,
+//! `MADDER_BENCH_PARTS=1` times the pieces one by one.
 
 use std::time::Instant;
 
@@ -108,7 +110,6 @@ fn main() {
     );
     if std::env::var("MADDER_BENCH_PARTS").is_ok() {
         parts(127, 77, 50);
-        cg_ab(127, 77, 20);
         return;
     }
     bench(127, 77, 48); // ≈ 10k vertices
@@ -117,7 +118,7 @@ fn main() {
     }
 }
 
-#[allow(dead_code)]
+/// `MADDER_BENCH_PARTS=1`: the step's pieces timed one by one on the whole mesh.
 fn parts(nx: usize, ny: usize, reps: usize) {
     use madder::mesh::{Connection, Geometry, OneRings, VertexFrames, one_ring_rotations};
     use madder::stain::advect::{UpwindPlan, advect_velocity, dual_fluxes};
@@ -162,129 +163,4 @@ fn parts(nx: usize, ny: usize, reps: usize) {
         let mut m2 = m.clone();
         plan.transport_all(&topo, &mut [&mut m, &mut m2]);
     });
-}
-
-#[allow(dead_code)]
-fn cg_ab(nx: usize, ny: usize, reps: usize) {
-    use madder::mesh::Geometry;
-    use madder::ops::{VertexPattern, WarmCg, add_lumped_mass, cotan_stiffness};
-    let (topo, rest) = grid(nx, ny);
-    let n = topo.n_vertices();
-    let q = wave(&rest, 0.3);
-    let g = Geometry::new(&topo, &q).unwrap();
-    let pattern = VertexPattern::new(&topo);
-    let mut v = cotan_stiffness(&topo, &g, &pattern, 0.002 / 24.0);
-    add_lumped_mass(&g, &pattern, 1.0, &mut v);
-    let b: Vec<f64> = (0..2 * n)
-        .map(|i| {
-            let p = rest[i % n];
-            (-(p.distance_squared(DVec3::new(1.0, 0.0, 0.8))) / 0.02).exp()
-                * g.vertex_area[i % n]
-                * if i < n { 1.0 } else { 0.05 }
-        })
-        .collect();
-    let mut cg = WarmCg::new(&pattern).with_tolerance(1e-10);
-    for round in 0..3 {
-        let t = Instant::now();
-        let mut it = 0;
-        for _ in 0..reps {
-            let mut x = vec![0.0; 2 * n];
-            cg.solve(&v, &b, &mut x).unwrap();
-            it += cg.last_iterations;
-        }
-        let block = t.elapsed().as_secs_f64() * 1e3 / reps as f64;
-        let t = Instant::now();
-        let mut it1 = 0;
-        for _ in 0..reps {
-            for c in 0..2 {
-                let mut x = vec![0.0; n];
-                cg.solve(&v, &b[c * n..(c + 1) * n], &mut x).unwrap();
-                it1 += cg.last_iterations;
-            }
-        }
-        let sep = t.elapsed().as_secs_f64() * 1e3 / reps as f64;
-        // hand-written Jacobi-PCG on the full CSR, same stopping rule
-        let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
-        // full CSR
-        let mut rows: Vec<Vec<(usize, usize)>> = vec![Vec::new(); n];
-        for j in 0..n {
-            for s in cp[j]..cp[j + 1] {
-                let i = ri[s as usize] as usize;
-                rows[i].push((j, s as usize));
-                if i != j {
-                    rows[j].push((i, s as usize));
-                }
-            }
-        }
-        let mut ptr = vec![0usize];
-        let mut col = Vec::new();
-        let mut slot = Vec::new();
-        for r in &mut rows {
-            r.sort();
-            for &(c, s) in r.iter() {
-                col.push(c);
-                slot.push(s);
-            }
-            ptr.push(col.len());
-        }
-        let t = Instant::now();
-        let mut it2 = 0;
-        for _ in 0..reps {
-            for c in 0..2 {
-                let full: Vec<f64> = slot.iter().map(|&s| v[s]).collect();
-                let inv: Vec<f64> = (0..n)
-                    .map(|i| 1.0 / v[pattern.diag_slot()[i] as usize])
-                    .collect();
-                let bb = &b[c * n..(c + 1) * n];
-                let mut x = vec![0.0; n];
-                let matvec = |p: &[f64], out: &mut [f64]| {
-                    for i in 0..n {
-                        let mut acc = 0.0;
-                        for k in ptr[i]..ptr[i + 1] {
-                            acc += full[k] * p[col[k]];
-                        }
-                        out[i] = acc;
-                    }
-                };
-                let mut r = vec![0.0; n];
-                matvec(&x, &mut r);
-                for i in 0..n {
-                    r[i] = bb[i] - r[i];
-                }
-                let bnorm = bb.iter().map(|v| v * v).sum::<f64>().sqrt();
-                let mut z: Vec<f64> = (0..n).map(|i| r[i] * inv[i]).collect();
-                let mut p = z.clone();
-                let mut rz: f64 = (0..n).map(|i| r[i] * z[i]).sum();
-                let mut ap = vec![0.0; n];
-                for _ in 0..2000 {
-                    let rn = r.iter().map(|v| v * v).sum::<f64>().sqrt();
-                    if rn <= 1e-10 * bnorm {
-                        break;
-                    }
-                    it2 += 1;
-                    matvec(&p, &mut ap);
-                    let alpha = rz / (0..n).map(|i| p[i] * ap[i]).sum::<f64>();
-                    for i in 0..n {
-                        x[i] += alpha * p[i];
-                        r[i] -= alpha * ap[i];
-                        z[i] = r[i] * inv[i];
-                    }
-                    let rz2: f64 = (0..n).map(|i| r[i] * z[i]).sum();
-                    let beta = rz2 / rz;
-                    rz = rz2;
-                    for i in 0..n {
-                        p[i] = z[i] + beta * p[i];
-                    }
-                }
-                std::hint::black_box(&x);
-            }
-        }
-        let own = t.elapsed().as_secs_f64() * 1e3 / reps as f64;
-        println!(
-            "round {round}: block {block:.2} ms ({} it), separate {sep:.2} ms ({} it), hand-written {own:.2} ms ({} it)",
-            it / reps,
-            it1 / reps,
-            it2 / reps
-        );
-    }
 }
