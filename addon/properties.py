@@ -113,6 +113,26 @@ def _rate(name, description, default, soft_max, precision=3, step=1.0, preset=Fa
     )
 
 
+def _splash_speed(what):
+    return FloatProperty(
+        name="Splash Speed",
+        description=f"{what}, with a random jitter (0 = no splash)",
+        unit="VELOCITY",
+        default=0.0,
+        min=0.0,
+        soft_max=5.0,
+    )
+
+
+def _splash_seed():
+    return IntProperty(
+        name="Splash Seed",
+        description="Random seed of the splash (the same seed gives the same splash)",
+        default=0,
+        min=0,
+    )
+
+
 class MadderObjectSettings(bpy.types.PropertyGroup):
     enabled: BoolProperty(
         name="Madder Stain",
@@ -159,21 +179,10 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         "Solute (what stains) per kg of solvent, kg/kg: 0 is clear water",
         0.05, 0.2, precision=3, step=0.1, preset=True, max=1.0,
     )
-    splash_speed: FloatProperty(
-        name="Splash Speed",
-        description="Initial outgoing speed of the spilled liquid, away from the centroid of the "
-        "wet area, with a random jitter (0 = no splash)",
-        unit="VELOCITY",
-        default=0.0,
-        min=0.0,
-        soft_max=5.0,
+    splash_speed: _splash_speed(
+        "Initial outgoing speed of the spilled liquid, away from the centroid of the wet area"
     )
-    splash_seed: IntProperty(
-        name="Splash Seed",
-        description="Random seed of the splash (the same seed gives the same splash)",
-        default=0,
-        min=0,
-    )
+    splash_seed: _splash_seed()
 
     # -- Flow: spreading through the fabric and moving on it
     diffusion_rate: _rate(
@@ -349,21 +358,8 @@ class MadderSourceSettings(bpy.types.PropertyGroup):
         default=(0.05, 0.08, 0.35),
         update=_mark_custom,
     )
-    splash_speed: FloatProperty(
-        name="Splash Speed",
-        description="When this source first adds liquid, the liquid leaves it outward at this "
-        "speed, with a random jitter (0 = no splash)",
-        unit="VELOCITY",
-        default=0.0,
-        min=0.0,
-        soft_max=5.0,
-    )
-    splash_seed: IntProperty(
-        name="Splash Seed",
-        description="Random seed of the splash (the same seed gives the same splash)",
-        default=0,
-        min=0,
-    )
+    splash_speed: _splash_speed("When this source first adds liquid, the liquid leaves it outward at this speed")
+    splash_seed: _splash_seed()
     use_frame_range: BoolProperty(
         name="Frame Range",
         description="Pour only between the start and end frames",

@@ -221,14 +221,6 @@ pub fn advect_velocity(
     velocity: &[DVec2],
     h: f64,
 ) -> Vec<DVec2> {
-    let n = topology.n_vertices();
-    assert_eq!(rings.n_vertices(), n, "rings of another topology");
-    assert_eq!(velocity.len(), n, "one velocity per vertex");
-    assert_eq!(
-        geometry.vertex_area.len(),
-        n,
-        "geometry of another topology"
-    );
     advect_velocity_where(topology, rings, geometry, connection, velocity, h, None)
 }
 
