@@ -5,11 +5,11 @@
 //! cloth time steps the matrix is strongly diagonally dominant (`M` dominates `hK` unless
 //! `h D` is many times the squared edge length), and the solution changes little from one
 //! step to the next. Measured on the waving-flag grid (`make bench`, 2 cores): starting CG
-//! from the previous solution, with a Jacobi preconditioner, takes 11 iterations at
-//! relative tolerance 1e-12 and 2.4 ms per step at 10k vertices, against 9–12 ms for the
-//! numeric refactorization of the prefactored Cholesky ([`super::PrefactoredSpd`]); 67
-//! against 95 ms at 100k. So the stepper uses this solver; the Cholesky stays for direct
-//! solves and as the reference in the tests.
+//! from the previous solution, with a Jacobi preconditioner (before IC(0), below), takes
+//! 11 iterations at relative tolerance 1e-12 and 2.4 ms per step at 10k vertices, against
+//! 9–12 ms for the numeric refactorization of the prefactored Cholesky
+//! ([`super::PrefactoredSpd`]); 67 against 95 ms at 100k. So the stepper uses this
+//! solver; the Cholesky stays for direct solves and as the reference in the tests.
 //!
 //! [`WarmCg`] expands the lower-triangle pattern ([`LowerCsc`]) once into the full
 //! symmetric matrix that faer's matrix-free CG multiplies with, with the lower slot of every
@@ -29,6 +29,54 @@
 //! block product); we keep the library's, as the project's dependency policy asks, and
 //! note the figure for whoever revisits it.
 //!
+//! ## Preconditioner: IC(0)
+//! Writing `A = L + D + Lᵀ` (`L` strictly lower), the preconditioner is
+//! `M = (I + L̃) D̃ (I + L̃)ᵀ` with `L̃` strictly lower on the pattern of `L` (`Factor`);
+//! `M⁻¹ r` is a forward sweep (gathered along the rows of `L̃`), a scaling by `D̃⁻¹` and
+//! a backward sweep (gathered along its columns), sequential, in a fixed order, through
+//! faer's [`Precond`] trait. Three choices of `(L̃, D̃)` are implemented
+//! ([`WarmCg::with_preconditioner`], hidden, for the benchmark and the tests):
+//! - Jacobi: `L̃ = 0`, `D̃ = D`.
+//! - symmetric Gauss–Seidel: `L̃ = L D⁻¹`, `D̃ = D` (no setup beyond a scaling).
+//! - IC(0), the default: the incomplete `LDLᵀ` factor that keeps only the pattern's
+//!   entries, `d_k = a_kk − Σ_{j<k} l̃_kj² d_j`, `l̃_ik = (a_ik − Σ_{j<k} l̃_ij l̃_kj d_j) / d_k`
+//!   for `(i, k)` in the pattern. The updates `(i, j) ← (i, k)(j, k)` that stay in the
+//!   pattern are listed once in [`WarmCg::new`], so refactoring every solve (the values
+//!   change every sub-step) is one pass over them: 1.7 ms at 100k vertices, about one
+//!   Jacobi-CG iteration (one IC(0) iteration: 2.7 ms). A pivot `d_k ≤ 10⁻⁸ a_kk`
+//!   (possible when `A` is not an M-matrix: obtuse triangles, anisotropy) restarts the factorization of `A + α diag(A)`, `α = 10⁻²`
+//!   then `10⁻¹` (Manteuffel's shift), then falls back to Jacobi; and a column the
+//!   factor fails to converge is solved again with Jacobi from the same warm start, so
+//!   nothing Jacobi solves fails. The factor is built once per [`WarmCg::solve`], before
+//!   the columns, which only read it. On the Bochner system the 2×2 diagonal blocks are
+//!   diagonal (`(M_jj + h K_jj) I₂`, see [`crate::ops::connection`]): block-Jacobi *is*
+//!   Jacobi there, so the same IC(0) is used on the block pattern.
+//!
+//! Measured (`cargo bench -p madder --bench diffusion`, the flag case: cells
+//! 3.2 × 1.9 mm, `S` = 2·10⁻⁴ m²/s along the weft and 5·10⁻⁵ along the warp,
+//! `h` = 1/24 s, a sharp-edged stain, one field per solve, warm start `m / A`, setup
+//! included; 2 busy cores, medians of three runs, ±15 %):
+//!
+//! ```text
+//!                                   Jacobi           SGS              IC(0)
+//! density  1e-9,   10k vertices   16.7 it  1.9 ms   6.9 it  1.9 ms   6.3 it  1.7 ms
+//! density  1e-9,  100k vertices   20.1 it 28   ms   7.8 it 23   ms   7.0 it 22   ms
+//! Bochner  1e-8,   10k vertices   18.1 it  5.6 ms   7.1 it  4.4 ms   6.0 it  4.6 ms
+//! Bochner  1e-8,  100k vertices   18.0 it 73   ms   7.2 it 69   ms   6.1 it 68   ms
+//! density, S × 4, 100k vertices   38.9 it 57   ms  14.4 it 40   ms  12.5 it 37   ms
+//! ```
+//!
+//! (The last row is a one-off run with the tensor four times larger, not in the bench.)
+//! IC(0) divides the iterations by ~3 but an iteration costs ~2.3 Jacobi ones (the two
+//! sweeps are latency-bound, one dependent row after another, and cost more than the
+//! product), so the wall time gains 15–25 % on the densities and 7–20 % on the Bochner
+//! system, more as the system gets stiffer (last row: 35 %). Symmetric Gauss–Seidel
+//! needs no factorization but ~15 % more iterations, and comes out level with IC(0)
+//! within the noise; IC(0) is kept for its fewer iterations, whose advantage grows with
+//! `h D / Δx²`. (This case needs ~20 Jacobi iterations, not the ~80 reported on the
+//! production flag, which it does not reproduce; there the gain should be nearer the
+//! last row's.)
+//!
 //! Each right-hand side column (solvent, solute, colour) is solved on its own, from its
 //! own warm start, so a field a thousand times smaller than another still gets its own
 //! relative tolerance. (faer's block CG, which shares the sparse products between
@@ -37,10 +85,10 @@
 //! products it saves.)
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
-use faer::matrix_free::LinOp;
 use faer::matrix_free::conjugate_gradient::{
     CgError, CgParams, conjugate_gradient, conjugate_gradient_scratch,
 };
+use faer::matrix_free::{LinOp, Precond};
 use faer::{Col, MatMut, MatRef, Par};
 use rayon::prelude::*;
 
@@ -58,7 +106,7 @@ pub const RELATIVE_TOLERANCE: f64 = 1e-12;
 pub const MAX_ITERATIONS: usize = 2000;
 
 /// A symmetric positive definite system on a fixed pattern, solved by warm-started
-/// Jacobi-preconditioned CG.
+/// CG preconditioned by IC(0) (module doc).
 pub struct WarmCg {
     n: usize,
     /// The full symmetric pattern, compressed by columns (= by rows).
@@ -69,6 +117,33 @@ pub struct WarmCg {
     /// Slot of each diagonal entry in the lower-triangle values.
     diag: Vec<u32>,
     full: Vec<f64>,
+    /// The strict lower triangle, compressed by columns with increasing rows: the pattern
+    /// of the incomplete factor `L̃` (see `Factor`); `l_slot` is each entry's slot in the
+    /// lower-triangle values.
+    l_ptr: Vec<u32>,
+    l_row: Vec<u32>,
+    l_slot: Vec<u32>,
+    /// IC(0) updates of the off-diagonal entries, per eliminated column `k`
+    /// (`upd_ptr[k]..upd_ptr[k + 1]`): `l[t] -= l[p] l[q] / d_k` for `[t, p, q]`, the
+    /// positions in `l_row` of `(i, j)`, `(i, k)` and `(j, k)`, `i > j > k`, when `(i, j)`
+    /// is in the pattern.
+    upd_ptr: Vec<u32>,
+    upd: Vec<[u32; 3]>,
+    /// The strict lower triangle by rows (`u_col` increasing in each row), `u_pos` each
+    /// entry's position in `l_row`: the forward sweep gathers along rows.
+    u_ptr: Vec<u32>,
+    u_col: Vec<u32>,
+    u_pos: Vec<u32>,
+    u_val: Vec<f64>,
+    /// The factor's values, rebuilt every solve: `l` on `l_row`, and `D̃⁻¹`.
+    l_val: Vec<f64>,
+    inv_d: Vec<f64>,
+    /// `diag(A)⁻¹`: the Jacobi preconditioner, and the fallback.
+    inv_diag: Vec<f64>,
+    precond: Preconditioner,
+    /// Diagonal shift the last IC(0) factorization needed (`0` if none; `NaN` if it fell
+    /// back to Jacobi).
+    last_shift: f64,
     /// One workspace per right-hand side column.
     scratch: Vec<MemBuffer>,
     tolerance: f64,
@@ -154,6 +229,61 @@ impl WarmCg {
             )
         };
         let full = vec![0.0; slot.len()];
+        // the strict lower triangle, rows increasing in each column: the entries of the
+        // full columns below their diagonal
+        let mut l_ptr = Vec::with_capacity(n + 1);
+        let (mut l_row, mut l_slot) = (Vec::new(), Vec::new());
+        l_ptr.push(0u32);
+        for j in 0..n {
+            for k in col_ptr[j] as usize..col_ptr[j + 1] as usize {
+                if row_idx[k] as usize > j {
+                    l_row.push(row_idx[k]);
+                    l_slot.push(slot[k]);
+                }
+            }
+            l_ptr.push(l_row.len() as u32);
+        }
+        let position = |i: u32, j: usize| {
+            let (lo, hi) = (l_ptr[j] as usize, l_ptr[j + 1] as usize);
+            l_row[lo..hi]
+                .binary_search(&i)
+                .ok()
+                .map(|p| (lo + p) as u32)
+        };
+        let mut upd_ptr = Vec::with_capacity(n + 1);
+        let mut upd = Vec::new();
+        upd_ptr.push(0u32);
+        for k in 0..n {
+            let (lo, hi) = (l_ptr[k] as usize, l_ptr[k + 1] as usize);
+            for q in lo..hi {
+                let j = l_row[q] as usize;
+                for (p, &i) in (q + 1..hi).zip(&l_row[q + 1..hi]) {
+                    if let Some(t) = position(i, j) {
+                        upd.push([t, p as u32, q as u32]);
+                    }
+                }
+            }
+            upd_ptr.push(upd.len() as u32);
+        }
+        let mut u_ptr = vec![0u32; n + 1];
+        for &i in &l_row {
+            u_ptr[i as usize + 1] += 1;
+        }
+        for i in 0..n {
+            u_ptr[i + 1] += u_ptr[i];
+        }
+        let mut next = u_ptr[..n].to_vec();
+        let (mut u_col, mut u_pos) = (vec![0u32; l_row.len()], vec![0u32; l_row.len()]);
+        for j in 0..n {
+            for p in l_ptr[j]..l_ptr[j + 1] {
+                let i = l_row[p as usize] as usize;
+                let s = next[i] as usize;
+                (u_col[s], u_pos[s]) = (j as u32, p);
+                next[i] += 1;
+            }
+        }
+        let l_val = vec![0.0; l_row.len()];
+        let u_val = l_val.clone();
         Self {
             n,
             col_ptr,
@@ -161,6 +291,20 @@ impl WarmCg {
             slot,
             diag,
             full,
+            l_ptr,
+            l_row,
+            l_slot,
+            upd_ptr,
+            upd,
+            u_ptr,
+            u_col,
+            u_pos,
+            u_val,
+            l_val,
+            inv_d: vec![0.0; n],
+            inv_diag: vec![0.0; n],
+            precond: Preconditioner::IncompleteCholesky,
+            last_shift: 0.0,
             scratch: Vec::new(),
             tolerance: RELATIVE_TOLERANCE,
             last_iterations: 0,
@@ -171,6 +315,14 @@ impl WarmCg {
     /// `[1e-14, 1e-4]`).
     pub fn with_tolerance(mut self, tolerance: f64) -> Self {
         self.tolerance = tolerance.clamp(1e-14, 1e-4);
+        self
+    }
+
+    /// The same solver with another preconditioner: for benchmarks and tests that compare
+    /// them (module doc); the default is the fastest measured.
+    #[doc(hidden)]
+    pub fn with_preconditioner(mut self, precond: Preconditioner) -> Self {
+        self.precond = precond;
         self
     }
 
@@ -189,20 +341,71 @@ impl WarmCg {
         for (f, &s) in self.full.iter_mut().zip(&self.slot) {
             *f = values[s as usize];
         }
-        let mut inv_diag = Col::<f64>::zeros(n);
         for (i, &d) in self.diag.iter().enumerate() {
             let a = values[d as usize];
             if !(a > 0.0 && a.is_finite()) {
                 return Err(SolveError::NotPositiveDefinite { pivot: i, n });
             }
-            inv_diag[i] = 1.0 / a;
+            self.inv_diag[i] = 1.0 / a;
+        }
+        let factored = match self.precond {
+            Preconditioner::Jacobi => false,
+            Preconditioner::SymmetricGaussSeidel => {
+                self.gauss_seidel(values);
+                true
+            }
+            Preconditioner::IncompleteCholesky => {
+                self.last_shift = f64::NAN;
+                IC_SHIFTS.iter().any(|&shift| {
+                    let ok = incomplete_cholesky(
+                        self.n,
+                        &self.diag,
+                        &self.l_ptr,
+                        &self.l_row,
+                        &self.l_slot,
+                        &self.upd_ptr,
+                        &self.upd,
+                        values,
+                        shift,
+                        &mut self.l_val,
+                        &mut self.inv_d,
+                    );
+                    if ok {
+                        self.last_shift = shift;
+                    }
+                    ok
+                })
+            }
+        };
+        if factored {
+            for (u, &p) in self.u_val.iter_mut().zip(&self.u_pos) {
+                *u = self.l_val[p as usize];
+            }
         }
         let a = SymOp {
             ptr: &self.col_ptr,
             idx: &self.row_idx,
             val: &self.full,
         };
-        let precond = inv_diag.as_ref().as_diagonal();
+        let jacobi = Factor {
+            ptr: &self.l_ptr,
+            row: &self.l_row,
+            l: &[],
+            u_ptr: &self.u_ptr,
+            u_col: &self.u_col,
+            u: &[],
+            inv_d: &self.inv_diag,
+        };
+        let precond = if factored {
+            Factor {
+                l: &self.l_val,
+                u: &self.u_val,
+                inv_d: &self.inv_d,
+                ..jacobi
+            }
+        } else {
+            jacobi
+        };
         let mut params = CgParams::<f64>::default();
         params.rel_tolerance = self.tolerance;
         params.max_iters = MAX_ITERATIONS;
@@ -221,25 +424,33 @@ impl WarmCg {
                     xc.fill(0.0);
                     return Ok(0);
                 }
-                conjugate_gradient(
-                    MatMut::from_column_major_slice_mut(xc, n, 1),
-                    precond,
-                    a,
-                    MatRef::from_column_major_slice(bc, n, 1),
-                    params,
-                    |_| {},
-                    Par::Seq,
-                    MemStack::new(scratch),
-                )
-                .map(|info| info.iter_count)
-                .map_err(|e| match e {
-                    CgError::NoConvergence { rel_residual, .. } => SolveError::NotConverged {
-                        iterations: MAX_ITERATIONS,
-                        residual: rel_residual,
-                    },
-                    // CG only sees a non-positive curvature, not where: no pivot to name
-                    _ => SolveError::NotPositiveDefinite { pivot: 0, n },
-                })
+                let run = |m: Factor<'_>, xc: &mut [f64], scratch: &mut MemBuffer| {
+                    conjugate_gradient(
+                        MatMut::from_column_major_slice_mut(xc, n, 1),
+                        m,
+                        a,
+                        MatRef::from_column_major_slice(bc, n, 1),
+                        params,
+                        |_| {},
+                        Par::Seq,
+                        MemStack::new(scratch),
+                    )
+                    .map(|info| info.iter_count)
+                };
+                if !factored {
+                    return run(jacobi, xc, scratch).map_err(cg_error(n));
+                }
+                // an incomplete factor is SPD (positive pivots) but can be a poor
+                // preconditioner for a matrix far from an M-matrix: a column it fails is
+                // solved again with Jacobi from the same warm start
+                let start = xc.to_vec();
+                match run(precond, xc, scratch) {
+                    Ok(it) => Ok(it),
+                    Err(_) => {
+                        xc.copy_from_slice(&start);
+                        run(jacobi, xc, scratch).map_err(cg_error(n))
+                    }
+                }
             })
             .collect();
         self.last_iterations = 0;
@@ -248,6 +459,83 @@ impl WarmCg {
         }
         Ok(())
     }
+
+    /// `L̃ = L D⁻¹`, `D̃ = D` (module doc): symmetric Gauss–Seidel.
+    fn gauss_seidel(&mut self, values: &[f64]) {
+        for j in 0..self.n {
+            let inv = self.inv_diag[j];
+            self.inv_d[j] = inv;
+            for p in self.l_ptr[j] as usize..self.l_ptr[j + 1] as usize {
+                self.l_val[p] = values[self.l_slot[p] as usize] * inv;
+            }
+        }
+    }
+}
+
+/// Diagonal shifts tried, in order, when an IC(0) pivot is not positive: the factor of
+/// `A + shift·diag(A)` (Manteuffel's shift); after the last, Jacobi.
+const IC_SHIFTS: [f64; 3] = [0.0, 1e-2, 1e-1];
+
+/// A pivot below this fraction of its (shifted) diagonal counts as a breakdown.
+const MIN_PIVOT: f64 = 1e-8;
+
+fn cg_error(n: usize) -> impl Fn(CgError<f64>) -> SolveError {
+    move |e| match e {
+        CgError::NoConvergence { rel_residual, .. } => SolveError::NotConverged {
+            iterations: MAX_ITERATIONS,
+            residual: rel_residual,
+        },
+        // CG only sees a non-positive curvature, not where: no pivot to name
+        _ => SolveError::NotPositiveDefinite { pivot: 0, n },
+    }
+}
+
+/// IC(0) of `A + shift·diag(A)` on the pattern, as `(I + L̃) D̃ (I + L̃)ᵀ` (module doc),
+/// right-looking: column `k` updates the diagonal and the in-pattern entries of the
+/// columns it couples, then is scaled by `1/d_k`. Returns `false` on a pivot that is not
+/// positive (or not finite).
+#[allow(clippy::too_many_arguments)]
+fn incomplete_cholesky(
+    n: usize,
+    diag: &[u32],
+    l_ptr: &[u32],
+    l_row: &[u32],
+    l_slot: &[u32],
+    upd_ptr: &[u32],
+    upd: &[[u32; 3]],
+    values: &[f64],
+    shift: f64,
+    l: &mut [f64],
+    inv_d: &mut [f64],
+) -> bool {
+    for (d, &s) in inv_d.iter_mut().zip(diag) {
+        // the working pivots, inverted as each column is eliminated
+        *d = values[s as usize] * (1.0 + shift);
+    }
+    for (v, &s) in l.iter_mut().zip(l_slot) {
+        *v = values[s as usize];
+    }
+    for k in 0..n {
+        let d = inv_d[k];
+        let a = values[diag[k] as usize] * (1.0 + shift);
+        if !(d > MIN_PIVOT * a && d.is_finite()) {
+            return false;
+        }
+        let inv = 1.0 / d;
+        let (lo, hi) = (l_ptr[k] as usize, l_ptr[k + 1] as usize);
+        for p in lo..hi {
+            let v = l[p];
+            inv_d[l_row[p] as usize] -= v * v * inv;
+        }
+        for &[t, p, q] in &upd[upd_ptr[k] as usize..upd_ptr[k + 1] as usize] {
+            l[t as usize] -= l[p as usize] * l[q as usize] * inv;
+        }
+        for v in &mut l[lo..hi] {
+            *v *= inv;
+        }
+        inv_d[k] = inv;
+    }
+    true
 }
 
 fn cg_scratch(a: SymOp<'_>, n: usize) -> StackReq {
@@ -314,11 +602,109 @@ impl LinOp<f64> for SymOp<'_> {
     }
 }
 
+/// The preconditioner of [`WarmCg`] (module doc).
+#[doc(hidden)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Preconditioner {
+    /// `diag(A)⁻¹`.
+    Jacobi,
+    /// `(D + L) D⁻¹ (D + L)ᵀ` with `A = L + D + Lᵀ`.
+    SymmetricGaussSeidel,
+    /// IC(0): `(I + L̃) D̃ (I + L̃)ᵀ` with `L̃` on the strict lower pattern of `A`.
+    IncompleteCholesky,
+}
+
+/// `M⁻¹` for `M = (I + L̃) D̃ (I + L̃)ᵀ`, `L̃` strictly lower on the pattern, compressed
+/// by columns: `y = M⁻¹ r` is a forward sweep, a scaling and a backward sweep, in a fixed
+/// order. With no `L̃` values, Jacobi (`D̃⁻¹ = diag(A)⁻¹`).
+#[derive(Debug, Clone, Copy)]
+struct Factor<'a> {
+    ptr: &'a [u32],
+    row: &'a [u32],
+    l: &'a [f64],
+    /// `L̃` again, by rows.
+    u_ptr: &'a [u32],
+    u_col: &'a [u32],
+    u: &'a [f64],
+    inv_d: &'a [f64],
+}
+
+impl Factor<'_> {
+    fn solve(&self, r: &[f64], y: &mut [f64]) {
+        if self.l.is_empty() {
+            for ((y, r), d) in y.iter_mut().zip(r).zip(self.inv_d) {
+                *y = d * r;
+            }
+            return;
+        }
+        let n = y.len();
+        // (I + L̃) w = r, row by row
+        for i in 0..n {
+            let (lo, hi) = (self.u_ptr[i] as usize, self.u_ptr[i + 1] as usize);
+            let mut acc = r[i];
+            for (u, &j) in self.u[lo..hi].iter().zip(&self.u_col[lo..hi]) {
+                acc -= u * y[j as usize];
+            }
+            y[i] = acc;
+        }
+        // (I + L̃)ᵀ y = D̃⁻¹ w, row j of L̃ᵀ being column j of L̃
+        for j in (0..n).rev() {
+            let (lo, hi) = (self.ptr[j] as usize, self.ptr[j + 1] as usize);
+            let mut acc = y[j] * self.inv_d[j];
+            for (l, &i) in self.l[lo..hi].iter().zip(&self.row[lo..hi]) {
+                acc -= l * y[i as usize];
+            }
+            y[j] = acc;
+        }
+    }
+}
+
+impl LinOp<f64> for Factor<'_> {
+    fn apply_scratch(&self, _rhs_ncols: usize, _par: Par) -> StackReq {
+        StackReq::EMPTY
+    }
+
+    fn nrows(&self) -> usize {
+        self.inv_d.len()
+    }
+
+    fn ncols(&self) -> usize {
+        self.inv_d.len()
+    }
+
+    fn apply(&self, mut out: MatMut<'_, f64>, rhs: MatRef<'_, f64>, _par: Par, _: &mut MemStack) {
+        let n = self.nrows();
+        assert!(out.nrows() == n && rhs.nrows() == n && out.ncols() == rhs.ncols());
+        for j in 0..rhs.ncols() {
+            let x = rhs.col(j);
+            let mut y = out.as_mut().col_mut(j);
+            if let (Some(x), Some(y)) = (x.try_as_col_major(), y.as_mut().try_as_col_major_mut()) {
+                self.solve(x.as_slice(), y.as_slice_mut());
+                continue;
+            }
+            let xs: Vec<f64> = x.iter().copied().collect();
+            let mut ys = vec![0.0; n];
+            self.solve(&xs, &mut ys);
+            y.iter_mut().zip(ys).for_each(|(o, v)| *o = v);
+        }
+    }
+
+    fn conj_apply(&self, out: MatMut<'_, f64>, rhs: MatRef<'_, f64>, par: Par, s: &mut MemStack) {
+        self.apply(out, rhs, par, s);
+    }
+}
+
+/// The CG applies the factor out of place; in place goes through faer's default copy.
+impl Precond<f64> for Factor<'_> {}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::{Geometry, Topology};
-    use crate::ops::{PrefactoredSpd, VertexPattern, add_lumped_mass, cotan_stiffness};
+    use crate::mesh::{Connection, Geometry, OneRings, Topology, VertexFrames};
+    use crate::ops::{
+        BochnerPattern, PrefactoredSpd, VertexPattern, add_lumped_mass, add_lumped_mass_blocks,
+        anisotropic_stiffness, bochner_stiffness, cotan_stiffness,
+    };
     use glam::DVec3;
 
     #[test]
@@ -365,5 +751,219 @@ mod tests {
         // warm-started from the solution, it converges at once
         cg.solve(&values, &b, &mut x).unwrap();
         assert!(cg.last_iterations <= 2, "{}", cg.last_iterations);
+    }
+
+    /// A grid sheared by `shear` (obtuse triangles for `shear` ≳ 0.5) with a little
+    /// jitter, optionally bent around a cylinder (a curved surface: non-trivial
+    /// connection).
+    fn sheared_mesh(n: usize, shear: f64, bend: bool) -> (Topology, Vec<DVec3>) {
+        let mut pos = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                let jit = ((i * 7 + j * 13) % 5) as f64 * 0.01;
+                let (u, v) = (
+                    i as f64 * 0.1 + shear * j as f64 * 0.1 + jit,
+                    j as f64 * 0.1,
+                );
+                pos.push(if bend {
+                    DVec3::new(u.sin(), v - jit, u.cos())
+                } else {
+                    DVec3::new(u, v - jit, 0.0)
+                });
+            }
+        }
+        let mut faces = Vec::new();
+        for j in 0..n - 1 {
+            for i in 0..n - 1 {
+                let v = (j * n + i) as u32;
+                faces.push([v, v + 1, v + n as u32 + 1]);
+                faces.push([v, v + n as u32 + 1, v + n as u32]);
+            }
+        }
+        (Topology::from_triangles(n * n, faces).unwrap(), pos)
+    }
+
+    /// `M + K_S` on the sheared mesh, `S` anisotropic (4:1, off the grid axes), scaled so
+    /// that `K` dominates: not an M-matrix (positive off-diagonal entries).
+    fn obtuse_anisotropic_system(n: usize) -> (VertexPattern, Vec<f64>) {
+        let (topo, pos) = sheared_mesh(n, 0.8, false);
+        let geom = Geometry::new(&topo, &pos).unwrap();
+        let pattern = VertexPattern::new(&topo);
+        let nf = topo.n_faces();
+        let mut values = anisotropic_stiffness(
+            &topo,
+            &geom,
+            &pattern,
+            &vec![0.4; nf],
+            &vec![[1.0, 0.2, 0.25]; nf],
+            0.1,
+        );
+        add_lumped_mass(&geom, &pattern, 1.0, &mut values);
+        (pattern, values)
+    }
+
+    fn max_error(x: &[f64], reference: &[f64]) -> f64 {
+        let err = x
+            .iter()
+            .zip(reference)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        err / reference.iter().map(|v| v.abs()).fold(0.0, f64::max)
+    }
+
+    #[test]
+    fn preconditioners_match_cholesky_on_an_obtuse_anisotropic_mesh() {
+        let n = 16;
+        let (pattern, values) = obtuse_anisotropic_system(n);
+        // not an M-matrix: some off-diagonal entries are positive
+        let positive = (0..n * n)
+            .flat_map(|j| pattern.col_ptr()[j] + 1..pattern.col_ptr()[j + 1])
+            .filter(|&s| values[s as usize] > 0.0)
+            .count();
+        assert!(positive > 0, "the test system is an M-matrix");
+        let b: Vec<f64> = (0..2 * n * n)
+            .map(|i| ((i * 31 % 17) as f64).sin())
+            .collect();
+        let mut direct = b.clone();
+        let mut chol = PrefactoredSpd::new(pattern.clone(), Par::Seq).unwrap();
+        chol.factorize(&values).unwrap();
+        chol.solve_in_place(&mut direct);
+        let mut iterations = Vec::new();
+        for p in [
+            Preconditioner::Jacobi,
+            Preconditioner::SymmetricGaussSeidel,
+            Preconditioner::IncompleteCholesky,
+        ] {
+            let mut cg = WarmCg::new(&pattern).with_preconditioner(p);
+            let mut x = vec![0.0; b.len()];
+            cg.solve(&values, &b, &mut x).unwrap();
+            let err = max_error(&x, &direct);
+            assert!(err < 1e-9, "{p:?} vs Cholesky: {err:e}");
+            iterations.push(cg.last_iterations);
+            if p == Preconditioner::IncompleteCholesky {
+                assert_eq!(cg.last_shift, 0.0, "IC(0) needed a shift");
+            }
+        }
+        // the default is IC(0), and it pays: fewer iterations than Jacobi
+        assert_eq!(
+            WarmCg::new(&pattern).precond,
+            Preconditioner::IncompleteCholesky
+        );
+        assert!(iterations[2] < iterations[0], "{iterations:?}");
+    }
+
+    #[test]
+    fn bochner_block_system_still_solves() {
+        let n = 12;
+        let (topo, pos) = sheared_mesh(n, 0.3, true);
+        let geom = Geometry::new(&topo, &pos).unwrap();
+        let rings = OneRings::new(&topo);
+        let frames = VertexFrames::new(&rings, &pos).unwrap();
+        let conn = Connection::new(&topo, &rings, &geom, &frames, &pos);
+        let scalar = VertexPattern::new(&topo);
+        let pattern = BochnerPattern::new(&scalar);
+        let stiffness = cotan_stiffness(&topo, &geom, &scalar, 0.05);
+        let mut values = bochner_stiffness(&scalar, &pattern, &stiffness, &conn);
+        add_lumped_mass_blocks(&geom, &pattern, 1.0, &mut values);
+        let b: Vec<f64> = (0..2 * n * n)
+            .map(|i| ((i * 7 % 11) as f64).cos())
+            .collect();
+        let mut direct = b.clone();
+        let mut chol = PrefactoredSpd::new(pattern.clone(), Par::Seq).unwrap();
+        chol.factorize(&values).unwrap();
+        chol.solve_in_place(&mut direct);
+        for p in [Preconditioner::Jacobi, Preconditioner::IncompleteCholesky] {
+            let mut cg = WarmCg::new(&pattern)
+                .with_tolerance(1e-12)
+                .with_preconditioner(p);
+            let mut x = vec![0.0; b.len()];
+            cg.solve(&values, &b, &mut x).unwrap();
+            let err = max_error(&x, &direct);
+            assert!(err < 1e-9, "{p:?} vs Cholesky: {err:e}");
+            // warm-started from the solution, it converges at once
+            cg.solve(&values, &b, &mut x).unwrap();
+            assert!(cg.last_iterations <= 2, "{p:?}: {}", cg.last_iterations);
+        }
+    }
+
+    #[test]
+    fn bit_identical_with_one_or_two_threads() {
+        let n = 24;
+        let (pattern, values) = obtuse_anisotropic_system(n);
+        // three columns, the second a thousand times smaller, solved side by side
+        let b: Vec<f64> = (0..3 * n * n)
+            .map(|i| ((i * 31 % 17) as f64).sin() * if i / (n * n) == 1 { 1e-3 } else { 1.0 })
+            .collect();
+        for p in [
+            Preconditioner::Jacobi,
+            Preconditioner::SymmetricGaussSeidel,
+            Preconditioner::IncompleteCholesky,
+        ] {
+            let run = |threads: usize| {
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap()
+                    .install(|| {
+                        let mut cg = WarmCg::new(&pattern)
+                            .with_tolerance(1e-9)
+                            .with_preconditioner(p);
+                        let mut x: Vec<f64> = b.iter().map(|v| 0.9 * v).collect();
+                        cg.solve(&values, &b, &mut x).unwrap();
+                        (x, cg.last_iterations)
+                    })
+            };
+            let ((x1, it1), (x2, it2)) = (run(1), run(2));
+            assert_eq!(it1, it2, "{p:?}");
+            assert!(
+                x1.iter().zip(&x2).all(|(a, b)| a.to_bits() == b.to_bits()),
+                "{p:?}: results differ between 1 and 2 threads"
+            );
+        }
+    }
+
+    /// SPD matrices on a 4-cycle (no chords) whose IC(0) breaks down: the solve shifts
+    /// the diagonal, or falls back to Jacobi, and still converges.
+    #[test]
+    fn incomplete_cholesky_breakdown_falls_back() {
+        struct Cycle;
+        impl LowerCsc for Cycle {
+            fn n(&self) -> usize {
+                4
+            }
+            fn col_ptr(&self) -> &[u32] {
+                &[0, 3, 5, 7, 8]
+            }
+            fn row_idx(&self) -> &[u32] {
+                &[0, 1, 3, 1, 2, 2, 3, 3]
+            }
+        }
+        // off-diagonal (1,0), (3,0), (2,1), (3,2); eigenvalues ≥ 0.047 and 0.056
+        for (off, shift) in [
+            ([-0.27, -0.91, -0.88, 0.28], 0.1),
+            ([-0.64, 0.61, -0.67, -0.66], f64::NAN),
+        ] {
+            let values = [1.0, off[0], off[1], 1.0, off[2], 1.0, off[3], 1.0];
+            let x_true = [1.0, -2.0, 0.5, 3.0];
+            let mut b = vec![0.0; 4];
+            for j in 0..4 {
+                for s in Cycle.col_ptr()[j]..Cycle.col_ptr()[j + 1] {
+                    let (i, v) = (Cycle.row_idx()[s as usize] as usize, values[s as usize]);
+                    b[i] += v * x_true[j];
+                    if i != j {
+                        b[j] += v * x_true[i];
+                    }
+                }
+            }
+            let mut cg = WarmCg::new(&Cycle);
+            let mut x = vec![0.0; 4];
+            cg.solve(&values, &b, &mut x).unwrap();
+            assert!(
+                cg.last_shift.to_bits() == shift.to_bits(),
+                "shift {} instead of {shift}",
+                cg.last_shift
+            );
+            assert!(max_error(&x, &x_true) < 1e-10, "{x:?}");
+        }
     }
 }
