@@ -1,6 +1,6 @@
 //! `Simulator`: the full stain simulator of chapter 4 (core module `stain::simulate`).
 
-use glam::{DVec2, DVec3};
+use glam::DVec3;
 use numpy::{
     PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
     PyUntypedArrayMethods,
@@ -298,20 +298,7 @@ impl Simulator {
     #[setter]
     fn set_velocity(&mut self, velocity: PyReadonlyArray2<'_, f32>) -> PyResult<()> {
         let w = dpoints(&velocity)?;
-        let frames = self.inner.frames();
-        if w.len() != frames.len() {
-            return Err(ParameterError::new_err(format!(
-                "velocity has {} rows, the mesh {} vertices",
-                w.len(),
-                frames.len()
-            )));
-        }
-        let local: Vec<DVec2> = w
-            .iter()
-            .enumerate()
-            .map(|(i, v)| frames.to_local(i, *v))
-            .collect();
-        self.inner.set_velocity(local).map_err(to_py)
+        self.inner.set_velocity_world(&w).map_err(to_py)
     }
 
     /// Lumped vertex areas at the current frame, m², float64.

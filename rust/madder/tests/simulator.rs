@@ -355,13 +355,14 @@ fn accelerating_plane_leaves_the_blob_behind_by_half_a_t_squared() {
     );
 }
 
-/// A still plane tilted by 30° about x, gravity only: (drift down the slope, expected,
-/// drift across).
-fn tilted_plane_drift(momentum_advection: bool) -> (f64, f64, f64) {
+/// A still plane tilted by 30° about x, gravity only, `frames` frames at 24 fps: (drift
+/// down the slope, expected, drift across). The expected drift from rest under the slope's
+/// acceleration `a = g sinθ` is `½at²` without friction and `(a/k)(t − (1 − e^{−kt})/k)`
+/// with friction `k` (the solution of `u̇ = a − ku`, integrated).
+fn tilted_plane_drift(momentum_advection: bool, friction: f64, frames: usize) -> (f64, f64, f64) {
     let theta = PI / 6.0;
     let g = 9.81;
     let dt = 1.0 / 24.0;
-    let frames = 8; // 1/3 s
     let (topo, flat) = grid(60, 1.0);
     let tilted: Vec<DVec3> = flat
         .iter()
@@ -369,6 +370,7 @@ fn tilted_plane_drift(momentum_advection: bool) -> (f64, f64, f64) {
         .collect();
     let mut params = ideal(ALL_FORCES); // the plane is still: only gravity acts
     params.momentum_advection = momentum_advection;
+    params.friction = friction;
     let mut sim = simulator(
         &topo,
         &tilted,
@@ -392,9 +394,14 @@ fn tilted_plane_drift(momentum_advection: bool) -> (f64, f64, f64) {
     let s1 = sim.totals();
     assert!(rel(s1.solute, s0.solute) <= 1e-12 && rel(s1.solvent, s0.solvent) <= 1e-12);
     let moved = centroid(&sim.fields().free_solvent, &flat) - c0;
-    let expected = 0.5 * g * theta.sin() * t * t;
+    let (a, k) = (g * theta.sin(), friction);
+    let expected = if k > 0.0 {
+        a / k * (t + (-k * t).exp_m1() / k)
+    } else {
+        0.5 * a * t * t
+    };
     println!(
-        "tilted plane (momentum advection {momentum_advection}): down the slope {:.5} m vs ½g·sinθ·t² = {expected:.5} m ({:.2}%), across {:.2e} m",
+        "tilted plane (momentum advection {momentum_advection}, friction {k}/s): down the slope {:.5} m vs {expected:.5} m ({:.2}%), across {:.2e} m",
         -moved.y,
         100.0 * rel(-moved.y, expected),
         moved.x
@@ -404,7 +411,16 @@ fn tilted_plane_drift(momentum_advection: bool) -> (f64, f64, f64) {
 
 #[test]
 fn tilted_plane_blob_runs_down_half_g_sin_theta_t_squared() {
-    let (down, expected, across) = tilted_plane_drift(false);
+    let (down, expected, across) = tilted_plane_drift(false, 0.0, 8);
+    assert!(rel(down, expected) <= 0.05, "drift {down} vs {expected}");
+    assert!(across.abs() <= 0.01 * expected, "sideways drift {across}");
+}
+
+#[test]
+fn with_friction_the_blob_runs_at_its_terminal_speed() {
+    // k = 50/s at 24 fps (kh ≈ 2): the terminal speed a/k is reached within a frame; a
+    // kick followed by the decay e^{-kh} would run at 30 % of it
+    let (down, expected, across) = tilted_plane_drift(false, 50.0, 24);
     assert!(rel(down, expected) <= 0.05, "drift {down} vs {expected}");
     assert!(across.abs() <= 0.01 * expected, "sideways drift {across}");
 }
@@ -874,7 +890,7 @@ fn conservation_on_a_waving_stretching_cloth_over_1000_steps() {
 
 #[test]
 fn momentum_advection_tilted_plane_and_conservation() {
-    let (down, expected, across) = tilted_plane_drift(true);
+    let (down, expected, across) = tilted_plane_drift(true, 0.0, 8);
     assert!(rel(down, expected) <= 0.10, "drift {down} vs {expected}");
     assert!(across.abs() <= 0.02 * expected, "sideways drift {across}");
     let (_, ds, dv) = waving_run(1000, true);
@@ -1309,6 +1325,70 @@ fn the_active_region_with_forces_conserves_and_never_misses_liquid() {
         diff / peak,
         x.len()
     );
+}
+
+/// A blob that dries into a stain within a few frames, then the cloth stretches to twice
+/// its width: the stain's solute density halves everywhere (nothing flows, so every
+/// vertex keeps its solute), window or not.
+#[test]
+fn a_dry_stain_outside_the_window_follows_the_stretching_cloth() {
+    let (topo, rest) = grid(30, 0.5);
+    let run = |active_region: bool| {
+        let mut params = ideal(NO_FORCES);
+        params.active_region = active_region;
+        params.interaction = InteractionRates {
+            evaporation: 5.0, // kg/m²/s: the blob dries within a frame or two
+            ..InteractionRates::default()
+        };
+        let mut sim = simulator(&topo, &rest, &rest, Conductivity::Isotropic(1e-4), params);
+        sim.add_liquid(
+            &gaussian(&rest, DVec2::new(0.1, 0.0), 0.08, 0.5),
+            0.05,
+            None,
+        )
+        .unwrap();
+        let dt = 1.0 / 24.0;
+        for _ in 0..6 {
+            sim.step(&rest, dt, None).unwrap();
+        }
+        let f = sim.fields();
+        assert!(
+            (0..rest.len()).all(|i| f.free_solvent[i] == 0.0 && f.absorbed_solvent[i] == 0.0),
+            "the blob has dried"
+        );
+        let before = sim.solute_density();
+        let stretched: Vec<DVec3> = rest
+            .iter()
+            .map(|p| DVec3::new(2.0 * p.x, p.y, p.z))
+            .collect();
+        sim.step(&stretched, dt, None).unwrap();
+        if active_region {
+            assert!(
+                sim.active_region().is_none_or(|m| !m.iter().any(|a| *a)),
+                "nothing flows, so nothing is active"
+            );
+        }
+        (before, sim.solute_density(), sim.totals().solute)
+    };
+    let (before, after, solute) = run(true);
+    let (_, whole, whole_solute) = run(false);
+    let marked = before.iter().filter(|d| **d > 0.0).count();
+    assert!(marked > 50, "a stain formed ({marked} vertices)");
+    for i in 0..before.len() {
+        let expected = 0.5 * before[i];
+        assert!(
+            (after[i] - expected).abs() <= 1e-12 * expected.abs().max(1e-300),
+            "vertex {i}: {} vs {expected}",
+            after[i]
+        );
+        assert!(
+            (after[i] - whole[i]).abs() <= 1e-9 * before[i],
+            "vertex {i}: {} vs whole mesh {}",
+            after[i],
+            whole[i]
+        );
+    }
+    assert!(rel(solute, whole_solute) <= 1e-12);
 }
 
 // ---------------------------------------------------------------------------------------

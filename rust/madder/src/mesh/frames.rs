@@ -165,6 +165,8 @@ pub struct OneRings {
     /// (global, into the per-spoke arrays; `u32::MAX` if the edge is in no fan).
     edge_spoke: Vec<[u32; 2]>,
     reversing: Vec<u32>,
+    /// Per face: walked against its vertex order.
+    flipped: Vec<bool>,
 }
 
 /// The walk of one fan component: wedges (index into the vertex's corner list, forward)
@@ -177,6 +179,19 @@ struct Walk {
 impl OneRings {
     /// Orders the fan of every vertex of `topology` (in parallel; deterministic).
     pub fn new(topology: &Topology) -> Self {
+        Self::with_orientation(topology, harmonize_orientation(topology))
+    }
+
+    /// [`OneRings::new`] with the faces' orientation given: `flipped[f]` if face `f` is
+    /// walked against its own vertex order. A part of a mesh cut out with the whole
+    /// mesh's [`OneRings::face_flipped`] walks every fan it shares with the whole mesh in
+    /// the same sense (its own harmonization could choose another on a part that does
+    /// not reach the whole mesh's deciding faces).
+    ///
+    /// # Panics
+    /// If `flipped` does not have one flag per face.
+    pub fn with_orientation(topology: &Topology, flipped: Vec<bool>) -> Self {
+        assert_eq!(flipped.len(), topology.n_faces(), "one flag per face");
         let n = topology.n_vertices();
         let faces = topology.faces();
         // vertex → incident (face, corner), in face order
@@ -193,7 +208,6 @@ impl OneRings {
         let edge_end: Vec<u32> = edges.iter().map(|&[_, b]| b).collect();
         let lookup = |i: u32, j: u32| find_edge(&edge_ptr, &edge_end, i, j);
 
-        let flipped = harmonize_orientation(topology);
         let fans: Vec<(Vec<Wedge>, Vec<u32>, FanKind)> = (0..n)
             .into_par_iter()
             .map(|v| {
@@ -258,7 +272,14 @@ impl OneRings {
             edge_end,
             edge_spoke,
             reversing,
+            flipped,
         }
+    }
+
+    /// Per face: whether the fans walk it against its own vertex order (the harmonized
+    /// orientation).
+    pub fn face_flipped(&self) -> &[bool] {
+        &self.flipped
     }
 
     pub fn n_vertices(&self) -> usize {

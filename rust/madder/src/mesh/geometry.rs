@@ -140,16 +140,39 @@ pub fn check_positions<P: Copy + Into<DVec3>>(
 /// Area and corner cotangents of a triangle with side `l[k]` opposite corner `k`.
 /// Requires a strict triangle inequality (guaranteed after mollification).
 fn triangle_area_cot(l: [f64; 3]) -> (f64, [f64; 3]) {
-    let mut s = l;
-    s.sort_by(|x, y| y.total_cmp(x));
-    let [a, b, c] = s;
-    let area = 0.25
-        * ((a + (b + c)) * (c - (a - b)) * (c + (a - b)) * (a + (b - c)))
-            .max(0.0)
-            .sqrt();
+    let area = heron(l);
     let sq = l.map(|x| x * x);
     let cot = std::array::from_fn(|k| (sq[(k + 1) % 3] + sq[(k + 2) % 3] - sq[k]) / (4.0 * area));
     (area, cot)
+}
+
+/// Heron's formula in Kahan's cancellation-free ordering (module doc).
+fn heron(l: [f64; 3]) -> f64 {
+    let mut s = l;
+    s.sort_by(|x, y| y.total_cmp(x));
+    let [a, b, c] = s;
+    0.25 * ((a + (b + c)) * (c - (a - b)) * (c + (a - b)) * (a + (b - c)))
+        .max(0.0)
+        .sqrt()
+}
+
+/// The lumped area `A_v = Σ_{T∋v} A_T / 3` of one vertex from the positions of its
+/// faces' corners (the [`Geometry`] value, unmollified), for a vertex whose area is
+/// needed without the whole mesh's geometry.
+pub fn vertex_area<P: Copy + Into<DVec3>>(
+    faces: impl Iterator<Item = [u32; 3]>,
+    positions: &[P],
+) -> f64 {
+    faces
+        .map(|f| {
+            let p = f.map(|v| positions[v as usize].into());
+            heron([
+                p[1].distance(p[2]),
+                p[2].distance(p[0]),
+                p[0].distance(p[1]),
+            ]) / 3.0
+        })
+        .sum()
 }
 
 #[cfg(test)]

@@ -84,6 +84,19 @@ impl Conductivity {
         }
     }
 
+    /// The conductivity of a sub-mesh made of `faces` (indices into this one's faces, in
+    /// the sub-mesh's face order).
+    pub fn faces(&self, faces: &[u32]) -> Self {
+        match self {
+            Conductivity::Isotropic(d) => Conductivity::Isotropic(*d),
+            Conductivity::Woven(w) => Conductivity::Woven(WovenFaces {
+                tensor: faces.iter().map(|&f| w.tensor[f as usize]).collect(),
+                uv: faces.iter().map(|&f| w.uv[f as usize]).collect(),
+                angle: faces.iter().map(|&f| w.angle[f as usize]).collect(),
+            }),
+        }
+    }
+
     /// Faces whose UVs are degenerate (the weft falls back to an edge), at `geometry`.
     pub fn degenerate_uv_faces(&self, topology: &Topology, geometry: &Geometry) -> usize {
         match self {

@@ -157,14 +157,95 @@ pub fn coriolis_turn(omega: DVec3, h: f64, u: DVec2) -> DVec2 {
     DVec2::new(cos * u.x - sin * u.y, sin * u.x + cos * u.y)
 }
 
+/// The exact solution over `h` of the velocity equation of one vertex,
+///
+/// ```text
+/// u̇ = a − k u − 2 ω_z J u        (J the quarter turn, a and ω_z constant over the step),
+/// ```
+///
+/// the tangential body force `a`, friction `k ≥ 0` and Coriolis rotation together.
+/// Returns the velocity at the end of the step and its mean over the step. In complex
+/// form (`u = x + i y`, `λ = −(k + 2iω_z)`): `u(h) = e^{λh} u₀ + h φ₁(λh) a` and
+/// `ū = φ₁(λh) u₀ + h φ₂(λh) a`, with `φ₁(z) = (e^z − 1)/z`, `φ₂(z) = (e^z − 1 − z)/z²`.
+///
+/// Why not split it: a kick `h a` followed by the friction factor `e^{−kh}` relaxes to
+/// `h a e^{−kh}/(1 − e^{−kh})` instead of the terminal velocity `a/k` — at a cloth's
+/// friction (`k = 50/s`) and a 24 fps frame (`kh ≈ 2`) that is 30 % of it. The exact
+/// solution has the right terminal velocity, transient and Coriolis turn at any step;
+/// without friction and rotation it is the plain `u₀ + h a` (mean `u₀ + h a/2`).
+pub fn integrate_velocity(
+    u: DVec2,
+    a: DVec2,
+    omega_z: f64,
+    friction: f64,
+    h: f64,
+) -> (DVec2, DVec2) {
+    let z = Complex(-friction * h, -2.0 * omega_z * h);
+    let (e, phi1, phi2) = z.phi();
+    let (u, a) = (Complex(u.x, u.y), Complex(a.x, a.y));
+    let end = e.mul(u).add(phi1.mul(a).scale(h));
+    let mean = phi1.mul(u).add(phi2.mul(a).scale(h));
+    (DVec2::new(end.0, end.1), DVec2::new(mean.0, mean.1))
+}
+
+/// A complex number `(re, im)`: just what [`integrate_velocity`] needs.
+#[derive(Debug, Clone, Copy)]
+struct Complex(f64, f64);
+
+impl Complex {
+    fn add(self, o: Self) -> Self {
+        Self(self.0 + o.0, self.1 + o.1)
+    }
+    fn mul(self, o: Self) -> Self {
+        Self(self.0 * o.0 - self.1 * o.1, self.0 * o.1 + self.1 * o.0)
+    }
+    fn scale(self, s: f64) -> Self {
+        Self(self.0 * s, self.1 * s)
+    }
+    fn div(self, o: Self) -> Self {
+        let d = o.0 * o.0 + o.1 * o.1;
+        Self(
+            (self.0 * o.0 + self.1 * o.1) / d,
+            (self.1 * o.0 - self.0 * o.1) / d,
+        )
+    }
+    /// `(e^z, φ₁(z), φ₂(z))`; by their Taylor series for small `|z|`, where the closed
+    /// forms cancel (six terms: the error is below `|z|⁶/5040 ≤ 2e-22` for `|z| ≤ 0.05`).
+    fn phi(self) -> (Self, Self, Self) {
+        let r = self.0.exp();
+        let (sin, cos) = self.1.sin_cos();
+        let e = Self(r * cos, r * sin);
+        if self.0.hypot(self.1) > 0.05 {
+            let em1 = Self(e.0 - 1.0, e.1);
+            let phi1 = em1.div(self);
+            let phi2 = Self(phi1.0 - 1.0, phi1.1).div(self);
+            return (e, phi1, phi2);
+        }
+        // φ₁ = Σ z^k/(k+1)!, φ₂ = Σ z^k/(k+2)!, k = 0..5 (Horner)
+        let horner = |first: u32| {
+            let mut acc = Self(0.0, 0.0);
+            for k in (0..6u32).rev() {
+                let fact: f64 = (1..=k + first).map(f64::from).product();
+                acc = acc.mul(self).add(Self(1.0 / fact, 0.0));
+            }
+            acc
+        };
+        (e, horner(1), horner(2))
+    }
+}
+
 /// Centred second difference `(next − 2 cur + prev) / H²` per vertex (world coordinates).
 pub fn frame_acceleration(prev: &[DVec3], cur: &[DVec3], next: &[DVec3], dt: f64) -> Vec<DVec3> {
-    let inv = 1.0 / (dt * dt);
     prev.par_iter()
         .zip(cur)
         .zip(next)
-        .map(|((a, b), c)| (*c - 2.0 * *b + *a) * inv)
+        .map(|((a, b), c)| second_difference(*a, *b, *c, dt))
         .collect()
+}
+
+/// One vertex of [`frame_acceleration`].
+pub fn second_difference(prev: DVec3, cur: DVec3, next: DVec3, dt: f64) -> DVec3 {
+    (next - 2.0 * cur + prev) * (1.0 / (dt * dt))
 }
 
 /// The tangential body acceleration `(x, y)` components of `F_iᵀ (g − p̈_i)` for the
@@ -202,6 +283,62 @@ mod tests {
         VertexFrames {
             frame: frames.iter().map(|f| r * *f).collect(),
         }
+    }
+
+    /// `u̇ = a − k u − 2ω J u` by classical RK4 with `steps` steps over `h`, and the
+    /// trapezoid-rule mean of the samples (an independent reference).
+    fn rk4(u: DVec2, a: DVec2, w: f64, k: f64, h: f64, steps: usize) -> (DVec2, DVec2) {
+        let f = |u: DVec2| a - k * u - 2.0 * w * u.perp();
+        let dt = h / steps as f64;
+        let (mut u, mut sum) = (u, 0.5 * u);
+        for s in 0..steps {
+            let k1 = f(u);
+            let k2 = f(u + 0.5 * dt * k1);
+            let k3 = f(u + 0.5 * dt * k2);
+            let k4 = f(u + dt * k3);
+            u += dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4);
+            sum += if s + 1 == steps { 0.5 * u } else { u };
+        }
+        (u, sum / steps as f64)
+    }
+
+    #[test]
+    fn integrate_velocity_matches_a_fine_reference_and_the_closed_forms() {
+        let (u0, a) = (DVec2::new(0.3, -0.2), DVec2::new(-1.5, 4.0));
+        // small and large |z| (the series and the closed form), with and without friction
+        for (w, k, h) in [
+            (0.0, 50.0, 1.0 / 24.0),
+            (3.0, 50.0, 1.0 / 24.0),
+            (0.7, 0.0, 0.5),
+            (1e-4, 1e-3, 0.01),
+            (0.2, 0.1, 0.1),
+        ] {
+            let (end, mean) = integrate_velocity(u0, a, w, k, h);
+            let (re, rm) = rk4(u0, a, w, k, h, 20_000);
+            let scale = u0.length() + a.length() * h;
+            assert!(
+                (end - re).length() < 1e-9 * scale,
+                "{w} {k} {h}: {end} vs {re}"
+            );
+            assert!(
+                (mean - rm).length() < 1e-8 * scale,
+                "{w} {k} {h}: {mean} vs {rm}"
+            );
+        }
+        // no friction, no turn: u₀ + h a exactly, and the mean is the midpoint
+        let (end, mean) = integrate_velocity(u0, a, 0.0, 0.0, 0.25);
+        assert_eq!(end, u0 + 0.25 * a);
+        assert!((mean - (u0 + 0.125 * a)).length() < 1e-15);
+        // friction: the terminal velocity a/k whatever the step (the split kick + decay
+        // relaxes to h a e^{-kh}/(1 - e^{-kh}), 30 % of it at kh = 2)
+        let mut u = DVec2::ZERO;
+        for _ in 0..40 {
+            u = integrate_velocity(u, a, 0.0, 50.0, 1.0 / 24.0).0;
+        }
+        assert!((u - a / 50.0).length() < 1e-14, "{u} vs {}", a / 50.0);
+        // pure rotation keeps the speed and turns by −2ωh
+        let (end, _) = integrate_velocity(u0, DVec2::ZERO, 0.8, 0.0, 0.3);
+        assert!((end - coriolis_turn(DVec3::new(0.0, 0.0, 0.8), 0.3, u0)).length() < 1e-15);
     }
 
     #[test]

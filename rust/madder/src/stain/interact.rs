@@ -241,6 +241,64 @@ impl Fields {
         }
     }
 
+    /// The fields of the vertices `index` (in that order).
+    pub fn gather(&self, index: &[u32]) -> Self {
+        let pick = |v: &[f64]| index.iter().map(|&i| v[i as usize]).collect();
+        let pick3 = |v: &Option<Vec<[f64; 3]>>| {
+            v.as_ref()
+                .map(|v| index.iter().map(|&i| v[i as usize]).collect())
+        };
+        Self {
+            free_solvent: pick(&self.free_solvent),
+            solute: pick(&self.solute),
+            absorbed_solvent: pick(&self.absorbed_solvent),
+            absorbed_solute: pick(&self.absorbed_solute),
+            adsorbed: pick(&self.adsorbed),
+            color_free: pick3(&self.color_free),
+            color_held: pick3(&self.color_held),
+        }
+    }
+
+    /// Writes `part` (the fields of the vertices `index`, as [`Fields::gather`] gives
+    /// them) back into these fields.
+    ///
+    /// # Panics
+    /// If `part` tracks colour and these fields do not, or the lengths differ.
+    pub fn scatter(&mut self, index: &[u32], part: &Fields) {
+        fn put<T: Copy>(to: &mut [T], index: &[u32], from: &[T]) {
+            assert_eq!(index.len(), from.len(), "one value per index");
+            for (&i, &x) in index.iter().zip(from) {
+                to[i as usize] = x;
+            }
+        }
+        put(&mut self.free_solvent, index, &part.free_solvent);
+        put(&mut self.solute, index, &part.solute);
+        put(&mut self.absorbed_solvent, index, &part.absorbed_solvent);
+        put(&mut self.absorbed_solute, index, &part.absorbed_solute);
+        put(&mut self.adsorbed, index, &part.adsorbed);
+        for (to, from) in [
+            (&mut self.color_free, &part.color_free),
+            (&mut self.color_held, &part.color_held),
+        ] {
+            if let Some(from) = from {
+                put(
+                    to.as_mut().expect("colour tracked in the part only"),
+                    index,
+                    from,
+                );
+            }
+        }
+    }
+
+    /// Whether vertex `i` holds liquid or solute that can still change (anything but
+    /// the adsorbed deposit).
+    pub fn is_live(&self, i: usize) -> bool {
+        self.free_solvent[i] > 0.0
+            || self.solute[i] > 0.0
+            || self.absorbed_solvent[i] > 0.0
+            || self.absorbed_solute[i] > 0.0
+    }
+
     /// `Σ_i (s_i + sp_i + sa_i)`, in vertex order.
     pub fn total_solute(&self) -> f64 {
         self.solute

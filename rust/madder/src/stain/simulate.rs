@@ -12,18 +12,21 @@
 //! One frame `t → t + H` is `S` sub-steps of `h = H/S`, the positions interpolated
 //! linearly between the two frames. Each sub-step, on the geometry at its end:
 //!
-//! 1. **Forces** (§4.4): `u += h·a` with `a` the tangential gravity and rectilinear force
-//!    in `F_i`, then the Coriolis rotation (exact, [`super::forces::apply_coriolis`]) with
-//!    the frames' angular velocity over the sub-step, then friction `u ← e^{−k h} u` — the
-//!    drag of the fibres on the liquid (`k = 0` is the seed's frictionless liquid; the
-//!    exponential is the exact solution of `u̇ = −k u`, stable for any `h`).
+//! 1. **Forces** (§4.4): `u̇ = a − k u − 2ω_z J u` over the sub-step, `a` the tangential
+//!    gravity and rectilinear force in `F_i`, `k` the drag of the fibres on the liquid
+//!    (`k = 0` is the seed's frictionless liquid), `ω` the frames' angular velocity over
+//!    the sub-step: integrated exactly for constant `a` and `ω`
+//!    ([`super::forces::integrate_velocity`]), so the liquid reaches its terminal
+//!    velocity `a/k` at any step (a kick followed by the decay `e^{−kh}` reaches 30 % of
+//!    it at 24 fps), and the Coriolis force turns it without changing its speed.
 //! 2. **Advection** (§4.3.1): the velocity semi-Lagrangian, then the densities by
 //!    upwind finite volumes ([`super::advect`]); or, with `momentum_advection`, the
 //!    velocity follows the solvent's momentum (§4.3.2). The densities move with the
-//!    time-centred velocity `½(u^n + u^{n+1})` (start and end of the sub-step): with the
-//!    end velocity alone (the plain split step) a liquid accelerating from rest travels
-//!    `(n+1)/n` times `½at²` after `n` steps — 12 % too far after 8 frames — and with the
-//!    average it travels exactly `½at²`.
+//!    sub-step's mean velocity: the exact mean under the forces plus half the change the
+//!    advection makes (without friction, `½(u^n + u^{n+1})`). With the end velocity alone
+//!    (the plain split step) a liquid accelerating from rest travels `(n+1)/n` times
+//!    `½at²` after `n` steps — 12 % too far after 8 frames — and with the mean it travels
+//!    exactly `½at²`.
 //! 3. **Diffusion** (§4.3.3–4.3.4): `(M + h K_S) σ' = m` for the free solvent and the
 //!    dissolved solute (and their colour), `K_S` the stiffness of the fabric tensor in
 //!    each face's weft basis; the velocity by the connection (Bochner) Laplacian of the
@@ -48,16 +51,32 @@
 //! positive semi-definite on every mesh (the scalar diffusion of the densities keeps the
 //! consistent weights).
 //!
-//! ## Active region
-//! A stain usually covers a small part of the cloth, so with `active_region` (the default)
-//! the expensive phases work on the *active region* only, recomputed every sub-step from
-//! the masses at its start: the vertices holding flowing liquid — free solvent or
-//! dissolved solute density above [`ACTIVE_THRESHOLD`] (1e-12) of that field's largest
-//! density — grown by [`ACTIVE_RINGS`] (3) rings plus the previous sub-step's number of
-//! transport sub-cycles. (A threshold of exactly zero would not
-//! do: implicit diffusion gives every vertex of the region a positive, if 1e-30-level,
-//! mass, so the region would grow by three rings every sub-step until it covered the
-//! cloth.) Geometry, frames, connection and forces stay global.
+//! ## Window and active region
+//! A stain usually covers a small part of the cloth, so with `active_region` (the
+//! default) a frame works on a *window*, a mesh of its own cut out of the cloth:
+//!
+//! - the **active** vertices: those holding flowing liquid — free solvent or dissolved
+//!   solute density above [`ACTIVE_THRESHOLD`] (1e-12) of that field's peak — grown by
+//!   [`ACTIVE_RINGS`] (3) rings plus one ring per transport sub-cycle of the frame's
+//!   sub-steps (liquid moves at most one ring per sub-cycle, so it cannot reach the
+//!   region's edge within the frame). Every phase runs on them. (A threshold of exactly
+//!   zero would not do: implicit diffusion gives every vertex of the region a positive,
+//!   if 1e-30-level, mass, so the region would grow every step until it covered the
+//!   cloth.)
+//! - the **held** vertices: not flowing, but holding absorbed liquid or solute that the
+//!   interactions still change.
+//! - the **halo**: the other corners of the active and held vertices' faces, so that
+//!   their one-rings are whole: their areas, Kabsch frames, connection and exposure are
+//!   exactly the cloth's. The halo holds nothing that can change; it is not written back.
+//!
+//! Geometry, frames, connection, forces, advection, diffusion and interactions all run on
+//! the window only; the cloth outside it costs nothing per frame but reading the
+//! positions. A frame gathers the window's state, steps it, and writes it back. The window
+//! is kept from frame to frame while the liquid's needed region stays inside its active
+//! vertices and is at least half of it; a new one gets [`WINDOW_SLACK_RINGS`] rings more
+//! than needed, so that it lasts several frames (building one is a topology, fans,
+//! patterns and solvers on the window). With `active_region` off, the window is the whole
+//! mesh, every vertex active: one code path.
 //!
 //! - **Diffusion.** `(M + h K_A) σ' = m` on the active vertices, `K_A` keeping the
 //!   stiffness of the edges with both ends active, each diagonal recomputed as minus the
@@ -66,13 +85,23 @@
 //!   one, and the total is restored over the region after the solve; the negative-mass
 //!   repair draws only from active vertices. The velocity's Bochner system is restricted
 //!   the same way (block rows and columns of the active vertices, `K_ii = Σ_{j active}
-//!   L_ij` with the clamped weights). The patterns and solvers are rebuilt only when the
-//!   region changes.
-//! - **Advection.** The semi-Lagrangian back-trace runs for active vertices only; and the
-//!   upwind transport is closed inside the region (no transfer across an edge with an end
-//!   outside, [`UpwindPlan::restrict_to`]; its sub-cycle count is the whole mesh's).
-//! - **Outside** the region the flowing masses are left unchanged (the interactions still
-//!   act everywhere) and the velocities keep their value after the forces.
+//!   L_ij` with the clamped weights).
+//! - **Advection.** The semi-Lagrangian back-trace runs for active vertices only, and the
+//!   flux across every edge with an end outside the active region is zero: the upwind
+//!   transport is closed inside it.
+//! - **Velocities outside.** The velocity of a vertex that is not in the window is not
+//!   stepped. Each vertex keeps the time of its last step and its frame then; when it
+//!   enters a window, its velocity is brought to now by the exact solution of the force
+//!   equation over the time between, with the current body force and the frame's mean
+//!   turn since ([`super::forces::integrate_velocity`]). For forces that did not change in
+//!   between this is what stepping it all along would have given: uniform acceleration
+//!   (`u + a t` without friction), terminal velocity, steady rotation. (A turn of more
+//!   than half a revolution between is aliased.) Dry liquid velocity is a fiction
+//!   anyway: it only matters once liquid arrives, and by then the vertex has been
+//!   active for [`ACTIVE_RINGS`] sub-steps at least.
+//! - **Areas outside.** The window writes back the areas of its active and held vertices;
+//!   after each frame the areas of every other vertex that holds a deposit are recomputed
+//!   from their faces, so the densities read out are current everywhere.
 //!
 //! What it truncates: the far tail of implicit diffusion, which on the whole mesh spreads
 //! mass beyond the three rings at levels ~1e-12 of the peak and below, and the viscous
@@ -81,38 +110,30 @@
 //! peak after 200 steps). Evaporation drains every vertex holding less than one step's
 //! evaporation to zero, so the wet edge is sharp and the whole-mesh step leaks about
 //! 1e-10 of the peak per step past three rings, where it evaporates at once; the region
-//! keeps that liquid (measured: up to 1e-5 of the peak after 200 steps; 1e-8 with five
-//! rings). The transport is closed inside the region, and each transport sub-cycle moves
-//! liquid at most one ring, so the margin is three rings plus the number of sub-cycles
-//! the previous sub-step needed: a fast flow widens its region instead of queueing at
-//! its edge (only a sudden jump in speed within one sub-step can make liquid wait one
-//! sub-step there).
+//! keeps that liquid (measured: up to 1e-5 of the peak after 200 steps).
 //!
 //! ## Failure
-//! [`Simulator::step`] works on a copy of the state and commits it only when the whole
-//! frame succeeded: an error (bad positions naming the vertex, a solver failure) leaves
+//! [`Simulator::step`] works on the window's copy of the state and writes it back only
+//! when the whole frame succeeded: an error (bad positions naming the vertex, a solver failure) leaves
 //! the simulator at the last good frame.
 
 use std::time::Instant;
 
 use faer::Par;
-use glam::{DVec2, DVec3};
+use glam::{DMat3, DVec2, DVec3};
 use rayon::prelude::*;
 
-use super::advect::{UpwindPlan, advect_velocity, advect_velocity_in, dual_fluxes};
+use super::advect::{UpwindPlan, advect_velocity_in, dual_fluxes};
 use super::diffuse::{Conductivity, check_range};
 use super::forces::{
-    Forces, coriolis_turn, corotating_frames_with, frame_acceleration, frame_angular_velocity,
-    frame_body_acceleration, rest_frames,
+    Forces, corotating_frames_with, frame_angular_velocity, frame_body_acceleration,
+    integrate_velocity, rest_frames, second_difference,
 };
 use super::interact::{Fields, InteractionRates, exposure, interact};
 use crate::error::{Error, ParamError};
-use crate::mesh::geometry::check_positions;
+use crate::mesh::geometry::{check_positions, vertex_area};
 use crate::mesh::{Connection, Geometry, OneRings, RingAdjacency, Topology, VertexFrames};
-use crate::ops::{
-    BochnerPattern, LowerCsc, VertexPattern, WarmCg, add_lumped_mass, add_lumped_mass_blocks,
-    bochner_stiffness, cotan_stiffness,
-};
+use crate::ops::{LowerCsc, VertexPattern, WarmCg, cotan_stiffness};
 
 /// A vertex is "dry" for the evaporation boundary rule (eq. 4.8) below this liquid
 /// density, kg/m² (1 g/m², a film of water 1 µm thick).
@@ -136,6 +157,14 @@ pub const ACTIVE_RINGS: usize = 3;
 /// A vertex holds flowing liquid when its free-solvent or dissolved-solute density is
 /// above this fraction of that field's largest density (module doc, "Active region").
 pub const ACTIVE_THRESHOLD: f64 = 1e-12;
+
+/// Rings a new window's active region gets beyond what the frame needs, so that the
+/// liquid can spread for several frames before the window is rebuilt (module doc).
+pub const WINDOW_SLACK_RINGS: usize = 4;
+
+/// A window is rebuilt when its active region exceeds twice the needed one plus this
+/// many vertices (the liquid shrank or dried).
+pub const WINDOW_SLACK_VERTICES: usize = 256;
 
 /// Physical parameters of the liquid and the cloth (SI units).
 #[derive(Debug, Clone, PartialEq)]
@@ -214,12 +243,20 @@ impl StainParams {
 struct State {
     positions: Vec<DVec3>,
     previous: Option<Vec<DVec3>>,
+    /// The frame of every vertex at `stamp`, the time its velocity was last stepped
+    /// (vertices outside the window are not stepped: module doc, "Window").
     frames: VertexFrames,
+    stamp: Vec<f64>,
+    /// Lumped areas at the current frame of every vertex that holds anything (and of the
+    /// window's vertices); other vertices keep the area they had when last needed.
     vertex_area: Vec<f64>,
     velocity: Vec<DVec2>,
     fields: Fields,
     evaporated: f64,
     time: f64,
+    /// Vertices that have ever held liquid or solute (their areas are kept current).
+    stained: Vec<u32>,
+    is_stained: Vec<bool>,
 }
 
 /// Totals over the mesh (kg), for conservation checks and reports.
@@ -237,43 +274,143 @@ pub struct Totals {
 #[derive(Debug)]
 pub struct Simulator {
     topology: Topology,
+    /// Fans of faces around every vertex (the window's faces, single vertex areas).
     rings: OneRings,
-    /// Vertex neighbours in edge order (the Kabsch sums, the negative-mass repair).
+    /// Vertex neighbours in edge order (the Kabsch sums, growing the active region).
     adjacency: RingAdjacency,
     rest: Vec<DVec3>,
     rest_frames: VertexFrames,
     conductivity: Conductivity,
     params: StainParams,
-    pattern: VertexPattern,
-    bochner: BochnerPattern,
-    scalar_cg: WarmCg,
-    vector_cg: WarmCg,
     boundary: Vec<bool>,
     loose: Vec<bool>,
     solute_color: [f64; 3],
     state: State,
     profile: Profile,
-    /// Scalar pattern slot → mesh edge (`u32::MAX` on the diagonal).
-    slot_edge: Vec<u32>,
-    /// The active region of the last sub-step and its solvers (kept while it is unchanged).
-    region: Option<Region>,
-    /// The density and velocity solvers of `region`.
-    region_cg: Option<(WarmCg, WarmCg)>,
+    /// The window of the last frame (kept while the liquid stays well inside it).
+    window: Option<Window>,
+    /// Liquid may have been poured outside the window: the next frame looks for it on
+    /// the whole mesh.
+    rescan: bool,
     /// Transport sub-cycles of the last sub-step (widens the next region).
     last_transport_cycles: usize,
 }
 
-/// The active region of a sub-step (module doc): the vertices, the restricted patterns of
-/// the two diffusions and their solvers.
+/// The part of the cloth a frame works on (module doc, "Window"): the *active* vertices
+/// (every phase), the *held* ones (wet but not flowing: interactions only), and the
+/// *halo*, the other corners of their faces, as a mesh of its own.
+#[derive(Debug)]
+struct Window {
+    /// Mesh vertex of every window vertex, increasing.
+    vertices: Vec<u32>,
+    topology: Topology,
+    rings: OneRings,
+    adjacency: RingAdjacency,
+    rest: Vec<DVec3>,
+    rest_frames: VertexFrames,
+    conductivity: Conductivity,
+    /// The cloth's border (not the window's edge), per window vertex.
+    boundary: Vec<bool>,
+    pattern: VertexPattern,
+    /// Window vertices that are active or held: their whole one-ring is in the window,
+    /// so their areas, frames and interactions are those of the cloth.
+    whole: Vec<u32>,
+    /// The active vertices and the restricted operators on them.
+    region: Region,
+    cg: Option<(WarmCg, WarmCg)>,
+    /// Per mesh vertex: active.
+    mask: Vec<bool>,
+    /// Per mesh vertex: active or held.
+    whole_mask: Vec<bool>,
+}
+
+impl Window {
+    /// The window of the mesh vertices flagged `active` or `held`.
+    fn new(sim: &Simulator, mask: Vec<bool>, held: &[bool]) -> Result<Option<Self>, Error> {
+        let topo = &sim.topology;
+        let n = topo.n_vertices();
+        let whole_mask: Vec<bool> = (0..n).map(|v| mask[v] || held[v]).collect();
+        let mut faces: Vec<u32> = (0..n)
+            .filter(|&v| whole_mask[v])
+            .flat_map(|v| sim.rings.wedges(v).iter().map(|w| w.face))
+            .collect();
+        if faces.is_empty() {
+            return Ok(None);
+        }
+        faces.sort_unstable();
+        faces.dedup();
+        let mut local = vec![u32::MAX; n];
+        for &f in &faces {
+            for v in topo.faces()[f as usize] {
+                local[v as usize] = 0;
+            }
+        }
+        let vertices: Vec<u32> = (0..n as u32).filter(|&v| local[v as usize] == 0).collect();
+        for (j, &v) in vertices.iter().enumerate() {
+            local[v as usize] = j as u32;
+        }
+        let tris = faces
+            .iter()
+            .map(|&f| topo.faces()[f as usize].map(|v| local[v as usize]))
+            .collect();
+        let topology = Topology::from_triangles(vertices.len(), tris)?;
+        // the fans walked in the cloth's sense (its harmonized orientation)
+        let flipped = faces
+            .iter()
+            .map(|&f| sim.rings.face_flipped()[f as usize])
+            .collect();
+        let rings = OneRings::with_orientation(&topology, flipped);
+        let adjacency = RingAdjacency::new(&topology);
+        let pattern = VertexPattern::new(&topology);
+        let mut slot_edge = vec![u32::MAX; pattern.nnz()];
+        for (e, &s) in pattern.edge_slot().iter().enumerate() {
+            slot_edge[s as usize] = e as u32;
+        }
+        let gather = |v: &[u32]| -> Vec<bool> { v.iter().map(|&v| mask[v as usize]).collect() };
+        let region = Region::new(&pattern, &slot_edge, gather(&vertices));
+        let cg = region.solvers();
+        Ok(Some(Self {
+            whole: (0..vertices.len() as u32)
+                .filter(|&j| whole_mask[vertices[j as usize] as usize])
+                .collect(),
+            rest: vertices.iter().map(|&v| sim.rest[v as usize]).collect(),
+            rest_frames: VertexFrames {
+                frame: vertices
+                    .iter()
+                    .map(|&v| sim.rest_frames.frame[v as usize])
+                    .collect(),
+            },
+            conductivity: sim.conductivity.faces(&faces),
+            boundary: vertices.iter().map(|&v| sim.boundary[v as usize]).collect(),
+            vertices,
+            topology,
+            rings,
+            adjacency,
+            pattern,
+            region,
+            cg,
+            mask,
+            whole_mask,
+        }))
+    }
+
+    /// `values` of every mesh vertex, in window order.
+    fn gather<T: Copy>(&self, values: &[T]) -> Vec<T> {
+        self.vertices.iter().map(|&v| values[v as usize]).collect()
+    }
+}
+
+/// The active region of a window (module doc): the active vertices, the restricted
+/// patterns of the two diffusions and their solvers.
 #[derive(Debug)]
 struct Region {
     /// Active vertices, increasing.
     vertices: Vec<u32>,
-    /// Per mesh vertex: active or not.
+    /// Per vertex: active or not.
     mask: Vec<bool>,
     /// Lower triangle of the restricted scalar operator, local numbering.
     scalar: SubCsc,
-    /// Per entry of `scalar`: its mesh edge (`u32::MAX` on the diagonal).
+    /// Per entry of `scalar`: its edge (`u32::MAX` on the diagonal).
     edge: Vec<u32>,
     /// The `2×2` block expansion of `scalar` (the Bochner system).
     bochner: SubCsc,
@@ -426,23 +563,21 @@ impl Region {
     }
 }
 
-/// The active mask (module doc): the vertices whose free solvent or dissolved solute is
-/// above [`ACTIVE_THRESHOLD`] of its field's peak density, grown by `rings` rings
-/// ([`ACTIVE_RINGS`] plus the last sub-step's transport sub-cycles). Loose vertices are
-/// never active.
-fn active_mask(
-    adjacency: &RingAdjacency,
+/// Where the liquid is (module doc, "Window"): among the vertices `scan`, those holding
+/// flowing liquid — free solvent or dissolved solute density above [`ACTIVE_THRESHOLD`]
+/// of that field's peak over `scan` — and those holding anything else that can still
+/// change (held). Loose vertices are neither.
+fn find_liquid(
+    scan: &[u32],
     loose: &[bool],
     fields: &Fields,
     area: &[f64],
-    rings: usize,
-) -> Vec<bool> {
-    let n = area.len();
+) -> (Vec<u32>, Vec<u32>) {
     let peak = |m: &[f64]| {
-        m.iter()
-            .zip(area)
-            .filter(|(_, a)| **a > 0.0)
-            .map(|(m, a)| m / a)
+        scan.iter()
+            .map(|&v| v as usize)
+            .filter(|&v| area[v] > 0.0)
+            .map(|v| m[v] / area[v])
             .fold(0.0, f64::max)
     };
     let (free, solute) = (&fields.free_solvent, &fields.solute);
@@ -450,14 +585,33 @@ fn active_mask(
         ACTIVE_THRESHOLD * peak(free),
         ACTIVE_THRESHOLD * peak(solute),
     );
-    let mut mask = vec![false; n];
-    let mut front = Vec::new();
-    for i in 0..n {
+    let (mut flowing, mut held) = (Vec::new(), Vec::new());
+    for &v in scan {
+        let i = v as usize;
         let wet = |m: f64, floor: f64| m > 0.0 && m > floor * area[i];
-        if !loose[i] && (wet(free[i], floor.0) || wet(solute[i], floor.1)) {
-            mask[i] = true;
-            front.push(i as u32);
+        if loose[i] {
+        } else if wet(free[i], floor.0) || wet(solute[i], floor.1) {
+            flowing.push(v);
+        } else if fields.is_live(i) {
+            held.push(v);
         }
+    }
+    (flowing, held)
+}
+
+/// `seeds` grown by `rings` rings of neighbours (loose vertices excluded), as a mask and
+/// as a list.
+fn grow(
+    adjacency: &RingAdjacency,
+    loose: &[bool],
+    seeds: &[u32],
+    rings: usize,
+) -> (Vec<bool>, Vec<u32>) {
+    let mut mask = vec![false; loose.len()];
+    let mut front = seeds.to_vec();
+    let mut all = seeds.to_vec();
+    for &v in seeds {
+        mask[v as usize] = true;
     }
     for _ in 0..rings {
         let mut next = Vec::new();
@@ -469,17 +623,21 @@ fn active_mask(
                 }
             }
         }
+        all.extend_from_slice(&next);
         front = next;
     }
-    mask
+    (mask, all)
 }
 
 /// Wall-clock seconds spent in each phase since the simulator was built (for benchmarks).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Profile {
+    /// Finding the liquid and (re)building the window.
+    pub window: f64,
     /// Geometry, comoving–corotating frames (Kabsch) and the connection.
     pub geometry: f64,
-    /// Body forces.
+    /// Body forces (and bringing the velocities of vertices entering the window up to
+    /// date).
     pub forces: f64,
     /// Velocity and density advection.
     pub advection: f64,
@@ -496,11 +654,23 @@ pub struct Profile {
     /// Transport sub-cycles of the density advection (≥ 1 per sub-step; more when the
     /// liquid crosses more than about one dual cell per step).
     pub transport_cycles: usize,
-    /// Active-region vertices, summed over the sub-steps (the whole mesh's count per
-    /// sub-step without an active region).
+    /// Active vertices, summed over the sub-steps.
     pub active_vertices: usize,
-    /// Times the active region changed and its patterns and solvers were rebuilt.
+    /// Window vertices (active, held and halo), summed over the sub-steps.
+    pub window_vertices: usize,
+    /// Times the window was rebuilt.
     pub region_rebuilds: usize,
+}
+
+/// One frame's work on a window, committed when the whole frame succeeded.
+struct Local {
+    velocity: Vec<DVec2>,
+    frames: VertexFrames,
+    fields: Fields,
+    area: Vec<f64>,
+    evaporated: f64,
+    /// Transport sub-cycles of the last sub-step.
+    cycles: usize,
 }
 
 impl Simulator {
@@ -534,14 +704,6 @@ impl Simulator {
         let rest_frames = rest_frames(&rings, rest)?;
         let frames = corotating_frames_with(&adjacency, &rest_frames, rest, positions);
         let geometry = Geometry::new(&topology, positions)?;
-        let pattern = VertexPattern::new(&topology);
-        let bochner = BochnerPattern::new(&pattern);
-        let scalar_cg = WarmCg::new(&pattern).with_tolerance(DENSITY_TOLERANCE);
-        let mut slot_edge = vec![u32::MAX; pattern.nnz()];
-        for (e, &s) in pattern.edge_slot().iter().enumerate() {
-            slot_edge[s as usize] = e as u32;
-        }
-        let vector_cg = WarmCg::new(&bochner).with_tolerance(VELOCITY_TOLERANCE);
         Ok(Self {
             boundary: topology.boundary_vertices(),
             loose: topology.loose_vertices(),
@@ -549,28 +711,26 @@ impl Simulator {
             rest_frames,
             conductivity,
             params,
-            pattern,
-            bochner,
-            scalar_cg,
-            vector_cg,
             solute_color,
             state: State {
                 positions: positions.to_vec(),
                 previous: None,
                 frames,
+                stamp: vec![0.0; n],
                 vertex_area: geometry.vertex_area,
                 velocity: vec![DVec2::ZERO; n],
                 fields: Fields::zeros(n),
                 evaporated: 0.0,
                 time: 0.0,
+                stained: Vec::new(),
+                is_stained: vec![false; n],
             },
             rings,
             adjacency,
             topology,
             profile: Profile::default(),
-            slot_edge,
-            region: None,
-            region_cg: None,
+            window: None,
+            rescan: true,
             last_transport_cycles: 1,
         })
     }
@@ -578,10 +738,14 @@ impl Simulator {
     pub fn topology(&self) -> &Topology {
         &self.topology
     }
-    /// The active region of the last sub-step (one flag per vertex), or `None` when the
-    /// whole mesh is stepped (`active_region` off, or before the first step).
+    /// The active vertices of the last frame (one flag per vertex), or `None` when the
+    /// whole mesh is stepped (`active_region` off) or nothing was stepped yet.
     pub fn active_region(&self) -> Option<&[bool]> {
-        self.region.as_ref().map(|r| r.mask.as_slice())
+        if self.params.active_region {
+            self.window.as_ref().map(|w| w.mask.as_slice())
+        } else {
+            None
+        }
     }
     /// Time spent per phase so far.
     pub fn profile(&self) -> Profile {
@@ -594,7 +758,8 @@ impl Simulator {
     pub fn time(&self) -> f64 {
         self.state.time
     }
-    /// Lumped vertex areas of the current frame, m².
+    /// Lumped vertex areas of the current frame, m² (of every vertex that holds or held
+    /// anything; a vertex that never did keeps an older area).
     pub fn vertex_area(&self) -> &[f64] {
         &self.state.vertex_area
     }
@@ -602,22 +767,21 @@ impl Simulator {
     pub fn fields(&self) -> &Fields {
         &self.state.fields
     }
-    /// Velocities in the vertex frames, m/s.
+    /// Velocities in the vertex frames, m/s (of each vertex's last step: a vertex outside
+    /// the window keeps the value it left it with).
     pub fn velocity(&self) -> &[DVec2] {
         &self.state.velocity
     }
-    /// The vertex frames of the current frame (columns `x, y, z`).
-    pub fn frames(&self) -> &VertexFrames {
-        &self.state.frames
-    }
-    /// Velocities as world vectors, m/s.
+    /// Velocities as world vectors, m/s (as [`Simulator::velocity`], in the frame of each
+    /// vertex's last step).
     pub fn velocity_world(&self) -> Vec<DVec3> {
         (0..self.state.velocity.len())
             .map(|i| self.state.frames.to_world(i, self.state.velocity[i]))
             .collect()
     }
-    /// Replaces the velocity field (frame components), e.g. an initial condition.
-    pub fn set_velocity(&mut self, velocity: Vec<DVec2>) -> Result<(), ParamError> {
+    /// Replaces the velocity field by world vectors (projected on each vertex's tangent
+    /// plane at the current frame), e.g. an initial condition.
+    pub fn set_velocity_world(&mut self, velocity: &[DVec3]) -> Result<(), ParamError> {
         self.check_len("velocity", velocity.len())?;
         if let Some(index) = velocity.iter().position(|u| !u.is_finite()) {
             return Err(ParamError::NonFinite {
@@ -625,7 +789,17 @@ impl Simulator {
                 index,
             });
         }
-        self.state.velocity = velocity;
+        let st = &mut self.state;
+        st.frames = corotating_frames_with(
+            &self.adjacency,
+            &self.rest_frames,
+            &self.rest,
+            &st.positions,
+        );
+        st.velocity = (0..velocity.len())
+            .map(|i| st.frames.to_local(i, velocity[i]))
+            .collect();
+        st.stamp.fill(st.time);
         Ok(())
     }
 
@@ -739,6 +913,13 @@ impl Simulator {
         if color != self.solute_color {
             self.enable_color();
         }
+        for (i, &d) in solvent.iter().enumerate() {
+            if d > 0.0 {
+                // the area now (a vertex away from the liquid keeps an older one)
+                self.state.vertex_area[i] = self.current_area(i);
+                self.mark_stained(i);
+            }
+        }
         let area = &self.state.vertex_area;
         let f = &mut self.state.fields;
         for (i, &d) in solvent.iter().enumerate() {
@@ -751,6 +932,7 @@ impl Simulator {
                 }
             }
         }
+        self.rescan = true;
         Ok(())
     }
 
@@ -797,23 +979,27 @@ impl Simulator {
                 value: weight[index],
             });
         }
+        // the splashed vertices' velocities and frames, brought to now
+        let splashed: Vec<usize> = (0..weight.len()).filter(|&i| weight[i] > 0.0).collect();
+        let now: Vec<(DVec2, DMat3)> = splashed
+            .par_iter()
+            .map(|&i| self.caught_up(i, DVec3::ZERO))
+            .collect();
         let st = &mut self.state;
-        let (frames, positions) = (&st.frames, &st.positions);
-        st.velocity.par_iter_mut().enumerate().for_each(|(i, u)| {
-            if weight[i] <= 0.0 {
-                return;
-            }
+        for (&i, (u, frame)) in splashed.iter().zip(now) {
             let mut rng = SplitMix64(seed ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
             let (r1, r2, r3) = (rng.unit(), rng.unit(), rng.unit());
-            let out = frames.to_local(i, positions[i] - center);
+            st.frames.frame[i] = frame;
+            st.stamp[i] = st.time;
+            let out = st.frames.to_local(i, st.positions[i] - center);
             let dir = if out.length() > 0.0 {
                 out.normalize()
             } else {
                 DVec2::from_angle(std::f64::consts::TAU * r3)
             };
             let turned = DVec2::from_angle(r1 - 0.5).rotate(dir);
-            *u += turned * (speed * weight[i] * (0.5 + r2));
-        });
+            st.velocity[i] = u + turned * (speed * weight[i] * (0.5 + r2));
+        }
         Ok(())
     }
 
@@ -846,54 +1032,179 @@ impl Simulator {
         if let Some(a) = after {
             check_positions(&self.topology, a)?;
         }
-        let mut state = self.state.clone();
-        let cur = state.positions.clone();
-        let acceleration = if self.params.forces.rectilinear {
-            // p̈ at the start of the interval: centred; at the very first frame, the
-            // forward difference if the frame after is known, else zero (the cloth is
-            // taken to have moved uniformly before the bake)
-            let start = match (&state.previous, after) {
-                (Some(prev), _) => frame_acceleration(prev, &cur, positions, dt),
-                (None, Some(a)) => frame_acceleration(&cur, positions, a, dt),
-                (None, None) => vec![DVec3::ZERO; cur.len()],
-            };
-            match after {
-                Some(a) => frame_acceleration(&cur, positions, a, dt)
-                    .iter()
-                    .zip(&start)
-                    .map(|(e, s)| 0.5 * (*e + *s))
-                    .collect(),
-                None => start,
-            }
-        } else {
-            vec![DVec3::ZERO; cur.len()]
+        let clock = Instant::now();
+        let substeps = self.params.substeps as usize;
+        let rebuilt = self.prepare_window(substeps)?;
+        let mut prof = self.profile;
+        prof.region_rebuilds += usize::from(rebuilt);
+        prof.window += clock.elapsed().as_secs_f64();
+        let t_end = self.state.time + dt;
+        let mut window = self.window.take();
+        let result = match window.as_mut() {
+            Some(w) => self
+                .run_frame(w, positions, dt, after, &mut prof)
+                .map(|local| self.commit(w, local, t_end)),
+            None => Ok(()),
         };
-        let s_count = self.params.substeps;
-        let h = dt / s_count as f64;
-        for s in 1..=s_count {
-            let q: Vec<DVec3> = if s == s_count {
-                positions.to_vec()
-            } else {
-                let t = s as f64 / s_count as f64;
-                cur.iter()
-                    .zip(positions)
-                    .map(|(a, b)| a.lerp(*b, t))
-                    .collect()
-            };
-            self.substep(&mut state, &q, h, &acceleration)?;
-        }
-        state.previous = Some(cur);
-        state.positions = positions.to_vec();
-        self.state = state;
+        self.window = window;
+        self.profile = prof;
+        // nothing is written before the whole frame succeeded (module doc, "Failure")
+        result?;
+        let st = &mut self.state;
+        st.time = t_end;
+        let mut buffer = st.previous.take().unwrap_or_default();
+        buffer.clear();
+        buffer.extend_from_slice(positions);
+        st.previous = Some(std::mem::replace(&mut st.positions, buffer));
+        self.refresh_areas();
         Ok(())
     }
 
+    /// Finds the liquid and keeps or rebuilds the window for a frame of `substeps`
+    /// sub-steps (module doc, "Window"). Returns whether it was rebuilt.
+    fn prepare_window(&mut self, substeps: usize) -> Result<bool, Error> {
+        let n = self.topology.n_vertices();
+        if !self.params.active_region {
+            // the whole mesh, every vertex with a face active, once
+            if self.window.is_some() {
+                return Ok(false);
+            }
+            let mask = self.loose.iter().map(|l| !l).collect();
+            self.window = Window::new(self, mask, &vec![false; n])?;
+            return Ok(true);
+        }
+        // the liquid is inside the window's whole vertices, unless some was poured since
+        let scan: Vec<u32> = match (&self.window, self.rescan) {
+            (Some(w), false) => w.whole.iter().map(|&j| w.vertices[j as usize]).collect(),
+            _ => (0..n as u32).collect(),
+        };
+        let st = &self.state;
+        let (flowing, held) = find_liquid(&scan, &self.loose, &st.fields, &st.vertex_area);
+        // liquid moves at most one ring per transport sub-cycle
+        let reach = ACTIVE_RINGS + substeps * self.last_transport_cycles;
+        let (_, needed) = grow(&self.adjacency, &self.loose, &flowing, reach);
+        let fits = self.window.as_ref().is_some_and(|w| {
+            needed.iter().all(|&v| w.mask[v as usize])
+                && held.iter().all(|&v| w.whole_mask[v as usize])
+                && w.region.vertices.len() <= 2 * needed.len() + WINDOW_SLACK_VERTICES
+        });
+        self.rescan = false;
+        if fits {
+            return Ok(false);
+        }
+        let (mask, _) = grow(
+            &self.adjacency,
+            &self.loose,
+            &flowing,
+            reach + WINDOW_SLACK_RINGS,
+        );
+        let mut is_held = vec![false; n];
+        held.iter().for_each(|&v| is_held[v as usize] = true);
+        self.window = Window::new(self, mask, &is_held)?;
+        Ok(true)
+    }
+
+    /// The velocity and frame of vertex `v` at the start of the frame: a vertex that was
+    /// outside the window is brought from its last step to now by the exact solution of
+    /// its force equation ([`integrate_velocity`]) over the time between, with the body
+    /// acceleration of `acceleration` (`p̈`, world) and the frame's mean turn since
+    /// (module doc, "Window").
+    fn caught_up(&self, v: usize, acceleration: DVec3) -> (DVec2, DMat3) {
+        let st = &self.state;
+        let (u, f) = (st.velocity[v], st.frames.frame[v]);
+        let gap = st.time - st.stamp[v];
+        if gap <= 0.0 {
+            return (u, f);
+        }
+        let now = self.adjacency.rotation(&self.rest, &st.positions, v) * self.rest_frames.frame[v];
+        if self.loose[v] {
+            return (DVec2::ZERO, now);
+        }
+        let p = &self.params;
+        let a = frame_body_acceleration(&now, acceleration, p.gravity, p.forces);
+        let turn = if p.forces.coriolis {
+            frame_angular_velocity(&f, &now, gap).z
+        } else {
+            0.0
+        };
+        (integrate_velocity(u, a, turn, p.friction, gap).0, now)
+    }
+
+    /// One frame on the window `w`, on copies of its state: nothing in `self` changes.
+    fn run_frame(
+        &self,
+        w: &mut Window,
+        positions: &[DVec3],
+        dt: f64,
+        after: Option<&[DVec3]>,
+        prof: &mut Profile,
+    ) -> Result<Local, Error> {
+        let clock = Instant::now();
+        let (p, st) = (&self.params, &self.state);
+        let cur = w.gather(&st.positions);
+        let next = w.gather(positions);
+        // p̈ over the frame interval: the mean of the centred differences at its two ends
+        // when the frame after is known (module doc of `forces`)
+        let acceleration: Vec<DVec3> = if p.forces.rectilinear {
+            w.vertices
+                .par_iter()
+                .map(|&v| {
+                    let v = v as usize;
+                    let (c, x) = (st.positions[v], positions[v]);
+                    let start = match (&st.previous, after) {
+                        (Some(prev), _) => second_difference(prev[v], c, x, dt),
+                        (None, Some(a)) => second_difference(c, x, a[v], dt),
+                        (None, None) => DVec3::ZERO,
+                    };
+                    match after {
+                        Some(a) => 0.5 * (start + second_difference(c, x, a[v], dt)),
+                        None => start,
+                    }
+                })
+                .collect()
+        } else {
+            vec![DVec3::ZERO; w.vertices.len()]
+        };
+        let (velocity, frame): (Vec<DVec2>, Vec<DMat3>) = w
+            .vertices
+            .par_iter()
+            .zip(&acceleration)
+            .map(|(&v, &a)| self.caught_up(v as usize, a))
+            .unzip();
+        let mut local = Local {
+            velocity,
+            frames: VertexFrames { frame },
+            fields: st.fields.gather(&w.vertices),
+            area: w.gather(&st.vertex_area),
+            evaporated: 0.0,
+            cycles: self.last_transport_cycles,
+        };
+        prof.forces += clock.elapsed().as_secs_f64();
+        let s_count = p.substeps as usize;
+        let h = dt / s_count as f64;
+        for s in 1..=s_count {
+            let between: Vec<DVec3>;
+            let q = if s == s_count {
+                &next
+            } else {
+                let t = s as f64 / s_count as f64;
+                between = cur.iter().zip(&next).map(|(a, b)| a.lerp(*b, t)).collect();
+                &between
+            };
+            self.substep(w, &mut local, q, h, &acceleration, prof)?;
+        }
+        Ok(local)
+    }
+
+    /// One sub-step `h` of the window to positions `q` (window order).
     fn substep(
-        &mut self,
-        st: &mut State,
+        &self,
+        w: &mut Window,
+        loc: &mut Local,
         q: &[DVec3],
         h: f64,
         acceleration: &[DVec3],
+        prof: &mut Profile,
     ) -> Result<(), Error> {
         let mut clock = Instant::now();
         let mut lap = |slot: &mut f64| {
@@ -901,100 +1212,62 @@ impl Simulator {
             *slot += (now - clock).as_secs_f64();
             clock = now;
         };
-        let mut prof = self.profile;
-        let p = self.params.clone();
-        let topo = &self.topology;
+        let p = &self.params;
+        let n = w.vertices.len();
+        let topo = &w.topology;
         let geometry = Geometry::new(topo, q)?;
-        let frames = corotating_frames_with(&self.adjacency, &self.rest_frames, &self.rest, q);
-        let connection = Connection::new(topo, &self.rings, &geometry, &frames, q);
-        // the active region, from the masses at the start of the sub-step (module doc)
-        if p.active_region {
-            let rings = ACTIVE_RINGS + self.last_transport_cycles;
-            let mask = active_mask(
-                &self.adjacency,
-                &self.loose,
-                &st.fields,
-                &st.vertex_area,
-                rings,
-            );
-            if self.region.as_ref().is_none_or(|r| r.mask != mask) {
-                let region = Region::new(&self.pattern, &self.slot_edge, mask);
-                self.region_cg = region.solvers();
-                self.region = Some(region);
-                prof.region_rebuilds += 1;
-            }
-        } else {
-            self.region = None;
-            self.region_cg = None;
-        }
-        let region = self.region.as_ref();
-        prof.active_vertices += region
-            .as_ref()
-            .map_or(topo.n_vertices(), |r| r.vertices.len());
+        let frames = corotating_frames_with(&w.adjacency, &w.rest_frames, &w.rest, q);
+        let connection = Connection::new(topo, &w.rings, &geometry, &frames, q);
+        prof.active_vertices += w.region.vertices.len();
+        prof.window_vertices += n;
         lap(&mut prof.geometry);
 
-        // the velocity at the start of the sub-step, for the time-centred flux below
-        let start_velocity = st.velocity.clone();
-        // 1. body forces (§4.4): half kick, Coriolis rotation, half kick, then friction;
-        // loose vertices are held at rest. One pass, vertex by vertex.
-        let kicks = p.forces.gravity || p.forces.rectilinear;
-        let damp = (p.friction > 0.0).then(|| (-p.friction * h).exp());
-        let (old_frames, loose) = (&st.frames.frame, &self.loose);
-        st.velocity
-            .par_iter_mut()
-            .zip(&frames.frame)
-            .enumerate()
-            .for_each(|(i, (u, f))| {
-                let kick = kicks.then(|| {
-                    (0.5 * h) * frame_body_acceleration(f, acceleration[i], p.gravity, p.forces)
-                });
-                if let Some(k) = kick {
-                    *u += k;
-                }
-                if p.forces.coriolis {
-                    *u = coriolis_turn(frame_angular_velocity(&old_frames[i], f, h), h, *u);
-                }
-                if let Some(k) = kick {
-                    *u += k;
-                }
-                if let Some(damp) = damp {
-                    *u *= damp;
-                }
-                if loose[i] {
-                    *u = DVec2::ZERO;
-                }
-            });
-
+        // 1. body forces (§4.4), friction and the Coriolis turn, exactly over the sub-step
+        let (forced, mean): (Vec<DVec2>, Vec<DVec2>) = (0..n)
+            .into_par_iter()
+            .map(|j| {
+                let f = &frames.frame[j];
+                let a = frame_body_acceleration(f, acceleration[j], p.gravity, p.forces);
+                let turn = if p.forces.coriolis {
+                    frame_angular_velocity(&loc.frames.frame[j], f, h).z
+                } else {
+                    0.0
+                };
+                integrate_velocity(loc.velocity[j], a, turn, p.friction, h)
+            })
+            .unzip();
         lap(&mut prof.forces);
-        // 2. advection (§4.3.1–4.3.2)
-        let advected = match &region {
-            Some(r) => advect_velocity_in(
-                topo,
-                &self.rings,
-                &geometry,
-                &connection,
-                &st.velocity,
-                h,
-                &r.mask,
-            ),
-            None => advect_velocity(topo, &self.rings, &geometry, &connection, &st.velocity, h),
-        };
-        let centred: Vec<DVec2> = advected
-            .par_iter()
-            .zip(&start_velocity)
-            .map(|(a, b)| 0.5 * (*a + *b))
+
+        // 2. advection (§4.3.1–4.3.2), closed inside the active region
+        let active = &w.region.mask;
+        let advected =
+            advect_velocity_in(topo, &w.rings, &geometry, &connection, &forced, h, active);
+        // the densities move with the sub-step's mean velocity: the exact mean under the
+        // forces, plus half the change the advection made at its end (module doc)
+        let centred: Vec<DVec2> = (0..n)
+            .map(|j| {
+                if active[j] {
+                    mean[j] + 0.5 * (advected[j] - forced[j])
+                } else {
+                    DVec2::ZERO
+                }
+            })
             .collect();
-        let flux = dual_fluxes(topo, q, &frames, &centred);
-        let mut plan = UpwindPlan::new(topo, &geometry.vertex_area, &flux, h)?;
-        if let Some(r) = &region {
-            plan.restrict_to(topo, &r.mask);
+        let mut flux = dual_fluxes(topo, q, &frames, &centred);
+        for (phi, &[a, b]) in flux.iter_mut().zip(topo.edges()) {
+            if !(active[a as usize] && active[b as usize]) {
+                *phi = 0.0;
+            }
         }
+        let plan = UpwindPlan::new(topo, &geometry.vertex_area, &flux, h)?;
         prof.transport_cycles += plan.substeps();
-        self.last_transport_cycles = plan.substeps();
+        loc.cycles = plan.substeps();
         // the momentum advection needs the solvent before its transport
-        let solvent_before = p.momentum_advection.then(|| st.fields.free_solvent.clone());
+        let solvent_before = p
+            .momentum_advection
+            .then(|| loc.fields.free_solvent.clone());
         {
-            let f = &mut st.fields;
+            let f = &mut loc.fields;
             let mut color = f.color_free.as_ref().map(|c| split_rgb(c));
             let mut fields: Vec<&mut [f64]> = vec![&mut f.free_solvent, &mut f.solute];
             if let Some(c) = color.as_mut() {
@@ -1005,118 +1278,147 @@ impl Simulator {
                 merge_rgb(&c, cf);
             }
         }
-        st.velocity = match solvent_before {
-            Some(before) => {
-                plan.momentum_velocity(topo, &connection, &before, &st.velocity, &advected)
-            }
+        loc.velocity = match solvent_before {
+            Some(before) => plan.momentum_velocity(topo, &connection, &before, &forced, &advected),
             None => advected,
         };
-
         lap(&mut prof.advection);
+
         // 3. diffusion (§4.3.3–4.3.4, eq. 4.6): the densities and the velocity are
         // independent systems, solved side by side
         let ops = Ops {
-            topology: &self.topology,
-            adjacency: &self.adjacency,
-            pattern: &self.pattern,
-            bochner: &self.bochner,
-            loose: &self.loose,
-            conductivity: &self.conductivity,
+            topology: topo,
+            adjacency: &w.adjacency,
+            pattern: &w.pattern,
+            conductivity: &w.conductivity,
+            region: &w.region,
         };
-        let (fields, velocity) = (&mut st.fields, &mut st.velocity);
-        let (densities, viscous) = match region {
-            None => {
-                let (scalar_cg, vector_cg) = (&mut self.scalar_cg, &mut self.vector_cg);
-                rayon::join(
-                    || diffuse_densities(&ops, scalar_cg, fields, &geometry, h),
-                    || {
-                        if p.viscosity > 0.0 {
-                            diffuse_velocity(
-                                &ops,
-                                vector_cg,
-                                velocity,
-                                &geometry,
-                                &connection,
-                                h * p.viscosity,
-                            )
-                        } else {
-                            Ok(0)
-                        }
-                    },
-                )
-            }
-            Some(r) => match self.region_cg.as_mut() {
-                None => (Ok(0), Ok(0)),
-                Some((scalar_cg, vector_cg)) => rayon::join(
-                    || diffuse_densities_in(&ops, r, scalar_cg, fields, &geometry, h),
-                    || {
-                        if p.viscosity > 0.0 {
-                            diffuse_velocity_in(
-                                &ops,
-                                r,
-                                vector_cg,
-                                velocity,
-                                &geometry,
-                                &connection,
-                                h * p.viscosity,
-                            )
-                        } else {
-                            Ok(0)
-                        }
-                    },
-                ),
-            },
+        let (fields, velocity) = (&mut loc.fields, &mut loc.velocity);
+        let (densities, viscous) = match w.cg.as_mut() {
+            None => (Ok(0), Ok(0)),
+            Some((scalar_cg, vector_cg)) => rayon::join(
+                || diffuse_densities(&ops, scalar_cg, fields, &geometry, h),
+                || {
+                    if p.viscosity > 0.0 {
+                        let scale = h * p.viscosity;
+                        diffuse_velocity(&ops, vector_cg, velocity, &geometry, &connection, scale)
+                    } else {
+                        Ok(0)
+                    }
+                },
+            ),
         };
         prof.density_iterations += densities?;
         prof.velocity_iterations += viscous?;
         lap(&mut prof.diffusion);
 
-        // 4. interactions (§4.5)
-        let topo = &self.topology;
-        let wet: Vec<f64> = (0..st.vertex_area.len())
-            .map(|i| {
-                let a = geometry.vertex_area[i];
-                let m = st.fields.free_solvent[i] + st.fields.absorbed_solvent[i];
+        // 4. interactions (§4.5) on the active and held vertices (the halo's areas are
+        // partial; it holds nothing that can change)
+        let wet: Vec<f64> = (0..n)
+            .map(|j| {
+                let a = geometry.vertex_area[j];
+                let m = loc.fields.free_solvent[j] + loc.fields.absorbed_solvent[j];
                 if a > 0.0 { m / a } else { 0.0 }
             })
             .collect();
         let exposed = exposure(
             topo,
-            &self.boundary,
+            &w.boundary,
             &wet,
             DRY_DENSITY,
             p.interaction.evaporation_boundary,
         );
-        st.evaporated += interact(
+        let pick = |v: &[f64]| -> Vec<f64> { w.whole.iter().map(|&j| v[j as usize]).collect() };
+        let mut part = loc.fields.gather(&w.whole);
+        loc.evaporated += interact(
             &p.interaction,
-            &geometry.vertex_area,
-            &exposed,
+            &pick(&geometry.vertex_area),
+            &pick(&exposed),
             h,
-            &mut st.fields,
+            &mut part,
         )?;
-
-        st.frames = frames;
-        st.vertex_area = geometry.vertex_area;
-        st.time += h;
+        loc.fields.scatter(&w.whole, &part);
+        loc.frames = frames;
+        loc.area = geometry.vertex_area;
         lap(&mut prof.interaction);
         prof.substeps += 1;
-        self.profile = prof;
         Ok(())
+    }
+
+    /// Writes a successful frame on `w` back (module doc, "Window"): fields of every
+    /// window vertex (the halo's are unchanged), velocities, frames and areas of the
+    /// active and held vertices, stamped `time`.
+    fn commit(&mut self, w: &Window, local: Local, time: f64) {
+        let st = &mut self.state;
+        st.fields.scatter(&w.vertices, &local.fields);
+        st.evaporated += local.evaporated;
+        for &j in &w.whole {
+            let (j, v) = (j as usize, w.vertices[j as usize] as usize);
+            st.velocity[v] = local.velocity[j];
+            st.frames.frame[v] = local.frames.frame[j];
+            st.stamp[v] = time;
+            st.vertex_area[v] = local.area[j];
+            let f = &st.fields;
+            if f.is_live(v) || f.adsorbed[v] > 0.0 {
+                if !st.is_stained[v] {
+                    st.is_stained[v] = true;
+                    st.stained.push(v as u32);
+                }
+            }
+        }
+        self.last_transport_cycles = local.cycles;
+    }
+
+    fn mark_stained(&mut self, v: usize) {
+        let st = &mut self.state;
+        if !st.is_stained[v] {
+            st.is_stained[v] = true;
+            st.stained.push(v as u32);
+        }
+    }
+
+    /// The lumped area of vertex `v` at the current positions.
+    fn current_area(&self, v: usize) -> f64 {
+        let faces = self.topology.faces();
+        vertex_area(
+            self.rings.wedges(v).iter().map(|w| faces[w.face as usize]),
+            &self.state.positions,
+        )
+    }
+
+    /// Brings the areas of the stained vertices outside the window to the current frame
+    /// (the densities read out are their masses over these areas).
+    fn refresh_areas(&mut self) {
+        let whole = self.window.as_ref().map(|w| &w.whole_mask);
+        let stale: Vec<u32> = self
+            .state
+            .stained
+            .iter()
+            .copied()
+            .filter(|&v| whole.is_none_or(|m| !m[v as usize]))
+            .collect();
+        let area: Vec<f64> = stale
+            .par_iter()
+            .map(|&v| self.current_area(v as usize))
+            .collect();
+        for (v, a) in stale.into_iter().zip(area) {
+            self.state.vertex_area[v as usize] = a;
+        }
     }
 }
 
-/// The fixed operators the diffusion steps read.
+/// The operators of a window the diffusion steps read.
 struct Ops<'a> {
     topology: &'a Topology,
     adjacency: &'a RingAdjacency,
     pattern: &'a VertexPattern,
-    bochner: &'a BochnerPattern,
-    loose: &'a [bool],
     conductivity: &'a Conductivity,
+    region: &'a Region,
 }
 
-/// `(M + h K_S) σ' = m` for every flowing field, then the exact mass restoration and the
-/// non-negativity repair of the module doc. Returns the CG iterations.
+/// `(M + h K_A) σ' = m` for every flowing field on the active vertices, Neumann at the
+/// region's edge (module doc), then the exact mass restoration and the non-negativity
+/// repair; the masses outside are not touched. Returns the CG iterations.
 fn diffuse_densities(
     ops: &Ops<'_>,
     cg: &mut WarmCg,
@@ -1124,63 +1426,7 @@ fn diffuse_densities(
     geometry: &Geometry,
     h: f64,
 ) -> Result<usize, Error> {
-    let n = ops.topology.n_vertices();
-    let mut values = ops
-        .conductivity
-        .stiffness(ops.topology, geometry, ops.pattern, h);
-    add_lumped_mass(geometry, ops.pattern, 1.0, &mut values);
-    for (v, _) in ops.loose.iter().enumerate().filter(|(_, l)| **l) {
-        values[ops.pattern.diag_slot()[v] as usize] = 1.0;
-    }
-    let mut color = f.color_free.as_ref().map(|c| split_rgb(c));
-    let mut fields: Vec<&mut Vec<f64>> = vec![&mut f.free_solvent, &mut f.solute];
-    if let Some(c) = color.as_mut() {
-        fields.extend(c.iter_mut());
-    }
-    let rhs: Vec<f64> = fields.iter().flat_map(|m| m.iter().copied()).collect();
-    // warm start: the densities the masses have now (after advection) on the new areas —
-    // the solution for h → 0, closer than the last step's solution because the liquid has
-    // moved since
-    let mut sigma: Vec<f64> = rhs
-        .iter()
-        .enumerate()
-        .map(|(k, m)| {
-            let a = geometry.vertex_area[k % n];
-            if a > 0.0 { m / a } else { 0.0 }
-        })
-        .collect();
-    cg.solve(&values, &rhs, &mut sigma)?;
-    for (k, m) in fields.iter_mut().enumerate() {
-        let before: f64 = m.iter().sum();
-        let sigma = &sigma[k * n..(k + 1) * n];
-        for i in 0..n {
-            if !ops.loose[i] {
-                m[i] = geometry.vertex_area[i] * sigma[i];
-            }
-        }
-        repair_negative(ops.adjacency, m);
-        let after: f64 = m.iter().sum();
-        if after > 0.0 && before > 0.0 {
-            let scale = before / after;
-            m.iter_mut().for_each(|x| *x *= scale);
-        }
-    }
-    if let (Some(c), Some(cf)) = (color, f.color_free.as_mut()) {
-        merge_rgb(&c, cf);
-    }
-    Ok(cg.last_iterations)
-}
-
-/// [`diffuse_densities`] on the active region (module doc): `(M + h K_A) σ' = m` on the
-/// active vertices, Neumann at the region's edge; the masses outside are not touched.
-fn diffuse_densities_in(
-    ops: &Ops<'_>,
-    region: &Region,
-    cg: &mut WarmCg,
-    f: &mut Fields,
-    geometry: &Geometry,
-    h: f64,
-) -> Result<usize, Error> {
+    let region = ops.region;
     let vertices = &region.vertices;
     let nv = vertices.len();
     let area = &geometry.vertex_area;
@@ -1197,6 +1443,9 @@ fn diffuse_densities_in(
         .iter()
         .flat_map(|m| vertices.iter().map(|&v| m[v as usize]))
         .collect();
+    // warm start: the densities the masses have now (after advection) on the new areas —
+    // the solution for h → 0, closer than the last step's solution because the liquid has
+    // moved since
     let mut sigma: Vec<f64> = rhs
         .iter()
         .enumerate()
@@ -1212,7 +1461,7 @@ fn diffuse_densities_in(
         for (j, &v) in vertices.iter().enumerate() {
             m[v as usize] = area[v as usize] * sigma[j];
         }
-        repair_negative_in(ops.adjacency, m, vertices, &region.mask);
+        repair_negative(ops.adjacency, m, vertices, &region.mask);
         let after: f64 = vertices.iter().map(|&v| m[v as usize]).sum();
         if after > 0.0 && before > 0.0 {
             let scale = before / after;
@@ -1225,18 +1474,19 @@ fn diffuse_densities_in(
     Ok(cg.last_iterations)
 }
 
-/// [`diffuse_velocity`] on the active region: the block rows and columns of the active
-/// vertices, diagonal blocks `K_ii = Σ_{j active} L_ij` (clamped weights); the velocities
-/// outside are not touched.
-fn diffuse_velocity_in(
+/// Eq. 4.6 on the active vertices with clamped (non-negative) edge weights,
+/// `(M ⊗ I + h ν K_∇) u' = (M ⊗ I) u` with `scale = h ν`: the block rows and columns of
+/// the active vertices, diagonal blocks `K_ii = Σ_{j active} L_ij`; the velocities
+/// outside are not touched. Returns the CG iterations.
+fn diffuse_velocity(
     ops: &Ops<'_>,
-    region: &Region,
     cg: &mut WarmCg,
     velocity: &mut [DVec2],
     geometry: &Geometry,
     connection: &Connection,
     scale: f64,
 ) -> Result<usize, Error> {
+    let region = ops.region;
     let stiffness = cotan_stiffness(ops.topology, geometry, ops.pattern, scale);
     let area = &geometry.vertex_area;
     let scalar = region.scalar_values(ops.pattern, &stiffness, area, true);
@@ -1256,100 +1506,16 @@ fn diffuse_velocity_in(
     Ok(cg.last_iterations)
 }
 
-/// Eq. 4.6 with clamped (non-negative) edge weights: `(M ⊗ I + h ν K_∇) u' = (M ⊗ I) u`,
-/// `scale = h ν`. Returns the CG iterations.
-fn diffuse_velocity(
-    ops: &Ops<'_>,
-    cg: &mut WarmCg,
-    velocity: &mut [DVec2],
-    geometry: &Geometry,
-    connection: &Connection,
-    scale: f64,
-) -> Result<usize, Error> {
-    let mut stiffness = cotan_stiffness(ops.topology, geometry, ops.pattern, scale);
-    clamp_weights(ops.pattern, &mut stiffness);
-    let mut values = bochner_stiffness(ops.pattern, ops.bochner, &stiffness, connection);
-    add_lumped_mass_blocks(geometry, ops.bochner, 1.0, &mut values);
-    let n = ops.topology.n_vertices();
-    let mut rhs = Vec::with_capacity(2 * n);
-    let mut x = Vec::with_capacity(2 * n);
-    for (i, u) in velocity.iter().enumerate() {
-        let a = geometry.vertex_area[i];
-        rhs.extend([a * u.x, a * u.y]);
-        x.extend([u.x, u.y]);
-    }
-    for (v, _) in ops.loose.iter().enumerate().filter(|(_, l)| **l) {
-        let d = ops.bochner.diag_slot()[v];
-        values[d[0] as usize] = 1.0;
-        values[d[1] as usize] = 1.0;
-        rhs[2 * v] = velocity[v].x;
-        rhs[2 * v + 1] = velocity[v].y;
-    }
-    // interleaved (x, y) per vertex is one column of the 2N system
-    cg.solve(&values, &rhs, &mut x)?;
-    for (i, u) in velocity.iter_mut().enumerate() {
-        *u = DVec2::new(x[2 * i], x[2 * i + 1]);
-    }
-    Ok(cg.last_iterations)
-}
-
-/// Makes a scalar stiffness an M-matrix: positive off-diagonal entries (negative edge
-/// weights) are dropped and each diagonal recomputed so rows still sum to zero.
-fn clamp_weights(pattern: &VertexPattern, values: &mut [f64]) {
-    let n = pattern.n();
-    let mut diag = vec![0.0; n];
-    let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
-    for j in 0..n {
-        for s in cp[j]..cp[j + 1] {
-            let i = ri[s as usize] as usize;
-            if i == j {
-                continue;
-            }
-            let v = &mut values[s as usize];
-            if *v > 0.0 {
-                *v = 0.0;
-            }
-            diag[i] -= *v;
-            diag[j] -= *v;
-        }
-    }
-    for (j, d) in diag.into_iter().enumerate() {
-        values[pattern.diag_slot()[j] as usize] = d;
-    }
-}
-
-/// Fills negative masses from positive neighbours (in proportion to their masses), then
-/// from all positive vertices if the neighbours cannot cover the deficit; conservative,
-/// sequential (deterministic), and a no-op when nothing is negative.
-fn repair_negative(adjacency: &RingAdjacency, mass: &mut [f64]) {
-    if !mass.iter().any(|&m| m < 0.0) {
-        return;
-    }
-    let all: Vec<u32> = (0..mass.len() as u32).collect();
-    repair_vertices(adjacency, mass, &all, |_| true);
-}
-
-/// [`repair_negative`] inside the active region: deficits are filled from active
-/// neighbours and active vertices only, so the masses outside are not touched.
-fn repair_negative_in(
-    adjacency: &RingAdjacency,
-    mass: &mut [f64],
-    vertices: &[u32],
-    mask: &[bool],
-) {
+/// Fills negative masses among `vertices` (increasing) from their positive neighbours
+/// where `mask` (in proportion to their masses), then from all positive `vertices` if the
+/// neighbours cannot cover the deficit; conservative, sequential (deterministic), and a
+/// no-op when nothing is negative. The masses outside `mask` are not touched.
+fn repair_negative(adjacency: &RingAdjacency, mass: &mut [f64], vertices: &[u32], mask: &[bool]) {
     if !vertices.iter().any(|&v| mass[v as usize] < 0.0) {
         return;
     }
-    repair_vertices(adjacency, mass, vertices, |j| mask[j]);
-}
+    let inside = |j: usize| mask[j];
 
-/// The repair over `vertices` (increasing), drawing only from vertices where `inside`.
-fn repair_vertices(
-    adjacency: &RingAdjacency,
-    mass: &mut [f64],
-    vertices: &[u32],
-    inside: impl Fn(usize) -> bool,
-) {
     let mut leftover = 0.0;
     for &i in vertices {
         let i = i as usize;
