@@ -266,7 +266,8 @@ def main():
     row("Madder Simulator() + add_liquid (once)", f"{t_new:8.2f} ms")
     row("Madder step + wetness/stain/deposit", f"{t_m:8.2f} ms", f"   ({wet} vertices wetter than 1 g/m²)")
     k = max(prof["substeps"], 1)  # the last repetition's sub-steps
-    phases = ", ".join(f"{p} {1e3 * prof[p] / k:.1f}" for p in ("geometry", "forces", "advection", "diffusion", "interaction"))
+    parts = ("window", "geometry", "forces", "advection", "diffusion", "interaction")
+    phases = ", ".join(f"{p} {1e3 * prof[p] / k:.1f}" for p in parts if p in prof)
     row("  of which, per frame (ms, last repetition)", "", f" {phases}")
     row(
         "  CG iterations / transport cycles per frame",
@@ -274,6 +275,13 @@ def main():
         f" density {prof['density_iterations'] / k:.1f}, velocity {prof['velocity_iterations'] / k:.1f}; "
         f"{prof['transport_cycles'] / k:.1f}",
     )
+    if "window_vertices" in prof:
+        row(
+            "  window per frame (vertices)",
+            "",
+            f" {prof['window_vertices'] / k:.0f}, of which active {prof['active_vertices'] / k:.0f}; "
+            f"{prof['window_rebuilds']} rebuilds in {k} frames",
+        )
     verdict = "holds" if ratio <= 1.0 / TARGET else "NOT met"
     row("ratio Madder / Dynamic Paint", f"{ratio:8.3f}", f"   (target ≤ 1/{TARGET:g} = {1 / TARGET:.3f}: {verdict})")
 

@@ -314,6 +314,7 @@ impl Simulator {
         let p = self.inner.profile();
         let d = PyDict::new(py);
         for (k, v) in [
+            ("window", p.window),
             ("geometry", p.geometry),
             ("forces", p.forces),
             ("advection", p.advection),
@@ -327,6 +328,9 @@ impl Simulator {
             ("density_iterations", p.density_iterations),
             ("velocity_iterations", p.velocity_iterations),
             ("transport_cycles", p.transport_cycles),
+            ("active_vertices", p.active_vertices),
+            ("window_vertices", p.window_vertices),
+            ("window_rebuilds", p.region_rebuilds),
         ] {
             d.set_item(k, v)?;
         }

@@ -1328,8 +1328,8 @@ fn the_active_region_with_forces_conserves_and_never_misses_liquid() {
 }
 
 /// A blob that dries into a stain within a few frames, then the cloth stretches to twice
-/// its width: the stain's solute density halves everywhere (nothing flows, so every
-/// vertex keeps its solute), window or not.
+/// its width: the stain's solute density halves wherever it is above the dust level
+/// (nothing flows, so every vertex keeps its solute), window or not.
 #[test]
 fn a_dry_stain_outside_the_window_follows_the_stretching_cloth() {
     let (topo, rest) = grid(30, 0.5);
@@ -1374,7 +1374,11 @@ fn a_dry_stain_outside_the_window_follows_the_stretching_cloth() {
     let (_, whole, whole_solute) = run(false);
     let marked = before.iter().filter(|d| **d > 0.0).count();
     assert!(marked > 50, "a stain formed ({marked} vertices)");
-    for i in 0..before.len() {
+    // dust (below 1e-12 of the largest density the stain had, the wet blob's) keeps its
+    // last area (module doc): compare the vertices well above that
+    let peak = before.iter().copied().fold(0.0, f64::max);
+    let floor = 1e-9 * peak;
+    for i in (0..before.len()).filter(|&i| before[i] > floor) {
         let expected = 0.5 * before[i];
         assert!(
             (after[i] - expected).abs() <= 1e-12 * expected.abs().max(1e-300),

@@ -63,8 +63,11 @@
 //!   zero would not do: implicit diffusion gives every vertex of the region a positive,
 //!   if 1e-30-level, mass, so the region would grow every step until it covered the
 //!   cloth.)
-//! - the **held** vertices: not flowing, but holding absorbed liquid or solute that the
-//!   interactions still change.
+//! - the **held** vertices: not flowing, but holding absorbed solvent or solute above
+//!   the same fraction of its peak, which the interactions still change. What is left
+//!   below the thresholds everywhere else is *dust* (the far tail of implicit diffusion,
+//!   1e-12 of the peaks and less): it stays untouched until liquid comes near again, and
+//!   keeps the area of its last step.
 //! - the **halo**: the other corners of the active and held vertices' faces, so that
 //!   their one-rings are whole: their areas, Kabsch frames, connection and exposure are
 //!   exactly the cloth's. The halo holds nothing that can change; it is not written back.
@@ -73,8 +76,8 @@
 //! the window only; the cloth outside it costs nothing per frame but reading the
 //! positions. A frame gathers the window's state, steps it, and writes it back. The window
 //! is kept from frame to frame while the liquid's needed region stays inside its active
-//! vertices and is at least half of it; a new one gets [`WINDOW_SLACK_RINGS`] rings more
-//! than needed, so that it lasts several frames (building one is a topology, fans,
+//! vertices and is at least half of it; a new one reaches twice as far as the frame
+//! needs, plus [`WINDOW_SLACK_RINGS`] rings, so that it lasts a few frames (building one is a topology, fans,
 //! patterns and solvers on the window). With `active_region` off, the window is the whole
 //! mesh, every vertex active: one code path.
 //!
@@ -158,8 +161,9 @@ pub const ACTIVE_RINGS: usize = 3;
 /// above this fraction of that field's largest density (module doc, "Active region").
 pub const ACTIVE_THRESHOLD: f64 = 1e-12;
 
-/// Rings a new window's active region gets beyond what the frame needs, so that the
-/// liquid can spread for several frames before the window is rebuilt (module doc).
+/// Rings a new window's active region gets beyond what the frame needs, on top of the
+/// frame's own reach again (room for about two more frames of the same flow), so that the
+/// window is not rebuilt every frame (module doc).
 pub const WINDOW_SLACK_RINGS: usize = 4;
 
 /// A window is rebuilt when its active region exceeds twice the needed one plus this
@@ -273,16 +277,9 @@ pub struct Totals {
 /// The stain simulator of chapter 4 on one cloth.
 #[derive(Debug)]
 pub struct Simulator {
-    topology: Topology,
-    /// Fans of faces around every vertex (the window's faces, single vertex areas).
-    rings: OneRings,
-    /// Vertex neighbours in edge order (the Kabsch sums, growing the active region).
-    adjacency: RingAdjacency,
-    rest: Vec<DVec3>,
-    rest_frames: VertexFrames,
-    conductivity: Conductivity,
+    /// The whole cloth.
+    cloth: Cloth,
     params: StainParams,
-    boundary: Vec<bool>,
     loose: Vec<bool>,
     solute_color: [f64; 3],
     state: State,
@@ -296,6 +293,22 @@ pub struct Simulator {
     last_transport_cycles: usize,
 }
 
+/// A triangle mesh with what every phase reads: the whole cloth, or a window cut out of it.
+#[derive(Debug)]
+struct Cloth {
+    topology: Topology,
+    /// Fans of faces around every vertex.
+    rings: OneRings,
+    /// Vertex neighbours in edge order (the Kabsch sums, the negative-mass repair).
+    adjacency: RingAdjacency,
+    rest: Vec<DVec3>,
+    rest_frames: VertexFrames,
+    /// The fabric's diffusion of the densities.
+    conductivity: Conductivity,
+    /// The cloth's border, per vertex.
+    boundary: Vec<bool>,
+}
+
 /// The part of the cloth a frame works on (module doc, "Window"): the *active* vertices
 /// (every phase), the *held* ones (wet but not flowing: interactions only), and the
 /// *halo*, the other corners of their faces, as a mesh of its own.
@@ -303,14 +316,9 @@ pub struct Simulator {
 struct Window {
     /// Mesh vertex of every window vertex, increasing.
     vertices: Vec<u32>,
-    topology: Topology,
-    rings: OneRings,
-    adjacency: RingAdjacency,
-    rest: Vec<DVec3>,
-    rest_frames: VertexFrames,
-    conductivity: Conductivity,
-    /// The cloth's border (not the window's edge), per window vertex.
-    boundary: Vec<bool>,
+    /// The window as a mesh of its own (its `boundary` is the cloth's border, not the
+    /// window's edge).
+    cloth: Cloth,
     pattern: VertexPattern,
     /// Window vertices that are active or held: their whole one-ring is in the window,
     /// so their areas, frames and interactions are those of the cloth.
@@ -327,12 +335,12 @@ struct Window {
 impl Window {
     /// The window of the mesh vertices flagged `active` or `held`.
     fn new(sim: &Simulator, mask: Vec<bool>, held: &[bool]) -> Result<Option<Self>, Error> {
-        let topo = &sim.topology;
+        let topo = &sim.cloth.topology;
         let n = topo.n_vertices();
         let whole_mask: Vec<bool> = (0..n).map(|v| mask[v] || held[v]).collect();
         let mut faces: Vec<u32> = (0..n)
             .filter(|&v| whole_mask[v])
-            .flat_map(|v| sim.rings.wedges(v).iter().map(|w| w.face))
+            .flat_map(|v| sim.cloth.rings.wedges(v).iter().map(|w| w.face))
             .collect();
         if faces.is_empty() {
             return Ok(None);
@@ -357,7 +365,7 @@ impl Window {
         // the fans walked in the cloth's sense (its harmonized orientation)
         let flipped = faces
             .iter()
-            .map(|&f| sim.rings.face_flipped()[f as usize])
+            .map(|&f| sim.cloth.rings.face_flipped()[f as usize])
             .collect();
         let rings = OneRings::with_orientation(&topology, flipped);
         let adjacency = RingAdjacency::new(&topology);
@@ -369,23 +377,32 @@ impl Window {
         let gather = |v: &[u32]| -> Vec<bool> { v.iter().map(|&v| mask[v as usize]).collect() };
         let region = Region::new(&pattern, &slot_edge, gather(&vertices));
         let cg = region.solvers();
+        let cloth = Cloth {
+            rest: vertices
+                .iter()
+                .map(|&v| sim.cloth.rest[v as usize])
+                .collect(),
+            rest_frames: VertexFrames {
+                frame: vertices
+                    .iter()
+                    .map(|&v| sim.cloth.rest_frames.frame[v as usize])
+                    .collect(),
+            },
+            conductivity: sim.cloth.conductivity.faces(&faces),
+            boundary: vertices
+                .iter()
+                .map(|&v| sim.cloth.boundary[v as usize])
+                .collect(),
+            topology,
+            rings,
+            adjacency,
+        };
         Ok(Some(Self {
             whole: (0..vertices.len() as u32)
                 .filter(|&j| whole_mask[vertices[j as usize] as usize])
                 .collect(),
-            rest: vertices.iter().map(|&v| sim.rest[v as usize]).collect(),
-            rest_frames: VertexFrames {
-                frame: vertices
-                    .iter()
-                    .map(|&v| sim.rest_frames.frame[v as usize])
-                    .collect(),
-            },
-            conductivity: sim.conductivity.faces(&faces),
-            boundary: vertices.iter().map(|&v| sim.boundary[v as usize]).collect(),
             vertices,
-            topology,
-            rings,
-            adjacency,
+            cloth,
             pattern,
             region,
             cg,
@@ -565,34 +582,38 @@ impl Region {
 
 /// Where the liquid is (module doc, "Window"): among the vertices `scan`, those holding
 /// flowing liquid — free solvent or dissolved solute density above [`ACTIVE_THRESHOLD`]
-/// of that field's peak over `scan` — and those holding anything else that can still
-/// change (held). Loose vertices are neither.
+/// of that field's peak over `scan` — and the others holding absorbed solvent or solute
+/// above that fraction of its peak (held). What is left below the thresholds is *dust*
+/// (1e-12 of the peaks and less, the far tail of implicit diffusion): it stays where it
+/// is, untouched, until liquid comes near again. Loose vertices are neither.
 fn find_liquid(
     scan: &[u32],
     loose: &[bool],
     fields: &Fields,
     area: &[f64],
 ) -> (Vec<u32>, Vec<u32>) {
-    let peak = |m: &[f64]| {
-        scan.iter()
-            .map(|&v| v as usize)
-            .filter(|&v| area[v] > 0.0)
-            .map(|v| m[v] / area[v])
-            .fold(0.0, f64::max)
+    let floor = |m: &[f64]| {
+        ACTIVE_THRESHOLD
+            * scan
+                .iter()
+                .map(|&v| v as usize)
+                .filter(|&v| area[v] > 0.0)
+                .map(|v| m[v] / area[v])
+                .fold(0.0, f64::max)
     };
-    let (free, solute) = (&fields.free_solvent, &fields.solute);
-    let floor = (
-        ACTIVE_THRESHOLD * peak(free),
-        ACTIVE_THRESHOLD * peak(solute),
-    );
+    let f = fields;
+    let flowing_floor = [floor(&f.free_solvent), floor(&f.solute)];
+    let held_floor = [floor(&f.absorbed_solvent), floor(&f.absorbed_solute)];
     let (mut flowing, mut held) = (Vec::new(), Vec::new());
     for &v in scan {
         let i = v as usize;
-        let wet = |m: f64, floor: f64| m > 0.0 && m > floor * area[i];
+        let above = |m: &[f64], floor: f64| m[i] > 0.0 && m[i] > floor * area[i];
         if loose[i] {
-        } else if wet(free[i], floor.0) || wet(solute[i], floor.1) {
+        } else if above(&f.free_solvent, flowing_floor[0]) || above(&f.solute, flowing_floor[1]) {
             flowing.push(v);
-        } else if fields.is_live(i) {
+        } else if above(&f.absorbed_solvent, held_floor[0])
+            || above(&f.absorbed_solute, held_floor[1])
+        {
             held.push(v);
         }
     }
@@ -705,11 +726,16 @@ impl Simulator {
         let frames = corotating_frames_with(&adjacency, &rest_frames, rest, positions);
         let geometry = Geometry::new(&topology, positions)?;
         Ok(Self {
-            boundary: topology.boundary_vertices(),
             loose: topology.loose_vertices(),
-            rest: rest.to_vec(),
-            rest_frames,
-            conductivity,
+            cloth: Cloth {
+                boundary: topology.boundary_vertices(),
+                rest: rest.to_vec(),
+                rest_frames,
+                conductivity,
+                rings,
+                adjacency,
+                topology,
+            },
             params,
             solute_color,
             state: State {
@@ -725,9 +751,6 @@ impl Simulator {
                 stained: Vec::new(),
                 is_stained: vec![false; n],
             },
-            rings,
-            adjacency,
-            topology,
             profile: Profile::default(),
             window: None,
             rescan: true,
@@ -736,7 +759,7 @@ impl Simulator {
     }
 
     pub fn topology(&self) -> &Topology {
-        &self.topology
+        &self.cloth.topology
     }
     /// The active vertices of the last frame (one flag per vertex), or `None` when the
     /// whole mesh is stepped (`active_region` off) or nothing was stepped yet.
@@ -791,9 +814,9 @@ impl Simulator {
         }
         let st = &mut self.state;
         st.frames = corotating_frames_with(
-            &self.adjacency,
-            &self.rest_frames,
-            &self.rest,
+            &self.cloth.adjacency,
+            &self.cloth.rest_frames,
+            &self.cloth.rest,
             &st.positions,
         );
         st.velocity = (0..velocity.len())
@@ -867,7 +890,7 @@ impl Simulator {
     }
 
     fn check_len(&self, name: &'static str, got: usize) -> Result<(), ParamError> {
-        let expected = self.topology.n_vertices();
+        let expected = self.cloth.topology.n_vertices();
         if got == expected {
             Ok(())
         } else {
@@ -1028,9 +1051,9 @@ impl Simulator {
         after: Option<&[DVec3]>,
     ) -> Result<(), Error> {
         check_range("time step", dt, dt > 0.0, "finite and > 0")?;
-        check_positions(&self.topology, positions)?;
+        check_positions(&self.cloth.topology, positions)?;
         if let Some(a) = after {
-            check_positions(&self.topology, a)?;
+            check_positions(&self.cloth.topology, a)?;
         }
         let clock = Instant::now();
         let substeps = self.params.substeps as usize;
@@ -1063,7 +1086,7 @@ impl Simulator {
     /// Finds the liquid and keeps or rebuilds the window for a frame of `substeps`
     /// sub-steps (module doc, "Window"). Returns whether it was rebuilt.
     fn prepare_window(&mut self, substeps: usize) -> Result<bool, Error> {
-        let n = self.topology.n_vertices();
+        let n = self.cloth.topology.n_vertices();
         if !self.params.active_region {
             // the whole mesh, every vertex with a face active, once
             if self.window.is_some() {
@@ -1082,7 +1105,7 @@ impl Simulator {
         let (flowing, held) = find_liquid(&scan, &self.loose, &st.fields, &st.vertex_area);
         // liquid moves at most one ring per transport sub-cycle
         let reach = ACTIVE_RINGS + substeps * self.last_transport_cycles;
-        let (_, needed) = grow(&self.adjacency, &self.loose, &flowing, reach);
+        let (_, needed) = grow(&self.cloth.adjacency, &self.loose, &flowing, reach);
         let fits = self.window.as_ref().is_some_and(|w| {
             needed.iter().all(|&v| w.mask[v as usize])
                 && held.iter().all(|&v| w.whole_mask[v as usize])
@@ -1093,10 +1116,11 @@ impl Simulator {
             return Ok(false);
         }
         let (mask, _) = grow(
-            &self.adjacency,
+            &self.cloth.adjacency,
             &self.loose,
             &flowing,
-            reach + WINDOW_SLACK_RINGS,
+            // room for about two more frames of the same flow
+            2 * reach + WINDOW_SLACK_RINGS - ACTIVE_RINGS,
         );
         let mut is_held = vec![false; n];
         held.iter().for_each(|&v| is_held[v as usize] = true);
@@ -1116,7 +1140,11 @@ impl Simulator {
         if gap <= 0.0 {
             return (u, f);
         }
-        let now = self.adjacency.rotation(&self.rest, &st.positions, v) * self.rest_frames.frame[v];
+        let now = self
+            .cloth
+            .adjacency
+            .rotation(&self.cloth.rest, &st.positions, v)
+            * self.cloth.rest_frames.frame[v];
         if self.loose[v] {
             return (DVec2::ZERO, now);
         }
@@ -1214,10 +1242,11 @@ impl Simulator {
         };
         let p = &self.params;
         let n = w.vertices.len();
-        let topo = &w.topology;
+        let topo = &w.cloth.topology;
         let geometry = Geometry::new(topo, q)?;
-        let frames = corotating_frames_with(&w.adjacency, &w.rest_frames, &w.rest, q);
-        let connection = Connection::new(topo, &w.rings, &geometry, &frames, q);
+        let frames =
+            corotating_frames_with(&w.cloth.adjacency, &w.cloth.rest_frames, &w.cloth.rest, q);
+        let connection = Connection::new(topo, &w.cloth.rings, &geometry, &frames, q);
         prof.active_vertices += w.region.vertices.len();
         prof.window_vertices += n;
         lap(&mut prof.geometry);
@@ -1240,8 +1269,15 @@ impl Simulator {
 
         // 2. advection (§4.3.1–4.3.2), closed inside the active region
         let active = &w.region.mask;
-        let advected =
-            advect_velocity_in(topo, &w.rings, &geometry, &connection, &forced, h, active);
+        let advected = advect_velocity_in(
+            topo,
+            &w.cloth.rings,
+            &geometry,
+            &connection,
+            &forced,
+            h,
+            active,
+        );
         // the densities move with the sub-step's mean velocity: the exact mean under the
         // forces, plus half the change the advection made at its end (module doc)
         let centred: Vec<DVec2> = (0..n)
@@ -1288,9 +1324,9 @@ impl Simulator {
         // independent systems, solved side by side
         let ops = Ops {
             topology: topo,
-            adjacency: &w.adjacency,
+            adjacency: &w.cloth.adjacency,
             pattern: &w.pattern,
-            conductivity: &w.conductivity,
+            conductivity: &w.cloth.conductivity,
             region: &w.region,
         };
         let (fields, velocity) = (&mut loc.fields, &mut loc.velocity);
@@ -1323,7 +1359,7 @@ impl Simulator {
             .collect();
         let exposed = exposure(
             topo,
-            &w.boundary,
+            &w.cloth.boundary,
             &wet,
             DRY_DENSITY,
             p.interaction.evaporation_boundary,
@@ -1359,11 +1395,9 @@ impl Simulator {
             st.stamp[v] = time;
             st.vertex_area[v] = local.area[j];
             let f = &st.fields;
-            if f.is_live(v) || f.adsorbed[v] > 0.0 {
-                if !st.is_stained[v] {
-                    st.is_stained[v] = true;
-                    st.stained.push(v as u32);
-                }
+            if (f.is_live(v) || f.adsorbed[v] > 0.0) && !st.is_stained[v] {
+                st.is_stained[v] = true;
+                st.stained.push(v as u32);
             }
         }
         self.last_transport_cycles = local.cycles;
@@ -1379,20 +1413,48 @@ impl Simulator {
 
     /// The lumped area of vertex `v` at the current positions.
     fn current_area(&self, v: usize) -> f64 {
-        let faces = self.topology.faces();
+        let faces = self.cloth.topology.faces();
         vertex_area(
-            self.rings.wedges(v).iter().map(|w| faces[w.face as usize]),
+            self.cloth
+                .rings
+                .wedges(v)
+                .iter()
+                .map(|w| faces[w.face as usize]),
             &self.state.positions,
         )
     }
 
     /// Brings the areas of the stained vertices outside the window to the current frame
-    /// (the densities read out are their masses over these areas).
+    /// (the densities read out are their masses over these areas). Dust — a vertex
+    /// holding less than [`ACTIVE_THRESHOLD`] of the largest stain density — is dropped
+    /// from the list and keeps its last area (its density is 1e-12 of the peak's; a
+    /// window that reaches it again puts it back).
     fn refresh_areas(&mut self) {
+        let st = &self.state;
+        let f = &st.fields;
+        let density = |v: usize| {
+            let m = f.free_solvent[v]
+                + f.solute[v]
+                + f.absorbed_solvent[v]
+                + f.absorbed_solute[v]
+                + f.adsorbed[v];
+            if st.vertex_area[v] > 0.0 {
+                m / st.vertex_area[v]
+            } else {
+                0.0
+            }
+        };
+        let floor = ACTIVE_THRESHOLD
+            * st.stained
+                .iter()
+                .map(|&v| density(v as usize))
+                .fold(0.0, f64::max);
         let whole = self.window.as_ref().map(|w| &w.whole_mask);
-        let stale: Vec<u32> = self
-            .state
+        let (keep, dust): (Vec<u32>, Vec<u32>) = st
             .stained
+            .iter()
+            .partition(|&&v| density(v as usize) > floor);
+        let stale: Vec<u32> = keep
             .iter()
             .copied()
             .filter(|&v| whole.is_none_or(|m| !m[v as usize]))
@@ -1401,9 +1463,14 @@ impl Simulator {
             .par_iter()
             .map(|&v| self.current_area(v as usize))
             .collect();
+        let st = &mut self.state;
         for (v, a) in stale.into_iter().zip(area) {
-            self.state.vertex_area[v as usize] = a;
+            st.vertex_area[v as usize] = a;
         }
+        for v in dust {
+            st.is_stained[v as usize] = false;
+        }
+        st.stained = keep;
     }
 }
 
