@@ -301,7 +301,8 @@ impl Simulator {
         self.inner.set_velocity_world(&w).map_err(to_py)
     }
 
-    /// Lumped vertex areas at the current frame, m², float64.
+    /// Lumped vertex areas at the current frame, m², float64 (of every vertex that holds
+    /// or held liquid or solute; a vertex that never did keeps an older area).
     #[getter]
     fn vertex_area<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
         PyArray1::from_vec(py, self.inner.vertex_area().to_vec())

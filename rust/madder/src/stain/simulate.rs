@@ -1097,8 +1097,10 @@ impl Simulator {
             return Ok(true);
         }
         // the liquid is inside the window's whole vertices, unless some was poured since
+        // (no window and no pour: there is none but dust)
         let scan: Vec<u32> = match (&self.window, self.rescan) {
             (Some(w), false) => w.whole.iter().map(|&j| w.vertices[j as usize]).collect(),
+            (None, false) => return Ok(false),
             _ => (0..n as u32).collect(),
         };
         let st = &self.state;
