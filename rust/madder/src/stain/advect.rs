@@ -743,29 +743,36 @@ impl UpwindPlan {
         edges[e][usize::from(!self.donor_is_a[e])] as usize
     }
 
-    /// One sub-step of a mass field: per-edge transfers, then a gather per vertex in edge
-    /// order. Returns the transfers too (momentum advection reuses them).
-    fn substep(&self, topology: &Topology, mass: &[f64]) -> Vec<f64> {
+    /// The plan's transfers as each vertex sees them, in its edge order, without the
+    /// edges that carry nothing (built once per transport, used by every sub-cycle).
+    fn flows(&self, topology: &Topology) -> Flows {
         let edges = topology.edges();
-        let transfer: Vec<f64> = (0..edges.len())
-            .into_par_iter()
-            .map(|e| self.fraction[e] * mass[self.donor(edges, e)])
-            .collect();
-        (0..mass.len())
-            .into_par_iter()
-            .map(|v| {
-                let (mut out, mut inflow) = (0.0, 0.0);
-                for &e in topology.vertex_edges(v) {
-                    let e = e as usize;
-                    if self.donor(edges, e) == v {
-                        out += transfer[e];
-                    } else {
-                        inflow += transfer[e];
-                    }
+        let n = topology.n_vertices();
+        let mut f = Flows {
+            out_ptr: Vec::with_capacity(n + 1),
+            out_fraction: Vec::new(),
+            in_ptr: Vec::with_capacity(n + 1),
+            in_from: Vec::new(),
+        };
+        f.out_ptr.push(0);
+        f.in_ptr.push(0);
+        for v in 0..n {
+            for &e in topology.vertex_edges(v) {
+                let fraction = self.fraction[e as usize];
+                if fraction == 0.0 {
+                    continue;
                 }
-                (mass[v] - out).max(0.0) + inflow
-            })
-            .collect()
+                let d = self.donor(edges, e as usize);
+                if d == v {
+                    f.out_fraction.push(fraction);
+                } else {
+                    f.in_from.push((fraction, d as u32, e));
+                }
+            }
+            f.out_ptr.push(f.out_fraction.len() as u32);
+            f.in_ptr.push(f.in_from.len() as u32);
+        }
+        f
     }
 
     fn check(&self, topology: &Topology, len: usize) {
@@ -784,12 +791,7 @@ impl UpwindPlan {
     /// # Panics
     /// If `mass` does not have one value per vertex of `topology`, the plan's topology.
     pub fn transport(&self, topology: &Topology, mass: &mut [f64]) {
-        self.check(topology, mass.len());
-        let mut m = mass.to_vec();
-        for _ in 0..self.substeps {
-            m = self.substep(topology, &m);
-        }
-        mass.copy_from_slice(&m);
+        self.transport_all(topology, &mut [mass]);
     }
 
     /// Moves several fields (solvent, solute, colour masses) with the same fractions, each
@@ -810,36 +812,17 @@ impl UpwindPlan {
         if k == 0 {
             return;
         }
-        let (n, edges) = (topology.n_vertices(), topology.edges());
+        let n = topology.n_vertices();
         let mut m = vec![0.0; n * k];
         for (c, field) in fields.iter().enumerate() {
             for (v, x) in field.iter().enumerate() {
                 m[v * k + c] = *x;
             }
         }
+        let flows = self.flows(topology);
         let mut next = vec![0.0; n * k];
-        let mut transfer = vec![0.0; edges.len() * k];
         for _ in 0..self.substeps {
-            transfer.par_chunks_mut(k).enumerate().for_each(|(e, t)| {
-                let d = self.donor(edges, e);
-                for (c, t) in t.iter_mut().enumerate() {
-                    *t = self.fraction[e] * m[d * k + c];
-                }
-            });
-            next.par_chunks_mut(k).enumerate().for_each(|(v, out)| {
-                for (c, o) in out.iter_mut().enumerate() {
-                    let (mut gone, mut inflow) = (0.0, 0.0);
-                    for &e in topology.vertex_edges(v) {
-                        let e = e as usize;
-                        if self.donor(edges, e) == v {
-                            gone += transfer[e * k + c];
-                        } else {
-                            inflow += transfer[e * k + c];
-                        }
-                    }
-                    *o = (m[v * k + c] - gone).max(0.0) + inflow;
-                }
-            });
+            flows.cycle(&m, k, &mut next);
             std::mem::swap(&mut m, &mut next);
         }
         for (c, field) in fields.iter_mut().enumerate() {
@@ -869,33 +852,28 @@ impl UpwindPlan {
         self.check(topology, solvent_before.len());
         self.check(topology, velocity.len());
         self.check(topology, fallback.len());
-        let edges = topology.edges();
+        let flows = self.flows(topology);
         let mut mass = solvent_before.to_vec();
+        let mut next = vec![0.0; mass.len()];
         let mut momentum: Vec<DVec2> = mass.iter().zip(velocity).map(|(&m, &u)| m * u).collect();
         for _ in 0..self.substeps {
-            let carried: Vec<DVec2> = (0..edges.len())
-                .into_par_iter()
-                .map(|e| self.fraction[e] * momentum[self.donor(edges, e)])
-                .collect();
             momentum = (0..mass.len())
                 .into_par_iter()
                 .map(|v| {
                     let (mut out, mut inflow) = (DVec2::ZERO, DVec2::ZERO);
-                    for &e in topology.vertex_edges(v) {
-                        let e = e as usize;
-                        let d = self.donor(edges, e);
-                        if d == v {
-                            out += carried[e];
-                        } else {
-                            let r = connection.edge_rotation(e);
-                            let r = if v < d { r } else { r.transpose() };
-                            inflow += r * carried[e];
-                        }
+                    for &fraction in flows.given(v) {
+                        out += fraction * momentum[v];
+                    }
+                    for &(fraction, d, e) in flows.received(v) {
+                        let r = connection.edge_rotation(e as usize);
+                        let r = if v < d as usize { r } else { r.transpose() };
+                        inflow += r * (fraction * momentum[d as usize]);
                     }
                     (momentum[v] - out) + inflow
                 })
                 .collect();
-            mass = self.substep(topology, &mass);
+            flows.cycle(&mass, 1, &mut next);
+            std::mem::swap(&mut mass, &mut next);
         }
         let scale = solvent_before.iter().copied().fold(0.0, f64::max);
         let floor = MOMENTUM_MIN_MASS_REL * scale;
@@ -910,6 +888,47 @@ impl UpwindPlan {
                 }
             })
             .collect()
+    }
+}
+
+/// An [`UpwindPlan`]'s transfers per vertex ([`UpwindPlan::flows`]): the fractions it
+/// gives away, and the `(fraction, donor, edge)` of what it receives, each in the
+/// vertex's edge order.
+struct Flows {
+    out_ptr: Vec<u32>,
+    out_fraction: Vec<f64>,
+    in_ptr: Vec<u32>,
+    in_from: Vec<(f64, u32, u32)>,
+}
+
+impl Flows {
+    fn given(&self, v: usize) -> &[f64] {
+        &self.out_fraction[self.out_ptr[v] as usize..self.out_ptr[v + 1] as usize]
+    }
+
+    fn received(&self, v: usize) -> &[(f64, u32, u32)] {
+        &self.in_from[self.in_ptr[v] as usize..self.in_ptr[v + 1] as usize]
+    }
+
+    /// One sub-cycle of `k` interleaved fields `m` into `next`: each vertex gives
+    /// `fraction · m_v` across each of its outgoing edges and receives
+    /// `fraction · m_donor` across each incoming one — the same product on both sides, so
+    /// the transfer is conservative to rounding — clamped at zero against rounding.
+    fn cycle(&self, m: &[f64], k: usize, next: &mut [f64]) {
+        next.par_chunks_mut(k).enumerate().for_each(|(v, out)| {
+            for (c, o) in out.iter_mut().enumerate() {
+                let mv = m[v * k + c];
+                let mut gone = 0.0;
+                for &fraction in self.given(v) {
+                    gone += fraction * mv;
+                }
+                let mut inflow = 0.0;
+                for &(fraction, d, _) in self.received(v) {
+                    inflow += fraction * m[d as usize * k + c];
+                }
+                *o = (mv - gone).max(0.0) + inflow;
+            }
+        });
     }
 }
 
