@@ -16,80 +16,18 @@ use std::collections::VecDeque;
 use std::f64::consts::PI;
 
 use glam::{DMat2, DMat3, DVec2, DVec3};
-use madder::mesh::{Connection, Geometry, OneRings, Topology, VertexFrames};
+use madder::mesh::{Geometry, OneRings, Topology, VertexFrames};
 use madder::stain::advect::{UpwindPlan, advect_velocity, dual_fluxes};
+
+mod common;
+use common::{Built, Grid, build, build_with};
 
 // ---------------------------------------------------------------------------------------
 // meshes and helpers
 
-/// Deterministic pseudo-random number in [−½, ½).
-fn hash(k: usize, salt: u64) -> f64 {
-    let mut x =
-        (k as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ salt.wrapping_mul(0xD6E8_FEB8_6659_FD93);
-    x ^= x >> 31;
-    x = x.wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    x ^= x >> 29;
-    (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-}
-
-/// `n×n` quads over [−1, 1]² split along alternating diagonals, interior vertices jittered
-/// by up to `jitter` × spacing, then sheared: `x += shear · y` (obtuse triangles).
-fn grid(n: usize, jitter: f64, shear: f64) -> (Topology, Vec<DVec3>) {
-    let idx = |i: usize, j: usize| (i * (n + 1) + j) as u32;
-    let mut faces = Vec::new();
-    for i in 0..n {
-        for j in 0..n {
-            let (a, b, c, d) = (idx(i, j), idx(i, j + 1), idx(i + 1, j + 1), idx(i + 1, j));
-            if (i + j) % 2 == 0 {
-                faces.extend([[a, b, c], [a, c, d]]);
-            } else {
-                faces.extend([[a, b, d], [b, c, d]]);
-            }
-        }
-    }
-    let dx = 2.0 / n as f64;
-    let mut pos = Vec::new();
-    for i in 0..=n {
-        for j in 0..=n {
-            let interior = i > 0 && j > 0 && i < n && j < n;
-            let k = i * (n + 1) + j;
-            let (jx, jy) = if interior {
-                (hash(k, 1) * jitter, hash(k, 2) * jitter)
-            } else {
-                (0.0, 0.0)
-            };
-            let (x, y) = (-1.0 + (j as f64 + jx) * dx, -1.0 + (i as f64 + jy) * dx);
-            pos.push(DVec3::new(x + shear * y, y, 0.0));
-        }
-    }
-    (
-        Topology::from_triangles((n + 1) * (n + 1), faces).unwrap(),
-        pos,
-    )
-}
-
-struct Built {
-    rings: OneRings,
-    geometry: Geometry,
-    frames: VertexFrames,
-    connection: Connection,
-}
-
-fn build(t: &Topology, p: &[DVec3]) -> Built {
-    let rings = OneRings::new(t);
-    let frames = VertexFrames::new(&rings, p).unwrap();
-    build_with(t, p, rings, frames)
-}
-
-fn build_with(t: &Topology, p: &[DVec3], rings: OneRings, frames: VertexFrames) -> Built {
-    let geometry = Geometry::new(t, p).unwrap();
-    let connection = Connection::new(t, &rings, &geometry, &frames, p);
-    Built {
-        rings,
-        geometry,
-        frames,
-        connection,
-    }
+/// Grid placement `(x + shear · y, y, 0)`: a shear that makes the triangles obtuse.
+fn sheared(shear: f64) -> impl Fn(f64, f64) -> DVec3 {
+    move |x, y| DVec3::new(x + shear * y, y, 0.0)
 }
 
 fn xy(p: DVec3) -> DVec2 {
@@ -154,7 +92,7 @@ fn mean_edge(b: &Built) -> f64 {
 
 #[test]
 fn constant_velocity_is_advected_unchanged() {
-    let (t, p) = grid(20, 0.4, 0.0);
+    let (t, p) = Grid::new(20, 1.0).jitter(0.4).build();
     let b = build(&t, &p);
     let w = DVec2::new(0.3, -0.2);
     let u: Vec<DVec2> = (0..p.len()).map(|i| to_local(&b, i, w)).collect();
@@ -207,7 +145,7 @@ fn linear_field_error(b: &Built, t: &Topology, p: &[DVec3], h: f64) -> (f64, usi
 
 #[test]
 fn linear_field_is_exact_in_the_one_ring_along_the_strip_and_at_the_border() {
-    let (t, p) = grid(16, 0.4, 0.0);
+    let (t, p) = Grid::new(16, 1.0).jitter(0.4).build();
     let n = p.len();
     // polar frames (x along the reference spoke) and frames aligned with the world axes
     let polar = build(&t, &p);
@@ -240,7 +178,7 @@ fn linear_field_is_exact_in_the_one_ring_along_the_strip_and_at_the_border() {
 #[test]
 fn back_trace_leaving_the_cloth_stops_on_the_border() {
     // uniform wind towards +x: vertices within h|u| of the left border trace back past it
-    let (t, p) = grid(12, 0.3, 0.0);
+    let (t, p) = Grid::new(12, 1.0).jitter(0.3).build();
     let b = build(&t, &p);
     let field = |x: DVec2| DVec2::new(1.0 + 0.3 * x.y, 0.2 * x.x);
     let u: Vec<DVec2> = (0..p.len())
@@ -412,7 +350,7 @@ fn independent_fluxes(t: &Topology, p: &[DVec3], w: DVec2) -> Vec<f64> {
 #[test]
 fn dual_fluxes_match_an_independent_formula_and_close_interior_cells() {
     for (name, shear) in [("jittered", 0.0), ("obtuse", 0.8)] {
-        let (t, p) = grid(14, 0.4, shear);
+        let (t, p) = Grid::new(14, 1.0).jitter(0.4).build_with(sheared(shear));
         let b = build(&t, &p);
         let w = DVec2::new(0.7, -0.4);
         let u: Vec<DVec2> = (0..p.len()).map(|i| to_local(&b, i, w)).collect();
@@ -453,6 +391,7 @@ fn rotating(b: &Built, p: &[DVec3]) -> Vec<DVec2> {
 }
 
 /// A Gaussian blob of mass (kg per vertex = density × area).
+// Local, not `common::gaussian`: `exp(−r²/radius²)` (no factor 2) on a base level, times area.
 fn blob(b: &Built, p: &[DVec3], centre: DVec2, radius: f64, base: f64) -> Vec<f64> {
     (0..p.len())
         .map(|i| {
@@ -475,7 +414,7 @@ fn cotan_weights(t: &Topology, g: &Geometry) -> Vec<f64> {
 
 #[test]
 fn upwind_transport_conserves_mass_and_stays_non_negative_on_obtuse_triangles() {
-    let (t, p) = grid(20, 0.2, 0.8);
+    let (t, p) = Grid::new(20, 1.0).jitter(0.2).build_with(sheared(0.8));
     let b = build(&t, &p);
     let weights = cotan_weights(&t, &b.geometry);
     let n_negative = weights.iter().filter(|&&w| w < 0.0).count();
@@ -530,7 +469,7 @@ fn upwind_transport_conserves_mass_and_stays_non_negative_on_obtuse_triangles() 
 
 #[test]
 fn uniform_density_under_a_constant_velocity_stays_uniform_inside() {
-    let (t, p) = grid(30, 0.4, 0.0);
+    let (t, p) = Grid::new(30, 1.0).jitter(0.4).build();
     let b = build(&t, &p);
     let w = DVec2::new(0.6, 0.35);
     let u: Vec<DVec2> = (0..p.len()).map(|i| to_local(&b, i, w)).collect();
@@ -559,17 +498,9 @@ fn uniform_density_under_a_constant_velocity_stays_uniform_inside() {
     assert!(err < 1e-13, "{err}");
 }
 
-fn centroid(p: &[DVec3], mass: &[f64]) -> DVec2 {
-    let total: f64 = mass.iter().sum();
-    p.iter()
-        .zip(mass)
-        .fold(DVec2::ZERO, |acc, (x, m)| acc + *m * xy(*x))
-        / total
-}
-
 #[test]
 fn blob_centroid_moves_with_the_velocity() {
-    let (t, p) = grid(40, 0.4, 0.0);
+    let (t, p) = Grid::new(40, 1.0).jitter(0.4).build();
     let b = build(&t, &p);
     let w = DVec2::new(0.5, 0.2);
     let u: Vec<DVec2> = (0..p.len()).map(|i| to_local(&b, i, w)).collect();
@@ -577,11 +508,11 @@ fn blob_centroid_moves_with_the_velocity() {
     let (h, steps) = (0.01, 80);
     let plan = UpwindPlan::new(&t, &b.geometry.vertex_area, &flux, h).unwrap();
     let mut mass = blob(&b, &p, DVec2::new(-0.3, -0.1), 0.12, 0.0);
-    let before = centroid(&p, &mass);
+    let before = common::centroid(&mass, &p).truncate();
     for _ in 0..steps {
         plan.transport(&t, &mut mass);
     }
-    let moved = centroid(&p, &mass) - before;
+    let moved = common::centroid(&mass, &p).truncate() - before;
     let expected = w * h * steps as f64;
     let rel = (moved - expected).length() / expected.length();
     println!("blob centroid moved {moved:?}, expected {expected:?}: relative error {rel:.2e}");
@@ -590,7 +521,7 @@ fn blob_centroid_moves_with_the_velocity() {
 
 #[test]
 fn huge_steps_sub_cycle_and_limit_keeping_masses_non_negative() {
-    let (t, p) = grid(16, 0.4, 0.5);
+    let (t, p) = Grid::new(16, 1.0).jitter(0.4).build_with(sheared(0.5));
     let b = build(&t, &p);
     let u = rotating(&b, &p);
     let flux = dual_fluxes(&t, &p, &b.frames, &u);
@@ -628,7 +559,7 @@ fn huge_steps_sub_cycle_and_limit_keeping_masses_non_negative() {
 
 #[test]
 fn solute_moves_with_the_solvent() {
-    let (t, p) = grid(16, 0.4, 0.8);
+    let (t, p) = Grid::new(16, 1.0).jitter(0.4).build_with(sheared(0.8));
     let b = build(&t, &p);
     let u = rotating(&b, &p);
     let flux = dual_fluxes(&t, &p, &b.frames, &u);
@@ -659,7 +590,7 @@ fn solute_moves_with_the_solvent() {
 
 #[test]
 fn momentum_advection_keeps_uniform_fields_and_conserves_momentum() {
-    let (t, p) = grid(18, 0.4, 0.0);
+    let (t, p) = Grid::new(18, 1.0).jitter(0.4).build();
     let b = build(&t, &p);
     let area = &b.geometry.vertex_area;
     let world_momentum = |mass: &[f64], u: &[DVec2]| {
@@ -713,7 +644,7 @@ fn momentum_advection_keeps_uniform_fields_and_conserves_momentum() {
 
 #[test]
 fn dry_vertices_take_the_fallback_velocity() {
-    let (t, p) = grid(10, 0.3, 0.0);
+    let (t, p) = Grid::new(10, 1.0).jitter(0.3).build();
     let b = build(&t, &p);
     let u = rotating(&b, &p);
     let flux = dual_fluxes(&t, &p, &b.frames, &u);
@@ -741,7 +672,7 @@ fn dry_vertices_take_the_fallback_velocity() {
 
 #[test]
 fn results_are_bit_identical_with_one_and_two_threads() {
-    let (t, p) = grid(40, 0.4, 0.6);
+    let (t, p) = Grid::new(40, 1.0).jitter(0.4).build_with(sheared(0.6));
     let b = build(&t, &p);
     let u = rotating(&b, &p);
     let run = || {

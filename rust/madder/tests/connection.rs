@@ -19,62 +19,17 @@ use std::f64::consts::{PI, TAU};
 use faer::Par;
 use glam::{DMat2, DMat3, DQuat, DVec2, DVec3};
 use madder::mesh::kabsch::{best_rotation, rotation_from_covariance, svd3};
-use madder::mesh::{
-    Connection, FanKind, Geometry, OneRings, Topology, VertexFrames, one_ring_rotations,
-};
+use madder::mesh::{Connection, FanKind, Geometry, Topology, VertexFrames, one_ring_rotations};
 use madder::ops::{
     BochnerPattern, BochnerSystem, LowerCsc, VertexPattern, add_lumped_mass, bochner_stiffness,
     cotan_stiffness, diffuse_tangent_field, solve_spd,
 };
 
+mod common;
+use common::{Built, Grid, build, hash};
+
 // ---------------------------------------------------------------------------------------
 // meshes and helpers
-
-/// Deterministic pseudo-random number in [−½, ½).
-fn hash(k: usize, salt: u64) -> f64 {
-    let mut x =
-        (k as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ salt.wrapping_mul(0xD6E8_FEB8_6659_FD93);
-    x ^= x >> 31;
-    x = x.wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    x ^= x >> 29;
-    (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-}
-
-/// `n×n` quads over [−1, 1]² split along alternating diagonals, interior vertices jittered
-/// by up to `jitter` × spacing, heights `z = height(x, y)`.
-fn grid(n: usize, jitter: f64, height: impl Fn(f64, f64) -> f64) -> (Topology, Vec<DVec3>) {
-    let idx = |i: usize, j: usize| (i * (n + 1) + j) as u32;
-    let mut faces = Vec::new();
-    for i in 0..n {
-        for j in 0..n {
-            let (a, b, c, d) = (idx(i, j), idx(i, j + 1), idx(i + 1, j + 1), idx(i + 1, j));
-            if (i + j) % 2 == 0 {
-                faces.extend([[a, b, c], [a, c, d]]);
-            } else {
-                faces.extend([[a, b, d], [b, c, d]]);
-            }
-        }
-    }
-    let dx = 2.0 / n as f64;
-    let mut pos = Vec::new();
-    for i in 0..=n {
-        for j in 0..=n {
-            let interior = i > 0 && j > 0 && i < n && j < n;
-            let k = i * (n + 1) + j;
-            let (jx, jy) = if interior {
-                (hash(k, 1) * jitter, hash(k, 2) * jitter)
-            } else {
-                (0.0, 0.0)
-            };
-            let (x, y) = (-1.0 + (j as f64 + jx) * dx, -1.0 + (i as f64 + jy) * dx);
-            pos.push(DVec3::new(x, y, height(x, y)));
-        }
-    }
-    (
-        Topology::from_triangles((n + 1) * (n + 1), faces).unwrap(),
-        pos,
-    )
-}
 
 /// Unit icosphere, `levels` times subdivided; faces counter-clockwise seen from outside.
 fn icosphere(levels: usize) -> (Topology, Vec<DVec3>) {
@@ -172,26 +127,6 @@ fn pyramid(apex: DVec3, ring: &[DVec3]) -> (Topology, Vec<DVec3>) {
     )
 }
 
-struct Built {
-    rings: OneRings,
-    geometry: Geometry,
-    frames: VertexFrames,
-    connection: Connection,
-}
-
-fn build(t: &Topology, p: &[DVec3]) -> Built {
-    let rings = OneRings::new(t);
-    let geometry = Geometry::new(t, p).unwrap();
-    let frames = VertexFrames::new(&rings, p).unwrap();
-    let connection = Connection::new(t, &rings, &geometry, &frames, p);
-    Built {
-        rings,
-        geometry,
-        frames,
-        connection,
-    }
-}
-
 /// Rotation angle of a 2×2 rotation matrix, in (−π, π].
 fn angle_of(r: DMat2) -> f64 {
     r.x_axis.y.atan2(r.x_axis.x)
@@ -240,7 +175,7 @@ fn flat_transport_error(t: &Topology, b: &Built, frames: &VertexFrames, w: DVec3
 
 #[test]
 fn flat_cloth_transports_a_constant_field_exactly() {
-    let (t, p) = grid(12, 0.5, |_, _| 0.0);
+    let (t, p) = Grid::new(12, 1.0).jitter(0.5).build();
     let b = build(&t, &p);
     let boundary = t.boundary_vertices();
     for v in 0..t.n_vertices() {
@@ -268,7 +203,7 @@ fn flat_cloth_transports_a_constant_field_exactly() {
 
 #[test]
 fn flipped_faces_are_harmonized() {
-    let (t0, p) = grid(8, 0.4, |_, _| 0.0);
+    let (t0, p) = Grid::new(8, 1.0).jitter(0.4).build();
     let mut faces = t0.faces().to_vec();
     // flip an interior face, a border face and the face at a corner
     for f in [37usize, 3, 0] {
@@ -301,7 +236,7 @@ fn flipped_faces_are_harmonized() {
 fn any_in_plane_frames_keep_the_flat_transport_exact() {
     // turn every frame about its normal by a different angle: the connection measures
     // the offset and stays exact
-    let (t, p) = grid(10, 0.5, |_, _| 0.0);
+    let (t, p) = Grid::new(10, 1.0).jitter(0.5).build();
     let b = build(&t, &p);
     let turns: Vec<DMat3> = (0..t.n_vertices())
         .map(|v| DMat3::from_rotation_z(TAU * hash(v, 5)))
@@ -448,7 +383,9 @@ fn face_holonomies_obey_gauss_bonnet() {
 
 #[test]
 fn reverse_rotation_is_the_transpose_and_matches_the_polar_angles() {
-    let (t, p) = grid(10, 0.4, |x, y| 0.3 * (2.0 * x).sin() * (1.5 * y).cos());
+    let (t, p) = Grid::new(10, 1.0)
+        .jitter(0.4)
+        .build_with(|x, y| DVec3::new(x, y, 0.3 * (2.0 * x).sin() * (1.5 * y).cos()));
     let b = build(&t, &p);
     let c = &b.connection;
     // angle of spoke j in the frame of i, from the stored polar angles and offsets
@@ -503,7 +440,9 @@ fn frames_on_a_sphere_are_orthonormal_and_normal() {
 fn comoving_frames_follow_a_rigid_motion() {
     // rest frames turned by the Kabsch rotations of a rigidly moved mesh give the same
     // connection as the rest mesh, and as the frames rebuilt on the moved mesh
-    let (t, rest) = grid(8, 0.4, |x, y| 0.2 * (x * y + x * x));
+    let (t, rest) = Grid::new(8, 1.0)
+        .jitter(0.4)
+        .build_with(|x, y| DVec3::new(x, y, 0.2 * (x * y + x * x)));
     let q = random_rotation(3);
     let shift = DVec3::new(0.5, -2.0, 7.0);
     let moved: Vec<DVec3> = rest.iter().map(|&x| q * x + shift).collect();
@@ -735,7 +674,10 @@ fn kabsch_agrees_with_faer_svd_including_reflections() {
 fn one_ring_rotations_of_a_rigid_motion_are_the_motion() {
     let q = random_rotation(9);
     for (name, (t, p)) in [
-        ("flat grid (rank-2 covariances)", grid(6, 0.4, |_, _| 0.0)),
+        (
+            "flat grid (rank-2 covariances)",
+            Grid::new(6, 1.0).jitter(0.4).build(),
+        ),
         ("icosphere", icosphere(2)),
     ] {
         let moved: Vec<DVec3> = p
@@ -748,7 +690,7 @@ fn one_ring_rotations_of_a_rigid_motion_are_the_motion() {
         assert!(err < 1e-12);
     }
     // wrong lengths are reported
-    let (t, p) = grid(2, 0.0, |_, _| 0.0);
+    let (t, p) = Grid::new(2, 1.0).build();
     assert!(one_ring_rotations(&t, &p, &p[..3]).is_err());
 }
 
@@ -762,7 +704,7 @@ fn flat(u: &[DVec2]) -> Vec<f64> {
 
 #[test]
 fn constant_field_is_in_the_kernel_on_a_flat_mesh() {
-    let (t, p) = grid(12, 0.5, |_, _| 0.0);
+    let (t, p) = Grid::new(12, 1.0).jitter(0.5).build();
     let b = build(&t, &p);
     let sp = VertexPattern::new(&t);
     let bp = BochnerPattern::new(&sp);
@@ -787,7 +729,7 @@ fn constant_field_is_in_the_kernel_on_a_flat_mesh() {
 
 #[test]
 fn flat_vector_diffusion_is_two_scalar_diffusions() {
-    let (t, p) = grid(16, 0.5, |_, _| 0.0);
+    let (t, p) = Grid::new(16, 1.0).jitter(0.5).build();
     let b = build(&t, &p);
     let n = t.n_vertices();
     // a smooth field with swirl and shear, in the global basis
@@ -845,7 +787,8 @@ fn energy_is_the_sum_of_transport_residuals_and_nonnegative() {
         ("icosphere(3)", icosphere(3)),
         (
             "bumpy grid",
-            grid(14, 0.0, |x, y| 0.25 * (2.5 * x).sin() * (2.0 * y).cos()),
+            Grid::new(14, 1.0)
+                .build_with(|x, y| DVec3::new(x, y, 0.25 * (2.5 * x).sin() * (2.0 * y).cos())),
         ),
     ] {
         let b = build(&t, &p);
@@ -969,7 +912,7 @@ fn system_is_spd_on_curved_meshes_and_reuses_its_factorization() {
 
 #[test]
 fn loose_vertex_keeps_its_velocity_and_bad_input_is_reported() {
-    let (t0, p0) = grid(3, 0.0, |_, _| 0.0);
+    let (t0, p0) = Grid::new(3, 1.0).build();
     let mut p = p0.clone();
     p.push(DVec3::new(5.0, 5.0, 5.0));
     let t = Topology::from_triangles(p.len(), t0.faces().to_vec()).unwrap();

@@ -11,32 +11,19 @@
 //!   `‖σ_fine − σ_x‖ / ‖σ_fine‖` with `‖σ‖² = Σ A_i σ_i²`.
 
 use faer::Par;
-use glam::DVec3;
+use glam::{DVec2, DVec3};
 use madder::mesh::Topology;
 use madder::stain::{Conductivity, DiffusionStepper, WovenFaces};
 use madder::weave::{PairCoefficients, Tensor2, Tile, cell_tensors, homogenize};
 
+mod common;
+use common::{Grid, Split, gaussian};
+
 const N: usize = 256; // quads per side on [-1, 1]²
 
+/// Quads split uniformly (all along the same diagonal), unlike the other tests' grids.
 fn mesh() -> (Topology, Vec<DVec3>) {
-    let idx = |i: usize, j: usize| (i * (N + 1) + j) as u32;
-    let mut faces = Vec::new();
-    for i in 0..N {
-        for j in 0..N {
-            let (a, b, c, d) = (idx(i, j), idx(i, j + 1), idx(i + 1, j + 1), idx(i + 1, j));
-            faces.extend([[a, b, c], [a, c, d]]);
-        }
-    }
-    let h = 2.0 / N as f64;
-    let pos = (0..=N)
-        .flat_map(|i| {
-            (0..=N).map(move |j| DVec3::new(-1.0 + j as f64 * h, -1.0 + i as f64 * h, 0.0))
-        })
-        .collect();
-    (
-        Topology::from_triangles((N + 1) * (N + 1), faces).unwrap(),
-        pos,
-    )
+    Grid::new(N, 1.0).split(Split::Uniform).build()
 }
 
 /// Final density after diffusing a Gaussian blob with per-face tensors `tensor`.
@@ -47,10 +34,7 @@ fn run(t: &Topology, pos: &[DVec3], tensor: Vec<Tensor2>, steps: usize) -> (Vec<
         .map(|tri| tri.map(|v| [pos[v as usize].x, pos[v as usize].y]))
         .collect();
     let nf = t.n_faces();
-    let d0 = pos
-        .iter()
-        .map(|p| (-p.length_squared() / (2.0 * 0.15f64.powi(2))).exp())
-        .collect();
+    let d0 = gaussian(pos, DVec2::ZERO, 0.15f64.powi(2), 1.0);
     let woven = WovenFaces {
         tensor,
         uv,
@@ -65,6 +49,7 @@ fn run(t: &Topology, pos: &[DVec3], tensor: Vec<Tensor2>, steps: usize) -> (Vec<
 }
 
 /// Variance of the stain along x and y.
+// Local, not `common::covariance`: weights `density × area` summed in another order.
 fn variance(pos: &[DVec3], d: &[f64], area: &[f64]) -> [f64; 2] {
     let m: f64 = d.iter().zip(area).map(|(x, a)| x * a).sum();
     let mean = |f: &dyn Fn(&DVec3) -> f64| {

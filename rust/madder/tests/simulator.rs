@@ -26,42 +26,11 @@ use madder::stain::{
 };
 use madder::{Error, MeshError, ParamError};
 
+mod common;
+use common::{Grid, centroid, covariance, gaussian};
+
 // ---------------------------------------------------------------------------------------
 // meshes and helpers
-
-/// `n×n` quads over `[−half, half]²` (z = 0), split along alternating diagonals. Vertex
-/// `(i, j)` (row `i` along y, column `j` along x) is `i·(n+1) + j`.
-fn grid(n: usize, half: f64) -> (Topology, Vec<DVec3>) {
-    let (faces, pos) = grid_arrays(n, half);
-    (Topology::from_triangles(pos.len(), faces).unwrap(), pos)
-}
-
-fn grid_arrays(n: usize, half: f64) -> (Vec<[u32; 3]>, Vec<DVec3>) {
-    let idx = |i: usize, j: usize| (i * (n + 1) + j) as u32;
-    let mut faces = Vec::new();
-    for i in 0..n {
-        for j in 0..n {
-            let (a, b, c, d) = (idx(i, j), idx(i, j + 1), idx(i + 1, j + 1), idx(i + 1, j));
-            if (i + j) % 2 == 0 {
-                faces.extend([[a, b, c], [a, c, d]]);
-            } else {
-                faces.extend([[a, b, d], [b, c, d]]);
-            }
-        }
-    }
-    let dx = 2.0 * half / n as f64;
-    let mut pos = Vec::new();
-    for i in 0..=n {
-        for j in 0..=n {
-            pos.push(DVec3::new(
-                -half + j as f64 * dx,
-                -half + i as f64 * dx,
-                0.0,
-            ));
-        }
-    }
-    (faces, pos)
-}
 
 /// A polar disk of `rings` rings (ring `k` has `6k` vertices at radius `k/rings · radius`)
 /// in the XY plane, neighbouring rings zipped together by angle.
@@ -168,34 +137,6 @@ fn simulator(
     .unwrap()
 }
 
-/// `amp · exp(−|p − c|²/2s²)` at every vertex (distance in the XY plane of `coords`).
-fn gaussian(coords: &[DVec3], c: DVec2, s: f64, amp: f64) -> Vec<f64> {
-    coords
-        .iter()
-        .map(|p| amp * (-(p.truncate() - c).length_squared() / (2.0 * s * s)).exp())
-        .collect()
-}
-
-/// Mass-weighted centroid of `points` (one per vertex).
-fn centroid(mass: &[f64], points: &[DVec3]) -> DVec3 {
-    let total: f64 = mass.iter().sum();
-    mass.iter().zip(points).map(|(m, p)| *m * *p).sum::<DVec3>() / total
-}
-
-/// Mass-weighted 2×2 covariance `[xx, xy, yy]` of the XY coordinates.
-fn covariance(mass: &[f64], points: &[DVec3]) -> [f64; 3] {
-    let c = centroid(mass, points);
-    let total: f64 = mass.iter().sum();
-    let mut v = [0.0; 3];
-    for (m, p) in mass.iter().zip(points) {
-        let d = *p - c;
-        v[0] += m * d.x * d.x;
-        v[1] += m * d.x * d.y;
-        v[2] += m * d.y * d.y;
-    }
-    v.map(|x| x / total)
-}
-
 /// Eigen-decomposition of a symmetric 2×2 `[a, b, c]`: (largest, smallest, angle of the
 /// largest's eigenvector in (−π/2, π/2]).
 fn eigen2(m: [f64; 3]) -> (f64, f64, f64) {
@@ -267,8 +208,12 @@ fn rotating_disk_path_error(coriolis: bool) -> (f64, f64) {
         Conductivity::Isotropic(0.0),
         ideal(forces),
     );
-    sim.add_liquid(&gaussian(&rest, DVec2::new(0.3, 0.0), 0.04, 1.0), 0.0, None)
-        .unwrap();
+    sim.add_liquid(
+        &gaussian(&rest, DVec2::new(0.3, 0.0), 0.04 * 0.04, 1.0),
+        0.0,
+        None,
+    )
+    .unwrap();
     let c0 = centroid(&sim.fields().free_solvent, &frame(0));
     for k in 1..=24 {
         sim.step(&frame(k), dt, Some(&frame(k + 1))).unwrap();
@@ -312,7 +257,7 @@ fn accelerating_plane_leaves_the_blob_behind_by_half_a_t_squared() {
     let a = 2.0;
     let dt = 1.0 / 24.0;
     let frames = 12; // 0.5 s
-    let (topo, rest) = grid(60, 1.0);
+    let (topo, rest) = Grid::new(60, 1.0).build();
     let frame = |k: usize| -> Vec<DVec3> {
         let t = k as f64 * dt;
         rest.iter()
@@ -330,8 +275,12 @@ fn accelerating_plane_leaves_the_blob_behind_by_half_a_t_squared() {
         Conductivity::Isotropic(0.0),
         ideal(forces),
     );
-    sim.add_liquid(&gaussian(&rest, DVec2::new(0.4, 0.0), 0.08, 1.0), 0.0, None)
-        .unwrap();
+    sim.add_liquid(
+        &gaussian(&rest, DVec2::new(0.4, 0.0), 0.08 * 0.08, 1.0),
+        0.0,
+        None,
+    )
+    .unwrap();
     let c0 = centroid(&sim.fields().free_solvent, &rest);
     for k in 1..=frames {
         sim.step(&frame(k), dt, Some(&frame(k + 1))).unwrap();
@@ -363,7 +312,7 @@ fn tilted_plane_drift(momentum_advection: bool, friction: f64, frames: usize) ->
     let theta = PI / 6.0;
     let g = 9.81;
     let dt = 1.0 / 24.0;
-    let (topo, flat) = grid(60, 1.0);
+    let (topo, flat) = Grid::new(60, 1.0).build();
     let tilted: Vec<DVec3> = flat
         .iter()
         .map(|p| DVec3::new(p.x, p.y * theta.cos(), p.y * theta.sin()))
@@ -379,7 +328,7 @@ fn tilted_plane_drift(momentum_advection: bool, friction: f64, frames: usize) ->
         params,
     );
     sim.add_liquid(
-        &gaussian(&flat, DVec2::new(0.0, 0.5), 0.08, 1.0),
+        &gaussian(&flat, DVec2::new(0.0, 0.5), 0.08 * 0.08, 1.0),
         0.02,
         None,
     )
@@ -433,7 +382,7 @@ fn woven_spreading_follows_the_weft_in_the_ratio_of_the_eigenvalues() {
     let (d1, d2) = (1e-2, 2.5e-3);
     let phi = 25f64.to_radians();
     let dt = 1.0 / 24.0;
-    let (topo, rest) = grid(64, 1.0);
+    let (topo, rest) = Grid::new(64, 1.0).build();
     let (e, e_perp) = (DVec2::from_angle(phi), DVec2::from_angle(phi + 0.5 * PI));
     // the UV map is the mesh turned by −φ: u grows along e, the weft is at φ in the world
     let uv = topo
@@ -458,7 +407,7 @@ fn woven_spreading_follows_the_weft_in_the_ratio_of_the_eigenvalues() {
         Conductivity::Woven(woven),
         ideal(NO_FORCES),
     );
-    sim.add_liquid(&gaussian(&rest, DVec2::ZERO, 0.06, 1.0), 0.0, None)
+    sim.add_liquid(&gaussian(&rest, DVec2::ZERO, 0.06 * 0.06, 1.0), 0.0, None)
         .unwrap();
     let c0 = covariance(&sim.fields().free_solvent, &rest);
     let total0 = sim.totals().solvent;
@@ -519,7 +468,7 @@ fn uniform_run(
     frames: usize,
     mut check: impl FnMut(f64, &Simulator),
 ) {
-    let (topo, rest) = grid(16, 0.5);
+    let (topo, rest) = Grid::new(16, 0.5).build();
     let mut params = ideal(NO_FORCES);
     params.interaction = rates;
     params.substeps = 3;
@@ -665,7 +614,7 @@ fn evaporation_is_faster_on_the_exposed_border_and_is_accounted() {
         evaporation: k,
         evaporation_boundary: a,
     };
-    let (topo, _) = grid(16, 0.5);
+    let (topo, _) = Grid::new(16, 0.5).build();
     let border = topo.boundary_vertices();
     let mut initial = None;
     uniform_run(rates, 0.0, f0, 0.02, 48, |t, sim| {
@@ -734,7 +683,7 @@ fn evaporation_stops_when_the_cloth_is_dry_and_leaves_the_solute() {
 
 /// A 30×30 grid over [−1, 1]² waving (travelling wave in z) and stretching in x and y.
 fn waving(n: usize) -> (Topology, Vec<DVec3>, impl Fn(f64) -> Vec<DVec3>) {
-    let (topo, rest) = grid(n, 1.0);
+    let (topo, rest) = Grid::new(n, 1.0).build();
     let r = rest.clone();
     let at = move |t: f64| -> Vec<DVec3> {
         let sx = 1.0 + 0.2 * (1.3 * t).sin();
@@ -809,12 +758,12 @@ fn waving_run(steps: usize, momentum_advection: bool) -> (Simulator, f64, f64) {
         full_params(momentum_advection, 1),
     );
     sim.add_liquid(
-        &gaussian(&rest, DVec2::new(-0.2, 0.3), 0.25, 0.4),
+        &gaussian(&rest, DVec2::new(-0.2, 0.3), 0.25 * 0.25, 0.4),
         0.03,
         None,
     )
     .unwrap();
-    let weights = gaussian(&rest, DVec2::new(-0.2, 0.3), 0.15, 1.0);
+    let weights = gaussian(&rest, DVec2::new(-0.2, 0.3), 0.15 * 0.15, 1.0);
     let nearest = (0..rest.len())
         .min_by(|&a, &b| {
             let d = |i: usize| (rest[i].truncate() - DVec2::new(-0.2, 0.3)).length();
@@ -851,7 +800,7 @@ fn waving_run(steps: usize, momentum_advection: bool) -> (Simulator, f64, f64) {
         if k == steps / 3 {
             // a second liquid of another colour (switches colour tracking on)
             sim.add_liquid(
-                &gaussian(&rest, DVec2::new(0.4, -0.3), 0.2, 0.3),
+                &gaussian(&rest, DVec2::new(0.4, -0.3), 0.2 * 0.2, 0.3),
                 0.05,
                 Some([0.1, 0.2, 0.8]),
             )
@@ -909,8 +858,9 @@ fn momentum_advection_tilted_plane_and_conservation() {
 /// time giving the positions under an affine motion (which keeps the degeneracies exact).
 fn bad_mesh() -> (Topology, Vec<DVec3>, impl Fn(f64) -> Vec<DVec3>) {
     let n = 12;
-    let (mut faces, mut pos) = grid_arrays(n, 0.5);
-    let idx = |i: usize, j: usize| (i * (n + 1) + j) as u32;
+    let grid = Grid::new(n, 0.5);
+    let (mut faces, mut pos) = grid.arrays();
+    let idx = |i: usize, j: usize| grid.index(i, j);
     // zero-area flap on the border edge (0,3)-(0,4)
     let (a, b) = (idx(0, 3), idx(0, 4));
     pos.push(0.5 * (pos[a as usize] + pos[b as usize]));
@@ -1005,7 +955,7 @@ fn expect_param_error(result: Result<Simulator, Error>, name: &str) {
 
 #[test]
 fn parameters_out_of_range_are_rejected_by_name() {
-    let (topo, rest) = grid(4, 0.5);
+    let (topo, rest) = Grid::new(4, 0.5).build();
     let make = |edit: &dyn Fn(&mut StainParams), cond: Conductivity| {
         let mut p = StainParams::default();
         edit(&mut p);
@@ -1065,7 +1015,7 @@ fn a_nan_position_names_the_vertex_and_leaves_the_state_unchanged() {
             Conductivity::Isotropic(2e-3),
             full_params(false, 2),
         );
-        s.add_liquid(&gaussian(&rest, DVec2::ZERO, 0.3, 0.3), 0.02, None)
+        s.add_liquid(&gaussian(&rest, DVec2::ZERO, 0.3 * 0.3, 0.3), 0.02, None)
             .unwrap();
         s
     };
@@ -1192,7 +1142,7 @@ fn region_run(
         params,
     );
     sim.add_liquid(
-        &gaussian(&rest, DVec2::new(-0.2, 0.3), 0.08, 0.4),
+        &gaussian(&rest, DVec2::new(-0.2, 0.3), 0.08 * 0.08, 0.4),
         0.03,
         None,
     )
@@ -1332,7 +1282,7 @@ fn the_active_region_with_forces_conserves_and_never_misses_liquid() {
 /// (nothing flows, so every vertex keeps its solute), window or not.
 #[test]
 fn a_dry_stain_outside_the_window_follows_the_stretching_cloth() {
-    let (topo, rest) = grid(30, 0.5);
+    let (topo, rest) = Grid::new(30, 0.5).build();
     let run = |active_region: bool| {
         let mut params = ideal(NO_FORCES);
         params.active_region = active_region;
@@ -1342,7 +1292,7 @@ fn a_dry_stain_outside_the_window_follows_the_stretching_cloth() {
         };
         let mut sim = simulator(&topo, &rest, &rest, Conductivity::Isotropic(1e-4), params);
         sim.add_liquid(
-            &gaussian(&rest, DVec2::new(0.1, 0.0), 0.08, 0.5),
+            &gaussian(&rest, DVec2::new(0.1, 0.0), 0.08 * 0.08, 0.5),
             0.05,
             None,
         )
@@ -1400,7 +1350,7 @@ fn a_dry_stain_outside_the_window_follows_the_stretching_cloth() {
 
 #[test]
 fn splash_is_outgoing_and_reproducible_from_its_seed() {
-    let (topo, rest) = grid(40, 1.0);
+    let (topo, rest) = Grid::new(40, 1.0).build();
     let center = DVec3::new(0.1, -0.05, 0.0);
     let weights: Vec<f64> = rest
         .iter()

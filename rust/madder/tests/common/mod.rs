@@ -1,0 +1,209 @@
+//! Test meshes and measurements shared by the integration tests (`mod common;`).
+//!
+//! - [`Grid`]: `n×n` quads over `[−half, half]²`. Vertex `(i, j)` (row `i` along y, column
+//!   `j` along x) is `i·(n+1) + j` at `(−half + j·dx, −half + i·dx)`, `dx = 2·half/n`.
+//!   Quad `(i, j)` has corners `a = (i, j)`, `b = (i, j+1)`, `c = (i+1, j+1)`,
+//!   `d = (i+1, j)` and is split into `[a, b, c], [a, c, d]` ([`Split::Uniform`]) or, where
+//!   `i + j` is odd, into `[a, b, d], [b, c, d]` ([`Split::Alternating`], the default);
+//!   every face is counter-clockwise seen from +z. Interior vertices can be jittered by up
+//!   to `±jitter/2 · dx` in x and y, from [`hash`] (or another hash); the
+//!   border stays straight. Positions are `(x, y, 0)` or any `place(x, y)`.
+//! - [`hash`] (and [`hash_unmixed_salt`]): deterministic pseudo-random numbers in [−½, ½).
+//! - [`Built`]: one-rings, geometry, vertex frames and connection of a mesh.
+//! - [`gaussian`], [`centroid`], [`covariance`]: a blob at every vertex and the mass-weighted
+//!   moments of a field.
+
+#![allow(dead_code)]
+
+use glam::{DVec2, DVec3};
+use madder::mesh::{Connection, Geometry, OneRings, Topology, VertexFrames};
+
+/// Deterministic pseudo-random number in [−½, ½) for key `k` and stream `salt`.
+pub fn hash(k: usize, salt: u64) -> f64 {
+    finish(
+        (k as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ salt.wrapping_mul(0xD6E8_FEB8_6659_FD93),
+    )
+}
+
+/// [`hash`] with the salt xored in without mixing: another fixed stream, kept because the
+/// diffusion tests' jittered meshes are drawn from it.
+pub fn hash_unmixed_salt(k: usize, salt: u64) -> f64 {
+    finish((k as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ salt)
+}
+
+fn finish(mut x: u64) -> f64 {
+    x ^= x >> 31;
+    x = x.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    x ^= x >> 29;
+    (x >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+}
+
+/// How a [`Grid`] splits its quads into triangles.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Split {
+    /// Along alternating diagonals (`a–c` where `i + j` is even, `b–d` where it is odd).
+    Alternating,
+    /// Every quad along its `a–c` diagonal.
+    Uniform,
+}
+
+/// A grid of `n×n` quads over `[−half, half]²` (see the module doc for the layout).
+#[derive(Clone, Copy)]
+pub struct Grid {
+    n: usize,
+    half: f64,
+    jitter: f64,
+    hash: fn(usize, u64) -> f64,
+    split: Split,
+}
+
+impl Grid {
+    /// Regular grid, quads split along alternating diagonals.
+    pub fn new(n: usize, half: f64) -> Self {
+        Grid {
+            n,
+            half,
+            jitter: 0.0,
+            hash,
+            split: Split::Alternating,
+        }
+    }
+
+    /// Moves interior vertex `k` by `(hash(k, 1), hash(k, 2)) · jitter · dx`.
+    pub fn jitter(self, jitter: f64) -> Self {
+        self.jitter_with(jitter, hash)
+    }
+
+    /// [`Grid::jitter`] with the numbers drawn from `hash` instead.
+    pub fn jitter_with(self, jitter: f64, hash: fn(usize, u64) -> f64) -> Self {
+        Grid {
+            jitter,
+            hash,
+            ..self
+        }
+    }
+
+    pub fn split(self, split: Split) -> Self {
+        Grid { split, ..self }
+    }
+
+    /// Index of vertex `(i, j)`: row `i` along y, column `j` along x.
+    pub fn index(&self, i: usize, j: usize) -> u32 {
+        (i * (self.n + 1) + j) as u32
+    }
+
+    pub fn faces(&self) -> Vec<[u32; 3]> {
+        let n = self.n;
+        let mut faces = Vec::with_capacity(2 * n * n);
+        for i in 0..n {
+            for j in 0..n {
+                let (a, b) = (self.index(i, j), self.index(i, j + 1));
+                let (c, d) = (self.index(i + 1, j + 1), self.index(i + 1, j));
+                if self.split == Split::Uniform || (i + j) % 2 == 0 {
+                    faces.extend([[a, b, c], [a, c, d]]);
+                } else {
+                    faces.extend([[a, b, d], [b, c, d]]);
+                }
+            }
+        }
+        faces
+    }
+
+    /// `place(x, y)` at every (jittered) grid point, in vertex order.
+    pub fn positions(&self, place: impl Fn(f64, f64) -> DVec3) -> Vec<DVec3> {
+        let (n, half) = (self.n, self.half);
+        let dx = 2.0 * half / n as f64;
+        let mut pos = Vec::with_capacity((n + 1) * (n + 1));
+        for i in 0..=n {
+            for j in 0..=n {
+                let interior = i > 0 && j > 0 && i < n && j < n;
+                let k = i * (n + 1) + j;
+                let (jx, jy) = if interior && self.jitter != 0.0 {
+                    (
+                        (self.hash)(k, 1) * self.jitter,
+                        (self.hash)(k, 2) * self.jitter,
+                    )
+                } else {
+                    (0.0, 0.0)
+                };
+                let (x, y) = (-half + (j as f64 + jx) * dx, -half + (i as f64 + jy) * dx);
+                pos.push(place(x, y));
+            }
+        }
+        pos
+    }
+
+    /// Faces and flat positions `(x, y, 0)`, before building a topology.
+    pub fn arrays(&self) -> (Vec<[u32; 3]>, Vec<DVec3>) {
+        (self.faces(), self.positions(|x, y| DVec3::new(x, y, 0.0)))
+    }
+
+    /// Flat mesh, positions `(x, y, 0)`.
+    pub fn build(&self) -> (Topology, Vec<DVec3>) {
+        self.build_with(|x, y| DVec3::new(x, y, 0.0))
+    }
+
+    /// Mesh with positions `place(x, y)`.
+    pub fn build_with(&self, place: impl Fn(f64, f64) -> DVec3) -> (Topology, Vec<DVec3>) {
+        let pos = self.positions(place);
+        (
+            Topology::from_triangles(pos.len(), self.faces()).unwrap(),
+            pos,
+        )
+    }
+}
+
+/// The per-mesh structures of the connection: one-rings, geometry, frames, connection.
+pub struct Built {
+    pub rings: OneRings,
+    pub geometry: Geometry,
+    pub frames: VertexFrames,
+    pub connection: Connection,
+}
+
+/// [`Built`] with the default vertex frames of `p`.
+pub fn build(t: &Topology, p: &[DVec3]) -> Built {
+    let rings = OneRings::new(t);
+    let frames = VertexFrames::new(&rings, p).unwrap();
+    build_with(t, p, rings, frames)
+}
+
+/// [`Built`] with the given one-rings and frames.
+pub fn build_with(t: &Topology, p: &[DVec3], rings: OneRings, frames: VertexFrames) -> Built {
+    let geometry = Geometry::new(t, p).unwrap();
+    let connection = Connection::new(t, &rings, &geometry, &frames, p);
+    Built {
+        rings,
+        geometry,
+        frames,
+        connection,
+    }
+}
+
+/// `amp · exp(−|p − c|²/(2 var))` at every point (distance in the XY plane).
+pub fn gaussian(points: &[DVec3], c: DVec2, var: f64, amp: f64) -> Vec<f64> {
+    points
+        .iter()
+        .map(|p| amp * (-(p.truncate() - c).length_squared() / (2.0 * var)).exp())
+        .collect()
+}
+
+/// Mass-weighted centroid of `points` (one per vertex).
+pub fn centroid(mass: &[f64], points: &[DVec3]) -> DVec3 {
+    let total: f64 = mass.iter().sum();
+    mass.iter().zip(points).map(|(m, p)| *m * *p).sum::<DVec3>() / total
+}
+
+/// Mass-weighted 2×2 covariance `[xx, xy, yy]` of the XY coordinates about the centroid.
+pub fn covariance(mass: &[f64], points: &[DVec3]) -> [f64; 3] {
+    let c = centroid(mass, points);
+    let total: f64 = mass.iter().sum();
+    let mut v = [0.0; 3];
+    for (m, p) in mass.iter().zip(points) {
+        let d = *p - c;
+        v[0] += m * d.x * d.x;
+        v[1] += m * d.x * d.y;
+        v[2] += m * d.y * d.y;
+    }
+    v.map(|x| x / total)
+}
