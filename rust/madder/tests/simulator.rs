@@ -1277,6 +1277,87 @@ fn the_active_region_with_forces_conserves_and_never_misses_liquid() {
     );
 }
 
+/// Faces listed against the majority's orientation where a window lies: the window walks
+/// its fans in the cloth's (majority) orientation, not its own local majority, so the
+/// stain on the waving cloth is the same with and without a window, and the same as on
+/// the consistently listed mesh.
+#[test]
+fn a_window_over_flipped_faces_follows_the_cloth_orientation() {
+    let grid = Grid::new(60, 1.0);
+    let (faces, rest) = grid.arrays();
+    let at = waving(60).2;
+    // the left 35 % of the faces listed clockwise: a minority of the cloth, the majority
+    // of the window around a blob at x = -0.75
+    let flipped: Vec<[u32; 3]> = faces
+        .iter()
+        .map(|&[a, b, c]| {
+            let x = (rest[a as usize].x + rest[b as usize].x + rest[c as usize].x) / 3.0;
+            if x < -0.3 { [a, c, b] } else { [a, b, c] }
+        })
+        .collect();
+    let original: std::collections::HashSet<[u32; 3]> = faces.iter().copied().collect();
+    let run = |faces: &[[u32; 3]], active_region: bool| {
+        let topo = Topology::from_triangles(rest.len(), faces.to_vec()).unwrap();
+        let params = StainParams {
+            forces: ALL_FORCES,
+            active_region,
+            interaction: no_interaction(),
+            ..Default::default()
+        };
+        let mut sim = simulator(
+            &topo,
+            &rest,
+            &at(0.0),
+            Conductivity::Isotropic(5e-4),
+            params,
+        );
+        sim.add_liquid(
+            &gaussian(&rest, DVec2::new(-0.75, 0.0), 0.05 * 0.05, 0.4),
+            0.03,
+            None,
+        )
+        .unwrap();
+        let dt = 1.0 / 30.0;
+        for k in 1..=60 {
+            let t = k as f64 * dt;
+            sim.step(&at(t), dt, Some(&at(t + dt))).unwrap();
+        }
+        if active_region {
+            // the premise: within the window, most faces are listed clockwise
+            let m = sim.active_region().expect("liquid is flowing");
+            let inside: Vec<&[u32; 3]> = faces
+                .iter()
+                .filter(|f| f.iter().all(|&v| m[v as usize]))
+                .collect();
+            let clockwise = inside.iter().filter(|f| !original.contains(**f)).count();
+            assert!(
+                2 * clockwise > inside.len() && inside.len() < faces.len() * 3 / 4,
+                "{clockwise} of {} window faces flipped, of {}",
+                inside.len(),
+                faces.len()
+            );
+        }
+        sim.solute_density()
+    };
+    let reference = run(&faces, false);
+    let peak = reference.iter().copied().fold(0.0, f64::max);
+    for (what, got) in [
+        ("window", run(&flipped, true)),
+        ("whole mesh", run(&flipped, false)),
+    ] {
+        let diff = got
+            .iter()
+            .zip(&reference)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        eprintln!(
+            "flipped faces, {what}: max solute density difference {:.1e} of the peak",
+            diff / peak
+        );
+        assert!(diff <= 1e-9 * peak, "{what}: {diff:e} of peak {peak:e}");
+    }
+}
+
 /// A blob that dries into a stain within a few frames, then the cloth stretches to twice
 /// its width: the stain's solute density halves wherever it is above the dust level
 /// (nothing flows, so every vertex keeps its solute), window or not.
