@@ -213,8 +213,8 @@ fn flipped_faces_are_harmonized() {
     let b = build(&t, &p);
     assert!(b.rings.orientation_reversing_edges().is_empty());
     let boundary = t.boundary_vertices();
-    for v in 0..t.n_vertices() {
-        assert_eq!(b.rings.kind(v) == FanKind::Boundary, boundary[v]);
+    for (v, &on_boundary) in boundary.iter().enumerate() {
+        assert_eq!(b.rings.kind(v) == FanKind::Boundary, on_boundary);
         assert!(
             (b.frames.frame[v].z_axis - DVec3::Z).length() < 1e-15,
             "vertex {v}"
@@ -420,15 +420,12 @@ fn reverse_rotation_is_the_transpose_and_matches_the_polar_angles() {
 fn frames_on_a_sphere_are_orthonormal_and_normal() {
     let (t, p) = icosphere(3);
     let b = build(&t, &p);
-    for v in 0..t.n_vertices() {
+    assert_eq!(p.len(), t.n_vertices());
+    for (v, &pv) in p.iter().enumerate() {
         assert_eq!(b.rings.kind(v), FanKind::Interior);
         let f = &b.frames.frame[v];
         assert!(frame_error(f) < 1e-14);
-        assert!(
-            f.z_axis.dot(p[v]) > 0.999,
-            "vertex {v}: normal {}",
-            f.z_axis
-        );
+        assert!(f.z_axis.dot(pv) > 0.999, "vertex {v}: normal {}", f.z_axis);
         // interior: polar angles span [0, 2π)
         let a = b.connection.polar_angles(v);
         assert_eq!(a[0], 0.0);
@@ -483,9 +480,7 @@ fn irregular_fans_stay_finite() {
     let mut p: Vec<DVec3> = (0..14)
         .map(|k| DVec3::new(hash(k, 1), hash(k, 2), hash(k, 3)))
         .collect();
-    for v in 10..14 {
-        p[v] = DVec3::new(3.0, 3.0, 3.0);
-    }
+    p[10..14].fill(DVec3::new(3.0, 3.0, 3.0));
     let b = build(&t, &p);
     assert_eq!(b.rings.kind(0), FanKind::Irregular);
     assert_eq!(b.rings.kind(5), FanKind::Irregular);

@@ -74,6 +74,8 @@ pub fn distances_within(
     cutoff: f64,
 ) -> Vec<f64> {
     let far = vec![f64::INFINITY; points.len()];
+    // `!(cutoff >= 0.0)` (not `cutoff < 0.0`) so that a NaN cutoff is rejected too
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     if triangles.is_empty() || !(cutoff >= 0.0) {
         return far;
     }

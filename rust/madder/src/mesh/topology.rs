@@ -199,6 +199,28 @@ impl Topology {
     }
 }
 
+/// Vertex → incident edge lists (counting sort over the edges, so each list is in
+/// increasing edge order).
+fn incidence(n: usize, edges: &[[u32; 2]]) -> (Vec<u32>, Vec<u32>) {
+    let mut ptr = vec![0u32; n + 1];
+    for &[a, b] in edges {
+        ptr[a as usize + 1] += 1;
+        ptr[b as usize + 1] += 1;
+    }
+    for v in 0..n {
+        ptr[v + 1] += ptr[v];
+    }
+    let mut next = ptr[..n].to_vec();
+    let mut list = vec![0u32; ptr[n] as usize];
+    for (e, &[a, b]) in edges.iter().enumerate() {
+        for v in [a as usize, b as usize] {
+            list[next[v] as usize] = e as u32;
+            next[v] += 1;
+        }
+    }
+    (ptr, list)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -248,26 +270,4 @@ mod tests {
         let t = Topology::from_triangles(4, vec![[0, 1, 2]]).unwrap();
         assert_eq!(t.loose_vertices(), vec![false, false, false, true]);
     }
-}
-
-/// Vertex → incident edge lists (counting sort over the edges, so each list is in
-/// increasing edge order).
-fn incidence(n: usize, edges: &[[u32; 2]]) -> (Vec<u32>, Vec<u32>) {
-    let mut ptr = vec![0u32; n + 1];
-    for &[a, b] in edges {
-        ptr[a as usize + 1] += 1;
-        ptr[b as usize + 1] += 1;
-    }
-    for v in 0..n {
-        ptr[v + 1] += ptr[v];
-    }
-    let mut next = ptr[..n].to_vec();
-    let mut list = vec![0u32; ptr[n] as usize];
-    for (e, &[a, b]) in edges.iter().enumerate() {
-        for v in [a as usize, b as usize] {
-            list[next[v] as usize] = e as u32;
-            next[v] += 1;
-        }
-    }
-    (ptr, list)
 }

@@ -406,9 +406,11 @@ impl WarmCg {
         } else {
             jacobi
         };
-        let mut params = CgParams::<f64>::default();
-        params.rel_tolerance = self.tolerance;
-        params.max_iters = MAX_ITERATIONS;
+        let params = CgParams::<f64> {
+            rel_tolerance: self.tolerance,
+            max_iters: MAX_ITERATIONS,
+            ..Default::default()
+        };
         let k = b.len() / n;
         while self.scratch.len() < k {
             self.scratch.push(MemBuffer::new(cg_scratch(a, n)));

@@ -154,10 +154,10 @@ impl BochnerPattern {
         for j in 0..x.len() {
             let (lo, hi) = (self.col_ptr[j] as usize, self.col_ptr[j + 1] as usize);
             y[j] += values[lo] * x[j];
-            for s in lo + 1..hi {
-                let i = self.row_idx[s] as usize;
-                y[i] += values[s] * x[j];
-                y[j] += values[s] * x[i];
+            for (&i, &v) in self.row_idx[lo + 1..hi].iter().zip(&values[lo + 1..hi]) {
+                let i = i as usize;
+                y[i] += v * x[j];
+                y[j] += v * x[i];
             }
         }
         y

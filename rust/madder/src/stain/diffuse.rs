@@ -239,6 +239,9 @@ impl DiffusionStepper {
             });
         }
         self.fields.truncate(n);
+        // `k` is the colour channel (inner index of `colors[i]`); clippy's suggested
+        // `colors.iter()` would iterate over vertices instead
+        #[allow(clippy::needless_range_loop)]
         for k in 0..3 {
             let tint: Vec<f64> = (0..n).map(|i| self.fields[i] * colors[i][k]).collect();
             self.fields.extend(tint);
@@ -299,8 +302,8 @@ impl DiffusionStepper {
         for (i, d) in delta.iter().enumerate() {
             self.fields[i] += d;
             if let Some(c) = tint {
-                for k in 0..3 {
-                    self.fields[(k + 1) * n + i] += d * c[k];
+                for (k, ck) in c.iter().enumerate() {
+                    self.fields[(k + 1) * n + i] += d * ck;
                 }
             }
         }

@@ -39,6 +39,10 @@
 //! - **Gravity.** The tangential part of `g`: the `(x, y)` components of `F_iᵀ g` (the
 //!   frame's `z` is the rotated rest normal, within the one-ring's bending of the true
 //!   normal).
+//! - **All together.** The simulator does not apply these one after the other: with the
+//!   fibres' friction `−k u` they make the linear equation `u̇ = a − k u − 2ω_z J u`,
+//!   which [`integrate_velocity`] solves exactly over a step for constant `a` and `ω`
+//!   (its doc says why splitting it is wrong at cloth frictions).
 
 use glam::{DMat3, DVec2, DVec3};
 use rayon::prelude::*;
