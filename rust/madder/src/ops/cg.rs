@@ -13,7 +13,7 @@
 //!
 //! [`WarmCg`] expands the lower-triangle pattern ([`LowerCsc`]) once into the full
 //! symmetric matrix that faer's matrix-free CG multiplies with, with the lower slot of every
-//! full entry, so each solve only gathers values. The product is our own ([`SymOp`]): the
+//! full entry, so each solve only gathers values. The product is our own (`SymOp`): the
 //! matrix being symmetric, its compressed columns are also its rows, and each output entry
 //! is gathered along its row, `y_i = Σ_k a_ik x_k` in increasing `k` — the order in which
 //! faer's compressed-column product accumulates `y_i` (column after column), so the

@@ -722,23 +722,6 @@ impl UpwindPlan {
         self.n_limited
     }
 
-    /// Stops every transfer across an edge with an end outside `active` (the simulator's
-    /// active region): the transport is then closed inside the region (conservative and
-    /// non-negative as before) and leaves every vertex outside it unchanged. The sub-step
-    /// count and the other fractions are kept, so inside the region the transport is the
-    /// whole-mesh one.
-    ///
-    /// # Panics
-    /// If `active` does not have one entry per vertex of `topology`, the plan's topology.
-    pub fn restrict_to(&mut self, topology: &Topology, active: &[bool]) {
-        self.check(topology, active.len());
-        for (f, &[a, b]) in self.fraction.iter_mut().zip(topology.edges()) {
-            if !(active[a as usize] && active[b as usize]) {
-                *f = 0.0;
-            }
-        }
-    }
-
     fn donor(&self, edges: &[[u32; 2]], e: usize) -> usize {
         edges[e][usize::from(!self.donor_is_a[e])] as usize
     }

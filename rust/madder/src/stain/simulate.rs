@@ -374,25 +374,15 @@ impl Window {
         for (e, &s) in pattern.edge_slot().iter().enumerate() {
             slot_edge[s as usize] = e as u32;
         }
-        let gather = |v: &[u32]| -> Vec<bool> { v.iter().map(|&v| mask[v as usize]).collect() };
-        let region = Region::new(&pattern, &slot_edge, gather(&vertices));
+        let region = Region::new(&pattern, &slot_edge, pick(&vertices, &mask));
         let cg = region.solvers();
         let cloth = Cloth {
-            rest: vertices
-                .iter()
-                .map(|&v| sim.cloth.rest[v as usize])
-                .collect(),
+            rest: pick(&vertices, &sim.cloth.rest),
             rest_frames: VertexFrames {
-                frame: vertices
-                    .iter()
-                    .map(|&v| sim.cloth.rest_frames.frame[v as usize])
-                    .collect(),
+                frame: pick(&vertices, &sim.cloth.rest_frames.frame),
             },
             conductivity: sim.cloth.conductivity.faces(&faces),
-            boundary: vertices
-                .iter()
-                .map(|&v| sim.cloth.boundary[v as usize])
-                .collect(),
+            boundary: pick(&vertices, &sim.cloth.boundary),
             topology,
             rings,
             adjacency,
@@ -413,8 +403,13 @@ impl Window {
 
     /// `values` of every mesh vertex, in window order.
     fn gather<T: Copy>(&self, values: &[T]) -> Vec<T> {
-        self.vertices.iter().map(|&v| values[v as usize]).collect()
+        pick(&self.vertices, values)
     }
+}
+
+/// `values[i]` for every `i` of `index`, in that order.
+fn pick<T: Copy>(index: &[u32], values: &[T]) -> Vec<T> {
+    index.iter().map(|&i| values[i as usize]).collect()
 }
 
 /// The active region of a window (module doc): the active vertices, the restricted
@@ -1366,12 +1361,11 @@ impl Simulator {
             DRY_DENSITY,
             p.interaction.evaporation_boundary,
         );
-        let pick = |v: &[f64]| -> Vec<f64> { w.whole.iter().map(|&j| v[j as usize]).collect() };
         let mut part = loc.fields.gather(&w.whole);
         loc.evaporated += interact(
             &p.interaction,
-            &pick(&geometry.vertex_area),
-            &pick(&exposed),
+            &pick(&w.whole, &geometry.vertex_area),
+            &pick(&w.whole, &exposed),
             h,
             &mut part,
         )?;
