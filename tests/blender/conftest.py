@@ -6,6 +6,7 @@ import shutil
 import sys
 import tempfile
 
+import numpy as np
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -49,3 +50,21 @@ def open_fixture(addon, tmp_path):
 def make_active(obj):
     bpy.context.view_layer.objects.active = obj
     return obj
+
+
+def lumped_areas(mesh, co=None):
+    """Independent lumped vertex areas (a third of each incident triangle) of `mesh`'s
+    triangles at positions `co` ((N, 3); default: the mesh's own vertex coordinates)."""
+    mesh.calc_loop_triangles()
+    t = np.empty(3 * len(mesh.loop_triangles), dtype=np.int64)
+    mesh.loop_triangles.foreach_get("vertices", t)
+    t = t.reshape(-1, 3)
+    if co is None:
+        co = np.empty(3 * len(mesh.vertices))
+        mesh.vertices.foreach_get("co", co)
+        co = co.reshape(-1, 3)
+    area = 0.5 * np.linalg.norm(np.cross(co[t[:, 1]] - co[t[:, 0]], co[t[:, 2]] - co[t[:, 0]]), axis=1)
+    out = np.zeros(len(co))
+    for k in range(3):
+        np.add.at(out, t[:, k], area / 3)
+    return out

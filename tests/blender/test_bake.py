@@ -5,7 +5,7 @@ import os
 import bpy
 import numpy as np
 import pytest
-from conftest import make_active
+from conftest import lumped_areas, make_active
 
 import madder
 
@@ -24,22 +24,13 @@ def point_attr(mesh, name, prop, width):
     return attr, out.reshape(-1, width) if width > 1 else out
 
 
-def lumped_areas(obj_eval):
+def world_lumped_areas(obj_eval):
     """Independent numpy lumped vertex areas of an evaluated mesh, world space."""
     me = obj_eval.data
-    me.calc_loop_triangles()
-    tris = np.empty(3 * len(me.loop_triangles), dtype=np.int64)
-    me.loop_triangles.foreach_get("vertices", tris)
-    tris = tris.reshape(-1, 3)
     co = np.empty(3 * len(me.vertices))
     me.vertices.foreach_get("co", co)
     m = np.array(obj_eval.matrix_world)
-    p = co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3]
-    area = 0.5 * np.linalg.norm(np.cross(p[tris[:, 1]] - p[tris[:, 0]], p[tris[:, 2]] - p[tris[:, 0]]), axis=1)
-    out = np.zeros(len(p))
-    for k in range(3):
-        np.add.at(out, tris[:, k], area / 3)
-    return out
+    return lumped_areas(me, co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3])
 
 
 def test_extension_is_installed_with_its_own_wheel(addon):
@@ -116,7 +107,7 @@ def test_mass_is_conserved_on_the_draping_tablecloth(open_fixture):
     solute, liquid, areas = [], [], []
     for f in range(scene.frame_start, scene.frame_end + 1, 6):
         scene.frame_set(f)
-        a = lumped_areas(cloth.evaluated_get(bpy.context.evaluated_depsgraph_get()))
+        a = world_lumped_areas(cloth.evaluated_get(bpy.context.evaluated_depsgraph_get()))
         solute.append(a @ reader.read(f, "solute").astype(np.float64))
         liquid.append(a @ reader.read(f, "wetness").astype(np.float64))
         areas.append(a.sum())

@@ -6,7 +6,7 @@ import sys
 import bpy
 import numpy as np
 import pytest
-from conftest import ADDON, make_active
+from conftest import ADDON, lumped_areas, make_active
 
 import madder
 
@@ -212,17 +212,5 @@ def test_momentum_advection_and_substeps_bake_and_conserve(open_fixture):
     first, last = r.read(scene.frame_start, "solute"), r.read(scene.frame_end, "solute")
     assert np.abs(last - plain).max() > 1e-3 * plain.max()  # they did change the flow
     assert (centroid(flag, scene.frame_end) - centroid(flag, scene.frame_start))[2] < -0.05
-    # lumped vertex areas of the (still) flag: a third of each incident triangle
-    me = flag.data
-    me.calc_loop_triangles()
-    tris = np.empty(3 * len(me.loop_triangles), dtype=np.int64)
-    me.loop_triangles.foreach_get("vertices", tris)
-    tris = tris.reshape(-1, 3)
-    co = np.empty(3 * len(me.vertices))
-    me.vertices.foreach_get("co", co)
-    co = co.reshape(-1, 3)
-    tri_area = 0.5 * np.linalg.norm(np.cross(co[tris[:, 1]] - co[tris[:, 0]], co[tris[:, 2]] - co[tris[:, 0]]), axis=1)
-    area = np.zeros(len(co))
-    for k in range(3):
-        np.add.at(area, tris[:, k], tri_area / 3)
+    area = lumped_areas(flag.data)  # the flag is still: its own coordinates
     assert area @ last.astype(np.float64) == pytest.approx(area @ first.astype(np.float64), rel=2e-6)

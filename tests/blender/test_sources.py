@@ -4,7 +4,7 @@ active over a frame range, and colours that mix."""
 import bpy
 import numpy as np
 import pytest
-from conftest import make_active
+from conftest import lumped_areas, make_active
 
 import madder
 
@@ -37,19 +37,6 @@ def square_brush(centre, half, height, flow, reach, color=(0.0, 0.0, 1.0)):
     return brush
 
 
-def lumped_areas(co, cloth):
-    me = cloth.data
-    me.calc_loop_triangles()
-    t = np.empty(3 * len(me.loop_triangles), dtype=np.int64)
-    me.loop_triangles.foreach_get("vertices", t)
-    t = t.reshape(-1, 3)
-    area = 0.5 * np.linalg.norm(np.cross(co[t[:, 1]] - co[t[:, 0]], co[t[:, 2]] - co[t[:, 0]]), axis=1)
-    out = np.zeros(len(co))
-    for k in range(3):
-        np.add.at(out, t[:, k], area / 3)
-    return out
-
-
 def masses(cloth, areas, field):
     """Mass (kg) of a cache field at every frame: Σ A_i σ_i (the cloth is still and flat)."""
     r = madder.CacheReader(bpy.path.abspath(cloth.madder.cache_file))
@@ -73,7 +60,7 @@ def test_pour_adds_exactly_its_flow_during_its_frame_range():
     dx = np.maximum(np.abs(co[:, 0] - centre[0]) - half, 0)
     dy = np.maximum(np.abs(co[:, 1] - centre[1]) - half, 0)
     d = np.sqrt(dx**2 + dy**2 + height**2)
-    areas = lumped_areas(co, cloth)
+    areas = lumped_areas(cloth.data, co)
     per_frame = flow / FPS * (areas @ np.clip(1 - d / reach, 0, 1))
     frames = np.arange(2, 21)
     active = (frames >= 5) & (frames <= 12)

@@ -331,7 +331,7 @@ impl Simulator {
             ("transport_cycles", p.transport_cycles),
             ("active_vertices", p.active_vertices),
             ("window_vertices", p.window_vertices),
-            ("window_rebuilds", p.region_rebuilds),
+            ("window_rebuilds", p.window_rebuilds),
         ] {
             d.set_item(k, v)?;
         }

@@ -76,7 +76,7 @@ fn bench(nx: usize, ny: usize, frames: usize) {
         per(p.interaction),
         100.0 * p.window_vertices as f64 / (p.substeps * n) as f64,
         100.0 * p.active_vertices as f64 / (p.substeps * n) as f64,
-        p.region_rebuilds,
+        p.window_rebuilds,
     );
 }
 

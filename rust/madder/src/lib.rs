@@ -21,6 +21,7 @@ pub mod error;
 pub mod io;
 pub mod mesh;
 pub mod ops;
+pub mod rng;
 pub mod stain;
 pub mod weave;
 

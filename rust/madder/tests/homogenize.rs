@@ -3,6 +3,7 @@
 //! checkerboard, the Wiener bounds on random tiles, rotation covariance, and the
 //! convergence of the primal–dual extrapolation on tiles without a closed form.
 
+use madder::rng::SplitMix64;
 use madder::weave::homogenize::{bounds, reduce, refine};
 use madder::weave::tensor::{self, is_psd};
 use madder::weave::{
@@ -28,22 +29,17 @@ fn iso(k: f64) -> Tensor2 {
     [k, 0.0, k]
 }
 
-/// splitmix64: a seeded, deterministic generator (no `rand` dependency).
-struct Rng(u64);
+/// The tests' random numbers: splitmix64, plus random SPD tensors.
+struct Rng(SplitMix64);
 impl Rng {
     fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
+        self.0.next_u64()
     }
     fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+        self.0.unit()
     }
-    /// Log-uniform in [lo, hi].
     fn log_uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        (lo.ln() + self.unit() * (hi.ln() - lo.ln())).exp()
+        self.0.log_uniform(lo, hi)
     }
     /// A random SPD tensor: eigenvalues log-uniform in [lo, hi], random axes.
     fn spd(&mut self, lo: f64, hi: f64) -> Tensor2 {
@@ -101,7 +97,7 @@ fn opts(method: Method, max_cells: usize) -> HomogenizeOptions {
 
 #[test]
 fn laminates_with_anisotropic_layers_are_exact() {
-    let mut rng = Rng(7);
+    let mut rng = Rng(SplitMix64::new(7));
     for trial in 0..20 {
         // layers of 1–3 cells, 2–6 layers, tensors with contrast up to 10⁴ and any axes
         let n = 2 + trial % 5;
@@ -253,7 +249,7 @@ fn four_phase_checkerboard_is_mortola_steffe() {
 
 #[test]
 fn wiener_bounds_spd_and_bracket_on_random_tiles() {
-    let mut rng = Rng(2024);
+    let mut rng = Rng(SplitMix64::new(2024));
     for trial in 0..60 {
         let (w, h) = (1 + (rng.next() % 7) as usize, 1 + (rng.next() % 7) as usize);
         let t: Vec<Tensor2> = (0..w * h).map(|_| rng.spd(0.1, 1000.0)).collect();
@@ -289,7 +285,7 @@ fn wiener_bounds_spd_and_bracket_on_random_tiles() {
 
 #[test]
 fn quarter_turn_and_mirror_transform_the_tensor() {
-    let mut rng = Rng(99);
+    let mut rng = Rng(SplitMix64::new(99));
     for trial in 0..20 {
         let (w, h) = (1 + (rng.next() % 6) as usize, 1 + (rng.next() % 6) as usize);
         let t: Vec<Tensor2> = (0..w * h).map(|_| rng.spd(0.5, 50.0)).collect();
@@ -327,7 +323,7 @@ fn quarter_turn_and_mirror_transform_the_tensor() {
 fn keller_duality_commutes_with_homogenization() {
     // the dual medium a / det a has effective tensor A / det A (Keller); the bounds swap
     // roles, φ ↦ 1 − φ, and the estimate follows exactly
-    let mut rng = Rng(31);
+    let mut rng = Rng(SplitMix64::new(31));
     for trial in 0..10 {
         let (w, h) = (2 + (rng.next() % 4) as usize, 2 + (rng.next() % 4) as usize);
         let t: Vec<Tensor2> = (0..w * h).map(|_| rng.spd(0.2, 200.0)).collect();
@@ -384,7 +380,7 @@ fn bounds_tighten_monotonically_under_refinement() {
 
 #[test]
 fn same_bits_in_parallel_and_sequentially() {
-    let mut rng = Rng(5);
+    let mut rng = Rng(SplitMix64::new(5));
     let t: Vec<Tensor2> = (0..5 * 4).map(|_| rng.spd(1.0, 100.0)).collect();
     let p = homogenize_report(5, 4, &t, &HomogenizeOptions::default()).unwrap();
     let s = homogenize_report(

@@ -1116,37 +1116,22 @@ fn one_and_two_threads_give_bit_identical_fields() {
 // ---------------------------------------------------------------------------------------
 // 7b. active region
 
-/// A blob spreading on the waving, stretching cloth for `steps` steps, with or without
-/// the active region, with `forces` (and the default viscosity, friction, interactions).
-/// Calls `check(sim, before)` after every step with the fields before it.
-fn region_run(
-    active_region: bool,
-    forces: Forces,
-    interaction: &InteractionRates,
+/// A blob (0.4 kg/m² peak, 3 % solute, gaussian of width `blob.1` at `blob.0`) spreading
+/// on the cloth `topo` moving as `at`, `steps` steps of 1/30 s, with isotropic diffusion
+/// 5e-4 m²/s and `params`. Checks the state is sane and calls `check(sim, before)` after
+/// every step, with the fields before it.
+fn blob_run(
+    (topo, rest): (&Topology, &[DVec3]),
+    at: &impl Fn(f64) -> Vec<DVec3>,
+    params: StainParams,
+    blob: (DVec2, f64),
     steps: usize,
     mut check: impl FnMut(&Simulator, &Fields),
 ) -> Simulator {
-    let (topo, rest, at) = waving(40);
     let dt = 1.0 / 30.0;
-    let params = StainParams {
-        forces,
-        active_region,
-        interaction: *interaction,
-        ..Default::default()
-    };
-    let mut sim = simulator(
-        &topo,
-        &rest,
-        &at(0.0),
-        Conductivity::Isotropic(5e-4),
-        params,
-    );
-    sim.add_liquid(
-        &gaussian(&rest, DVec2::new(-0.2, 0.3), 0.08 * 0.08, 0.4),
-        0.03,
-        None,
-    )
-    .unwrap();
+    let mut sim = simulator(topo, rest, &at(0.0), Conductivity::Isotropic(5e-4), params);
+    sim.add_liquid(&gaussian(rest, blob.0, blob.1 * blob.1, 0.4), 0.03, None)
+        .unwrap();
     for k in 1..=steps {
         let before = sim.fields().clone();
         let t = k as f64 * dt;
@@ -1155,6 +1140,42 @@ fn region_run(
         check(&sim, &before);
     }
     sim
+}
+
+/// [`blob_run`] on the 40×40 waving cloth, with or without the active region, with
+/// `forces` and `interaction` (and the default viscosity and friction).
+fn region_run(
+    active_region: bool,
+    forces: Forces,
+    interaction: &InteractionRates,
+    steps: usize,
+    check: impl FnMut(&Simulator, &Fields),
+) -> Simulator {
+    let (topo, rest, at) = waving(40);
+    let params = StainParams {
+        forces,
+        active_region,
+        interaction: *interaction,
+        ..Default::default()
+    };
+    blob_run(
+        (&topo, &rest),
+        &at,
+        params,
+        (DVec2::new(-0.2, 0.3), 0.08),
+        steps,
+        check,
+    )
+}
+
+/// `(max |x − y|, max y)`: how far two density fields are apart, and the reference peak.
+fn max_difference(x: &[f64], y: &[f64]) -> (f64, f64) {
+    let diff = x
+        .iter()
+        .zip(y)
+        .map(|(p, q)| (p - q).abs())
+        .fold(0.0, f64::max);
+    (diff, y.iter().copied().fold(0.0, f64::max))
 }
 
 #[test]
@@ -1206,12 +1227,7 @@ fn the_active_region_matches_the_whole_mesh_and_never_misses_liquid() {
         ("solute", active.solute_density(), whole.solute_density()),
         ("wetness", active.wetness(), whole.wetness()),
     ] {
-        let peak = y.iter().copied().fold(0.0, f64::max);
-        let diff = x
-            .iter()
-            .zip(&y)
-            .map(|(p, q)| (p - q).abs())
-            .fold(0.0, f64::max);
+        let (diff, peak) = max_difference(&x, &y);
         assert!(
             diff <= 1e-9 * peak,
             "{name}: max difference {diff:e} of peak {peak:e}"
@@ -1260,12 +1276,7 @@ fn the_active_region_with_forces_conserves_and_never_misses_liquid() {
     // step past the region into the dry cloth, where it evaporates; the region keeps it
     // (module doc). Measured 1.4e-5 of the peak after 200 steps here.
     let (x, y) = (active.solute_density(), whole.solute_density());
-    let peak = y.iter().copied().fold(0.0, f64::max);
-    let diff = x
-        .iter()
-        .zip(&y)
-        .map(|(p, q)| (p - q).abs())
-        .fold(0.0, f64::max);
+    let (diff, peak) = max_difference(&x, &y);
     assert!(
         diff <= 1e-4 * peak,
         "max solute density difference {diff:e} of peak {peak:e}"
@@ -1304,24 +1315,8 @@ fn a_window_over_flipped_faces_follows_the_cloth_orientation() {
             interaction: no_interaction(),
             ..Default::default()
         };
-        let mut sim = simulator(
-            &topo,
-            &rest,
-            &at(0.0),
-            Conductivity::Isotropic(5e-4),
-            params,
-        );
-        sim.add_liquid(
-            &gaussian(&rest, DVec2::new(-0.75, 0.0), 0.05 * 0.05, 0.4),
-            0.03,
-            None,
-        )
-        .unwrap();
-        let dt = 1.0 / 30.0;
-        for k in 1..=60 {
-            let t = k as f64 * dt;
-            sim.step(&at(t), dt, Some(&at(t + dt))).unwrap();
-        }
+        let blob = (DVec2::new(-0.75, 0.0), 0.05);
+        let sim = blob_run((&topo, &rest), &at, params, blob, 60, |_, _| {});
         if active_region {
             // the premise: within the window, most faces are listed clockwise
             let m = sim.active_region().expect("liquid is flowing");
@@ -1340,16 +1335,11 @@ fn a_window_over_flipped_faces_follows_the_cloth_orientation() {
         sim.solute_density()
     };
     let reference = run(&faces, false);
-    let peak = reference.iter().copied().fold(0.0, f64::max);
     for (what, got) in [
         ("window", run(&flipped, true)),
         ("whole mesh", run(&flipped, false)),
     ] {
-        let diff = got
-            .iter()
-            .zip(&reference)
-            .map(|(a, b)| (a - b).abs())
-            .fold(0.0, f64::max);
+        let (diff, peak) = max_difference(&got, &reference);
         eprintln!(
             "flipped faces, {what}: max solute density difference {:.1e} of the peak",
             diff / peak

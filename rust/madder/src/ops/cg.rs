@@ -568,6 +568,30 @@ impl SymOp<'_> {
     }
 }
 
+/// `out = f(rhs)` column by column for the `n × n` matrix-free operators below, `f`
+/// writing one contiguous column (`x` into `y`).
+fn by_columns(
+    n: usize,
+    mut out: MatMut<'_, f64>,
+    rhs: MatRef<'_, f64>,
+    f: impl Fn(&[f64], &mut [f64]),
+) {
+    assert!(out.nrows() == n && rhs.nrows() == n && out.ncols() == rhs.ncols());
+    for j in 0..rhs.ncols() {
+        let x = rhs.col(j);
+        let mut y = out.as_mut().col_mut(j);
+        if let (Some(x), Some(y)) = (x.try_as_col_major(), y.as_mut().try_as_col_major_mut()) {
+            f(x.as_slice(), y.as_slice_mut());
+            continue;
+        }
+        // strided columns (the CG does not make them): through contiguous copies
+        let xs: Vec<f64> = x.iter().copied().collect();
+        let mut ys = vec![0.0; n];
+        f(&xs, &mut ys);
+        y.iter_mut().zip(ys).for_each(|(o, v)| *o = v);
+    }
+}
+
 impl LinOp<f64> for SymOp<'_> {
     fn apply_scratch(&self, _rhs_ncols: usize, _par: Par) -> StackReq {
         StackReq::EMPTY
@@ -581,22 +605,8 @@ impl LinOp<f64> for SymOp<'_> {
         self.ptr.len() - 1
     }
 
-    fn apply(&self, mut out: MatMut<'_, f64>, rhs: MatRef<'_, f64>, _par: Par, _: &mut MemStack) {
-        let n = self.nrows();
-        assert!(out.nrows() == n && rhs.nrows() == n && out.ncols() == rhs.ncols());
-        for j in 0..rhs.ncols() {
-            let x = rhs.col(j);
-            let mut y = out.as_mut().col_mut(j);
-            if let (Some(x), Some(y)) = (x.try_as_col_major(), y.as_mut().try_as_col_major_mut()) {
-                self.gather(x.as_slice(), y.as_slice_mut());
-                continue;
-            }
-            // strided columns (the CG does not make them): through contiguous copies
-            let xs: Vec<f64> = x.iter().copied().collect();
-            let mut ys = vec![0.0; n];
-            self.gather(&xs, &mut ys);
-            y.iter_mut().zip(ys).for_each(|(o, v)| *o = v);
-        }
+    fn apply(&self, out: MatMut<'_, f64>, rhs: MatRef<'_, f64>, _par: Par, _: &mut MemStack) {
+        by_columns(self.nrows(), out, rhs, |x, y| self.gather(x, y));
     }
 
     fn conj_apply(&self, out: MatMut<'_, f64>, rhs: MatRef<'_, f64>, par: Par, s: &mut MemStack) {
@@ -674,21 +684,8 @@ impl LinOp<f64> for Factor<'_> {
         self.inv_d.len()
     }
 
-    fn apply(&self, mut out: MatMut<'_, f64>, rhs: MatRef<'_, f64>, _par: Par, _: &mut MemStack) {
-        let n = self.nrows();
-        assert!(out.nrows() == n && rhs.nrows() == n && out.ncols() == rhs.ncols());
-        for j in 0..rhs.ncols() {
-            let x = rhs.col(j);
-            let mut y = out.as_mut().col_mut(j);
-            if let (Some(x), Some(y)) = (x.try_as_col_major(), y.as_mut().try_as_col_major_mut()) {
-                self.solve(x.as_slice(), y.as_slice_mut());
-                continue;
-            }
-            let xs: Vec<f64> = x.iter().copied().collect();
-            let mut ys = vec![0.0; n];
-            self.solve(&xs, &mut ys);
-            y.iter_mut().zip(ys).for_each(|(o, v)| *o = v);
-        }
+    fn apply(&self, out: MatMut<'_, f64>, rhs: MatRef<'_, f64>, _par: Par, _: &mut MemStack) {
+        by_columns(self.nrows(), out, rhs, |x, y| self.solve(x, y));
     }
 
     fn conj_apply(&self, out: MatMut<'_, f64>, rhs: MatRef<'_, f64>, par: Par, s: &mut MemStack) {

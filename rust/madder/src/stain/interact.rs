@@ -689,23 +689,15 @@ impl Vertex {
 mod tests {
     use super::*;
 
-    /// splitmix64: a tiny deterministic generator for the randomized tests.
-    struct Rng(u64);
+    /// The randomized tests' numbers (splitmix64).
+    struct Rng(crate::rng::SplitMix64);
 
     impl Rng {
-        fn next_u64(&mut self) -> u64 {
-            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = self.0;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            z ^ (z >> 31)
-        }
-        /// Uniform in `[0, 1)`.
         fn uniform(&mut self) -> f64 {
-            (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+            self.0.unit()
         }
         fn log_uniform(&mut self, lo: f64, hi: f64) -> f64 {
-            (lo.ln() + (hi.ln() - lo.ln()) * self.uniform()).exp()
+            self.0.log_uniform(lo, hi)
         }
         /// Zero with probability `p_zero`, else log-uniform in `[lo, hi]`.
         fn mass(&mut self, p_zero: f64, lo: f64, hi: f64) -> f64 {
@@ -1045,7 +1037,7 @@ mod tests {
     #[test]
     fn random_steps_conserve_solute_and_solvent_and_stay_non_negative() {
         let n = 64;
-        let mut rng = Rng(0x5eed_1234);
+        let mut rng = Rng(crate::rng::SplitMix64::new(0x5eed_1234));
         let (mut worst_solute, mut worst_solvent, mut worst_color) = (0.0f64, 0.0f64, 0.0f64);
         let (mut worst_epoch, mut worst_channel0) = (0.0f64, 0.0f64);
         for _epoch in 0..200 {
@@ -1301,7 +1293,7 @@ mod tests {
     #[test]
     fn thread_count_does_not_change_results() {
         let n = 5000; // five chunks
-        let mut rng = Rng(42);
+        let mut rng = Rng(crate::rng::SplitMix64::new(42));
         let start = random_fields(&mut rng, n);
         let r = random_rates(&mut rng);
         let area: Vec<f64> = (0..n).map(|_| rng.log_uniform(1e-4, 1.0)).collect();

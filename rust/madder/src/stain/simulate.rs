@@ -137,6 +137,7 @@ use crate::error::{Error, ParamError};
 use crate::mesh::geometry::{check_positions, vertex_area};
 use crate::mesh::{Connection, Geometry, OneRings, RingAdjacency, Topology, VertexFrames};
 use crate::ops::{LowerCsc, VertexPattern, WarmCg, cotan_stiffness};
+use crate::rng::SplitMix64;
 
 /// A vertex is "dry" for the evaporation boundary rule (eq. 4.8) below this liquid
 /// density, kg/m² (1 g/m², a film of water 1 µm thick).
@@ -404,6 +405,19 @@ impl Window {
     /// `values` of every mesh vertex, in window order.
     fn gather<T: Copy>(&self, values: &[T]) -> Vec<T> {
         pick(&self.vertices, values)
+    }
+}
+
+/// Every value finite and `≥ 0`, else the error names the first vertex that is not.
+fn check_each_nonnegative(name: &'static str, values: &[f64]) -> Result<(), ParamError> {
+    match values.iter().position(|x| !(x.is_finite() && *x >= 0.0)) {
+        None => Ok(()),
+        Some(index) => Err(ParamError::OutOfRangeAt {
+            name,
+            index,
+            requirement: "finite and ≥ 0",
+            value: values[index],
+        }),
     }
 }
 
@@ -675,7 +689,7 @@ pub struct Profile {
     /// Window vertices (active, held and halo), summed over the sub-steps.
     pub window_vertices: usize,
     /// Times the window was rebuilt.
-    pub region_rebuilds: usize,
+    pub window_rebuilds: usize,
 }
 
 /// One frame's work on a window, committed when the whole frame succeeded.
@@ -907,14 +921,7 @@ impl Simulator {
         color: Option<[f64; 3]>,
     ) -> Result<(), ParamError> {
         self.check_len("added solvent", solvent.len())?;
-        if let Some(index) = solvent.iter().position(|d| !(d.is_finite() && *d >= 0.0)) {
-            return Err(ParamError::OutOfRangeAt {
-                name: "added solvent",
-                index,
-                requirement: "finite and ≥ 0",
-                value: solvent[index],
-            });
-        }
+        check_each_nonnegative("added solvent", solvent)?;
         check_range(
             "concentration",
             concentration,
@@ -989,14 +996,7 @@ impl Simulator {
                 index: 0,
             });
         }
-        if let Some(index) = weight.iter().position(|w| !(w.is_finite() && *w >= 0.0)) {
-            return Err(ParamError::OutOfRangeAt {
-                name: "splash weight",
-                index,
-                requirement: "finite and ≥ 0",
-                value: weight[index],
-            });
-        }
+        check_each_nonnegative("splash weight", weight)?;
         // the splashed vertices' velocities and frames, brought to now
         let splashed: Vec<usize> = (0..weight.len()).filter(|&i| weight[i] > 0.0).collect();
         let now: Vec<(DVec2, DMat3)> = splashed
@@ -1005,7 +1005,7 @@ impl Simulator {
             .collect();
         let st = &mut self.state;
         for (&i, (u, frame)) in splashed.iter().zip(now) {
-            let mut rng = SplitMix64(seed ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+            let mut rng = SplitMix64::new(seed ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
             let (r1, r2, r3) = (rng.unit(), rng.unit(), rng.unit());
             st.frames.frame[i] = frame;
             st.stamp[i] = st.time;
@@ -1054,7 +1054,7 @@ impl Simulator {
         let substeps = self.params.substeps as usize;
         let rebuilt = self.prepare_window(substeps)?;
         let mut prof = self.profile;
-        prof.region_rebuilds += usize::from(rebuilt);
+        prof.window_rebuilds += usize::from(rebuilt);
         prof.window += clock.elapsed().as_secs_f64();
         let t_end = self.state.time + dt;
         let mut window = self.window.take();
@@ -1625,23 +1625,5 @@ fn split_rgb(c: &[[f64; 3]]) -> [Vec<f64>; 3] {
 fn merge_rgb(c: &[Vec<f64>; 3], out: &mut [[f64; 3]]) {
     for (i, o) in out.iter_mut().enumerate() {
         *o = [c[0][i], c[1][i], c[2][i]];
-    }
-}
-
-/// splitmix64 (Steele, Lea & Flood 2014): a tiny, well-mixed generator, enough for
-/// reproducible jitter; one per vertex, seeded from the splash seed and the index.
-struct SplitMix64(u64);
-
-impl SplitMix64 {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [0, 1).
-    fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
     }
 }
