@@ -5,6 +5,7 @@
 
 pub mod advect;
 pub mod diffuse;
+pub mod extend;
 pub mod forces;
 pub mod interact;
 pub mod simulate;

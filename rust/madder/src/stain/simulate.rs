@@ -12,26 +12,56 @@
 //! One frame `t → t + H` is `S` sub-steps of `h = H/S`, the positions interpolated
 //! linearly between the two frames. Each sub-step, on the geometry at its end:
 //!
-//! 1. **Forces** (§4.4): `u̇ = a − k u − 2ω_z J u` over the sub-step, `a` the tangential
-//!    gravity and rectilinear force in `F_i`, `k` the drag of the fibres on the liquid
-//!    (`k = 0` is the seed's frictionless liquid), `ω` the frames' angular velocity over
-//!    the sub-step: integrated exactly for constant `a` and `ω`
+//! 1. **Forces** (§4.4), the first half: `u̇ = a − k u − 2ω_z J u` over `h/2`, `a` the
+//!    tangential gravity and rectilinear force in `F_i`, `k` the drag of the fibres on
+//!    the liquid (`k = 0` is the seed's frictionless liquid), `ω` the frames' angular
+//!    velocity over the sub-step: integrated exactly for constant `a` and `ω`
 //!    ([`super::forces::integrate_velocity`]), so the liquid reaches its terminal
 //!    velocity `a/k` at any step (a kick followed by the decay `e^{−kh}` reaches 30 % of
-//!    it at 24 fps), and the Coriolis force turns it without changing its speed.
-//! 2. **Advection** (§4.3.1): the velocity semi-Lagrangian, then the densities by
-//!    upwind finite volumes ([`super::advect`]); or, with `momentum_advection`, the
-//!    velocity follows the solvent's momentum (§4.3.2). The densities move with the
-//!    sub-step's mean velocity: the exact mean under the forces plus half the change the
-//!    advection makes (without friction, `½(u^n + u^{n+1})`). With the end velocity alone
-//!    (the plain split step) a liquid accelerating from rest travels `(n+1)/n` times
-//!    `½at²` after `n` steps — 12 % too far after 8 frames — and with the mean it travels
-//!    exactly `½at²`.
-//! 3. **Diffusion** (§4.3.3–4.3.4): `(M + h K_S) σ' = m` for the free solvent and the
+//!    it at 24 fps), and the Coriolis force turns it without changing its speed. The
+//!    velocity is then **extended** over the dry cloth from the wet region
+//!    ([`super::extend`]): it is the liquid's, and the dry value is what arriving liquid
+//!    reads.
+//! 2. **Advection** (§4.3.1–4.3.2): the densities by upwind finite volumes
+//!    ([`super::advect`]); the velocity with the solvent's momentum (§4.3.2, the
+//!    default: `u = p/m`, the mass-weighted velocity), or semi-Lagrangian (§4.3.1) with
+//!    `momentum_advection` off. The densities move with the sub-step's mean velocity:
+//!    the exact mean under the forces over the whole sub-step plus half the change the
+//!    advection makes (without friction, `½(u^n + u^{n+1})`). With the end velocity
+//!    alone (the plain split step) a liquid accelerating from rest travels `(n+1)/n`
+//!    times `½at²` after `n` steps — 12 % too far after 8 frames — and with the mean it
+//!    travels exactly `½at²`.
+//! 3. **Forces**, the second half, at the vertex the liquid arrived at. Half a kick where
+//!    the liquid leaves and half where it arrives is the kick–drift–kick (leapfrog)
+//!    splitting: second order, and it keeps the energy of a frictionless liquid bounded.
+//!    The whole kick at the start (the seed's order) gives a liquid swinging in a trough
+//!    the force of where it was, not where it went: with the momentum velocity its swing
+//!    grew by 13 % per half period at 25 fps.
+//! 4. **Diffusion** (§4.3.3–4.3.4): `(M + h K_S) σ' = m` for the free solvent and the
 //!    dissolved solute (and their colour), `K_S` the stiffness of the fabric tensor in
 //!    each face's weft basis; the velocity by the connection (Bochner) Laplacian of the
 //!    viscosity, eq. 4.6. Both by warm-started CG ([`crate::ops::WarmCg`]).
-//! 4. **Interactions** (§4.5): absorption, adsorption, evaporation ([`super::interact`]).
+//! 5. **Interactions** (§4.5): absorption, adsorption, evaporation ([`super::interact`]).
+//!
+//! ## Which velocity (issue 10)
+//! The momentum form is the default because only it conserves momentum where streams of
+//! liquid meet. The semi-Lagrangian velocity is a Burgers equation for `u` alone: where
+//! fast liquid runs into slow liquid (or into a trace of it) the two velocities meet at
+//! their plain average, whatever their masses. A blob released in a frictionless trough
+//! focuses at the bottom like the pendulums of its parcels (they all arrive together), and
+//! there the semi-Lagrangian swing loses 40 % of its amplitude per half period, at any
+//! sub-step; with the momentum form the blob follows a point mass to 8 % of the amplitude
+//! at one sub-step per 25 fps frame (4 % at two). Both coast exactly when launched on a flat
+//! cloth (tests: `tests/liquid_motion.rs`).
+//!
+//! ## Fast rotation
+//! The splitting of forces and advection errs where the frames turn fast: on a disk
+//! spinning at 8 rad/s at 25 fps, 7 % off the inertial path at one sub-step. A frame
+//! therefore takes as many sub-steps as keep the largest turn of an active vertex's frame
+//! about its normal to [`MAX_TURN`] (0.1 rad) per sub-step, on top of the ones asked for
+//! ([`StainParams::substeps`]): 1 at 2 rad/s, 4 at 8 rad/s at 25 fps, and the path stays
+//! within 5 %. The turn is measured on the window's active vertices only (where liquid can
+//! be), from the frames at the start of the frame to the Kabsch frames at its end.
 //!
 //! ## Conservation and sign (why the clamps are safe)
 //! The system conserves mass exactly (`1ᵀ(M + hK) = 1ᵀM`) and CG to its tolerance; after
@@ -128,6 +158,7 @@ use rayon::prelude::*;
 
 use super::advect::{UpwindPlan, advect_velocity_in, dual_fluxes};
 use super::diffuse::{Conductivity, check_range};
+use super::extend::{extend_velocity, wet_vertices};
 use super::forces::{
     Forces, corotating_frames_with, frame_angular_velocity, frame_body_acceleration,
     integrate_velocity, rest_frames, second_difference,
@@ -171,6 +202,14 @@ pub const WINDOW_SLACK_RINGS: usize = 4;
 /// many vertices (the liquid shrank or dried).
 pub const WINDOW_SLACK_VERTICES: usize = 256;
 
+/// Largest turn of a vertex frame about its normal in one sub-step, rad (module doc,
+/// "Fast rotation"): a frame that turns faster gets more sub-steps.
+pub const MAX_TURN: f64 = 0.1;
+
+/// Most sub-steps a frame takes on its own to keep the turn per sub-step below
+/// [`MAX_TURN`] (a frame turning by 6.4 rad, a full turn, in one frame).
+pub const MAX_AUTO_SUBSTEPS: usize = 64;
+
 /// Physical parameters of the liquid and the cloth (SI units).
 #[derive(Debug, Clone, PartialEq)]
 pub struct StainParams {
@@ -190,7 +229,8 @@ pub struct StainParams {
     pub friction: f64,
     /// Absorption, adsorption and evaporation rates (§4.5).
     pub interaction: InteractionRates,
-    /// Sub-steps per frame.
+    /// Sub-steps per frame, at least: a frame whose vertex frames turn by more than
+    /// [`MAX_TURN`] takes more on its own (module doc, "Fast rotation").
     pub substeps: u32,
     /// Step only the vertices near the flowing liquid (module doc, "Active region");
     /// `false` steps the whole mesh.
@@ -202,7 +242,7 @@ impl Default for StainParams {
         Self {
             gravity: DVec3::new(0.0, 0.0, -9.81),
             forces: Forces::default(),
-            momentum_advection: false,
+            momentum_advection: true,
             viscosity: 1e-4,
             friction: 50.0,
             interaction: InteractionRates::default(),
@@ -290,8 +330,9 @@ pub struct Simulator {
     /// Liquid may have been poured outside the window: the next frame looks for it on
     /// the whole mesh.
     rescan: bool,
-    /// Transport sub-cycles of the last sub-step (widens the next region).
-    last_transport_cycles: usize,
+    /// Transport sub-cycles of the last frame, all its sub-steps together (widens the
+    /// next region: liquid moves at most one ring per sub-cycle).
+    last_frame_cycles: usize,
 }
 
 /// A triangle mesh with what every phase reads: the whole cloth, or a window cut out of it.
@@ -763,7 +804,7 @@ impl Simulator {
             profile: Profile::default(),
             window: None,
             rescan: true,
-            last_transport_cycles: 1,
+            last_frame_cycles: 1,
         })
     }
 
@@ -1051,8 +1092,7 @@ impl Simulator {
             check_positions(&self.cloth.topology, a)?;
         }
         let clock = Instant::now();
-        let substeps = self.params.substeps as usize;
-        let rebuilt = self.prepare_window(substeps)?;
+        let rebuilt = self.prepare_window()?;
         let mut prof = self.profile;
         prof.window_rebuilds += usize::from(rebuilt);
         prof.window += clock.elapsed().as_secs_f64();
@@ -1078,9 +1118,9 @@ impl Simulator {
         Ok(())
     }
 
-    /// Finds the liquid and keeps or rebuilds the window for a frame of `substeps`
-    /// sub-steps (module doc, "Window"). Returns whether it was rebuilt.
-    fn prepare_window(&mut self, substeps: usize) -> Result<bool, Error> {
+    /// Finds the liquid and keeps or rebuilds the window for the next frame (module doc,
+    /// "Window"). Returns whether it was rebuilt.
+    fn prepare_window(&mut self) -> Result<bool, Error> {
         let n = self.cloth.topology.n_vertices();
         if !self.params.active_region {
             // the whole mesh, every vertex with a face active, once
@@ -1101,7 +1141,7 @@ impl Simulator {
         let st = &self.state;
         let (flowing, held) = find_liquid(&scan, &self.loose, &st.fields, &st.vertex_area);
         // liquid moves at most one ring per transport sub-cycle
-        let reach = ACTIVE_RINGS + substeps * self.last_transport_cycles;
+        let reach = ACTIVE_RINGS + self.last_frame_cycles;
         let (_, needed) = grow(&self.cloth.adjacency, &self.loose, &flowing, reach);
         let fits = self.window.as_ref().is_some_and(|w| {
             needed.iter().all(|&v| w.mask[v as usize])
@@ -1202,10 +1242,10 @@ impl Simulator {
             fields: st.fields.gather(&w.vertices),
             area: w.gather(&st.vertex_area),
             evaporated: 0.0,
-            cycles: self.last_transport_cycles,
+            cycles: 0,
         };
         prof.forces += clock.elapsed().as_secs_f64();
-        let s_count = p.substeps as usize;
+        let s_count = self.substeps(w, &next, &local.frames, dt);
         let h = dt / s_count as f64;
         for s in 1..=s_count {
             let between: Vec<DVec3>;
@@ -1219,6 +1259,35 @@ impl Simulator {
             self.substep(w, &mut local, q, h, &acceleration, prof)?;
         }
         Ok(local)
+    }
+
+    /// Sub-steps of a frame of `dt` on the window `w` from the vertex frames `start` to the
+    /// positions `next` (window order): the user's [`StainParams::substeps`], or more so
+    /// that the frames of the active vertices turn (about their normals) by at most
+    /// [`MAX_TURN`] per sub-step (module doc, "Fast rotation").
+    fn substeps(&self, w: &Window, next: &[DVec3], start: &VertexFrames, dt: f64) -> usize {
+        let asked = self.params.substeps as usize;
+        if !self.params.forces.coriolis {
+            return asked;
+        }
+        let cloth = &w.cloth;
+        let turn = w
+            .region
+            .vertices
+            .par_iter()
+            .map(|&j| {
+                let j = j as usize;
+                let end = cloth.adjacency.rotation(&cloth.rest, next, j) * cloth.rest_frames.frame[j];
+                frame_angular_velocity(&start.frame[j], &end, dt).z.abs() * dt
+            })
+            .reduce(|| 0.0, f64::max);
+        // a NaN turn (never from finite positions) keeps the user's count
+        let needed = (turn / MAX_TURN).ceil();
+        if needed > asked as f64 {
+            (needed as usize).min(MAX_AUTO_SUBSTEPS)
+        } else {
+            asked
+        }
     }
 
     /// One sub-step `h` of the window to positions `q` (window order).
@@ -1248,8 +1317,10 @@ impl Simulator {
         prof.window_vertices += n;
         lap(&mut prof.geometry);
 
-        // 1. body forces (§4.4), friction and the Coriolis turn, exactly over the sub-step
-        let (forced, mean): (Vec<DVec2>, Vec<DVec2>) = (0..n)
+        // 1. body forces (§4.4), friction and the Coriolis turn, exactly over half the
+        // sub-step at the vertex the liquid leaves (kick–drift–kick, module doc); the
+        // densities drift with the exact mean velocity of a whole sub-step under them
+        let force: Vec<(DVec2, f64)> = (0..n)
             .into_par_iter()
             .map(|j| {
                 let f = &frames.frame[j];
@@ -1259,9 +1330,26 @@ impl Simulator {
                 } else {
                     0.0
                 };
-                integrate_velocity(loc.velocity[j], a, turn, p.friction, h)
+                (a, turn)
+            })
+            .collect();
+        let kick = |u: DVec2, (a, turn): (DVec2, f64), t: f64| {
+            integrate_velocity(u, a, turn, p.friction, t)
+        };
+        let (mut forced, mut mean): (Vec<DVec2>, Vec<DVec2>) = (0..n)
+            .into_par_iter()
+            .map(|j| {
+                let u = loc.velocity[j];
+                (kick(u, force[j], 0.5 * h).0, kick(u, force[j], h).1)
             })
             .unzip();
+        // the velocity is the liquid's: on the dry cloth it is the wet region's, extended
+        let wet = wet_vertices(
+            &loc.fields.free_solvent,
+            &geometry.vertex_area,
+            &w.region.mask,
+        );
+        extend_velocity(topo, &connection, &wet, &mut [&mut forced, &mut mean]);
         lap(&mut prof.forces);
 
         // 2. advection (§4.3.1–4.3.2), closed inside the active region
@@ -1294,7 +1382,7 @@ impl Simulator {
         }
         let plan = UpwindPlan::new(topo, &geometry.vertex_area, &flux, h)?;
         prof.transport_cycles += plan.substeps();
-        loc.cycles = plan.substeps();
+        loc.cycles += plan.substeps();
         // the momentum advection needs the solvent before its transport
         let solvent_before = p
             .momentum_advection
@@ -1311,11 +1399,18 @@ impl Simulator {
                 merge_rgb(&c, cf);
             }
         }
-        loc.velocity = match solvent_before {
+        let arrived = match solvent_before {
             Some(before) => plan.momentum_velocity(topo, &connection, &before, &forced, &advected),
             None => advected,
         };
         lap(&mut prof.advection);
+        // the second half of the forces, at the vertex the liquid arrived at
+        loc.velocity = arrived
+            .into_par_iter()
+            .zip(&force)
+            .map(|(u, &f)| kick(u, f, 0.5 * h).0)
+            .collect();
+        lap(&mut prof.forces);
 
         // 3. diffusion (§4.3.3–4.3.4, eq. 4.6): the densities and the velocity are
         // independent systems, solved side by side
@@ -1396,7 +1491,7 @@ impl Simulator {
                 st.stained.push(v as u32);
             }
         }
-        self.last_transport_cycles = local.cycles;
+        self.last_frame_cycles = local.cycles;
     }
 
     fn mark_stained(&mut self, v: usize) {

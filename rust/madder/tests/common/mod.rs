@@ -15,6 +15,8 @@
 
 #![allow(dead_code)]
 
+use std::f64::consts::PI;
+
 use glam::{DVec2, DVec3};
 use madder::mesh::{Connection, Geometry, OneRings, Topology, VertexFrames};
 
@@ -206,4 +208,50 @@ pub fn covariance(mass: &[f64], points: &[DVec3]) -> [f64; 3] {
         v[2] += m * d.y * d.y;
     }
     v.map(|x| x / total)
+}
+
+/// A polar disk of `rings` rings (ring `k` has `6k` vertices at radius `k/rings · radius`)
+/// in the XY plane, neighbouring rings zipped together by angle.
+pub fn disk(rings: usize, radius: f64) -> (Topology, Vec<DVec3>) {
+    let mut pos = vec![DVec3::ZERO];
+    let mut ring_ids: Vec<Vec<(u32, f64)>> = vec![vec![(0, 0.0)]];
+    for k in 1..=rings {
+        let r = radius * k as f64 / rings as f64;
+        let m = 6 * k;
+        let mut ids = Vec::with_capacity(m);
+        for j in 0..m {
+            let a = 2.0 * PI * j as f64 / m as f64;
+            ids.push((pos.len() as u32, a));
+            pos.push(DVec3::new(r * a.cos(), r * a.sin(), 0.0));
+        }
+        ring_ids.push(ids);
+    }
+    let mut faces = Vec::new();
+    let first = &ring_ids[1];
+    for j in 0..first.len() {
+        faces.push([0, first[j].0, first[(j + 1) % first.len()].0]);
+    }
+    for k in 2..=rings {
+        let (inner, outer) = (&ring_ids[k - 1], &ring_ids[k]);
+        let (ni, no) = (inner.len(), outer.len());
+        let angle = |ring: &[(u32, f64)], i: usize| {
+            if i >= ring.len() {
+                ring[i % ring.len()].1 + 2.0 * PI
+            } else {
+                ring[i].1
+            }
+        };
+        let (mut i, mut j) = (0, 0);
+        while i < ni || j < no {
+            let advance_outer = j < no && (i == ni || angle(outer, j + 1) <= angle(inner, i + 1));
+            if advance_outer {
+                faces.push([inner[i % ni].0, outer[j].0, outer[(j + 1) % no].0]);
+                j += 1;
+            } else {
+                faces.push([inner[i].0, outer[j % no].0, inner[(i + 1) % ni].0]);
+                i += 1;
+            }
+        }
+    }
+    (Topology::from_triangles(pos.len(), faces).unwrap(), pos)
 }
