@@ -30,8 +30,12 @@ $(VENV)/.stamp: tests/requirements.txt
 	touch $@
 
 wheel: $(WHEEL)
-$(WHEEL): $(VENV)/.stamp $(RUST_SRC)
+# The wheel carries the add-on's Python code as `madder.addon` (for `python -m madder` with
+# the bpy module alone): copied in here, never committed (pyproject.toml includes it).
+PYADDON  := rust/madder-py/python/madder/addon
+$(WHEEL): $(VENV)/.stamp $(RUST_SRC) $(wildcard addon/*.py)
 	rm -f addon/wheels/*.whl
+	rm -rf $(PYADDON) && mkdir -p $(PYADDON) && cp addon/*.py $(PYADDON)/
 	$(VENV)/bin/maturin build --release --zig --compatibility manylinux_2_28 --interpreter $(PY) -o addon/wheels
 	test -f $@
 

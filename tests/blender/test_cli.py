@@ -125,6 +125,7 @@ def test_python_module_entry_end_to_end(tmp_path):
         env=env, capture_output=True, text=True, cwd=str(tmp_path),
     )
     assert run.returncode == 0, run.stderr
+    assert "using the Madder extension bl_ext.user_default.madder installed in" in run.stdout  # not the wheel's copy
     assert "baked 'Flag'" in run.stdout and "saved" in run.stdout
     assert madder.CacheReader(str(tmp_path / "madder_cache" / "Flag.madder")).last_frame == 12
     bad = subprocess.run(
