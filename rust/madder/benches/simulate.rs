@@ -65,7 +65,8 @@ fn bench(nx: usize, ny: usize, frames: usize) {
         (h ^ b).wrapping_mul(0x0100_0000_01b3)
     });
     println!(
-        "{n:>7} vertices, {frames} frames: {total:7.2} ms/frame (setup {setup:.0} ms) = window {:.2}, geometry+frames+connection {:.2}, forces {:.2}, advection {:.2}, diffusion {:.2} (density {:.1} + velocity {:.1} CG it.), interactions {:.2}; window {:.1} %, active {:.1} % of the vertices ({} rebuilds); state checksum {checksum:016x}",
+        "{n:>7} vertices, {frames} frames: {total:7.2} ms/frame ({:.1} sub-steps, setup {setup:.0} ms) = window {:.2}, geometry+frames+connection {:.2}, forces {:.2}, advection {:.2}, diffusion {:.2} (density {:.1} + velocity {:.1} CG it.), interactions {:.2}; window {:.1} %, active {:.1} % of the vertices ({} rebuilds); state checksum {checksum:016x}",
+        p.substeps as f64 / frames as f64,
         per(p.window),
         per(p.geometry),
         per(p.forces),
@@ -82,7 +83,7 @@ fn bench(nx: usize, ny: usize, frames: usize) {
 
 fn main() {
     println!(
-        "full stain simulator on a waving flag grid, {} rayon threads (1 sub-step per frame, all physics on)",
+        "full stain simulator on a waving flag grid, {} rayon threads (default parameters: sub-steps as the frames' turn needs, all physics on)",
         rayon::current_num_threads()
     );
     if std::env::var("MADDER_BENCH_PARTS").is_ok() {
