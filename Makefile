@@ -15,6 +15,23 @@ ZIP      := dist/madder-$(VERSION).zip
 WHEELDIR := $(VENV)/madder-wheel
 BLENDER_EXT = $(firstword $(wildcard $(VENV)/lib/python3*/site-packages/bpy/*/scripts/addons_core/bl_pkg/cli/blender_ext.py))
 
+# The Blender the Blender tests and the demo run in: `make test-blender BPY=4.2.23` runs
+# them on bpy 4.2.23, in a venv of its own (.venv-bpy-4.2.23, bpy plus the test tools of
+# tests/requirements.txt), with the same extension zip. The default is the pinned bpy of
+# tests/requirements.txt in .venv, which also builds the zip (Blender's extension tool
+# comes from that bpy).
+BPY_PINNED := $(shell sed -n 's/^bpy==//p' tests/requirements.txt)
+BPY        ?= $(BPY_PINNED)
+ifeq ($(BPY),$(BPY_PINNED))
+BPY_VENV   := $(VENV)
+BPY_STAMP  := $(VENV)/.stamp
+else
+BPY_VENV   := .venv-bpy-$(BPY)
+BPY_STAMP  := $(BPY_VENV)/.stamp
+endif
+BPY_PY     := $(BPY_VENV)/bin/python
+BPY_ENV    = MADDER_ZIP=$(abspath $(ZIP)) BLENDER_USER_RESOURCES=$(abspath $(BPY_VENV))/blender-user
+
 RUST_SRC   := Cargo.toml Cargo.lock pyproject.toml $(shell find rust -name '*.rs' -o -name 'Cargo.toml' -o -name '*.py')
 ADDON_SRC  := $(wildcard addon/*.py) addon/blender_manifest.toml
 
@@ -28,6 +45,14 @@ $(VENV)/.stamp: tests/requirements.txt
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -r tests/requirements.txt
 	touch $@
+
+ifneq ($(BPY_VENV),$(VENV))
+$(BPY_STAMP): tests/requirements.txt
+	$(PYTHON) -m venv $(BPY_VENV)
+	$(BPY_PY) -m pip install --quiet --upgrade pip
+	$(BPY_PY) -m pip install --quiet bpy==$(BPY) $$(grep -E '^(numpy|pytest)==' tests/requirements.txt)
+	touch $@
+endif
 
 wheel: $(WHEEL)
 $(WHEEL): $(VENV)/.stamp $(RUST_SRC)
@@ -58,11 +83,11 @@ test-rust:
 test-python: $(WHEELDIR)/.stamp
 	PYTHONPATH=$(abspath $(WHEELDIR)) $(PY) -m pytest -q tests/python
 
-test-blender: $(ZIP)
-	MADDER_ZIP=$(abspath $(ZIP)) $(PY) -m pytest -q tests/blender
+test-blender: $(ZIP) $(BPY_STAMP)
+	$(BPY_ENV) $(BPY_PY) -m pytest -q tests/blender
 
-demo: $(ZIP)
-	MADDER_ZIP=$(abspath $(ZIP)) $(PY) blend_fixtures/demo.py --out out/demo.png
+demo: $(ZIP) $(BPY_STAMP)
+	$(BPY_ENV) $(BPY_PY) blend_fixtures/demo.py --out $(if $(filter $(BPY_VENV),$(VENV)),out/demo.png,out/demo-bpy-$(BPY).png)
 
 bench: $(ZIP) $(WHEELDIR)/.stamp
 	cargo bench -p madder
