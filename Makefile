@@ -22,15 +22,20 @@ BLENDER_EXT = $(firstword $(wildcard $(VENV)/lib/python3*/site-packages/bpy/*/sc
 # comes from that bpy).
 BPY_PINNED := $(shell sed -n 's/^bpy==//p' tests/requirements.txt)
 BPY        ?= $(BPY_PINNED)
+# Blender reads files of older versions but not always of newer ones (4.2 cannot open the
+# committed fixtures, saved by 5.0), so another bpy rebuilds them for itself, from the same
+# blend_fixtures/build_fixtures.py, into its venv.
 ifeq ($(BPY),$(BPY_PINNED))
 BPY_VENV   := $(VENV)
 BPY_STAMP  := $(VENV)/.stamp
+BPY_ENV    = MADDER_ZIP=$(abspath $(ZIP))
 else
 BPY_VENV   := .venv-bpy-$(BPY)
-BPY_STAMP  := $(BPY_VENV)/.stamp
+BPY_STAMP  := $(BPY_VENV)/fixtures/.stamp
+BPY_ENV    = MADDER_ZIP=$(abspath $(ZIP)) BLENDER_USER_RESOURCES=$(abspath $(BPY_VENV))/blender-user \
+             MADDER_FIXTURES=$(abspath $(BPY_VENV))/fixtures
 endif
 BPY_PY     := $(BPY_VENV)/bin/python
-BPY_ENV    = MADDER_ZIP=$(abspath $(ZIP)) BLENDER_USER_RESOURCES=$(abspath $(BPY_VENV))/blender-user
 
 RUST_SRC   := Cargo.toml Cargo.lock pyproject.toml $(shell find rust -name '*.rs' -o -name 'Cargo.toml' -o -name '*.py')
 ADDON_SRC  := $(wildcard addon/*.py) addon/blender_manifest.toml
@@ -47,10 +52,15 @@ $(VENV)/.stamp: tests/requirements.txt
 	touch $@
 
 ifneq ($(BPY_VENV),$(VENV))
-$(BPY_STAMP): tests/requirements.txt
+$(BPY_VENV)/.stamp: tests/requirements.txt
 	$(PYTHON) -m venv $(BPY_VENV)
 	$(BPY_PY) -m pip install --quiet --upgrade pip
 	$(BPY_PY) -m pip install --quiet bpy==$(BPY) $$(grep -E '^(numpy|pytest)==' tests/requirements.txt)
+	touch $@
+
+$(BPY_STAMP): $(BPY_VENV)/.stamp blend_fixtures/build_fixtures.py
+	mkdir -p $(dir $@)
+	BLENDER_USER_RESOURCES=$(abspath $(BPY_VENV))/blender-user $(BPY_PY) blend_fixtures/build_fixtures.py --out $(dir $@)
 	touch $@
 endif
 

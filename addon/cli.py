@@ -1,6 +1,6 @@
 """The `madder` command line, for render farms and pipelines:
 
-    blender -b scene.blend --command madder bake [--object NAME ... | --all] [--frames A-B] [--no-save]
+    blender -b scene.blend --command madder bake [--object NAME ... | --all] [--frames A-B | A] [--no-save]
     blender -b --command madder bake scene.blend [...]
     python -m madder bake scene.blend [...]          (the bpy module, no Blender binary)
 

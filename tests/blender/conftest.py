@@ -10,8 +10,11 @@ import numpy as np
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-FIXTURES = os.path.join(ROOT, "blend_fixtures")
-sys.path.insert(0, FIXTURES)
+HARNESS = os.path.join(ROOT, "blend_fixtures")  # harness.py, shared with the demo
+sys.path.insert(0, HARNESS)
+# The .blend fixtures: the committed ones (saved by bpy 5.0), or, for a Blender that cannot
+# read 5.0 files (4.2), the same fixtures rebuilt by that Blender (`make test-blender BPY=…`).
+FIXTURES = os.environ.get("MADDER_FIXTURES") or HARNESS
 
 # A fresh user resource folder per session: extensions (and the wheels they unpack into
 # <user>/extensions/.local) are installed anew, never picked up from an earlier run.

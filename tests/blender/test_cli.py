@@ -8,7 +8,7 @@ import sys
 
 import bpy
 import pytest
-from conftest import ADDON, FIXTURES, ROOT, ZIP, make_active
+from conftest import ADDON, FIXTURES, HARNESS, ROOT, ZIP, make_active
 
 import madder
 
@@ -113,7 +113,7 @@ def test_python_module_entry_end_to_end(tmp_path):
     env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "user"))
     env.pop("PYTHONPATH", None)
     install = (
-        f"import sys; sys.path.insert(0, {FIXTURES!r}); import harness; "
+        f"import sys; sys.path.insert(0, {HARNESS!r}); import harness; "
         f"harness.install_extension({ZIP!r}, repo='user_default')"
     )
     subprocess.run([sys.executable, "-c", install], env=env, check=True, capture_output=True, cwd=ROOT)

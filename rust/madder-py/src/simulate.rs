@@ -64,10 +64,11 @@ fn positions_arg(name: &str, a: &Bound<'_, PyAny>) -> PyResult<Vec<DVec3>> {
         name: &str,
         a: &PyReadonlyArray2<'_, T>,
     ) -> PyResult<Vec<DVec3>> {
-        if a.shape()[1] != 3 {
+        if let [n, k] = *a.shape()
+            && k != 3
+        {
             return Err(ParameterError::new_err(format!(
-                "{name} must have shape (N, 3), got {:?}",
-                a.shape()
+                "{name} must have shape (N, 3), got ({n}, {k})"
             )));
         }
         Ok(a.as_array()
