@@ -508,9 +508,13 @@ def build_disk(path: str) -> dict:
 
     # Blender 5.0 uses layered actions: the F-curves live in the channelbag of
     # the slot assigned to the object (Action.fcurves no longer exists).
+    # (4.2 has the action's own F-curves; layered actions came in 4.4.)
     anim = disk.animation_data
-    channelbag = anim_utils.action_get_channelbag_for_slot(anim.action, anim.action_slot)
-    for fcurve in channelbag.fcurves:
+    if bpy.app.version >= (4, 4, 0):
+        fcurves = anim_utils.action_get_channelbag_for_slot(anim.action, anim.action_slot).fcurves
+    else:
+        fcurves = anim.action.fcurves
+    for fcurve in fcurves:
         fcurve.extrapolation = "LINEAR"
         for key in fcurve.keyframe_points:
             key.interpolation = "LINEAR"

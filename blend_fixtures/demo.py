@@ -70,3 +70,4 @@ def main():
 
 if __name__ == "__main__":
     main()
+    harness.exit(0)

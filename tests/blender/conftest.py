@@ -31,6 +31,21 @@ ZIP = os.environ.get("MADDER_ZIP") or os.path.join(ROOT, "dist", "madder-0.1.0.z
 ADDON = harness.install_extension(ZIP)
 
 
+_status = [0]
+
+
+def pytest_sessionfinish(session, exitstatus):
+    _status[0] = int(exitstatus)
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_unconfigure(config):
+    """With a bpy that crashes at the interpreter's exit (4.2, see harness.crashes_at_exit),
+    ends the process here, with pytest's own exit status, once the report is printed."""
+    if harness.crashes_at_exit():
+        harness.exit(_status[0])
+
+
 @pytest.fixture(scope="session")
 def addon():
     """The installed add-on's module name."""

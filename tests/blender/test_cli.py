@@ -114,7 +114,7 @@ def test_python_module_entry_end_to_end(tmp_path):
     env.pop("PYTHONPATH", None)
     install = (
         f"import sys; sys.path.insert(0, {HARNESS!r}); import harness; "
-        f"harness.install_extension({ZIP!r}, repo='user_default')"
+        f"harness.install_extension({ZIP!r}, repo='user_default'); harness.exit(0)"
     )
     subprocess.run([sys.executable, "-c", install], env=env, check=True, capture_output=True, cwd=ROOT)
     # madder itself is importable only from the extension's wheel: point -m at it
