@@ -89,13 +89,18 @@ def check_transform(obj, frame, faces, local, matrix):
     to work on. Compares the world-space area of the triangles `faces` with their
     object-space area times the transform's largest stretch squared (1 for any rotation
     and uniform scale; 0 when the scale flattens the cloth to a line or a point)."""
-    m = np.asarray(matrix, dtype=np.float64)[:3, :3]
+    full = np.asarray(matrix, dtype=np.float64)
+    m = full[:3, :3]
+    if not np.isfinite(full).all():
+        raise BakeError(f"'{obj.name}' at frame {frame}: its object transform is not finite")
+    stretch = np.linalg.svd(m, compute_uv=False)
+    if stretch[-1] > 1e-6 * stretch[0]:  # invertible: no area can vanish (the usual case, O(1))
+        return
     a, b, c = (local[faces[:, k]] for k in range(3))
     n = np.cross(b - a, c - a)  # twice the object-space area vectors
     area_local = np.linalg.norm(n, axis=1).sum()
     if not area_local > 0.0:  # the mesh itself is flat; the core's own checks handle it
         return
-    stretch = np.linalg.svd(m, compute_uv=False)
     # the area vectors map by the cofactor matrix det(M)·M^-T, computed without inverting
     cof = np.cross(m[:, [1, 2, 0]].T, m[:, [2, 0, 1]].T)
     area_world = np.linalg.norm(n @ cof, axis=1).sum()
