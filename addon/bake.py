@@ -99,7 +99,7 @@ def check_transform(obj, frame, faces, local, matrix):
     a, b, c = (local[faces[:, k]] for k in range(3))
     n = np.cross(b - a, c - a)  # twice the object-space area vectors
     area_local = np.linalg.norm(n, axis=1).sum()
-    if not area_local > 0.0:  # the mesh itself is flat; the core's own checks handle it
+    if not area_local > 0.0:  # no area even in object space: not the transform's doing
         return
     # the area vectors map by the cofactor matrix det(M)·M^-T, computed without inverting
     cof = np.cross(m[:, [1, 2, 0]].T, m[:, [2, 0, 1]].T)
@@ -162,6 +162,20 @@ class MotionFile:
                     f"'{obj.name}': its Mesh Cache modifier '{m.name}' reads the motion file with Time Mode "
                     f"'{m.time_mode.title()}' and Play Mode '{m.play_mode.title()}'; Madder reads motion files "
                     "as the modifier does in Time Mode Frame, Play Mode Scene: set those"
+                )
+            others = {
+                "Forward/Up Axis": (m.forward_axis, m.up_axis) != ("POS_Y", "POS_Z"),
+                "Flip Axis": any(m.flip_axis),  # a set of axes before 5.0, three booleans since
+                "Influence": m.factor != 1.0 or bool(m.vertex_group),
+                "Deform Mode": m.deform_mode != "OVERWRITE",
+                "Interpolation": m.interpolation != "LINEAR",
+            }
+            changed = [k for k, v in others.items() if v]
+            if changed:
+                raise BakeError(
+                    f"'{obj.name}': its Mesh Cache modifier '{m.name}' changes the file's positions "
+                    f"({', '.join(changed)}), which Madder's motion file reader does not do: leave those "
+                    "at their defaults, or clear Motion File to bake what the modifier stack shows"
                 )
             self.offset, self.scale = m.frame_start, m.frame_scale
             break

@@ -145,6 +145,10 @@ def test_bad_motion_files_are_named_and_keep_the_previous_bake(flag_and_motion, 
     with pytest.raises(RuntimeError, match="Time Mode 'Time'"):
         mesh_cache(flag, path).time_mode = "TIME"
         bpy.ops.madder.bake()
+    mesh_cache(flag, path).time_mode = "FRAME"
+    flag.modifiers["Mesh Cache"].forward_axis = "NEG_X"
+    with pytest.raises(RuntimeError, match=r"changes the file's positions \(Forward/Up Axis\)"):
+        bpy.ops.madder.bake()
     flag.modifiers.remove(flag.modifiers["Mesh Cache"])
     assert open(bpy.path.abspath(flag.madder.cache_file), "rb").read() == before
 
