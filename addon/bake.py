@@ -229,7 +229,7 @@ class BakeJob:
 
     The first frame builds the simulator (`madder.Simulator`: rest pose = the mesh's own
     vertices, placed in world space; first pose = the frame's positions), spills the
-    initial wetness of the Source group (weight × Amount of the object's liquid) and
+    initial wetness of the Spill Group (weight × Amount of the object's liquid) and
     starts its splash. Every later frame steps the simulator to the frame's positions,
     then lets each source pour what it brought during that frame (and splash, the first
     time it pours). Each frame's densities go to the cache (`FIELDS`, kg/m²)."""
@@ -338,7 +338,7 @@ class BakeJob:
         return out
 
     def _spill(self, pos):
-        """The initial wetness: the Source group's weights × Amount of the object's liquid,
+        """The initial wetness: the Spill Group's weights × Amount of the object's liquid,
         and its splash (outward from the weighted centroid of the wet area)."""
         s = self.obj.madder
         if self.wet0 is None or not self.wet0.any():
