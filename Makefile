@@ -110,4 +110,4 @@ fixtures: $(VENV)/.stamp
 	$(PY) blend_fixtures/build_fixtures.py --check
 
 clean:
-	rm -rf $(VENV) dist out addon/wheels target
+	rm -rf $(VENV) .venv-bpy-* dist out addon/wheels target
