@@ -88,7 +88,8 @@ def check_transform(obj, frame, faces, local, matrix):
     nearly 0) on the axes the cloth spans leaves it no area, and the simulation nothing
     to work on. Compares the world-space area of the triangles `faces` with their
     object-space area times the transform's largest stretch squared (1 for any rotation
-    and uniform scale; 0 when the scale flattens the cloth to a line or a point)."""
+    and uniform scale; 0 when the scale flattens the cloth to a line or a point) and
+    refuses a ratio of a millionth or less."""
     full = np.asarray(matrix, dtype=np.float64)
     m = full[:3, :3]
     if not np.isfinite(full).all():
@@ -104,7 +105,7 @@ def check_transform(obj, frame, faces, local, matrix):
     # the area vectors map by the cofactor matrix det(M)·M^-T, computed without inverting
     cof = np.cross(m[:, [1, 2, 0]].T, m[:, [2, 0, 1]].T)
     area_world = np.linalg.norm(n @ cof, axis=1).sum()
-    if not area_world > 1e-9 * stretch[0] ** 2 * area_local:
+    if not area_world > 1e-6 * stretch[0] ** 2 * area_local:
         scale = ", ".join(f"{x:g}" for x in np.linalg.norm(m, axis=0))
         raise BakeError(
             f"'{obj.name}' at frame {frame}: its object scale ({scale}) collapses the cloth to no area; "

@@ -81,6 +81,15 @@ def test_scale_animated_to_zero_on_one_axis_names_the_frame(tmp_path):
     assert "positive definite" not in msg
 
 
+def test_nearly_zero_scale_is_refused_too(tmp_path):
+    scene, cloth = tilted_cloth(tmp_path)
+    cloth.scale.x = 1e-7  # a ten-millionth of its width
+    with pytest.raises(RuntimeError, match=r"scale \(1e-07, 1, 1\) collapses the cloth"):
+        bpy.ops.madder.bake()
+    cloth.scale.x = 1e-3  # a millimetre-wide metre of cloth is odd, but it is still cloth
+    assert bpy.ops.madder.bake() == {"FINISHED"}
+
+
 def test_zero_scale_across_a_flat_cloth_is_harmless(tmp_path):
     """The grid is flat in its own z: a z scale of 0 leaves its area whole."""
     scene, flat = tilted_cloth(tmp_path / "flat")
