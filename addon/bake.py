@@ -3,6 +3,7 @@ simulator and streams the densities into the cache file. Errors are `BakeError`s
 message names the object and frame; the previous cache is kept on any failure."""
 
 import os
+import re
 
 import bpy
 import numpy as np
@@ -47,17 +48,17 @@ def stored_path(path):
 
 
 def check_object(obj, sources=()):
-    if obj is None or obj.type != "MESH":
-        kind = "nothing" if obj is None else f"a {obj.type.lower()}"
-        name = "" if obj is None else f"'{obj.name}' "
-        raise BakeError(f"Madder bakes mesh objects; {name}is {kind}")
+    if obj is None:
+        raise BakeError("no active object: select the cloth (a mesh object) to bake, or use Bake All Stains")
+    if obj.type != "MESH":
+        raise BakeError(f"Madder bakes mesh objects; '{obj.name}' is a {obj.type.lower()}")
     group = obj.madder.source_group
     if not group and not sources:
         raise BakeError(
-            f"'{obj.name}': no liquid: choose a Source vertex group, or mark an object as a Madder Source"
+            f"'{obj.name}': no liquid: choose a Spill Group (vertex group), or mark an object as a Madder Source"
         )
     if group and group not in obj.vertex_groups:
-        raise BakeError(f"'{obj.name}' has no vertex group '{group}' (the Source)")
+        raise BakeError(f"'{obj.name}' has no vertex group '{group}' (its Spill Group)")
 
 
 def source_objects(scene, obj):
@@ -69,7 +70,51 @@ def source_objects(scene, obj):
     return sources
 
 
-def frame_positions(obj, depsgraph, n_vertices, frame):
+def unit_scale(scene):
+    """Metres per Blender unit: the scene's Unit Scale, as Blender applies it to every
+    length, velocity and acceleration it shows (not at all with the unit system None)."""
+    units = scene.unit_settings
+    return float(units.scale_length) if units.system != "NONE" else 1.0
+
+
+def placed(local, matrix, unit):
+    """Object-space positions `local` (N, 3) through the 4×4 `matrix`, in metres, float32."""
+    m = np.asarray(matrix, dtype=np.float64)
+    return ((np.asarray(local, dtype=np.float64) @ m[:3, :3].T + m[:3, 3]) * unit).astype(np.float32)
+
+
+def check_transform(obj, frame, faces, local, matrix):
+    """Refuses an object transform that collapses the cloth at `frame`: a scale of 0 (or
+    nearly 0) on the axes the cloth spans leaves it no area, and the simulation nothing
+    to work on. Compares the world-space area of the triangles `faces` with their
+    object-space area times the transform's largest stretch squared (1 for any rotation
+    and uniform scale; 0 when the scale flattens the cloth to a line or a point) and
+    refuses a ratio of a millionth or less."""
+    full = np.asarray(matrix, dtype=np.float64)
+    m = full[:3, :3]
+    if not np.isfinite(full).all():
+        raise BakeError(f"'{obj.name}' at frame {frame}: its object transform is not finite")
+    stretch = np.linalg.svd(m, compute_uv=False)
+    if stretch[-1] > 1e-6 * stretch[0]:  # invertible: no area can vanish (the usual case, O(1))
+        return
+    a, b, c = (local[faces[:, k]] for k in range(3))
+    n = np.cross(b - a, c - a)  # twice the object-space area vectors
+    area_local = np.linalg.norm(n, axis=1).sum()
+    if not area_local > 0.0:  # no area even in object space: not the transform's doing
+        return
+    # the area vectors map by the cofactor matrix det(M)·M^-T, computed without inverting
+    cof = np.cross(m[:, [1, 2, 0]].T, m[:, [2, 0, 1]].T)
+    area_world = np.linalg.norm(n @ cof, axis=1).sum()
+    if not area_world > 1e-6 * stretch[0] ** 2 * area_local:
+        scale = ", ".join(f"{x:g}" for x in np.linalg.norm(m, axis=0))
+        raise BakeError(
+            f"'{obj.name}' at frame {frame}: its object scale ({scale}) collapses the cloth to no area; "
+            "give the object a non-zero scale on every axis the cloth spans (check its scale animation)"
+        )
+
+
+def frame_positions(obj, depsgraph, n_vertices, frame, faces, unit):
+    """World positions of the evaluated `obj` at `frame`, in metres, (N, 3) float32."""
     obj_eval = obj.evaluated_get(depsgraph)
     n = len(obj_eval.data.vertices)
     if n != n_vertices:
@@ -78,56 +123,99 @@ def frame_positions(obj, depsgraph, n_vertices, frame):
             "the deformed cloth must keep its topology (move generating modifiers such as "
             "Subdivision below the cloth and disable them for the bake)"
         )
-    pos = bridge.world_positions(obj_eval)
-    bad = np.flatnonzero(~np.isfinite(pos).all(axis=1))
+    local = bridge.rest_positions(obj_eval.data).astype(np.float64)
+    bad = np.flatnonzero(~np.isfinite(local).all(axis=1))
     if bad.size:
         raise BakeError(f"'{obj.name}': vertex {bad[0]} has a non-finite position at frame {frame}")
-    return pos
+    check_transform(obj, frame, faces, local, obj_eval.matrix_world)
+    return placed(local, obj_eval.matrix_world, unit)
 
 
 class MotionFile:
     """Cloth positions from a PC2/MDD file (object space, placed by the object's current
-    transform), sampled at scene frames: PC2 sample `k` is at scene frame `start + k·rate`,
-    MDD sample `k` at `times[k]` seconds, counted from the bake's first frame. Between
-    samples the positions are interpolated linearly; outside the file is an error."""
+    transform), sampled at scene frames exactly as Blender's Mesh Cache modifier shows the
+    file in its Time Mode *Frame* and Play Mode *Scene*: scene frame `f` reads sample
+    `f · frame_scale − frame_start` (0-based), whatever start, rate or times the file's
+    header gives. `frame_start` and `frame_scale` are those of the object's Mesh Cache
+    modifier that reads the same file, or 0 and 1 (the modifier's defaults) without one.
+    Between samples the positions are interpolated linearly, as the modifier does; before
+    the first sample and after the last the cloth holds that sample, as the modifier shows
+    it (the bake warns)."""
 
-    def __init__(self, madder, obj, scene, first):
+    def __init__(self, madder, obj):
         path = bpy.path.abspath(obj.madder.motion_file)
         try:
             self.cache = madder.PointCache(path)
-            self.cache.check_times()
         except madder.MadderError as e:
-            raise BakeError(f"'{obj.name}': motion file: {e}") from e
+            raise BakeError(f"'{obj.name}': motion file: {_sample_message(e)}") from e
         if self.cache.n_points != len(obj.data.vertices):
             raise BakeError(
                 f"'{obj.name}' has {len(obj.data.vertices)} vertices but its motion file {path} has "
                 f"{self.cache.n_points} points"
             )
         self.obj, self.path = obj, path
-        times = np.asarray(self.cache.frame_times, dtype=np.float64)
-        if self.cache.time_unit == "second":  # MDD: seconds from the first frame
-            fps = scene.render.fps / scene.render.fps_base
-            times = first + (times - times[0]) * fps
-        self.frames = times  # scene frame of every sample
-        m = np.array(obj.matrix_world, dtype=np.float64)
-        self.rotation, self.offset = m[:3, :3].T, m[:3, 3]
+        self.offset, self.scale = 0.0, 1.0
+        for m in obj.modifiers:
+            if m.type != "MESH_CACHE" or not m.filepath or os.path.normpath(bpy.path.abspath(m.filepath)) != os.path.normpath(path):
+                continue
+            if m.time_mode != "FRAME" or m.play_mode != "SCENE":
+                raise BakeError(
+                    f"'{obj.name}': its Mesh Cache modifier '{m.name}' reads the motion file with Time Mode "
+                    f"'{m.time_mode.title()}' and Play Mode '{m.play_mode.title()}'; Madder reads motion files "
+                    "as the modifier does in Time Mode Frame, Play Mode Scene: set those"
+                )
+            others = {
+                "Forward/Up Axis": (m.forward_axis, m.up_axis) != ("POS_Y", "POS_Z"),
+                "Flip Axis": any(m.flip_axis),  # a set of axes before 5.0, three booleans since
+                "Influence": m.factor != 1.0 or bool(m.vertex_group),
+                "Deform Mode": m.deform_mode != "OVERWRITE",
+                "Interpolation": m.interpolation != "LINEAR",
+            }
+            changed = [k for k, v in others.items() if v]
+            if changed:
+                raise BakeError(
+                    f"'{obj.name}': its Mesh Cache modifier '{m.name}' changes the file's positions "
+                    f"({', '.join(changed)}), which Madder's motion file reader does not do: leave those "
+                    "at their defaults, or clear Motion File to bake what the modifier stack shows"
+                )
+            self.offset, self.scale = m.frame_start, m.frame_scale
+            break
+        self.matrix = np.array(obj.matrix_world, dtype=np.float64)
 
-    def positions(self, frame):
-        f = self.frames
-        if not (f[0] - 1e-6 <= frame <= f[-1] + 1e-6):
-            raise BakeError(
-                f"'{self.obj.name}': frame {frame} is outside its motion file {self.path} "
-                f"(frames {f[0]:g}–{f[-1]:g})"
-            )
-        k = int(np.clip(np.searchsorted(f, frame, side="right") - 1, 0, len(f) - 1))
+    def sample(self, frame):
+        """The (fractional) sample the Mesh Cache modifier shows at scene `frame`."""
+        return frame * self.scale - self.offset
+
+    def outside(self, first, last):
+        """A warning when frames `first`–`last` read past the file's samples (or None)."""
+        n = self.cache.n_frames
+        out = [f for f in range(first, last + 1) if not (-1e-6 <= self.sample(f) <= n - 1 + 1e-6)]
+        if not out:
+            return None
+        return (
+            f"{len(out)} frames ({out[0]}…{out[-1]}) read past the {n} samples of its motion file "
+            f"{os.path.basename(self.path)}: the cloth holds its first or last sample there, as the "
+            "Mesh Cache modifier shows it"
+        )
+
+    def local(self, frame):
+        """Object-space positions at scene `frame`, (N, 3) float64."""
+        t, last = self.sample(frame), self.cache.n_frames - 1
+        t = min(max(t, 0.0), float(last))  # the modifier holds the first or last sample
+        k = int(min(np.floor(t + 1e-6), last))
         try:
             co = self.cache.read_frame(k).astype(np.float64)
-            if k + 1 < len(f) and frame > f[k]:
-                t = (frame - f[k]) / (f[k + 1] - f[k])
-                co = (1 - t) * co + t * self.cache.read_frame(k + 1)
+            if k < last and t - k > 1e-6:
+                co += (t - k) * (self.cache.read_frame(k + 1) - co)
         except Exception as e:
-            raise BakeError(f"'{self.obj.name}' at frame {frame}: {e}") from e
-        return (co @ self.rotation + self.offset).astype(np.float32)
+            raise BakeError(f"'{self.obj.name}' at frame {frame}: {_sample_message(e)}") from e
+        return co
+
+
+def _sample_message(error):
+    """A point-cache error read while baking, with its file frame called the *sample*, so
+    that the bake's message names one frame: the scene's."""
+    return re.sub(r"\bframe (\d+)", r"sample \1", str(error))
 
 
 class BakeJob:
@@ -142,7 +230,7 @@ class BakeJob:
 
     The first frame builds the simulator (`madder.Simulator`: rest pose = the mesh's own
     vertices, placed in world space; first pose = the frame's positions), spills the
-    initial wetness of the Source group (weight × Amount of the object's liquid) and
+    initial wetness of the Spill Group (weight × Amount of the object's liquid) and
     starts its splash. Every later frame steps the simulator to the frame's positions,
     then lets each source pour what it brought during that frame (and splash, the first
     time it pours). Each frame's densities go to the cache (`FIELDS`, kg/m²)."""
@@ -179,7 +267,13 @@ class BakeJob:
         self.references = properties.references(settings, [o.madder_source for o in self.sources], spill=self.wet0 is not None)
         if self.references[0] == 0.0:
             self.warnings.append("its liquid has no solute (concentration 0): it wets the cloth but leaves no stain")
-        self.motion = MotionFile(self.madder, obj, scene, self.first) if settings.motion_file else None
+        self.unit = unit_scale(scene)
+        self.faces = faces.astype(np.int64)
+        self.motion = MotionFile(self.madder, obj) if settings.motion_file else None
+        if self.motion is not None:
+            outside = self.motion.outside(self.first, self.last)
+            if outside:
+                self.warnings.append(outside)
         self.frame = None  # last frame baked
         self.frame_before = scene.frame_current
         self.writer = self.sim = None
@@ -207,7 +301,8 @@ class BakeJob:
                 self._evaluating = frame
                 self._goto(frame)
                 pos = self._positions(frame)
-                self.sim = madder.Simulator(self.topology, self._rest(), pos, **simulator_settings(self.scene, obj),
+                self.sim = madder.Simulator(self.topology, self._rest(), pos,
+                                            **simulator_settings(self.scene, obj, self.unit),
                                             **self.conductivity)
                 self._spill(pos)
                 self.writer = madder.CacheWriter(self.path, self.n_vertices, self.fields, self.first, self.total)
@@ -244,7 +339,7 @@ class BakeJob:
         return out
 
     def _spill(self, pos):
-        """The initial wetness: the Source group's weights × Amount of the object's liquid,
+        """The initial wetness: the Spill Group's weights × Amount of the object's liquid,
         and its splash (outward from the weighted centroid of the wet area)."""
         s = self.obj.madder
         if self.wet0 is None or not self.wet0.any():
@@ -253,7 +348,7 @@ class BakeJob:
         if s.splash_speed > 0.0:
             w = self.wet0.astype(np.float64)
             centre = tuple((w @ pos.astype(np.float64)) / w.sum())
-            self.sim.splash(centre, s.splash_speed, s.splash_seed, self.wet0)
+            self.sim.splash(centre, s.splash_speed * self.unit, s.splash_seed, self.wet0)
 
     def _visit(self, frame):
         """Positions at `frame` and what the sources bring there (from the lookahead when
@@ -282,10 +377,11 @@ class BakeJob:
             verts, tris = bridge.world_triangles(src_eval)
             if len(tris) == 0:
                 continue
-            d = self.madder.distances_within(pos, verts, tris, s.distance)
-            weight = np.clip(1.0 - d / s.distance, 0.0, 1.0).astype(np.float32)  # inf → 0
+            reach = s.distance * self.unit  # metres, like the positions
+            d = self.madder.distances_within(pos, verts * np.float32(self.unit), tris, reach)
+            weight = np.clip(1.0 - d / reach, 0.0, 1.0).astype(np.float32)  # inf → 0
             if weight.any():
-                out.append((src, weight, tuple(src_eval.matrix_world.translation)))
+                out.append((src, weight, tuple(np.asarray(src_eval.matrix_world.translation) * self.unit)))
         return out
 
     def _pour(self, contacts):
@@ -297,7 +393,7 @@ class BakeJob:
             self.sim.add_liquid((s.amount * self.dt * weight).astype(np.float32), s.concentration, tuple(s.color))
             if s.splash_speed > 0.0 and src.name not in self.splashed:
                 self.splashed.add(src.name)
-                self.sim.splash(origin, s.splash_speed, s.splash_seed, weight)
+                self.sim.splash(origin, s.splash_speed * self.unit, s.splash_seed, weight)
 
     def _goto(self, frame):
         """Moves the scene to `frame` unless nothing needs the scene (motion from a file and
@@ -307,19 +403,22 @@ class BakeJob:
 
     def _positions(self, frame):
         if self.motion is not None:
-            return self.motion.positions(frame)
-        return frame_positions(self.obj, bpy.context.evaluated_depsgraph_get(), self.n_vertices, frame)
+            local = self.motion.local(frame)
+            check_transform(self.obj, frame, self.faces, local, self.motion.matrix)
+            return placed(local, self.motion.matrix, self.unit)
+        return frame_positions(self.obj, bpy.context.evaluated_depsgraph_get(), self.n_vertices, frame,
+                               self.faces, self.unit)
 
     def _rest(self):
-        """The rest pose: the mesh's own (undeformed) vertices, placed in world space by the
-        object's transform at the first frame (or the motion file's placement)."""
+        """The rest pose: the mesh's own (undeformed) vertices, placed in world space (in
+        metres) by the object's transform at the first frame (or the motion file's
+        placement)."""
         co = bridge.rest_positions(self.obj.data).astype(np.float64)
         if self.motion is not None:
-            rotation, offset = self.motion.rotation, self.motion.offset
+            matrix = self.motion.matrix
         else:
-            m = np.array(self.obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).matrix_world, dtype=np.float64)
-            rotation, offset = m[:3, :3].T, m[:3, 3]
-        rest = (co @ rotation + offset).astype(np.float32)
+            matrix = self.obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).matrix_world
+        rest = placed(co, matrix, self.unit)
         bad = np.flatnonzero(~np.isfinite(rest).all(axis=1))
         if bad.size:
             raise BakeError(f"'{self.obj.name}': vertex {bad[0]} has a non-finite rest position")
@@ -358,13 +457,16 @@ class BakeJob:
                 self.scene.frame_set(self.frame_before)
 
 
-def simulator_settings(scene, obj):
+def simulator_settings(scene, obj, unit=None):
     """Keyword arguments of `madder.Simulator` from the object's settings (SI units) and
-    the scene's gravity (off when either the scene's or the object's Gravity is off)."""
+    the scene's gravity (off when either the scene's or the object's Gravity is off),
+    which Blender stores in scene units per s², so it is scaled by `unit` (metres per
+    unit; default the scene's Unit Scale) like the positions."""
     s = obj.madder
+    unit = unit_scale(scene) if unit is None else unit
     return dict(
         color=tuple(s.stain_color),
-        gravity=tuple(scene.gravity),
+        gravity=tuple(g * unit for g in scene.gravity),
         viscosity=s.viscosity,
         friction=s.friction,
         absorption=s.absorption,

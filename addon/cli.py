@@ -1,6 +1,6 @@
 """The `madder` command line, for render farms and pipelines:
 
-    blender -b scene.blend --command madder bake [--object NAME ... | --all] [--frames A-B] [--no-save]
+    blender -b scene.blend --command madder bake [--object NAME ... | --all] [--frames A-B | A] [--no-save]
     blender -b --command madder bake scene.blend [...]
     python -m madder bake scene.blend [...]          (the bpy module, no Blender binary)
 
@@ -10,6 +10,7 @@ stderr (2 for a usage error). Without `--object`, every object with Madder Stain
 is baked."""
 
 import argparse
+import re
 import sys
 import time
 
@@ -20,14 +21,32 @@ from . import bake
 _handle = None
 
 
+# A, or A-B; either frame may be negative (Blender's frames are): 3, -5, 1-250, -5-3, -5--1
+_FRAMES = re.compile(r"\s*(-?\d+)(?:\s*-\s*(-?\d+))?\s*")
+
+
 def _frame_range(text):
-    try:
-        a, b = (int(x) for x in text.split("-", 1))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected A-B (e.g. 1-250), got '{text}'") from None
+    m = _FRAMES.fullmatch(text)
+    if m is None:
+        raise argparse.ArgumentTypeError(f"expected A-B or A (e.g. 1-250, -5-3 or 7), got '{text}'")
+    a = int(m[1])
+    b = a if m[2] is None else int(m[2])
     if b < a:
         raise argparse.ArgumentTypeError(f"empty frame range {text}")
     return a, b
+
+
+def _join_frames(argv):
+    """`--frames -5-3` as `--frames=-5-3`: argparse takes a value that starts with '-' (and
+    is not a plain negative number) for an option, so a negative range needs the '='."""
+    out, args = [], iter(argv)
+    for a in args:
+        if a == "--frames":
+            value = next(args, None)
+            out.append(a if value is None else f"{a}={value}")
+        else:
+            out.append(a)
+    return out
 
 
 def _parser():
@@ -38,7 +57,8 @@ def _parser():
     who = b.add_mutually_exclusive_group()
     who.add_argument("--object", action="append", dest="objects", metavar="NAME", help="object to bake (repeatable)")
     who.add_argument("--all", action="store_true", help="every object with Madder Stain enabled (the default)")
-    b.add_argument("--frames", type=_frame_range, metavar="A-B", help="frame range (default: the scene's)")
+    b.add_argument("--frames", type=_frame_range, metavar="A-B",
+                   help="frame range, or one frame; negative frames are fine (-5-3) (default: the scene's)")
     b.add_argument("--no-save", action="store_true", help="do not save the .blend after baking")
     return ap
 
@@ -55,7 +75,7 @@ def _fail(msg, code=1):
 def main(argv):
     """Runs the command line `argv` (without the program name); returns the exit code."""
     try:
-        args = _parser().parse_args(argv)
+        args = _parser().parse_args(_join_frames(argv))
     except SystemExit as e:  # argparse printed the usage or the help
         return 0 if e.code in (0, None) else 2
     if args.blend:
@@ -100,9 +120,16 @@ def main(argv):
     return 0
 
 
+def running_as_module():
+    """True inside the `bpy` module from PyPI (it has no executable, and no `--command`)."""
+    return not bpy.app.binary_path
+
+
 def register():
     global _handle
-    if hasattr(bpy.utils, "register_cli_command"):  # Blender 4.2+
+    # `blender --command` needs a Blender binary. The bpy module has no command line to add
+    # to, and bpy 4.2 crashes at the interpreter's exit while a command is registered.
+    if hasattr(bpy.utils, "register_cli_command") and not running_as_module():  # Blender 4.2+
         _handle = bpy.utils.register_cli_command("madder", main)
 
 

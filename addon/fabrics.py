@@ -42,7 +42,13 @@ class MadderFabric(bpy.types.PropertyGroup):
         description="Faces with this material are woven: the stain spreads along the threads",
         default=False,
     )
-    weave: EnumProperty(name="Weave", items=WEAVES, default="PLAIN")
+    weave: EnumProperty(
+        name="Weave",
+        description="How the warp and weft threads interlace in the fabric's repeating tile "
+        "(it sets how much faster the stain spreads along one direction than across)",
+        items=WEAVES,
+        default="PLAIN",
+    )
     gaps: BoolProperty(
         name="Gaps",
         description="Leave gap cells between the yarns of a built-in weave (an open weave)",

@@ -149,15 +149,17 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         default="CUSTOM",
         update=_liquid_update,
     )
+    # the identifier stays `source_group` (saved .blend files and scripts use it); the UI
+    # calls it the Spill Group so it is not confused with a Madder Source object
     source_group: StringProperty(
-        name="Source",
+        name="Spill Group",
         description="Vertex group whose weights give the initial wetness (weight × Amount); "
-        "optional when source objects pour liquid on the cloth",
+        "optional when Madder Source objects pour liquid on the cloth",
         default="",
     )
     amount: FloatProperty(
         name="Amount (kg/m²)",
-        description="Liquid spilled per unit area where the Source weight is 1, kg/m² "
+        description="Liquid spilled per unit area where the Spill Group's weight is 1, kg/m² "
         "(the fibres hold Saturation; the rest is free liquid that flows and spreads)",
         default=0.5,
         min=0.0,
@@ -365,8 +367,16 @@ class MadderSourceSettings(bpy.types.PropertyGroup):
         description="Pour only between the start and end frames",
         default=False,
     )
-    frame_start: IntProperty(name="Start", default=1)
-    frame_end: IntProperty(name="End", default=250)
+    frame_start: IntProperty(
+        name="Start",
+        description="First frame this source pours on (with Frame Range on)",
+        default=1,
+    )
+    frame_end: IntProperty(
+        name="End",
+        description="Last frame this source pours on (with Frame Range on)",
+        default=250,
+    )
 
 
 def references(settings, sources=(), spill=True):

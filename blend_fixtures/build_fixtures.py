@@ -113,6 +113,8 @@ def setup_world(scene: bpy.types.Scene) -> None:
     """A plain grey-blue background (node trees exist by default in 5.0)."""
     world = bpy.data.worlds.new("World")
     world.color = WORLD_COLOUR[:3]
+    if bpy.app.version < (5, 0, 0):  # before 5.0 the node tree comes with use_nodes
+        world.use_nodes = True
     background = world.node_tree.nodes["Background"]
     background.inputs["Color"].default_value = WORLD_COLOUR
     background.inputs["Strength"].default_value = 1.0
@@ -152,6 +154,8 @@ def make_material(name: str, base_colour, roughness=0.8, checker=None) -> bpy.ty
     """
     mat = bpy.data.materials.new(name)
     mat.diffuse_color = base_colour
+    if bpy.app.version < (5, 0, 0):  # before 5.0 the node tree comes with use_nodes
+        mat.use_nodes = True
     nodes = mat.node_tree.nodes
     bsdf = nodes["Principled BSDF"]
     bsdf.inputs["Base Color"].default_value = base_colour
@@ -504,9 +508,13 @@ def build_disk(path: str) -> dict:
 
     # Blender 5.0 uses layered actions: the F-curves live in the channelbag of
     # the slot assigned to the object (Action.fcurves no longer exists).
+    # (4.2 has the action's own F-curves; layered actions came in 4.4.)
     anim = disk.animation_data
-    channelbag = anim_utils.action_get_channelbag_for_slot(anim.action, anim.action_slot)
-    for fcurve in channelbag.fcurves:
+    if bpy.app.version >= (4, 4, 0):
+        fcurves = anim_utils.action_get_channelbag_for_slot(anim.action, anim.action_slot).fcurves
+    else:
+        fcurves = anim.action.fcurves
+    for fcurve in fcurves:
         fcurve.extrapolation = "LINEAR"
         for key in fcurve.keyframe_points:
             key.interpolation = "LINEAR"

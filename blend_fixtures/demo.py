@@ -29,7 +29,8 @@ def main():
     work = os.path.join(os.path.dirname(out), "demo")
     os.makedirs(work, exist_ok=True)
     blend = os.path.join(work, "flag.blend")
-    shutil.copyfile(os.path.join(HERE, "flag.blend"), blend)
+    # MADDER_FIXTURES: the fixtures rebuilt by an older Blender (`make demo BPY=4.2.23`)
+    shutil.copyfile(os.path.join(os.environ.get("MADDER_FIXTURES") or HERE, "flag.blend"), blend)
 
     # a fresh Blender user folder: Blender keeps an installed wheel whose file name has not
     # changed, so a reused folder could run a stale build of the same version
@@ -69,3 +70,4 @@ def main():
 
 if __name__ == "__main__":
     main()
+    harness.exit(0)

@@ -11,8 +11,11 @@ import numpy as np
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-FIXTURES = os.path.join(ROOT, "blend_fixtures")
-sys.path.insert(0, FIXTURES)
+HARNESS = os.path.join(ROOT, "blend_fixtures")  # harness.py, shared with the demo
+sys.path.insert(0, HARNESS)
+# The .blend fixtures: the committed ones (saved by bpy 5.0), or, for a Blender that cannot
+# read 5.0 files (4.2), the same fixtures rebuilt by that Blender (`make test-blender BPY=…`).
+FIXTURES = os.environ.get("MADDER_FIXTURES") or HARNESS
 
 # A fresh user resource folder per session: extensions (and the wheels they unpack into
 # <user>/extensions/.local) are installed anew, never picked up from an earlier run.
@@ -27,6 +30,21 @@ ZIP = os.environ.get("MADDER_ZIP") or os.path.join(ROOT, "dist", "madder-0.1.0.z
 # Installed before the test modules are imported: `import madder` in a test resolves to the
 # wheel the extension brought, which exists only once the extension is installed.
 ADDON = harness.install_extension(ZIP)
+
+
+_status = [0]
+
+
+def pytest_sessionfinish(session, exitstatus):
+    _status[0] = int(exitstatus)
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_unconfigure(config):
+    """With a bpy that crashes at the interpreter's exit (4.2, see harness.crashes_at_exit),
+    ends the process here, with pytest's own exit status, once the report is printed."""
+    if harness.crashes_at_exit():
+        harness.exit(_status[0])
 
 
 @pytest.fixture(scope="session")
@@ -63,7 +81,10 @@ def open_two_stained_objects(path):
 def install_in_user_default(env):
     """Installs the extension zip, in a fresh process, into Blender's own `user_default`
     repository of the user folder `env["BLENDER_USER_RESOURCES"]`."""
-    code = f"import sys; sys.path.insert(0, {FIXTURES!r}); import harness; harness.install_extension({ZIP!r}, repo='user_default')"
+    code = (
+        f"import sys; sys.path.insert(0, {HARNESS!r}); import harness; "
+        f"harness.install_extension({ZIP!r}, repo='user_default'); harness.exit(0)"
+    )
     subprocess.run([sys.executable, "-c", code], env=env, check=True, capture_output=True, cwd=ROOT)
 
 

@@ -23,11 +23,12 @@ use crate::threads::Pool;
 /// use_rectilinear=True, use_coriolis=True, momentum_advection=False, threads=None)`.
 ///
 /// `topology` is a `Topology` or an `(F, 3)` uint32 face array; `rest` and `positions`
-/// `(N, 3)` float32 world positions (rest pose; first frame). The densities diffuse
-/// isotropically at `diffusion` m²/s, or per face along the weave (`face_tensors`
-/// `(F, 3)` float64 in m²/s, `face_uv` `(F, 3, 2)`, `face_angle` `(F,)`, as for
-/// `DiffusionStepper`); the default is isotropic, 2e-4 m²/s (wicking in cotton, whose
-/// front advances about a centimetre in the first second: `D ≈ L²/2t`).
+/// `(N, 3)` float32 or float64 world positions in metres (rest pose; first frame), one
+/// row per vertex of the topology. The densities diffuse isotropically at `diffusion`
+/// m²/s, or per face along the weave (`face_tensors` `(F, 3)` float64 in m²/s, `face_uv`
+/// `(F, 3, 2)`, `face_angle` `(F,)`, as for `DiffusionStepper`; `face_angle` only with
+/// the other two); the default is isotropic, 2e-4 m²/s (wicking in cotton, whose front
+/// advances about a centimetre in the first second: `D ≈ L²/2t`).
 /// Units are SI: densities in kg/m², rates in 1/s, evaporation in kg/(m²·s).
 /// `threads` caps the worker threads; results do not depend on it.
 #[pyclass(module = "madder")]
@@ -53,6 +54,42 @@ fn f64s(a: &PyReadonlyArray1<'_, f32>) -> Vec<f64> {
 
 fn dpoints(a: &PyReadonlyArray2<'_, f32>) -> PyResult<Vec<DVec3>> {
     Ok(points(a)?.into_iter().map(|p| p.as_dvec3()).collect())
+}
+
+/// The `(N, 3)` positions passed as argument `name`, float32 or float64 (a float64 array
+/// keeps its precision: the core works in f64). Anything else is a `ParameterError` that
+/// names the argument and says what it got.
+fn positions_arg(name: &str, a: &Bound<'_, PyAny>) -> PyResult<Vec<DVec3>> {
+    fn rows<T: numpy::Element + Copy + Into<f64>>(
+        name: &str,
+        a: &PyReadonlyArray2<'_, T>,
+    ) -> PyResult<Vec<DVec3>> {
+        if let [n, k] = *a.shape()
+            && k != 3
+        {
+            return Err(ParameterError::new_err(format!(
+                "{name} must have shape (N, 3), got ({n}, {k})"
+            )));
+        }
+        Ok(a.as_array()
+            .rows()
+            .into_iter()
+            .map(|r| DVec3::new(r[0].into(), r[1].into(), r[2].into()))
+            .collect())
+    }
+    if let Ok(a) = a.extract::<PyReadonlyArray2<'_, f32>>() {
+        return rows(name, &a);
+    }
+    if let Ok(a) = a.extract::<PyReadonlyArray2<'_, f64>>() {
+        return rows(name, &a);
+    }
+    let got = match (a.getattr("dtype"), a.getattr("shape")) {
+        (Ok(dtype), Ok(shape)) => format!("a {dtype} array of shape {shape}"),
+        _ => format!("a {}", a.get_type().name()?),
+    };
+    Err(ParameterError::new_err(format!(
+        "{name} must be an (N, 3) float32 or float64 array, got {got}"
+    )))
 }
 
 fn out1<'py>(py: Python<'py>, v: &[f64]) -> Bound<'py, PyArray1<f32>> {
@@ -81,8 +118,8 @@ impl Simulator {
     fn new(
         py: Python<'_>,
         topology: &Bound<'_, PyAny>,
-        rest: PyReadonlyArray2<'_, f32>,
-        positions: PyReadonlyArray2<'_, f32>,
+        rest: &Bound<'_, PyAny>,
+        positions: &Bound<'_, PyAny>,
         diffusion: Option<f64>,
         face_tensors: Option<PyReadonlyArray2<'_, f64>>,
         face_uv: Option<PyReadonlyArray3<'_, f32>>,
@@ -104,8 +141,20 @@ impl Simulator {
         momentum_advection: bool,
         threads: Option<usize>,
     ) -> PyResult<Self> {
-        let rest = dpoints(&rest)?;
-        let pos = dpoints(&positions)?;
+        let rest = positions_arg("rest", rest)?;
+        let pos = positions_arg("positions", positions)?;
+        if rest.len() != pos.len() {
+            return Err(ParameterError::new_err(format!(
+                "rest has {} rows but positions has {}: both need one row per vertex",
+                rest.len(),
+                pos.len()
+            )));
+        }
+        if face_angle.is_some() && (face_tensors.is_none() || face_uv.is_none()) {
+            return Err(ParameterError::new_err(
+                "face_angle turns the weave of woven faces: it needs face_tensors and face_uv too",
+            ));
+        }
         let topo = if let Ok(t) = topology.cast::<Topology>() {
             t.get().inner.clone()
         } else {
@@ -128,6 +177,13 @@ impl Simulator {
                 .collect();
             madder::mesh::Topology::from_triangles(rest.len(), tris).map_err(to_py)?
         };
+        if topo.n_vertices() != rest.len() {
+            return Err(ParameterError::new_err(format!(
+                "rest and positions have {} rows but the topology has {} vertices",
+                rest.len(),
+                topo.n_vertices()
+            )));
+        }
         let conductivity = if diffusion.is_none() && face_tensors.is_none() {
             conductivity(Some(2e-4), None, None, None)?
         } else {
@@ -177,7 +233,7 @@ impl Simulator {
         })
     }
 
-    /// Advances one frame: the cloth moves to `positions` ((N, 3) float32) over `dt`
+    /// Advances one frame: the cloth moves to `positions` ((N, 3) float32 or float64) over `dt`
     /// seconds. `after`, the positions one frame later when known, makes the cloth's
     /// acceleration second-order accurate (and right at the first frame). Releases the
     /// GIL. On error the simulator stays at the previous frame.
@@ -185,12 +241,12 @@ impl Simulator {
     fn step(
         &mut self,
         py: Python<'_>,
-        positions: PyReadonlyArray2<'_, f32>,
+        positions: &Bound<'_, PyAny>,
         dt: f64,
-        after: Option<PyReadonlyArray2<'_, f32>>,
+        after: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<()> {
-        let pos = dpoints(&positions)?;
-        let after = after.as_ref().map(dpoints).transpose()?;
+        let pos = positions_arg("positions", positions)?;
+        let after = after.map(|a| positions_arg("after", a)).transpose()?;
         self.run(py, |s| s.step(&pos, dt, after.as_deref()))
             .map_err(to_py)
     }

@@ -74,5 +74,17 @@ def main(argv=None):
     return cli.main(argv)
 
 
+def _exit(code):
+    """bpy 4.2 from PyPI crashes (SIGSEGV) when the interpreter exits after an add-on with
+    property update callbacks was enabled, as Madder is here; end at once with the real
+    status there (4.5 and 5.0 exit normally; a Blender binary never runs this file)."""
+    bpy = sys.modules.get("bpy")
+    if bpy is not None and bpy.app.version < (4, 5, 0):
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    sys.exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    _exit(main())
