@@ -227,9 +227,10 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
     )
     momentum_advection: BoolProperty(
         name="Momentum Advection",
-        description="Carry the velocity with the liquid's momentum instead of semi-Lagrangian "
-        "advection (seed §4.3.2): the liquid's front keeps its speed better",
-        default=False,
+        description="Carry the velocity with the liquid's momentum (seed §4.3.2), so that where "
+        "streams of liquid meet they keep their momentum; off: semi-Lagrangian velocity "
+        "(§4.3.1), which loses speed where liquid runs into slower liquid",
+        default=True,
     )
 
     # -- Interactions with the fibres (seed §4.5)
@@ -271,7 +272,8 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
     )
     substeps: IntProperty(
         name="Substeps",
-        description="Simulation steps per frame (positions are interpolated between frames)",
+        description="Simulation steps per frame, at least (positions are interpolated between "
+        "frames); a frame in which the cloth turns fast takes more on its own",
         default=1,
         min=1,
         soft_max=8,

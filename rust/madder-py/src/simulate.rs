@@ -20,7 +20,7 @@ use crate::threads::Pool;
 /// face_uv=None, face_angle=None, color=(0.45, 0.05, 0.1), gravity=(0, 0, -9.81),
 /// viscosity=..., friction=..., absorption=..., saturation=..., adsorption=...,
 /// capacity=..., evaporation=..., evaporation_boundary=1.2, substeps=1, use_gravity=True,
-/// use_rectilinear=True, use_coriolis=True, momentum_advection=False, threads=None)`.
+/// use_rectilinear=True, use_coriolis=True, momentum_advection=True, threads=None)`.
 ///
 /// `topology` is a `Topology` or an `(F, 3)` uint32 face array; `rest` and `positions`
 /// `(N, 3)` float32 or float64 world positions in metres (rest pose; first frame), one
@@ -112,7 +112,7 @@ impl Simulator {
         face_uv=None, face_angle=None, color=(0.45, 0.05, 0.1), gravity=(0.0, 0.0, -9.81),
         viscosity=None, friction=None, absorption=None, saturation=None, adsorption=None,
         capacity=None, evaporation=None, evaporation_boundary=None, substeps=1,
-        use_gravity=true, use_rectilinear=true, use_coriolis=true, momentum_advection=false,
+        use_gravity=true, use_rectilinear=true, use_coriolis=true, momentum_advection=true,
         threads=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
