@@ -136,6 +136,20 @@ def write_stain(mesh, solute, wetness, deposit, references, color, colors=None):
     mesh.update()
 
 
+def clear_stain(mesh):
+    """Zeros the stain attributes `mesh` has (renders as the bare cloth: no colour, no
+    coverage, dry, no deposit); creates none."""
+    zeros = None
+    for name, prop, width in ((STAIN_ATTR, "color", 4), (WETNESS_ATTR, "value", 1), (DEPOSIT_ATTR, "value", 1)):
+        attr = mesh.attributes.get(name)
+        if attr is not None and attr.domain == "POINT":
+            if zeros is None:
+                zeros = np.zeros(4 * len(mesh.vertices), dtype=np.float32)
+            attr.data.foreach_set(prop, zeros[: width * len(mesh.vertices)])
+    if zeros is not None:
+        mesh.update()
+
+
 def degenerate_uv_faces(uv):
     """How many triangles of `uv` (F, 3, 2) have degenerate UVs (no weft direction; the
     simulator then takes an edge), by the core's test |det| ≤ 1e-12·|a|·|b|."""

@@ -69,7 +69,8 @@ impl CacheWriter {
     }
 }
 
-/// Reads frames of a cache file; every error names the file and the frame.
+/// Reads frames of a cache file; every error names the file and the frame. A truncated
+/// file opens: the frames before `truncated_at` read, the later ones raise `CacheError`.
 #[pyclass(module = "madder")]
 pub struct CacheReader {
     inner: madder::io::cache::CacheReader,
@@ -128,5 +129,10 @@ impl CacheReader {
     #[getter]
     fn last_frame(&self) -> i32 {
         self.inner.last_frame()
+    }
+    /// The first frame whose block is cut off (`None` when the file is whole).
+    #[getter]
+    fn truncated_at(&self) -> Option<i32> {
+        self.inner.truncated_at()
     }
 }

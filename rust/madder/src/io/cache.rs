@@ -22,6 +22,16 @@
 //! cancelled (writer dropped) leaves the previous cache untouched. [`CacheReader`]
 //! validates the header, the file length and each block's checksum, and names the file and
 //! frame in every error, so a truncated or corrupt file is reported, never trusted.
+//!
+//! ## Damaged files
+//! A damaged cache is read as far as it is whole. Blocks have a fixed size and each carries
+//! its own checksum, so the header alone tells which blocks a short file still holds: a
+//! file cut inside frame `k` opens, frames before `k` read normally, and reading frame `k`
+//! or a later one is [`CacheError::Truncated`] naming the frame read and the first one cut
+//! ([`CacheReader::truncated_at`]). A block whose checksum fails is
+//! [`CacheError::Checksum`] for that frame only; its neighbours still read. Only a damaged
+//! header (or a file longer than its frames: not a file this writer made) refuses the
+//! whole file.
 
 use std::fs::File;
 use std::io::{BufWriter, Read, Seek, SeekFrom, Write};
@@ -190,6 +200,8 @@ pub struct CacheReader {
     names: Vec<String>,
     first_frame: i32,
     n_frames: u32,
+    /// Whole blocks in the file (`n_frames` unless it is truncated).
+    complete: u32,
     header_len: u64,
 }
 
@@ -252,13 +264,14 @@ impl CacheReader {
             })
             .collect::<Result<Vec<_>, _>>()?;
         let header_len = header.len() as u64 + 4;
-        let reader = Self {
+        let mut reader = Self {
             path: path.clone(),
             file,
             n_vertices,
             names,
             first_frame,
             n_frames,
+            complete: n_frames,
             header_len,
         };
         let len = reader
@@ -275,12 +288,8 @@ impl CacheReader {
             .and_then(|frames| frames.checked_add(reader.header_len))
             .ok_or_else(|| header_err("declared size overflows 64 bits"))?;
         if len < expected {
-            // complete < n_frames, and the frame range fits in i32 (checked above)
-            let complete = len.saturating_sub(reader.header_len) / reader.block_len();
-            return Err(CacheError::Truncated {
-                path: reader.path,
-                frame: (first_frame as i64 + complete as i64) as i32,
-            });
+            // a truncated file keeps its whole blocks readable; < n_frames, so it fits u32
+            reader.complete = (len.saturating_sub(reader.header_len) / reader.block_len()) as u32;
         }
         if len > expected {
             return Err(header_err("file is longer than its frames"));
@@ -306,6 +315,17 @@ impl CacheReader {
     pub fn last_frame(&self) -> i32 {
         // fits: the range was checked at open
         (self.first_frame as i64 + self.n_frames as i64 - 1) as i32
+    }
+    /// How many frames, from the first, have their whole block in the file (all of them
+    /// unless the file is truncated). Their checksums are verified when they are read.
+    pub fn complete_frames(&self) -> u32 {
+        self.complete
+    }
+    /// The first frame whose block is cut off, when the file is truncated.
+    pub fn truncated_at(&self) -> Option<i32> {
+        // < n_frames, so within the range checked at open
+        (self.complete < self.n_frames)
+            .then(|| (self.first_frame as i64 + self.complete as i64) as i32)
     }
 
     fn block_len(&self) -> u64 {
@@ -344,6 +364,13 @@ impl CacheReader {
             });
         }
         let index = (frame as i64 - self.first_frame as i64) as u64;
+        if let Some(first_cut) = self.truncated_at().filter(|_| index >= self.complete as u64) {
+            return Err(CacheError::Truncated {
+                path: self.path.clone(),
+                frame,
+                first_cut,
+            });
+        }
         let offset = self.header_len + self.block_len() * index;
         let mut block = vec![0u8; self.block_len() as usize];
         let path = self.path.clone();
@@ -353,9 +380,11 @@ impl CacheReader {
                 path: path.clone(),
                 source,
             })?;
+        // the file shrank after it was opened (it is replaced by rename, so this is rare)
         read_exact_or(&mut self.file, &mut block, || CacheError::Truncated {
             path: path.clone(),
             frame,
+            first_cut: frame,
         })?;
         let crc = block.split_off(block.len() - 4);
         let stored_frame = i32::from_le_bytes(block[..4].try_into().unwrap());
@@ -433,12 +462,15 @@ mod tests {
             Err(CacheError::FieldMissing { .. })
         ));
 
-        // truncation names the first incomplete frame
+        // truncation keeps the whole frames and names the first incomplete one
         let bytes = std::fs::read(&p).unwrap();
         std::fs::write(&p, &bytes[..bytes.len() - 5]).unwrap();
-        let err = CacheReader::open(&p).unwrap_err();
+        let mut r = CacheReader::open(&p).unwrap();
+        assert_eq!((r.truncated_at(), r.complete_frames()), (Some(6), 1));
+        assert_eq!(r.read(5, "density").unwrap(), vec![0.0, 1.0, 2.0]);
+        let err = r.read(6, "density").unwrap_err();
         assert!(
-            matches!(err, CacheError::Truncated { frame: 6, .. }),
+            matches!(err, CacheError::Truncated { frame: 6, first_cut: 6, .. }),
             "{err}"
         );
         assert!(err.to_string().contains("c.madder"));
