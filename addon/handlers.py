@@ -23,6 +23,7 @@ file's mtime or size changes), the attributes, the topology check (re-run only w
 mesh's counts or its corner array change)."""
 
 import os
+import re
 import sys
 import tempfile
 import zlib
@@ -159,23 +160,20 @@ def apply_frame(obj, frame):
     if why is None:
         import madder
 
-        try:
-            values = reader.read_frame(at)  # one read and checksum for all fields
+        settings = obj.madder
+        refs = tuple(settings.bake_references)
+        if not any(refs):  # a cache made outside a bake (a script): the object's own settings
+            refs = properties.references(settings)
+        buffers = bridge.stain_buffers(reader.n_vertices)
+        try:  # one read and checksum for all fields, normalized in place (Rust)
+            reader.read_stain(at, refs, tuple(settings.stain_color), *buffers)
         except madder.CacheError as e:  # a corrupt block: remember it for the panel
-            path = cache_path(obj)
-            _corrupt.setdefault(_file_key(path, reader), {})[at] = str(e)
+            _corrupt.setdefault(_file_key(cache_path(obj), reader), {})[at] = str(e)
             why = f"Damaged cache: {e}: bake again"
     if why is not None:
         bridge.clear_stain(obj.data)
         return why
-    fields = reader.fields
-    colors = values[[fields.index(f) for f in bridge.COLOR_FIELDS]].T if "color_r" in fields else None
-    settings = obj.madder
-    refs = tuple(settings.bake_references)
-    if not any(refs):  # a cache made outside a bake (a script): the object's own settings
-        refs = properties.references(settings)
-    solute, wetness, deposit = (values[fields.index(f)] for f in bridge.FIELDS)
-    bridge.write_stain(obj.data, solute, wetness, deposit, refs, settings.stain_color, colors)
+    bridge.write_stain(obj.data, *buffers)
     return None
 
 
@@ -185,9 +183,13 @@ def _stained(scene):
 
 @persistent
 def on_frame_change(scene, depsgraph=None):
-    """Runs after every frame change, in the viewport and in renders. It reads no evaluated
-    data (only the cache and the original meshes of `scene`), so it is valid with whichever
-    depsgraph Blender passes, the viewport's or the render's."""
+    """Runs on every frame change, in the viewport and in renders, before the depsgraph
+    evaluates the new frame (`frame_change_pre`): the attributes written here are in that
+    one evaluation. Written after it (`frame_change_post`), the mesh's tag made Blender
+    evaluate its modifier stack a second time, which cost more than the handler itself.
+    It reads no evaluated data (only the cache and the original meshes of `scene`), so it
+    is valid with whichever depsgraph Blender evaluates next, the viewport's or the
+    render's."""
     if _suspended:
         return
     for obj in _stained(scene):
@@ -259,7 +261,7 @@ def _stop(scene, reason):
     if not os.path.isfile(blocker):
         with open(blocker, "w") as f:
             f.write("Madder stopped a render: its output path points under this file.\n")
-    label = bpy.path.clean_name(f"Madder stopped the render {reason} (see the console)", replace="_")
+    label = re.sub(r'[\\/:*?"<>|]', "_", f"Madder stopped the render - {reason} (see the console)")
     scene.render.filepath = os.path.join(blocker, label, "####")
     print(f"Madder: stopping the render: {reason} (tick Render Without Stain to render anyway)", file=sys.stderr)
 
@@ -309,7 +311,7 @@ def on_save_post(filepath, *_args):
 
 
 _HANDLERS = (
-    ("frame_change_post", on_frame_change),
+    ("frame_change_pre", on_frame_change),
     ("load_post", on_load),
     ("render_init", on_render_init),
     ("render_pre", on_render_pre),

@@ -38,6 +38,7 @@ use std::io::{BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
 use crate::error::CacheError;
+use crate::io::attributes::{StainColour, stain_attributes};
 
 pub const MAGIC: &[u8; 8] = b"MADDERC\0";
 pub const VERSION: u32 = 1;
@@ -203,6 +204,9 @@ pub struct CacheReader {
     /// Whole blocks in the file (`n_frames` unless it is truncated).
     complete: u32,
     header_len: u64,
+    /// The last block read and its decoded values, reused (playback reads every frame).
+    block: Vec<u8>,
+    values: Vec<f32>,
 }
 
 impl CacheReader {
@@ -273,6 +277,8 @@ impl CacheReader {
             n_frames,
             complete: n_frames,
             header_len,
+            block: Vec::new(),
+            values: Vec::new(),
         };
         let len = reader
             .file
@@ -334,16 +340,10 @@ impl CacheReader {
 
     /// Reads field `name` of `frame`, checking the block's checksum.
     pub fn read(&mut self, frame: i32, name: &str) -> Result<Vec<f32>, CacheError> {
-        let Some(k) = self.names.iter().position(|n| n == name) else {
-            return Err(CacheError::FieldMissing {
-                path: self.path.clone(),
-                field: name.into(),
-            });
-        };
+        let k = self.field(name)?;
+        let n = self.n_vertices;
         let body = self.read_block(frame)?;
-        Ok(decode(
-            &body[4 + 4 * k * self.n_vertices..][..4 * self.n_vertices],
-        ))
+        Ok(decode(&body[4 + 4 * k * n..][..4 * n]))
     }
 
     /// Reads every field of `frame` with one read and one checksum: field `k` is
@@ -353,8 +353,56 @@ impl CacheReader {
         Ok(decode(&body[4..]))
     }
 
-    /// The checked body (frame number + field data) of `frame`'s block.
-    fn read_block(&mut self, frame: i32) -> Result<Vec<u8>, CacheError> {
+    /// The playback attributes of `frame` ([`crate::io::attributes`]) into `rgba` (4 per
+    /// vertex), `wetness` and `deposit`, from the fields a bake writes: `solute`,
+    /// `wetness`, `deposit`, and `color_r`/`color_g`/`color_b` when it tracked colours
+    /// (else the stain is `colour`). One read and one checksum; no allocation once the
+    /// reader has read a frame.
+    ///
+    /// # Panics
+    /// When the buffers' lengths are not `4 × n_vertices`, `n_vertices`, `n_vertices`.
+    pub fn read_stain(
+        &mut self,
+        frame: i32,
+        references: [f32; 3],
+        colour: [f32; 3],
+        rgba: &mut [f32],
+        wetness: &mut [f32],
+        deposit: &mut [f32],
+    ) -> Result<(), CacheError> {
+        let [s, w, d] = [self.field("solute")?, self.field("wetness")?, self.field("deposit")?];
+        let rgb = match ["color_r", "color_g", "color_b"].map(|c| self.field(c)) {
+            [Ok(r), Ok(g), Ok(b)] => Some([r, g, b]),
+            _ => None,
+        };
+        self.read_block(frame)?;
+        let mut values = std::mem::take(&mut self.values);
+        values.resize(self.names.len() * self.n_vertices, 0.0);
+        decode_into(&self.block[4..self.block.len() - 4], &mut values);
+        let n = self.n_vertices;
+        let f = |k: usize| &values[k * n..(k + 1) * n];
+        let colour = match rgb {
+            Some([r, g, b]) => StainColour::PerVertex([f(r), f(g), f(b)]),
+            None => StainColour::Uniform(colour),
+        };
+        stain_attributes(f(s), f(w), f(d), colour, references, rgba, wetness, deposit);
+        self.values = values;
+        Ok(())
+    }
+
+    fn field(&self, name: &str) -> Result<usize, CacheError> {
+        self.names
+            .iter()
+            .position(|n| n == name)
+            .ok_or_else(|| CacheError::FieldMissing {
+                path: self.path.clone(),
+                field: name.into(),
+            })
+    }
+
+    /// Reads and checks `frame`'s block into `self.block`; returns its body (frame number
+    /// + field data, without the checksum).
+    fn read_block(&mut self, frame: i32) -> Result<&[u8], CacheError> {
         if frame < self.first_frame || frame > self.last_frame() {
             return Err(CacheError::FrameMissing {
                 path: self.path.clone(),
@@ -372,8 +420,9 @@ impl CacheReader {
             });
         }
         let offset = self.header_len + self.block_len() * index;
-        let mut block = vec![0u8; self.block_len() as usize];
-        let path = self.path.clone();
+        // a whole block is in the file, so this allocation is bounded by its size
+        self.block.resize(self.block_len() as usize, 0);
+        let path = &self.path;
         self.file
             .seek(SeekFrom::Start(offset))
             .map_err(|source| CacheError::Io {
@@ -381,19 +430,22 @@ impl CacheReader {
                 source,
             })?;
         // the file shrank after it was opened (it is replaced by rename, so this is rare)
-        read_exact_or(&mut self.file, &mut block, || CacheError::Truncated {
+        read_exact_or(&mut self.file, &mut self.block, || CacheError::Truncated {
             path: path.clone(),
             frame,
             first_cut: frame,
         })?;
-        let crc = block.split_off(block.len() - 4);
-        let stored_frame = i32::from_le_bytes(block[..4].try_into().unwrap());
-        if crc32fast::hash(&block) != u32::from_le_bytes(crc[..].try_into().unwrap())
+        let (body, crc) = self.block.split_at(self.block.len() - 4);
+        let stored_frame = i32::from_le_bytes(body[..4].try_into().unwrap());
+        if crc32fast::hash(body) != u32::from_le_bytes(crc.try_into().unwrap())
             || stored_frame != frame
         {
-            return Err(CacheError::Checksum { path, frame });
+            return Err(CacheError::Checksum {
+                path: path.clone(),
+                frame,
+            });
         }
-        Ok(block)
+        Ok(body)
     }
 }
 
@@ -409,6 +461,12 @@ fn decode(bytes: &[u8]) -> Vec<f32> {
         .chunks_exact(4)
         .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
         .collect()
+}
+
+fn decode_into(bytes: &[u8], out: &mut [f32]) {
+    for (v, c) in out.iter_mut().zip(bytes.chunks_exact(4)) {
+        *v = f32::from_le_bytes(c.try_into().unwrap());
+    }
 }
 
 fn read_exact_or(
