@@ -73,24 +73,31 @@ def forget(path):
 
 
 def topology_fingerprint(mesh):
-    """A cheap fingerprint of `mesh`'s faces: counts, then a CRC of every polygon's corner
-    vertices. The bake records it; playback compares it, so a stain baked for other faces
-    is not shown on these."""
+    """A cheap fingerprint of `mesh`'s faces: the counts of vertices, edges, faces and
+    corners, then a CRC of every corner's vertex. The bake records it; playback compares
+    it, so a stain baked for other faces is not shown on these."""
     corners = np.empty(len(mesh.loops), dtype=np.int32)
-    mesh.attributes[".corner_vert"].data.foreach_get("value", corners)
-    sizes = np.empty(len(mesh.polygons), dtype=np.int32)
-    mesh.polygons.foreach_get("loop_total", sizes)
-    crc = zlib.crc32(sizes.tobytes(), zlib.crc32(corners.tobytes()))
-    return f"{len(mesh.vertices)}:{len(mesh.edges)}:{len(mesh.polygons)}:{len(mesh.loops)}:{crc:08x}"
+    layer = mesh.attributes.get(".corner_vert")
+    if layer is not None:  # the fast path (mesh.loops' "vertex_index" is 100× slower)
+        layer.data.foreach_get("value", corners)
+    else:
+        mesh.loops.foreach_get("vertex_index", corners)
+    return f"{_counts(mesh)}{zlib.crc32(corners.tobytes()):08x}"
+
+
+def _counts(mesh):
+    return f"{len(mesh.vertices)}:{len(mesh.edges)}:{len(mesh.polygons)}:{len(mesh.loops)}:"
 
 
 def _same_topology(mesh, recorded):
-    counts = f"{len(mesh.vertices)}:{len(mesh.edges)}:{len(mesh.polygons)}:{len(mesh.loops)}:"
+    """Whether `mesh`'s faces match the fingerprint `recorded`. The counts are compared
+    every frame; the CRC again only when the mesh's corner layer moved (Edit Mode rebuilds
+    it) or the counts changed."""
+    counts = _counts(mesh)
     if not recorded.startswith(counts):
         return False
-    # a mesh whose counts and corner array are unchanged since the last check is unchanged
-    corners = mesh.attributes[".corner_vert"].data
-    key = (mesh.as_pointer(), counts, corners[0].as_pointer() if len(corners) else 0, recorded)
+    layer = mesh.attributes.get(".corner_vert")
+    key = (mesh.as_pointer(), counts, layer.as_pointer() if layer is not None else 0, recorded)
     hit = _topology.get(key)
     if hit is None:
         if len(_topology) > 256:

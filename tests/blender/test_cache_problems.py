@@ -184,18 +184,21 @@ def test_a_mesh_edited_after_the_bake_shows_no_stain(open_fixture, addon):
     flag, path = baked_flag(12)
     scene.frame_set(10)
     values = expected(path, 10)
-    # the same counts, other faces: one edge rotated
-    bm = bmesh.new()
-    bm.from_mesh(flag.data)
-    edge = next(e for e in bm.edges if len(e.link_faces) == 2)
-    bmesh.ops.rotate_edges(bm, edges=[edge], use_ccw=False)
-    bm.to_mesh(flag.data)
-    bm.free()
+    # the same counts, other faces: one edge rotated in Edit Mode
+    bpy.ops.object.mode_set(mode="EDIT")
+    bm = bmesh.from_edit_mesh(flag.data)
+    for e in bm.edges:
+        e.select_set(False)
+    next(e for e in bm.edges if len(e.link_faces) == 2).select_set(True)
+    bmesh.update_edit_mesh(flag.data)
+    assert bpy.ops.mesh.edge_rotate(use_ccw=False) == {"FINISHED"}
+    bpy.ops.object.mode_set(mode="OBJECT")
+    assert flag.madder.bake_topology.startswith(f"{len(flag.data.vertices)}:{len(flag.data.edges)}:")
     scene.frame_set(11)
     assert_bare(flag)
     why = handlers(addon).problem(flag, 11)
     assert "faces changed" in why and path in why
-    # another vertex count (a vertex deleted)
+    # another vertex count (a vertex deleted, from a script)
     bm = bmesh.new()
     bm.from_mesh(flag.data)
     bm.verts.ensure_lookup_table()
@@ -239,3 +242,30 @@ def test_an_animation_render_stops_at_the_first_frame_without_its_stain(open_fix
     for f in (4, 5, 6):
         assert f"render frame {f}: 'Flag': Damaged cache" in err
     assert "render frame 3" not in err
+
+
+def test_a_frame_change_evaluates_the_cloth_once_with_its_stain(open_fixture):
+    """Issue 10 item 10: playback writes before the frame is evaluated, so that one
+    evaluation already has the frame's stain. Written after it (frame_change_post), the
+    mesh's tag made `frame_set` evaluate the cloth's modifier stack a second time: the
+    evaluated mesh seen by later frame_change_post handlers was then replaced."""
+    scene = open_fixture("flag.blend")
+    flag, path = baked_flag(12)
+    scene.frame_set(1)
+    seen = {}
+
+    def after_evaluation(scene, depsgraph):
+        seen[scene.frame_current] = flag.evaluated_get(depsgraph).data.as_pointer()
+
+    bpy.app.handlers.frame_change_post.append(after_evaluation)  # runs after Madder's
+    try:
+        for f in range(2, 12):
+            scene.frame_set(f)
+            evaluated = flag.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+            assert evaluated.as_pointer() == seen[f], f"frame {f} was evaluated again"
+            wet = np.empty(len(evaluated.vertices), dtype=np.float32)
+            evaluated.attributes["madder_wetness"].data.foreach_get("value", wet)
+            np.testing.assert_allclose(wet, np.clip(expected(path, f)["wetness"] / flag.madder.saturation, 0, 1),
+                                       atol=1e-6, err_msg=f"frame {f}")
+    finally:
+        bpy.app.handlers.frame_change_post.remove(after_evaluation)

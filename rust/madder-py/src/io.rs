@@ -116,9 +116,15 @@ impl CacheReader {
         mut deposit: PyReadwriteArray1<'_, f32>,
     ) -> PyResult<()> {
         let n = self.inner.n_vertices();
-        let (rgba, wetness, deposit) = (rgba.as_slice_mut(), wetness.as_slice_mut(), deposit.as_slice_mut());
+        let (rgba, wetness, deposit) = (
+            rgba.as_slice_mut(),
+            wetness.as_slice_mut(),
+            deposit.as_slice_mut(),
+        );
         let (Ok(rgba), Ok(wetness), Ok(deposit)) = (rgba, wetness, deposit) else {
-            return Err(PyValueError::new_err("read_stain: the buffers must be contiguous"));
+            return Err(PyValueError::new_err(
+                "read_stain: the buffers must be contiguous",
+            ));
         };
         if rgba.len() != 4 * n || wetness.len() != n || deposit.len() != n {
             return Err(PyValueError::new_err(format!(

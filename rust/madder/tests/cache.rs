@@ -77,14 +77,21 @@ fn a_cache_cut_at_any_byte_keeps_every_whole_frame() {
             } else {
                 let e = r.read_frame(frame).unwrap_err();
                 match &e {
-                    CacheError::Truncated { frame: f, first_cut: c, .. } => {
+                    CacheError::Truncated {
+                        frame: f,
+                        first_cut: c,
+                        ..
+                    } => {
                         assert_eq!((*f, *c), (frame, first_cut), "cut at {len}")
                     }
                     other => panic!("cut at {len}, frame {frame}: {other:?}"),
                 }
                 let msg = e.to_string();
                 assert!(msg.contains("cut.madder"), "{msg}");
-                assert!(msg.contains(&format!("truncated at frame {first_cut}")), "{msg}");
+                assert!(
+                    msg.contains(&format!("truncated at frame {first_cut}")),
+                    "{msg}"
+                );
             }
         }
     }

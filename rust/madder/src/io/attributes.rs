@@ -74,14 +74,32 @@ mod tests {
         let (s, l, a) = ([0.0, 0.5, 2.0, -1.0], [0.1, 0.2, 0.0, 9.0], [1.0; 4]);
         let (mut rgba, mut w, mut d) = ([9.0; 16], [9.0; 4], [9.0; 4]);
         let colour = StainColour::Uniform([0.5, 0.25, 1.0]);
-        stain_attributes(&s, &l, &a, colour, [1.0, 0.2, 0.0], &mut rgba, &mut w, &mut d);
+        stain_attributes(
+            &s,
+            &l,
+            &a,
+            colour,
+            [1.0, 0.2, 0.0],
+            &mut rgba,
+            &mut w,
+            &mut d,
+        );
         assert_eq!(&rgba[4..8], &[0.25, 0.125, 0.5, 0.5]);
         assert_eq!(&rgba[8..12], &[0.5, 0.25, 1.0, 1.0]); // clamped to 1
         assert_eq!(&rgba[12..], &[0.0; 4]); // negative: 0
         assert_eq!(w, [0.5, 1.0, 0.0, 1.0]);
         assert_eq!(d, [0.0; 4]); // reference 0
         let (r, g, b) = ([1.0; 4], [0.0; 4], [0.5; 4]);
-        stain_attributes(&s, &l, &a, StainColour::PerVertex([&r, &g, &b]), [1.0; 3], &mut rgba, &mut w, &mut d);
+        stain_attributes(
+            &s,
+            &l,
+            &a,
+            StainColour::PerVertex([&r, &g, &b]),
+            [1.0; 3],
+            &mut rgba,
+            &mut w,
+            &mut d,
+        );
         assert_eq!(&rgba[4..8], &[0.5, 0.0, 0.25, 0.5]);
     }
 }

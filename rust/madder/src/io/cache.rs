@@ -370,7 +370,11 @@ impl CacheReader {
         wetness: &mut [f32],
         deposit: &mut [f32],
     ) -> Result<(), CacheError> {
-        let [s, w, d] = [self.field("solute")?, self.field("wetness")?, self.field("deposit")?];
+        let [s, w, d] = [
+            self.field("solute")?,
+            self.field("wetness")?,
+            self.field("deposit")?,
+        ];
         let rgb = match ["color_r", "color_g", "color_b"].map(|c| self.field(c)) {
             [Ok(r), Ok(g), Ok(b)] => Some([r, g, b]),
             _ => None,
@@ -412,7 +416,10 @@ impl CacheReader {
             });
         }
         let index = (frame as i64 - self.first_frame as i64) as u64;
-        if let Some(first_cut) = self.truncated_at().filter(|_| index >= self.complete as u64) {
+        if let Some(first_cut) = self
+            .truncated_at()
+            .filter(|_| index >= self.complete as u64)
+        {
             return Err(CacheError::Truncated {
                 path: self.path.clone(),
                 frame,
@@ -528,7 +535,14 @@ mod tests {
         assert_eq!(r.read(5, "density").unwrap(), vec![0.0, 1.0, 2.0]);
         let err = r.read(6, "density").unwrap_err();
         assert!(
-            matches!(err, CacheError::Truncated { frame: 6, first_cut: 6, .. }),
+            matches!(
+                err,
+                CacheError::Truncated {
+                    frame: 6,
+                    first_cut: 6,
+                    ..
+                }
+            ),
             "{err}"
         );
         assert!(err.to_string().contains("c.madder"));
