@@ -337,7 +337,7 @@ class BakeJob:
         self.obj.madder.cache_file = stored_path(self.path)
         self.obj.madder.bake_references = self.references
         self.obj.madder.bake_topology = handlers.topology_fingerprint(self.obj.data)
-        # Playback writes mesh attributes from frame_change_post; during a render from the
+        # Playback writes mesh attributes from frame_change_pre; during a render from the
         # UI, Blender evaluates the scene in a render thread, and "Lock Interface" is what
         # keeps the two from touching the same data at once (background renders are safe
         # either way: handlers run between frames on the one thread).

@@ -36,10 +36,11 @@ from . import bridge, properties
 
 _readers = {}  # absolute path -> (mtime_ns, size, CacheReader)
 _corrupt = {}  # (path, mtime_ns, size) -> {frame: message}: blocks that failed to read
-_topology = {}  # (mesh pointer, counts, corner pointer, fingerprint) -> matches
+_topology = {}  # mesh pointer -> ((counts, corner layer pointer, fingerprint), matches)
 _suspended = 0  # > 0 while a bake walks the frames: playback must not touch the meshes
 _render = None  # while a render runs: {"filepath": the user's output path, "stopped": reason}
 _remapped = []  # (object, its cache path before) while a Save As runs
+_told = {}  # object name -> the problem last printed for it (None: it played)
 
 
 def suspend():
@@ -92,18 +93,26 @@ def _counts(mesh):
 def _same_topology(mesh, recorded):
     """Whether `mesh`'s faces match the fingerprint `recorded`. The counts are compared
     every frame; the CRC again only when the mesh's corner layer moved (Edit Mode rebuilds
-    it) or the counts changed."""
+    it), the counts changed, the depsgraph reported a geometry edit of the mesh, or a
+    file was opened."""
     counts = _counts(mesh)
     if not recorded.startswith(counts):
         return False
     layer = mesh.attributes.get(".corner_vert")
-    key = (mesh.as_pointer(), counts, layer.as_pointer() if layer is not None else 0, recorded)
-    hit = _topology.get(key)
-    if hit is None:
-        if len(_topology) > 256:
-            _topology.clear()
-        hit = _topology[key] = topology_fingerprint(mesh) == recorded
-    return hit
+    key = (counts, layer.as_pointer() if layer is not None else 0, recorded)
+    hit = _topology.get(mesh.as_pointer())
+    if hit is None or hit[0] != key:
+        hit = _topology[mesh.as_pointer()] = (key, topology_fingerprint(mesh) == recorded)
+    return hit[1]
+
+
+@persistent
+def on_depsgraph_update(scene, depsgraph):
+    """An edited mesh (Edit Mode, a script's bmesh) has its faces checked again."""
+    if _topology:
+        for update in depsgraph.updates:
+            if update.is_updated_geometry and isinstance(update.id, bpy.types.Mesh):
+                _topology.pop(update.id.original.as_pointer(), None)
 
 
 def cache_path(obj):
@@ -144,7 +153,7 @@ def _check(obj, frame):
     at = min(max(frame, reader.first_frame), reader.last_frame)
     cut = reader.truncated_at
     if cut is not None and at >= cut:
-        return (f"Damaged cache: {path} is truncated at frame {cut}; frame {frame} is missing "
+        return (f"Damaged cache: {path} is truncated at frame {cut} "
                 f"(frames {reader.first_frame}–{cut - 1} play): bake again"), None, None
     bad = _corrupt.get(_file_key(path, reader), {}).get(at)
     if bad:
@@ -204,14 +213,21 @@ def on_frame_change(scene, depsgraph=None):
             why = apply_frame(obj, scene.frame_current)
         except Exception as e:  # never break playback or a render; say what failed
             why = f"cannot show the stain: {e}"
-        if why is not None and _render is None:
+            try:
+                bridge.clear_stain(obj.data)
+            except Exception:
+                pass
+        # the console hears of each problem once (renders report every frame themselves)
+        if why is not None and _render is None and _told.get(obj.name) != why:
             print(f"Madder: '{obj.name}' at frame {scene.frame_current}: {why}", file=sys.stderr)
+        _told[obj.name] = why
 
 
 @persistent
 def on_load(*_args):
     """A file just opened shows its current frame from the cache, not the stain saved in
     the .blend (which is stale when the cache moved or is gone)."""
+    _topology.clear()  # the meshes of the old file are gone; their addresses get reused
     scene = bpy.context.scene
     if scene is not None:
         on_frame_change(scene)
@@ -320,6 +336,7 @@ def on_save_post(filepath, *_args):
 _HANDLERS = (
     ("frame_change_pre", on_frame_change),
     ("load_post", on_load),
+    ("depsgraph_update_post", on_depsgraph_update),
     ("render_init", on_render_init),
     ("render_pre", on_render_pre),
     ("render_complete", on_render_end),
@@ -344,6 +361,7 @@ def unregister():
     _readers.clear()
     _corrupt.clear()
     _topology.clear()
+    _told.clear()
 
 
 def relocate(obj, path):
