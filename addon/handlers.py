@@ -161,6 +161,18 @@ def _check(obj, frame):
     return None, reader, at
 
 
+def damage(obj):
+    """A warning when `obj`'s cache is truncated (some frames show no stain), else None."""
+    try:
+        reader = _reader(cache_path(obj)) if obj.madder.cache_file else None
+    except Exception:
+        return None  # `problem()` says why
+    cut = reader.truncated_at if reader is not None else None
+    if cut is None:
+        return None
+    return f"Cache truncated at frame {cut}: frames {cut}–{reader.last_frame} show no stain (bake again)"
+
+
 def _file_key(path, reader):
     hit = _readers.get(path)
     return (path, *hit[:2]) if hit is not None and hit[2] is reader else (path,)
@@ -256,24 +268,35 @@ def on_render_init(scene, *_args):
         bad = [f for f in range(scene.frame_start, scene.frame_end + 1, max(scene.frame_step, 1))
                if problem(obj, f) is not None]
         if bad:
-            what = "renders without its stain" if obj.madder.render_without_cache else "stops the render"
+            anyway = obj.madder.render_without_cache or scene.render.is_movie_format
+            what = "renders without its stain" if anyway else "stops the render"
             print(f"Madder: '{obj.name}' has no valid stain at frames {_ranges(bad)} ({what}): "
                   f"{problem(obj, bad[0])}", file=sys.stderr)
+            if not obj.madder.render_without_cache and scene.render.is_movie_format:
+                # a movie's file is open from the first frame: it cannot be stopped from here
+                if bpy.app.background and bpy.app.binary_path:  # `blender -b … -a`: fail now
+                    print(f"Madder: render failed: '{obj.name}' has no valid stain at frame {bad[0]}",
+                          file=sys.stderr)
+                    raise SystemExit(1)
+                print("Madder: a movie cannot be stopped at a frame: these frames render without the "
+                      "stain (render an image sequence to stop there)", file=sys.stderr)
 
 
 @persistent
 def on_render_pre(scene, *_args):
     """Before each rendered frame (its frame change comes after): report the objects that
-    cannot show their stain, and stop the render unless they may render without it."""
+    cannot show their stain, and stop the render unless they may render without it (an
+    image sequence only: see `on_render_init` for movies)."""
     if _render is None or _render["stopped"]:
         return
+    movie = scene.render.is_movie_format
     frame = scene.frame_current
     for obj in _stained(scene):
         why = problem(obj, frame)
         if why is None:
             continue
         print(f"Madder: render frame {frame}: '{obj.name}': {why}", file=sys.stderr)
-        if not obj.madder.render_without_cache:
+        if not obj.madder.render_without_cache and not movie:
             _stop(scene, f"'{obj.name}' has no valid stain at frame {frame}")
 
 

@@ -46,6 +46,9 @@ def _draw_cache_status(layout, obj, frame):
     why = handlers.problem(obj, frame)
     if why is None:
         layout.label(text=f"Baked: {s.cache_file}", icon="CHECKMARK")
+        warning = handlers.damage(obj)
+        if warning:
+            layout.label(text=warning, icon="ERROR")
     else:
         col = layout.column(align=True)
         col.alert = True

@@ -87,6 +87,7 @@ def test_a_truncated_cache_plays_the_frames_before_the_cut(open_fixture, addon):
         scene.frame_set(f)
         assert_shows(flag, before[f])
         assert handlers(addon).problem(flag, f) is None
+        assert handlers(addon).damage(flag) == "Cache truncated at frame 12: frames 12–48 show no stain (bake again)"
     for f in (12, 30, 48, 60):  # at and after the cut (60 clamps to 48): no stale stain
         scene.frame_set(f)
         assert_bare(flag)
@@ -210,11 +211,14 @@ def test_a_mesh_edited_after_the_bake_shows_no_stain(open_fixture, addon):
     assert f"holds {len(values['wetness'])} vertices" in handlers(addon).problem(flag, 12)
 
 
-def render(scene, out, first, last):
+def render(scene, out, first, last, movie=False):
     r = scene.render
     r.engine = "BLENDER_WORKBENCH"
     r.resolution_x, r.resolution_y, r.resolution_percentage = 32, 24, 100
-    r.image_settings.file_format = "PNG"
+    if movie:
+        r.image_settings.media_type = "VIDEO"
+    else:
+        r.image_settings.file_format = "PNG"
     r.filepath = os.path.join(out, "f####")
     scene.frame_start, scene.frame_end = first, last
     bpy.ops.render.render(animation=True)
@@ -269,3 +273,20 @@ def test_a_frame_change_evaluates_the_cloth_once_with_its_stain(open_fixture):
                                        atol=1e-6, err_msg=f"frame {f}")
     finally:
         bpy.app.handlers.frame_change_post.remove(after_evaluation)
+
+
+def test_a_movie_render_reports_the_frames_it_cannot_stop_at(open_fixture, tmp_path, capfd):
+    """A movie's file is open from the first frame, so changing the output path cannot stop
+    it: the affected frames are listed before it starts, reported as they render, and
+    show the bare cloth (never the stale stain)."""
+    scene = open_fixture("flag.blend")
+    flag, path = baked_flag(6)
+    cut_inside(path, 5)
+    out = str(tmp_path / "movie")
+    render(scene, out, 1, 6, movie=True)
+    err = capfd.readouterr().err
+    assert "'Flag' has no valid stain at frames 5–6 (renders without its stain)" in err
+    assert "a movie cannot be stopped at a frame" in err
+    for f in (5, 6):
+        assert f"render frame {f}: 'Flag': Damaged cache" in err
+    assert len(os.listdir(out)) == 1 and scene.render.filepath == os.path.join(out, "f####")
