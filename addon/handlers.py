@@ -173,6 +173,28 @@ def damage(obj):
     return f"Cache truncated at frame {cut}: frames {cut}–{reader.last_frame} show no stain (bake again)"
 
 
+def _probe(obj, frame):
+    """`problem()`, after reading the frame's block so that a corrupt one is known (renders
+    check a frame before its frame change reads it)."""
+    why, reader, at = _check(obj, frame)
+    if why is None and reader is not None:
+        why = _read(obj, reader, at, (1.0, 1.0, 1.0), (1.0, 1.0, 1.0), bridge.stain_buffers(reader.n_vertices))
+    return why
+
+
+def _read(obj, reader, at, refs, color, buffers):
+    """Reads frame `at` into `buffers` (one read and checksum for all fields, normalized in
+    place, in Rust); a corrupt block is remembered for the panel and returned as the problem."""
+    import madder
+
+    try:
+        reader.read_stain(at, refs, color, *buffers)
+    except madder.CacheError as e:
+        _corrupt.setdefault(_file_key(cache_path(obj), reader), {})[at] = str(e)
+        return f"Damaged cache: {e}: bake again"
+    return None
+
+
 def _file_key(path, reader):
     hit = _readers.get(path)
     return (path, *hit[:2]) if hit is not None and hit[2] is reader else (path,)
@@ -186,18 +208,12 @@ def apply_frame(obj, frame):
         return None
     why, reader, at = _check(obj, frame)
     if why is None:
-        import madder
-
         settings = obj.madder
         refs = tuple(settings.bake_references)
         if not any(refs):  # a cache made outside a bake (a script): the object's own settings
             refs = properties.references(settings)
         buffers = bridge.stain_buffers(reader.n_vertices)
-        try:  # one read and checksum for all fields, normalized in place (Rust)
-            reader.read_stain(at, refs, tuple(settings.stain_color), *buffers)
-        except madder.CacheError as e:  # a corrupt block: remember it for the panel
-            _corrupt.setdefault(_file_key(cache_path(obj), reader), {})[at] = str(e)
-            why = f"Damaged cache: {e}: bake again"
+        why = _read(obj, reader, at, refs, tuple(settings.stain_color), buffers)
     if why is not None:
         bridge.clear_stain(obj.data)
         return why
@@ -292,7 +308,7 @@ def on_render_pre(scene, *_args):
     movie = scene.render.is_movie_format
     frame = scene.frame_current
     for obj in _stained(scene):
-        why = problem(obj, frame)
+        why = _probe(obj, frame)
         if why is None:
             continue
         print(f"Madder: render frame {frame}: '{obj.name}': {why}", file=sys.stderr)

@@ -115,6 +115,23 @@ def test_a_corrupt_frame_shows_no_stain_and_names_the_frame(open_fixture, addon)
     assert_shows(flag, good)
 
 
+def test_an_animation_render_stops_at_a_corrupt_frame(open_fixture, tmp_path, capfd):
+    """The render checks each frame's block before rendering it, not only the file."""
+    scene = open_fixture("flag.blend")
+    flag, path = baked_flag(12)
+    r = madder.CacheReader(path)
+    block = 4 + 4 * len(r.fields) * r.n_vertices + 4
+    header = 8 + 5 * 4 + 32 * len(r.fields) + 4
+    data = bytearray(open(path, "rb").read())
+    data[header + 9 * block + 100] ^= 0xFF  # inside frame 10
+    open(path, "wb").write(bytes(data))
+    out = str(tmp_path / "render")
+    with pytest.raises(RuntimeError, match="Madder stopped the render"):
+        render(scene, out, 8, 12)
+    assert "render frame 10: 'Flag': Damaged cache" in capfd.readouterr().err
+    assert sorted(os.listdir(out)) == ["f0008.png", "f0009.png"]
+
+
 def test_a_deleted_cache_shows_no_stain_and_the_panel_says_where_it_looked(open_fixture, addon):
     scene = open_fixture("flag.blend")
     flag, path = baked_flag(12)
