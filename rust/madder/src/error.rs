@@ -84,7 +84,7 @@ pub enum CacheError {
     #[error("{path}: corrupt header: {reason}")]
     Header { path: PathBuf, reason: String },
     #[error(
-        "{path}: file is truncated at frame {first_cut}: frame {frame} is not in it (the frames before it still read)"
+        "{path}: file is truncated at frame {first_cut}: frame {frame} is not in it (the frames before {first_cut} still read)"
     )]
     Truncated {
         path: PathBuf,
