@@ -232,8 +232,10 @@ def render(scene, out, first, last, movie=False):
     r = scene.render
     r.engine = "BLENDER_WORKBENCH"
     r.resolution_x, r.resolution_y, r.resolution_percentage = 32, 24, 100
-    if movie:
+    if movie and hasattr(r.image_settings, "media_type"):  # Blender 5.0
         r.image_settings.media_type = "VIDEO"
+    elif movie:  # Blender 4.x
+        r.image_settings.file_format = "FFMPEG"
     else:
         r.image_settings.file_format = "PNG"
     r.filepath = os.path.join(out, "f####")
