@@ -435,7 +435,8 @@ class BakeJob:
         self._close()
         self.obj.madder.cache_file = stored_path(self.path)
         self.obj.madder.bake_references = self.references
-        # Playback writes mesh attributes from frame_change_post; during a render from the
+        self.obj.madder.bake_topology = handlers.topology_fingerprint(self.obj.data)
+        # Playback writes mesh attributes from frame_change_pre; during a render from the
         # UI, Blender evaluates the scene in a render thread, and "Lock Interface" is what
         # keeps the two from touching the same data at once (background renders are safe
         # either way: handlers run between frames on the one thread).
@@ -533,6 +534,7 @@ def free(obj):
         os.remove(path)
     settings.cache_file = ""
     settings.bake_references = (0.0, 0.0, 0.0)
+    settings.bake_topology = ""
     if obj.type == "MESH":
         for name in bridge.ATTRIBUTES:
             attr = obj.data.attributes.get(name)

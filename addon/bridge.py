@@ -105,35 +105,49 @@ def _attribute(mesh, name, data_type, domain="POINT"):
     return attr
 
 
-def normalized(density, reference):
-    """`density / reference` clamped to [0, 1], float32 (all 0 when `reference` is 0)."""
-    if reference <= 0.0:
-        return np.zeros(len(density), dtype=np.float32)
-    return np.clip(np.asarray(density, dtype=np.float32) / np.float32(reference), 0.0, 1.0)
+_scratch = {}  # vertex count -> the playback buffers, reused every frame
 
 
-def write_stain(mesh, solute, wetness, deposit, references, color, colors=None):
-    """Writes one frame of a bake on the POINT domain, from its raw densities (kg/m²:
-    total `solute`, liquid `wetness`, adsorbed `deposit`) and the `references` (solute,
-    liquid, deposit; kg/m²) that read as full:
+def stain_buffers(n):
+    """Buffers for one frame of playback attributes on `n` vertices: RGBA (4n), wetness
+    (n) and deposit (n), float32, kept between frames (allocating them per frame cost
+    more than filling them)."""
+    hit = _scratch.get(n)
+    if hit is None:
+        _scratch.clear()
+        hit = _scratch[n] = tuple(np.zeros(k * n, dtype=np.float32) for k in (4, 1, 1))
+    return hit
+
+
+def write_stain(mesh, rgba, wetness, deposit):
+    """Writes one frame's playback attributes on the POINT domain (all in [0, 1]; computed
+    from the cache's densities by `CacheReader.read_stain`, core `io::attributes`):
 
     - `madder_stain` (FLOAT_COLOR): RGB = solute colour × coverage, alpha = coverage, with
-      coverage = solute / reference clamped to [0, 1] (premultiplied, for an "over" mix).
-      The colour is `colors` (N, 3) per vertex when the bake tracked colours, else `color`.
-    - `madder_wetness` (FLOAT): liquid / saturation, clamped to [0, 1] (1: the fibres are
-      full; free liquid pooled on top reads 1 as well).
-    - `madder_deposit` (FLOAT): adsorbed solute / capacity, clamped to [0, 1].
+      coverage = solute / (concentration × saturation) (premultiplied, for an "over" mix).
+    - `madder_wetness` (FLOAT): liquid / saturation (1: the fibres are full; free liquid
+      pooled on top reads 1 as well).
+    - `madder_deposit` (FLOAT): adsorbed solute / capacity.
 
     Then tags the mesh so the depsgraph re-evaluates it (foreach_set alone does not)."""
-    coverage = normalized(solute, references[0])
-    rgba = np.empty((len(coverage), 4), dtype=np.float32)
-    tint = np.asarray(color, dtype=np.float32)[None, :3] if colors is None else colors
-    rgba[:, :3] = coverage[:, None] * tint
-    rgba[:, 3] = coverage
-    _attribute(mesh, STAIN_ATTR, "FLOAT_COLOR").data.foreach_set("color", rgba.ravel())
-    _attribute(mesh, WETNESS_ATTR, "FLOAT").data.foreach_set("value", normalized(wetness, references[1]))
-    _attribute(mesh, DEPOSIT_ATTR, "FLOAT").data.foreach_set("value", normalized(deposit, references[2]))
+    _attribute(mesh, STAIN_ATTR, "FLOAT_COLOR").data.foreach_set("color", rgba)
+    _attribute(mesh, WETNESS_ATTR, "FLOAT").data.foreach_set("value", wetness)
+    _attribute(mesh, DEPOSIT_ATTR, "FLOAT").data.foreach_set("value", deposit)
     mesh.update()
+
+
+def clear_stain(mesh):
+    """Zeros the stain attributes `mesh` has (renders as the bare cloth: no colour, no
+    coverage, dry, no deposit); creates none."""
+    zeros = None
+    for name, prop, width in ((STAIN_ATTR, "color", 4), (WETNESS_ATTR, "value", 1), (DEPOSIT_ATTR, "value", 1)):
+        attr = mesh.attributes.get(name)
+        if attr is not None and attr.domain == "POINT":
+            if zeros is None:
+                zeros = np.zeros(4 * len(mesh.vertices), dtype=np.float32)
+            attr.data.foreach_set(prop, zeros[: width * len(mesh.vertices)])
+    if zeros is not None:
+        mesh.update()
 
 
 def degenerate_uv_faces(uv):

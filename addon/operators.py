@@ -5,7 +5,7 @@ progress bar and status text show how far it is, Esc cancels and keeps the previ
 bake) and blocking when executed from a script or in background mode."""
 
 import bpy
-from bpy.props import BoolProperty
+from bpy.props import BoolProperty, StringProperty
 
 from . import bake, handlers
 
@@ -127,7 +127,40 @@ class MADDER_OT_free_bake(bpy.types.Operator):
         return {"FINISHED"}
 
 
-classes = (MADDER_OT_bake, MADDER_OT_free_bake)
+class MADDER_OT_relocate_cache(bpy.types.Operator):
+    """Point the active object at its stain cache after the cache or the .blend moved"""
+
+    bl_idname = "madder.relocate_cache"
+    bl_label = "Relocate Cache"
+    bl_options = {"REGISTER", "UNDO"}
+
+    filepath: StringProperty(name="Cache File", subtype="FILE_PATH")
+    filter_glob: StringProperty(default="*" + bake.CACHE_EXT, options={"HIDDEN"})
+
+    @classmethod
+    def poll(cls, context):
+        return context.object is not None and context.object.type == "MESH"
+
+    def invoke(self, context, event):
+        if not self.filepath:
+            self.filepath = handlers.cache_path(context.object) or bpy.path.abspath(context.object.madder.cache_dir)
+        context.window_manager.fileselect_add(self)
+        return {"RUNNING_MODAL"}
+
+    def execute(self, context):
+        obj = context.object
+        try:
+            left = handlers.relocate(obj, self.filepath)
+        except ValueError as e:
+            self.report({"ERROR"}, f"Madder: {e}")
+            return {"CANCELLED"}
+        if left:
+            self.report({"WARNING"}, f"Madder: '{obj.name}': {left}")
+        self.report({"INFO"}, f"Madder: '{obj.name}' plays {obj.madder.cache_file}")
+        return {"FINISHED"}
+
+
+classes = (MADDER_OT_bake, MADDER_OT_free_bake, MADDER_OT_relocate_cache)
 
 
 def register():

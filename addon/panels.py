@@ -1,8 +1,10 @@
 """The Madder panel in the Physics properties tab."""
 
+import textwrap
+
 import bpy
 
-from . import fabrics
+from . import fabrics, handlers
 
 
 class _PhysicsPanel:
@@ -34,7 +36,26 @@ class MADDER_PT_stain(_PhysicsPanel, bpy.types.Panel):
         layout.operator("madder.bake", text="Bake All Stains", icon="SCENE_DATA").all_objects = True
         layout.operator("madder.add_stain_shader", icon="NODE_MATERIAL")
         if s.cache_file:
-            layout.label(text=f"Baked: {s.cache_file}", icon="CHECKMARK")
+            _draw_cache_status(layout, context.object, context.scene.frame_current)
+
+
+def _draw_cache_status(layout, obj, frame):
+    """The bake's state at this frame: playing, or why not (with the path looked at), and
+    the way out (Relocate Cache, or bake again)."""
+    s = obj.madder
+    why = handlers.problem(obj, frame)
+    if why is None:
+        layout.label(text=f"Baked: {s.cache_file}", icon="CHECKMARK")
+        warning = handlers.damage(obj)
+        if warning:
+            layout.label(text=warning, icon="ERROR")
+    else:
+        col = layout.column(align=True)
+        col.alert = True
+        for i, line in enumerate(textwrap.wrap(why, 48)):
+            col.label(text=line, icon="ERROR" if i == 0 else "BLANK1")
+        layout.operator("madder.relocate_cache", icon="FILEBROWSER")
+    layout.prop(s, "render_without_cache")
 
 
 class _StainSubPanel(_PhysicsPanel):

@@ -310,6 +310,18 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         default=(0.0, 0.0, 0.0),
         options={"HIDDEN"},
     )
+    bake_topology: StringProperty(
+        name="Bake Topology",
+        description="Fingerprint of the mesh's faces at the bake: playback shows no stain on other faces",
+        default="",
+        options={"HIDDEN"},
+    )
+    render_without_cache: BoolProperty(
+        name="Render Without Stain",
+        description="Render frames whose stain cache is missing, damaged or stale without the stain "
+        "(the console lists them). Off: such a render stops at the first of these frames with an error",
+        default=False,
+    )
 
 
 class MadderSourceSettings(bpy.types.PropertyGroup):

@@ -122,11 +122,17 @@ def test_truncated_and_corrupt_caches_name_file_and_frame(tmp_path):
     path = tmp_path / "t.madder"
     write_cache(path, np.ones((5, 100), dtype=np.float32))
     data = path.read_bytes()
-    path.write_bytes(data[: len(data) - 500])  # cut into the last two frames
-    with pytest.raises(madder.CacheError) as e:
-        madder.CacheReader(str(path))
-    assert "t.madder" in str(e.value) and "frame 13" in str(e.value)
-    assert isinstance(e.value, OSError)
+    path.write_bytes(data[: len(data) - 500])  # cut into the last two frames (400 bytes each)
+    r = madder.CacheReader(str(path))  # the frames before the cut still play
+    assert r.truncated_at == 13
+    np.testing.assert_array_equal(r.read(12, "density"), np.ones(100, dtype=np.float32))
+    for frame in (13, 14):
+        with pytest.raises(madder.CacheError) as e:
+            r.read(frame, "density")
+        assert "t.madder" in str(e.value) and f"frame {frame} is not in it" in str(e.value)
+        assert "truncated at frame 13" in str(e.value) and isinstance(e.value, OSError)
+    path.write_bytes(data)
+    assert madder.CacheReader(str(path)).truncated_at is None
     corrupt = bytearray(data)
     corrupt[-20] ^= 1
     path.write_bytes(bytes(corrupt))

@@ -2,7 +2,8 @@
 
 use std::path::PathBuf;
 
-use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1};
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadwriteArray1};
+use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
 use crate::errors::{CacheError, to_py};
@@ -69,7 +70,8 @@ impl CacheWriter {
     }
 }
 
-/// Reads frames of a cache file; every error names the file and the frame.
+/// Reads frames of a cache file; every error names the file and the frame. A truncated
+/// file opens: the frames before `truncated_at` read, the later ones raise `CacheError`.
 #[pyclass(module = "madder")]
 pub struct CacheReader {
     inner: madder::io::cache::CacheReader,
@@ -95,6 +97,47 @@ impl CacheReader {
         let inner = &mut self.inner;
         let v = py.detach(|| inner.read_frame(frame)).map_err(to_py)?;
         PyArray1::from_vec(py, v).reshape([k, n])
+    }
+
+    /// Reads `frame` and fills the playback attributes in place (core `io::attributes`):
+    /// `rgba` (4 float32 per vertex: colour × coverage, coverage), `wetness` and `deposit`
+    /// (float32 per vertex), each density over its reference (solute, liquid, deposit)
+    /// clamped to [0, 1]. The colour is the cache's `color_r/g/b` fields when it has them,
+    /// else `color`. The buffers must be contiguous float32 of the right lengths.
+    #[allow(clippy::too_many_arguments)]
+    fn read_stain(
+        &mut self,
+        py: Python<'_>,
+        frame: i32,
+        references: [f32; 3],
+        color: [f32; 3],
+        mut rgba: PyReadwriteArray1<'_, f32>,
+        mut wetness: PyReadwriteArray1<'_, f32>,
+        mut deposit: PyReadwriteArray1<'_, f32>,
+    ) -> PyResult<()> {
+        let n = self.inner.n_vertices();
+        let (rgba, wetness, deposit) = (
+            rgba.as_slice_mut(),
+            wetness.as_slice_mut(),
+            deposit.as_slice_mut(),
+        );
+        let (Ok(rgba), Ok(wetness), Ok(deposit)) = (rgba, wetness, deposit) else {
+            return Err(PyValueError::new_err(
+                "read_stain: the buffers must be contiguous",
+            ));
+        };
+        if rgba.len() != 4 * n || wetness.len() != n || deposit.len() != n {
+            return Err(PyValueError::new_err(format!(
+                "read_stain: buffers of {}, {} and {} values for {n} vertices (need {}, {n}, {n})",
+                rgba.len(),
+                wetness.len(),
+                deposit.len(),
+                4 * n
+            )));
+        }
+        let inner = &mut self.inner;
+        py.detach(|| inner.read_stain(frame, references, color, rgba, wetness, deposit))
+            .map_err(to_py)
     }
 
     /// Field `field` at `frame`, as a float32 array of one value per vertex.
@@ -128,5 +171,10 @@ impl CacheReader {
     #[getter]
     fn last_frame(&self) -> i32 {
         self.inner.last_frame()
+    }
+    /// The first frame whose block is cut off (`None` when the file is whole).
+    #[getter]
+    fn truncated_at(&self) -> Option<i32> {
+        self.inner.truncated_at()
     }
 }

@@ -83,8 +83,16 @@ pub enum CacheError {
     },
     #[error("{path}: corrupt header: {reason}")]
     Header { path: PathBuf, reason: String },
-    #[error("{path}: file is truncated: frame {frame} is incomplete")]
-    Truncated { path: PathBuf, frame: i32 },
+    #[error(
+        "{path}: file is truncated at frame {first_cut}: frame {frame} is not in it (the frames before {first_cut} still read)"
+    )]
+    Truncated {
+        path: PathBuf,
+        /// the frame that was read
+        frame: i32,
+        /// the first frame whose block is cut off
+        first_cut: i32,
+    },
     #[error("{path}: frame {frame} is corrupt (checksum mismatch)")]
     Checksum { path: PathBuf, frame: i32 },
     #[error("{path}: frame {frame} is not in the cache (frames {first}..={last})")]

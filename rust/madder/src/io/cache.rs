@@ -22,12 +22,23 @@
 //! cancelled (writer dropped) leaves the previous cache untouched. [`CacheReader`]
 //! validates the header, the file length and each block's checksum, and names the file and
 //! frame in every error, so a truncated or corrupt file is reported, never trusted.
+//!
+//! ## Damaged files
+//! A damaged cache is read as far as it is whole. Blocks have a fixed size and each carries
+//! its own checksum, so the header alone tells which blocks a short file still holds: a
+//! file cut inside frame `k` opens, frames before `k` read normally, and reading frame `k`
+//! or a later one is [`CacheError::Truncated`] naming the frame read and the first one cut
+//! ([`CacheReader::truncated_at`]). A block whose checksum fails is
+//! [`CacheError::Checksum`] for that frame only; its neighbours still read. Only a damaged
+//! header (or a file longer than its frames: not a file this writer made) refuses the
+//! whole file.
 
 use std::fs::File;
 use std::io::{BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
 use crate::error::CacheError;
+use crate::io::attributes::{StainColour, stain_attributes};
 
 pub const MAGIC: &[u8; 8] = b"MADDERC\0";
 pub const VERSION: u32 = 1;
@@ -190,7 +201,12 @@ pub struct CacheReader {
     names: Vec<String>,
     first_frame: i32,
     n_frames: u32,
+    /// Whole blocks in the file (`n_frames` unless it is truncated).
+    complete: u32,
     header_len: u64,
+    /// The last block read and its decoded values, reused (playback reads every frame).
+    block: Vec<u8>,
+    values: Vec<f32>,
 }
 
 impl CacheReader {
@@ -252,14 +268,17 @@ impl CacheReader {
             })
             .collect::<Result<Vec<_>, _>>()?;
         let header_len = header.len() as u64 + 4;
-        let reader = Self {
+        let mut reader = Self {
             path: path.clone(),
             file,
             n_vertices,
             names,
             first_frame,
             n_frames,
+            complete: n_frames,
             header_len,
+            block: Vec::new(),
+            values: Vec::new(),
         };
         let len = reader
             .file
@@ -275,12 +294,8 @@ impl CacheReader {
             .and_then(|frames| frames.checked_add(reader.header_len))
             .ok_or_else(|| header_err("declared size overflows 64 bits"))?;
         if len < expected {
-            // complete < n_frames, and the frame range fits in i32 (checked above)
-            let complete = len.saturating_sub(reader.header_len) / reader.block_len();
-            return Err(CacheError::Truncated {
-                path: reader.path,
-                frame: (first_frame as i64 + complete as i64) as i32,
-            });
+            // a truncated file keeps its whole blocks readable; < n_frames, so it fits u32
+            reader.complete = (len.saturating_sub(reader.header_len) / reader.block_len()) as u32;
         }
         if len > expected {
             return Err(header_err("file is longer than its frames"));
@@ -307,6 +322,17 @@ impl CacheReader {
         // fits: the range was checked at open
         (self.first_frame as i64 + self.n_frames as i64 - 1) as i32
     }
+    /// How many frames, from the first, have their whole block in the file (all of them
+    /// unless the file is truncated). Their checksums are verified when they are read.
+    pub fn complete_frames(&self) -> u32 {
+        self.complete
+    }
+    /// The first frame whose block is cut off, when the file is truncated.
+    pub fn truncated_at(&self) -> Option<i32> {
+        // < n_frames, so within the range checked at open
+        (self.complete < self.n_frames)
+            .then(|| (self.first_frame as i64 + self.complete as i64) as i32)
+    }
 
     fn block_len(&self) -> u64 {
         8 + 4 * (self.names.len() * self.n_vertices) as u64
@@ -314,16 +340,10 @@ impl CacheReader {
 
     /// Reads field `name` of `frame`, checking the block's checksum.
     pub fn read(&mut self, frame: i32, name: &str) -> Result<Vec<f32>, CacheError> {
-        let Some(k) = self.names.iter().position(|n| n == name) else {
-            return Err(CacheError::FieldMissing {
-                path: self.path.clone(),
-                field: name.into(),
-            });
-        };
+        let k = self.field(name)?;
+        let n = self.n_vertices;
         let body = self.read_block(frame)?;
-        Ok(decode(
-            &body[4 + 4 * k * self.n_vertices..][..4 * self.n_vertices],
-        ))
+        Ok(decode(&body[4 + 4 * k * n..][..4 * n]))
     }
 
     /// Reads every field of `frame` with one read and one checksum: field `k` is
@@ -333,8 +353,60 @@ impl CacheReader {
         Ok(decode(&body[4..]))
     }
 
-    /// The checked body (frame number + field data) of `frame`'s block.
-    fn read_block(&mut self, frame: i32) -> Result<Vec<u8>, CacheError> {
+    /// The playback attributes of `frame` ([`crate::io::attributes`]) into `rgba` (4 per
+    /// vertex), `wetness` and `deposit`, from the fields a bake writes: `solute`,
+    /// `wetness`, `deposit`, and `color_r`/`color_g`/`color_b` when it tracked colours
+    /// (else the stain is `colour`). One read and one checksum; no allocation once the
+    /// reader has read a frame.
+    ///
+    /// # Panics
+    /// When the buffers' lengths are not `4 × n_vertices`, `n_vertices`, `n_vertices`.
+    pub fn read_stain(
+        &mut self,
+        frame: i32,
+        references: [f32; 3],
+        colour: [f32; 3],
+        rgba: &mut [f32],
+        wetness: &mut [f32],
+        deposit: &mut [f32],
+    ) -> Result<(), CacheError> {
+        let [s, w, d] = [
+            self.field("solute")?,
+            self.field("wetness")?,
+            self.field("deposit")?,
+        ];
+        let rgb = match ["color_r", "color_g", "color_b"].map(|c| self.field(c)) {
+            [Ok(r), Ok(g), Ok(b)] => Some([r, g, b]),
+            _ => None,
+        };
+        self.read_block(frame)?;
+        let mut values = std::mem::take(&mut self.values);
+        values.resize(self.names.len() * self.n_vertices, 0.0);
+        decode_into(&self.block[4..self.block.len() - 4], &mut values);
+        let n = self.n_vertices;
+        let f = |k: usize| &values[k * n..(k + 1) * n];
+        let colour = match rgb {
+            Some([r, g, b]) => StainColour::PerVertex([f(r), f(g), f(b)]),
+            None => StainColour::Uniform(colour),
+        };
+        stain_attributes(f(s), f(w), f(d), colour, references, rgba, wetness, deposit);
+        self.values = values;
+        Ok(())
+    }
+
+    fn field(&self, name: &str) -> Result<usize, CacheError> {
+        self.names
+            .iter()
+            .position(|n| n == name)
+            .ok_or_else(|| CacheError::FieldMissing {
+                path: self.path.clone(),
+                field: name.into(),
+            })
+    }
+
+    /// Reads and checks `frame`'s block into `self.block`; returns its body (frame number
+    /// + field data, without the checksum).
+    fn read_block(&mut self, frame: i32) -> Result<&[u8], CacheError> {
         if frame < self.first_frame || frame > self.last_frame() {
             return Err(CacheError::FrameMissing {
                 path: self.path.clone(),
@@ -344,27 +416,43 @@ impl CacheReader {
             });
         }
         let index = (frame as i64 - self.first_frame as i64) as u64;
+        if let Some(first_cut) = self
+            .truncated_at()
+            .filter(|_| index >= self.complete as u64)
+        {
+            return Err(CacheError::Truncated {
+                path: self.path.clone(),
+                frame,
+                first_cut,
+            });
+        }
         let offset = self.header_len + self.block_len() * index;
-        let mut block = vec![0u8; self.block_len() as usize];
-        let path = self.path.clone();
+        // a whole block is in the file, so this allocation is bounded by its size
+        self.block.resize(self.block_len() as usize, 0);
+        let path = &self.path;
         self.file
             .seek(SeekFrom::Start(offset))
             .map_err(|source| CacheError::Io {
                 path: path.clone(),
                 source,
             })?;
-        read_exact_or(&mut self.file, &mut block, || CacheError::Truncated {
+        // the file shrank after it was opened (it is replaced by rename, so this is rare)
+        read_exact_or(&mut self.file, &mut self.block, || CacheError::Truncated {
             path: path.clone(),
             frame,
+            first_cut: frame,
         })?;
-        let crc = block.split_off(block.len() - 4);
-        let stored_frame = i32::from_le_bytes(block[..4].try_into().unwrap());
-        if crc32fast::hash(&block) != u32::from_le_bytes(crc[..].try_into().unwrap())
+        let (body, crc) = self.block.split_at(self.block.len() - 4);
+        let stored_frame = i32::from_le_bytes(body[..4].try_into().unwrap());
+        if crc32fast::hash(body) != u32::from_le_bytes(crc.try_into().unwrap())
             || stored_frame != frame
         {
-            return Err(CacheError::Checksum { path, frame });
+            return Err(CacheError::Checksum {
+                path: path.clone(),
+                frame,
+            });
         }
-        Ok(block)
+        Ok(body)
     }
 }
 
@@ -380,6 +468,12 @@ fn decode(bytes: &[u8]) -> Vec<f32> {
         .chunks_exact(4)
         .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
         .collect()
+}
+
+fn decode_into(bytes: &[u8], out: &mut [f32]) {
+    for (v, c) in out.iter_mut().zip(bytes.chunks_exact(4)) {
+        *v = f32::from_le_bytes(c.try_into().unwrap());
+    }
 }
 
 fn read_exact_or(
@@ -433,12 +527,22 @@ mod tests {
             Err(CacheError::FieldMissing { .. })
         ));
 
-        // truncation names the first incomplete frame
+        // truncation keeps the whole frames and names the first incomplete one
         let bytes = std::fs::read(&p).unwrap();
         std::fs::write(&p, &bytes[..bytes.len() - 5]).unwrap();
-        let err = CacheReader::open(&p).unwrap_err();
+        let mut r = CacheReader::open(&p).unwrap();
+        assert_eq!((r.truncated_at(), r.complete_frames()), (Some(6), 1));
+        assert_eq!(r.read(5, "density").unwrap(), vec![0.0, 1.0, 2.0]);
+        let err = r.read(6, "density").unwrap_err();
         assert!(
-            matches!(err, CacheError::Truncated { frame: 6, .. }),
+            matches!(
+                err,
+                CacheError::Truncated {
+                    frame: 6,
+                    first_cut: 6,
+                    ..
+                }
+            ),
             "{err}"
         );
         assert!(err.to_string().contains("c.madder"));

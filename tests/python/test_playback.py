@@ -1,0 +1,60 @@
+"""`CacheReader.read_stain`: the playback attributes of one frame, computed in Rust into
+the caller's buffers, against numpy's own normalization of the densities read back."""
+
+import numpy as np
+import pytest
+
+import madder
+
+N = 257
+
+
+def cache(path, colors):
+    fields = ["solute", "wetness", "deposit"] + (["color_r", "color_g", "color_b"] if colors else [])
+    rng = np.random.default_rng(3)
+    w = madder.CacheWriter(str(path), N, fields, 4, 3)
+    frames = []
+    for _ in range(3):
+        values = [rng.uniform(-0.01, 0.3, N).astype(np.float32) for _ in fields]
+        w.push_frame(values)
+        frames.append(dict(zip(fields, values)))
+    w.finish()
+    return frames
+
+
+def expected(values, refs, color):
+    cov = np.clip(values["solute"] / np.float32(refs[0]), 0, 1)
+    tint = np.stack([values[c] for c in ("color_r", "color_g", "color_b")], 1) if "color_r" in values else np.float32(color)
+    rgba = np.concatenate([cov[:, None] * tint, cov[:, None]], axis=1)
+    wet = np.clip(values["wetness"] / np.float32(refs[1]), 0, 1)
+    return rgba.ravel(), wet, np.zeros(N, dtype=np.float32)  # deposit reference 0: no deposit
+
+
+@pytest.mark.parametrize("colors", [False, True])
+def test_read_stain_matches_numpy(tmp_path, colors):
+    frames = cache(tmp_path / "c.madder", colors)
+    r = madder.CacheReader(str(tmp_path / "c.madder"))
+    rgba, wet, dep = np.full(4 * N, 9, np.float32), np.full(N, 9, np.float32), np.full(N, 9, np.float32)
+    refs, color = (0.05, 0.1, 0.0), (0.5, 0.25, 1.0)
+    for k in range(3):
+        r.read_stain(4 + k, refs, color, rgba, wet, dep)
+        for got, want in zip((rgba, wet, dep), expected(frames[k], refs, color)):
+            np.testing.assert_allclose(got, want, rtol=1e-6, atol=0)
+
+
+def test_read_stain_checks_buffers_and_names_bad_frames(tmp_path):
+    path = tmp_path / "c.madder"
+    cache(path, False)
+    r = madder.CacheReader(str(path))
+    with pytest.raises(ValueError, match=f"for {N} vertices"):
+        r.read_stain(4, (1, 1, 1), (1, 1, 1), np.zeros(N, np.float32), np.zeros(N, np.float32), np.zeros(N, np.float32))
+    with pytest.raises(ValueError, match="contiguous"):
+        r.read_stain(4, (1, 1, 1), (1, 1, 1), np.zeros(8 * N, np.float32)[::2], np.zeros(N, np.float32),
+                     np.zeros(N, np.float32))
+    data = path.read_bytes()
+    path.write_bytes(data[:-10])
+    r = madder.CacheReader(str(path))
+    bufs = np.zeros(4 * N, np.float32), np.zeros(N, np.float32), np.zeros(N, np.float32)
+    r.read_stain(5, (1, 1, 1), (1, 1, 1), *bufs)
+    with pytest.raises(madder.CacheError, match="truncated at frame 6"):
+        r.read_stain(6, (1, 1, 1), (1, 1, 1), *bufs)
