@@ -170,7 +170,9 @@ impl std::fmt::Display for Compact {
         }
         let sci = format!("{x:.3e}");
         // the exponent after rounding to four digits (9999.7 is 1.000e4)
-        let e: i32 = sci[sci.find('e').map_or(0, |i| i + 1)..].parse().unwrap_or(0);
+        let e: i32 = sci[sci.find('e').map_or(0, |i| i + 1)..]
+            .parse()
+            .unwrap_or(0);
         if !(-3..6).contains(&e) {
             return f.write_str(&sci);
         }

@@ -43,6 +43,18 @@ impl Rng {
     fn log_uniform(&mut self, lo: f64, hi: f64) -> f64 {
         self.0.log_uniform(lo, hi)
     }
+    /// A random `w × h` tile, each side in `sides`, of [`Rng::spd`] tensors.
+    fn tile(
+        &mut self,
+        sides: std::ops::RangeInclusive<usize>,
+        lo: f64,
+        hi: f64,
+    ) -> (usize, usize, Vec<Tensor2>) {
+        let span = (sides.end() - sides.start() + 1) as u64;
+        let w = sides.start() + (self.next() % span) as usize;
+        let h = sides.start() + (self.next() % span) as usize;
+        (w, h, (0..w * h).map(|_| self.spd(lo, hi)).collect())
+    }
     /// A random SPD tensor: eigenvalues log-uniform in [lo, hi], random axes.
     fn spd(&mut self, lo: f64, hi: f64) -> Tensor2 {
         let (l1, l2) = (self.log_uniform(lo, hi), self.log_uniform(lo, hi));
@@ -253,8 +265,7 @@ fn four_phase_checkerboard_is_mortola_steffe() {
 fn wiener_bounds_spd_and_bracket_on_random_tiles() {
     let mut rng = Rng(SplitMix64::new(2024));
     for trial in 0..60 {
-        let (w, h) = (1 + (rng.next() % 7) as usize, 1 + (rng.next() % 7) as usize);
-        let t: Vec<Tensor2> = (0..w * h).map(|_| rng.spd(0.1, 1000.0)).collect();
+        let (w, h, t) = rng.tile(1..=7, 0.1, 1000.0);
         let r = homogenize_report(w, h, &t, &opts(Method::Extrapolated, 48 * 48)).unwrap();
         let a = r.tensor;
         // arithmetic ⟨S⟩ and harmonic ⟨S⁻¹⟩⁻¹ means
@@ -289,8 +300,7 @@ fn wiener_bounds_spd_and_bracket_on_random_tiles() {
 fn quarter_turn_and_mirror_transform_the_tensor() {
     let mut rng = Rng(SplitMix64::new(99));
     for trial in 0..20 {
-        let (w, h) = (1 + (rng.next() % 6) as usize, 1 + (rng.next() % 6) as usize);
-        let t: Vec<Tensor2> = (0..w * h).map(|_| rng.spd(0.5, 50.0)).collect();
+        let (w, h, t) = rng.tile(1..=6, 0.5, 50.0);
         let o = opts(Method::Extrapolated, 40 * 40);
         let a = homogenize_with(w, h, &t, &o).unwrap();
         let (w2, h2, t2) = rotate(w, h, &t);
@@ -327,8 +337,7 @@ fn keller_duality_commutes_with_homogenization() {
     // roles, φ ↦ 1 − φ, and the estimate follows exactly
     let mut rng = Rng(SplitMix64::new(31));
     for trial in 0..10 {
-        let (w, h) = (2 + (rng.next() % 4) as usize, 2 + (rng.next() % 4) as usize);
-        let t: Vec<Tensor2> = (0..w * h).map(|_| rng.spd(0.2, 200.0)).collect();
+        let (w, h, t) = rng.tile(2..=5, 0.2, 200.0);
         let dual: Vec<Tensor2> = t.iter().map(|&a| tensor::keller_dual(a)).collect();
         let o = opts(Method::Extrapolated, 40 * 40);
         let a = homogenize_report(w, h, &t, &o).unwrap();
@@ -885,8 +894,7 @@ fn rectangular_cells_follow_the_change_of_variables() {
         .take(12)
         .enumerate()
     {
-        let (w, h) = (2 + (rng.next() % 3) as usize, 2 + (rng.next() % 3) as usize);
-        let t: Vec<Tensor2> = (0..w * h).map(|_| rng.spd(1.0, 10.0)).collect();
+        let (w, h, t) = rng.tile(2..=4, 1.0, 10.0);
         let (sw, sh) = (w * kx, h * ky);
         let stretched = stretch(w, h, &t, kx, ky);
         let a = homogenize(sw, sh, &stretched).unwrap();
@@ -910,8 +918,7 @@ fn periodic_repeats_give_the_same_tensor() {
     // up to the discretization
     let mut rng = Rng(SplitMix64::new(77));
     for trial in 0..8 {
-        let (w, h) = (1 + (rng.next() % 4) as usize, 1 + (rng.next() % 4) as usize);
-        let t: Vec<Tensor2> = (0..w * h).map(|_| rng.spd(1.0, 10.0)).collect();
+        let (w, h, t) = rng.tile(1..=4, 1.0, 10.0);
         let a = homogenize(w, h, &t).unwrap();
         for (kx, ky) in [(2, 1), (1, 3), (3, 2)] {
             let big = repeat(w, h, &t, kx, ky);
@@ -992,12 +999,17 @@ fn cache_keeps_rectangles_apart_from_squares() {
     assert!(rel(rect, square) > 0.1, "{rect:?} vs {square:?}");
     // the rectangles drawn at 2×2 pixels per cell and shifted: the same medium, a hit
     let px = stretch(4, 2, &t, 2, 2);
-    let shifted: Vec<Tensor2> = (0..8 * 4).map(|i| px[(i / 8) * 8 + (i % 8 + 3) % 8]).collect();
+    let shifted: Vec<Tensor2> = (0..8 * 4)
+        .map(|i| px[(i / 8) * 8 + (i % 8 + 3) % 8])
+        .collect();
     assert_eq!(cache.homogenize(8, 4, &shifted).unwrap(), rect);
     assert_eq!((cache.hits(), cache.misses()), (1, 2));
     // the process-wide cache too
     assert_eq!(homogenize_cached(4, 2, &t).unwrap(), rect);
-    assert_eq!(homogenize_cached(2, 2, &checkerboard(1.0, 10.0)).unwrap(), square);
+    assert_eq!(
+        homogenize_cached(2, 2, &checkerboard(1.0, 10.0)).unwrap(),
+        square
+    );
 }
 
 #[test]
@@ -1005,7 +1017,10 @@ fn nan_tensors_are_errors_naming_the_cell() {
     let mut t = vec![iso(1.0); 6];
     t[4] = [1.0, f64::NAN, 1.0]; // row 1, column 1 of a 3 × 2 tile
     let named = |r: Result<_, WeaveError>| {
-        matches!(r, Err(WeaveError::NotPositiveDefinite { row: 1, col: 1, .. }))
+        matches!(
+            r,
+            Err(WeaveError::NotPositiveDefinite { row: 1, col: 1, .. })
+        )
     };
     assert!(named(reduce(3, 2, &t).map(|_| ())));
     assert!(named(bounds(3, 2, &t).map(|_| ())));
@@ -1013,7 +1028,9 @@ fn nan_tensors_are_errors_naming_the_cell() {
     assert!(named(grid.effective(&t).map(|_| ())));
     assert!(named(grid.bounds(&t, true).map(|_| ())));
     assert!(named(homogenize_cached(3, 2, &t).map(|_| ())));
-    assert!(named(HomogenizationCache::new(2).homogenize(3, 2, &t).map(|_| ())));
+    assert!(named(
+        HomogenizationCache::new(2).homogenize(3, 2, &t).map(|_| ())
+    ));
     for reduce in [true, false] {
         let o = HomogenizeOptions {
             reduce,

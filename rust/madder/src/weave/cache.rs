@@ -23,7 +23,7 @@ use std::hash::{DefaultHasher, Hash, Hasher};
 use std::sync::{Mutex, OnceLock};
 
 use super::Tensor2;
-use super::homogenize::{HomogenizeOptions, bits, check_tensors, homogenize_with, reduce_checked};
+use super::homogenize::{HomogenizeOptions, bits, check_cells, homogenize_with, reduce_checked};
 use crate::error::WeaveError;
 
 /// A bounded map from tile content (hashed) to its effective tensor.
@@ -125,15 +125,16 @@ impl HomogenizationCache {
     }
 }
 
-/// The cache key of a tile under `opts` (validates the tile first, so a bad tile is
-/// reported the same way as by [`super::homogenize()`]).
+/// The cache key of a tile under `opts` (checks the cells first, so a bad tile is reported
+/// the same way as by [`super::homogenize()`]; the contrast is checked by the solve, and
+/// errors are not cached).
 pub fn key(
     width: usize,
     height: usize,
     tensors: &[Tensor2],
     opts: &HomogenizeOptions,
 ) -> Result<u128, WeaveError> {
-    check_tensors(width, height, tensors)?;
+    check_cells(width, height, tensors)?;
     let reduced;
     let (w, h, t) = if opts.reduce {
         reduced = reduce_checked(width, height, tensors);

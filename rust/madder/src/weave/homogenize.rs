@@ -229,18 +229,7 @@ impl Homogenized {
 /// Checks a per-cell tensor field: dimensions, and every tensor finite and SPD at any
 /// magnitude ([`tensor::is_spd`]); the error names the first bad cell.
 pub fn check_cells(width: usize, height: usize, tensors: &[Tensor2]) -> Result<(), WeaveError> {
-    if width == 0 || height == 0 {
-        return Err(WeaveError::EmptyTile);
-    }
-    let expected = width.saturating_mul(height);
-    if tensors.len() != expected {
-        return Err(WeaveError::CellCount {
-            width,
-            height,
-            expected,
-            got: tensors.len(),
-        });
-    }
+    check_count(width, height, tensors.len())?;
     match tensors.iter().position(|&t| !tensor::is_spd(t)) {
         None => Ok(()),
         Some(i) => {
@@ -254,6 +243,23 @@ pub fn check_cells(width: usize, height: usize, tensors: &[Tensor2]) -> Result<(
             })
         }
     }
+}
+
+/// A `width × height` tile must be non-empty and have `width · height` cells.
+fn check_count(width: usize, height: usize, got: usize) -> Result<(), WeaveError> {
+    if width == 0 || height == 0 {
+        return Err(WeaveError::EmptyTile);
+    }
+    let expected = width.saturating_mul(height);
+    if got != expected {
+        return Err(WeaveError::CellCount {
+            width,
+            height,
+            expected,
+            got,
+        });
+    }
+    Ok(())
 }
 
 /// [`check_cells`], then the contrast (largest over smallest eigenvalue over the tile) and
@@ -325,7 +331,10 @@ pub(crate) fn reduce_checked(
         (None, None) => 1,
     };
     // every break sits on a block boundary: start the sampling there
-    let (ox, oy) = (xb.first().map_or(0, |x| x % b), yb.first().map_or(0, |y| y % b));
+    let (ox, oy) = (
+        xb.first().map_or(0, |x| x % b),
+        yb.first().map_or(0, |y| y % b),
+    );
     let (w, h) = (px.div_ceil(b), py.div_ceil(b));
     let mut out = Vec::with_capacity(w * h);
     for j in 0..h {
@@ -398,18 +407,7 @@ pub fn refine(
     tensors: &[Tensor2],
     r: usize,
 ) -> Result<Vec<Tensor2>, WeaveError> {
-    if width == 0 || height == 0 {
-        return Err(WeaveError::EmptyTile);
-    }
-    let expected = width.saturating_mul(height);
-    if tensors.len() != expected {
-        return Err(WeaveError::CellCount {
-            width,
-            height,
-            expected,
-            got: tensors.len(),
-        });
-    }
+    check_count(width, height, tensors.len())?;
     if r == 0 {
         return Err(WeaveError::Option {
             name: "refine",
@@ -607,11 +605,22 @@ mod tests {
         // 6×4 rectangles drawn as pixels: gcd(6, 4) = 2 → 3×2 squares per rectangle
         let (w, h) = (12, 8);
         let t: Vec<Tensor2> = (0..w * h)
-            .map(|i| if ((i % w) / 6 + (i / w) / 4) % 2 == 0 { a } else { b })
+            .map(|i| {
+                if ((i % w) / 6 + (i / w) / 4) % 2 == 0 {
+                    a
+                } else {
+                    b
+                }
+            })
             .collect();
         let (rw, rh, r) = reduce(w, h, &t).unwrap();
         assert_eq!((rw, rh), (6, 4));
-        assert_eq!(r, (0..24).map(|i| t[(i / 6) * 2 * w + (i % 6) * 2]).collect::<Vec<_>>());
+        assert_eq!(
+            r,
+            (0..24)
+                .map(|i| t[(i / 6) * 2 * w + (i % 6) * 2])
+                .collect::<Vec<_>>()
+        );
     }
 
     #[test]
@@ -625,11 +634,19 @@ mod tests {
         ));
         assert!(matches!(
             reduce(3, 3, &t),
-            Err(WeaveError::CellCount { expected: 9, got: 6, .. })
+            Err(WeaveError::CellCount {
+                expected: 9,
+                got: 6,
+                ..
+            })
         ));
         assert!(matches!(
             refine(4, 2, &t, 2),
-            Err(WeaveError::CellCount { expected: 8, got: 6, .. })
+            Err(WeaveError::CellCount {
+                expected: 8,
+                got: 6,
+                ..
+            })
         ));
         assert!(matches!(
             refine(3, 2, &t, 0),

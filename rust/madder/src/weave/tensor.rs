@@ -231,7 +231,14 @@ mod tests {
         assert_eq!(exponent(1e-170), -565); // 2^-565 ≈ 1.5e-170
         assert_eq!(exponent(1e160), 531); // 2^531 ≈ 1.4e160
         // round trips through the whole range are exact
-        for x in [1.0, 3.0, -1.2345678901234567, 1e-170, 1e160, f64::MIN_POSITIVE] {
+        for x in [
+            1.0,
+            3.0,
+            -1.2345678901234567,
+            1e-170,
+            1e160,
+            f64::MIN_POSITIVE,
+        ] {
             for k in [-1074, -600, -1, 0, 1, 600, 1023] {
                 let y = ldexp(x, k);
                 if y != 0.0 && y.is_finite() && y.abs() >= f64::MIN_POSITIVE {
