@@ -59,6 +59,27 @@ def test_laminate_fabric_tensor_is_exact():
     assert ratio == pytest.approx(5.05) and angle == pytest.approx(0.0, abs=1e-12)
 
 
+def test_custom_grid_of_rectangles_matches_the_change_of_variables():
+    # "FFWW/WWFF" with the seed's coefficients has cells F = [150, 0, 200] and
+    # W = [350, 0, 200] (worked out by hand: each borders one cell of its own kind and one
+    # of the other along x, the other kind above and below), so it is the 2×2
+    # checkerboard of F and W stretched twice along x: each cell a 2×1 rectangle.
+    # Substituting x = 2x' maps it to the square checkerboard of F⁻¹ a F⁻ᵀ, F = diag(2, 1)
+    # (a11 / 4, a12 / 2, a22), whose effective tensor Ã gives A = [4 Ã11, 2 Ã12, Ã22].
+    # The old reduction solved the rectangles as squares: 228.1 instead of 237.6 (−4 %).
+    t = madder.fabric_tensor("CUSTOM", grid="FFWW\nWWFF")
+    f, w = [150.0 / 4, 0.0, 200.0], [350.0 / 4, 0.0, 200.0]
+    squeezed = np.array([[f, w], [w, f]])
+    via = madder.homogenize(squeezed) * np.array([4.0, 2.0, 1.0])
+    np.testing.assert_allclose(t, via, rtol=1e-4, atol=1e-9 * t[0])
+    # A e_y = 200 e_y exactly (every cell passes the flux 200 e_y unchanged)
+    assert t[2] == pytest.approx(200.0, rel=1e-12) and abs(t[1]) < 1e-9
+    # the same cells given as tensors (row 0 at the bottom) agree
+    cells = np.array([[[350.0, 0, 200], [350, 0, 200], [150, 0, 200], [150, 0, 200]],
+                      [[150.0, 0, 200], [150, 0, 200], [350, 0, 200], [350, 0, 200]]])
+    np.testing.assert_allclose(madder.homogenize(cells), t, rtol=1e-12, atol=1e-9)
+
+
 def test_checkerboard_is_the_geometric_mean():
     k1, k2 = 1.0, 20.0
     cells = np.zeros((64, 64, 3))

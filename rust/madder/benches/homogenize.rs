@@ -5,14 +5,15 @@
 //! - the default `homogenize` (reduction, levels, extrapolation) of random tiles that cannot
 //!   be reduced, and of built-in weaves, cold (first use of a grid size: symbolic analysis
 //!   included) and warm (grid shared), sequential and parallel;
+//! - a custom grid of 2×1-rectangle cells (reduced by square blocks only);
 //! - the cost of the extrapolation (its coarse level) and of a cache hit.
 
 use std::hint::black_box;
 use std::time::Instant;
 
 use madder::weave::{
-    Grid, HomogenizationCache, HomogenizeOptions, Method, PairCoefficients, Tensor2, Tile, Weave,
-    cell_tensors, homogenize_report,
+    Grid, HomogenizationCache, HomogenizeOptions, Homogenized, Method, PairCoefficients, Tensor2,
+    Tile, Weave, cell_tensors, homogenize_report,
 };
 
 /// splitmix64
@@ -49,6 +50,17 @@ fn time<T>(reps: usize, mut f: impl FnMut() -> T) -> (f64, f64) {
         .collect();
     v.sort_by(f64::total_cmp);
     (v[v.len() / 2], v[0])
+}
+
+/// The grids a homogenization solved, coarse first: "w×h + w×h".
+fn grid_sizes(r: &Homogenized) -> String {
+    let (w, h) = r.reduced;
+    let levels: Vec<String> = r
+        .levels
+        .iter()
+        .map(|l| format!("{}×{}", w * l.refine, h * l.refine))
+        .collect();
+    levels.join(" + ")
 }
 
 fn main() {
@@ -126,19 +138,26 @@ fn main() {
             homogenize_report(w, h, &s, &no_extrapolation).unwrap()
         });
         let (rw, rh) = r.reduced;
-        let levels: Vec<String> = r
-            .levels
-            .iter()
-            .map(|l| format!("{}×{}", rw * l.refine, rh * l.refine))
-            .collect();
         println!(
             "  {:<8} gaps={:<5} {w}×{h} → {rw}×{rh} (levels {:<17}): {warm:6.2} ({wm:.2}) | finest only {g:6.2} | rigorous gap {:.1e}",
             format!("{weave:?}"),
             gaps,
-            levels.join(" + "),
+            grid_sizes(&r),
             r.relative_gap()
         );
     }
+
+    // a custom grid whose cells are 2×1 rectangles: reduced only by square blocks, so it
+    // stays 4×2 (it used to be squeezed to a 2×2 checkerboard, and was 4 % off)
+    let tile = Tile::parse("FFWW\nWWFF").unwrap();
+    let s = cell_tensors(&tile, &d).unwrap();
+    let r = homogenize_report(4, 2, &s, &default).unwrap();
+    let (t, tm) = time(7, || homogenize_report(4, 2, &s, &default).unwrap());
+    let (rw, rh) = r.reduced;
+    println!(
+        "  custom FFWW/WWFF 4×2 → {rw}×{rh} (levels {}): {t:6.2} ({tm:.2})",
+        grid_sizes(&r)
+    );
 
     // a 128² tile drawn from a weave at 16 pixels per cell reduces to the weave's own tile
     let tile = Tile::builtin(Weave::Twill31, true);

@@ -165,6 +165,35 @@ pub enum PointCacheError {
     Usage { path: PathBuf, reason: String },
 }
 
+/// A number in an error message, at most four significant digits: plain from 10⁻³ to
+/// below 10⁶ (`1`, `-0.25`, `123.5`), else in scientific notation (`1.000e-170`), so a
+/// message never spells out 170 zeros.
+struct Compact(f64);
+
+impl std::fmt::Display for Compact {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let x = self.0;
+        if x == 0.0 || !x.is_finite() {
+            return write!(f, "{x}");
+        }
+        let sci = format!("{x:.3e}");
+        // the exponent after rounding to four digits (9999.7 is 1.000e4)
+        let e: i32 = sci[sci.find('e').map_or(0, |i| i + 1)..]
+            .parse()
+            .unwrap_or(0);
+        if !(-3..6).contains(&e) {
+            return f.write_str(&sci);
+        }
+        let plain = format!("{x:.*}", (3 - e).max(0) as usize);
+        let plain = if plain.contains('.') {
+            plain.trim_end_matches('0').trim_end_matches('.')
+        } else {
+            &plain
+        };
+        f.write_str(plain)
+    }
+}
+
 /// Bad weave input or a failed homogenization (module [`crate::weave`]). Cells are named by
 /// tile `row` (0 = bottom, the `y = 0` edge) and `col` (0 = left); lines of a text grid by
 /// their 1-based `line` counted from the top, as an editor shows them.
@@ -195,10 +224,11 @@ pub enum WeaveError {
         column: usize,
         ch: char,
     },
-    #[error("pair coefficient {pair} must be finite and > 0, got {value}")]
+    #[error("pair coefficient {pair} must be finite and > 0, got {}", Compact(*.value))]
     NonPositiveCoefficient { pair: &'static str, value: f64 },
     #[error(
-        "cell (row {row}, column {col}) borders a {pair} pair, whose coefficient must be finite and > 0, got {value}"
+        "cell (row {row}, column {col}) borders a {pair} pair, whose coefficient must be finite and > 0, got {}",
+        Compact(*.value)
     )]
     CellCoefficient {
         row: usize,
@@ -207,7 +237,8 @@ pub enum WeaveError {
         value: f64,
     },
     #[error(
-        "cell (row {row}, column {col}) has diffusion tensor [s11 {s11}, s12 {s12}, s22 {s22}], which is not symmetric positive definite (needs finite entries, s11 > 0 and s11·s22 − s12² > 0)"
+        "cell (row {row}, column {col}) has diffusion tensor [s11 {}, s12 {}, s22 {}], which is not symmetric positive definite (needs finite entries, s11 > 0 and s11·s22 − s12² > 0)",
+        Compact(*.s11), Compact(*.s12), Compact(*.s22)
     )]
     NotPositiveDefinite {
         row: usize,
@@ -225,7 +256,7 @@ pub enum WeaveError {
         row: usize,
         col: usize,
     },
-    #[error("homogenization option {name} must be {requirement}, got {value}")]
+    #[error("homogenization option {name} must be {requirement}, got {}", Compact(*.value))]
     Option {
         name: &'static str,
         requirement: &'static str,
@@ -253,3 +284,26 @@ pub enum Error {
 }
 
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+#[cfg(test)]
+mod tests {
+    use super::Compact;
+
+    #[test]
+    fn compact_numbers() {
+        let show = |x: f64| Compact(x).to_string();
+        assert_eq!(show(1.0), "1");
+        assert_eq!(show(-0.25), "-0.25");
+        assert_eq!(show(123.456), "123.5");
+        assert_eq!(show(0.1 + 0.2), "0.3");
+        assert_eq!(show(123456.0), "123456");
+        assert_eq!(show(999999.9), "1.000e6");
+        assert_eq!(show(0.001), "0.001");
+        assert_eq!(show(0.00099999), "0.001");
+        assert_eq!(show(1e-170), "1.000e-170");
+        assert_eq!(show(-3.5e160), "-3.500e160");
+        assert_eq!(show(0.0), "0");
+        assert_eq!(show(f64::NAN), "NaN");
+        assert_eq!(show(f64::NEG_INFINITY), "-inf");
+    }
+}

@@ -1,7 +1,9 @@
 //! Homogenization (seed §2.2.2) against exact and independent results: laminates with
 //! anisotropic layers, the Keller–Dykhne checkerboard, Mortola–Steffé's four-phase
-//! checkerboard, the Wiener bounds on random tiles, rotation covariance, and the
-//! convergence of the primal–dual extrapolation on tiles without a closed form.
+//! checkerboard, the Wiener bounds on random tiles, rotation covariance, the convergence
+//! of the primal–dual extrapolation on tiles without a closed form, and tiles whose cells
+//! are rectangles (runs of unequal length along x and y) against the change of variables
+//! that makes them squares and against rigorous brackets of the unreduced tile.
 
 use madder::rng::SplitMix64;
 use madder::weave::homogenize::{bounds, reduce, refine};
@@ -40,6 +42,18 @@ impl Rng {
     }
     fn log_uniform(&mut self, lo: f64, hi: f64) -> f64 {
         self.0.log_uniform(lo, hi)
+    }
+    /// A random `w × h` tile, each side in `sides`, of [`Rng::spd`] tensors.
+    fn tile(
+        &mut self,
+        sides: std::ops::RangeInclusive<usize>,
+        lo: f64,
+        hi: f64,
+    ) -> (usize, usize, Vec<Tensor2>) {
+        let span = (sides.end() - sides.start() + 1) as u64;
+        let w = sides.start() + (self.next() % span) as usize;
+        let h = sides.start() + (self.next() % span) as usize;
+        (w, h, (0..w * h).map(|_| self.spd(lo, hi)).collect())
     }
     /// A random SPD tensor: eigenvalues log-uniform in [lo, hi], random axes.
     fn spd(&mut self, lo: f64, hi: f64) -> Tensor2 {
@@ -251,8 +265,7 @@ fn four_phase_checkerboard_is_mortola_steffe() {
 fn wiener_bounds_spd_and_bracket_on_random_tiles() {
     let mut rng = Rng(SplitMix64::new(2024));
     for trial in 0..60 {
-        let (w, h) = (1 + (rng.next() % 7) as usize, 1 + (rng.next() % 7) as usize);
-        let t: Vec<Tensor2> = (0..w * h).map(|_| rng.spd(0.1, 1000.0)).collect();
+        let (w, h, t) = rng.tile(1..=7, 0.1, 1000.0);
         let r = homogenize_report(w, h, &t, &opts(Method::Extrapolated, 48 * 48)).unwrap();
         let a = r.tensor;
         // arithmetic ⟨S⟩ and harmonic ⟨S⁻¹⟩⁻¹ means
@@ -287,8 +300,7 @@ fn wiener_bounds_spd_and_bracket_on_random_tiles() {
 fn quarter_turn_and_mirror_transform_the_tensor() {
     let mut rng = Rng(SplitMix64::new(99));
     for trial in 0..20 {
-        let (w, h) = (1 + (rng.next() % 6) as usize, 1 + (rng.next() % 6) as usize);
-        let t: Vec<Tensor2> = (0..w * h).map(|_| rng.spd(0.5, 50.0)).collect();
+        let (w, h, t) = rng.tile(1..=6, 0.5, 50.0);
         let o = opts(Method::Extrapolated, 40 * 40);
         let a = homogenize_with(w, h, &t, &o).unwrap();
         let (w2, h2, t2) = rotate(w, h, &t);
@@ -325,8 +337,7 @@ fn keller_duality_commutes_with_homogenization() {
     // roles, φ ↦ 1 − φ, and the estimate follows exactly
     let mut rng = Rng(SplitMix64::new(31));
     for trial in 0..10 {
-        let (w, h) = (2 + (rng.next() % 4) as usize, 2 + (rng.next() % 4) as usize);
-        let t: Vec<Tensor2> = (0..w * h).map(|_| rng.spd(0.2, 200.0)).collect();
+        let (w, h, t) = rng.tile(2..=5, 0.2, 200.0);
         let dual: Vec<Tensor2> = t.iter().map(|&a| tensor::keller_dual(a)).collect();
         let o = opts(Method::Extrapolated, 40 * 40);
         let a = homogenize_report(w, h, &t, &o).unwrap();
@@ -361,7 +372,7 @@ fn bounds_tighten_monotonically_under_refinement() {
     let (w, h) = (3, 2);
     let mut prev: Option<madder::weave::Bounds> = None;
     for r in [1, 2, 4, 8] {
-        let b = bounds(w * r, h * r, &refine(w, h, &t, r)).unwrap();
+        let b = bounds(w * r, h * r, &refine(w, h, &t, r).unwrap()).unwrap();
         let tol = 1e-12 * b.upper[0].max(b.upper[2]);
         assert!(is_psd(sub(b.upper, b.lower), tol));
         if let Some(p) = prev {
@@ -762,18 +773,306 @@ fn reduce_keeps_the_medium() {
         iso(4.0),
     ];
     let big: Vec<Tensor2> = {
-        let r = refine(2, 3, &t, 2);
+        let r = refine(2, 3, &t, 2).unwrap();
         (0..12 * 8)
             .map(|i| r[((i / 8) % 6) * 4 + (i % 8) % 4])
             .collect()
     };
-    let (w, h, small) = reduce(8, 12, &big);
+    let (w, h, small) = reduce(8, 12, &big).unwrap();
     assert_eq!((w, h), (2, 3));
     // the smallest translate of t (it starts at the row [1, 4] that follows [2 1 3])
     assert_eq!(small, vec![t[4], t[5], t[0], t[1], t[2], t[3]]);
-    assert_eq!(reduce(2, 3, &t).2, small);
+    assert_eq!(reduce(2, 3, &t).unwrap().2, small);
     assert_eq!(
         homogenize(8, 12, &big).unwrap(),
         homogenize(2, 3, &t).unwrap()
+    );
+}
+
+/// Each cell of a `w × h` tile drawn as `kx × ky` unit cells: the medium stretched by
+/// `F = diag(kx, ky)`. With `kx = ky = r` it is the tile refined `r` times.
+fn stretch(w: usize, h: usize, t: &[Tensor2], kx: usize, ky: usize) -> Vec<Tensor2> {
+    let wk = w * kx;
+    (0..wk * h * ky)
+        .map(|i| t[(i / wk / ky) * w + (i % wk) / kx])
+        .collect()
+}
+
+/// The tile repeated `kx` times along x and `ky` times along y.
+fn repeat(w: usize, h: usize, t: &[Tensor2], kx: usize, ky: usize) -> Vec<Tensor2> {
+    let wk = w * kx;
+    (0..wk * h * ky)
+        .map(|i| t[((i / wk) % h) * w + (i % wk) % w])
+        .collect()
+}
+
+/// The change of variables `x = F x'`, `F = diag(fx, fy)`, in the cell energy
+/// `⟨(ξ + ∇χ)ᵀ a (ξ + ∇χ)⟩` (eq. 2.3; `∇ = F⁻ᵀ∇'`, cell averages unchanged): the medium
+/// `a(F⁻¹x)` has effective tensor `F Ã Fᵀ`, with `Ã` that of the medium `F⁻¹ a F⁻ᵀ` on the
+/// unstretched cells. `squeeze` is `a ↦ F⁻¹ a F⁻ᵀ`, `unsqueeze` is `Ã ↦ F Ã Fᵀ`.
+fn squeeze(a: Tensor2, fx: f64, fy: f64) -> Tensor2 {
+    [a[0] / (fx * fx), a[1] / (fx * fy), a[2] / (fy * fy)]
+}
+
+fn unsqueeze(a: Tensor2, fx: f64, fy: f64) -> Tensor2 {
+    [a[0] * fx * fx, a[1] * fx * fy, a[2] * fy * fy]
+}
+
+/// The rigorous bracket `L ≤ A ≤ U` of the tile as given, each cell split into `r × r`
+/// elements, with no reduction (one primal and one Keller-dual P1 solve).
+fn bracket(w: usize, h: usize, t: &[Tensor2], r: usize) -> madder::weave::Bounds {
+    bounds(w * r, h * r, &stretch(w, h, t, r, r)).unwrap()
+}
+
+/// Whether `lower − slack ≤ a ≤ upper + slack` as quadratic forms (`slack` relative to
+/// `a`'s largest entry).
+fn inside(a: Tensor2, b: &madder::weave::Bounds, slack: f64) -> bool {
+    let tol = slack * a[0].abs().max(a[2].abs());
+    is_psd(sub(b.upper, a), tol) && is_psd(sub(a, b.lower), tol)
+}
+
+#[test]
+fn checkerboard_of_2x1_rectangles() {
+    // 2×1 rectangles of 1 and 10 in a checkerboard: a 4×2 tile whose columns run in pairs
+    // and rows one by one (row 0 at the bottom)
+    let (k1, k2) = (1.0, 10.0);
+    let t = vec![
+        iso(k1),
+        iso(k1),
+        iso(k2),
+        iso(k2),
+        iso(k2),
+        iso(k2),
+        iso(k1),
+        iso(k1),
+    ];
+    let a = homogenize(4, 2, &t).unwrap();
+    eprintln!("2×1 rectangles, 1 and 10: {a:?}");
+    // mirror symmetric: diagonal. Keller's reciprocity A₁₁(k₁, k₂) A₂₂(k₂, k₁) = k₁k₂, and
+    // swapping the phases is a shift by one rectangle, so A₁₁ A₂₂ = 10
+    assert!(a[1].abs() < 1e-12 * a[0], "{a:?}");
+    assert!((a[0] * a[2] / (k1 * k2) - 1.0).abs() < 1e-9, "{a:?}");
+    // longer along x: the phases alternate less often along x, so it conducts better
+    // there than the square checkerboard's √10 (which the square reduction returned)
+    assert!(a[0] > 3.9 && a[2] < 2.6, "{a:?}");
+    // inside the rigorous bracket of the unreduced tile at every resolution, which closes
+    // in on it: 8, 16, 32 elements per unit cell
+    let mut gap = f64::INFINITY;
+    for r in [8, 16, 32] {
+        let b = bracket(4, 2, &t, r);
+        assert!(inside(a, &b, 0.0), "r = {r}: {a:?} outside {b:?}");
+        let g = rel(b.upper, b.lower);
+        assert!(g < gap, "r = {r}: the bracket did not shrink");
+        gap = g;
+    }
+    // the change of variables: the square checkerboard of k·diag(¼, 1), stretched by 2
+    let sq = vec![
+        squeeze(iso(k1), 2.0, 1.0),
+        squeeze(iso(k2), 2.0, 1.0),
+        squeeze(iso(k2), 2.0, 1.0),
+        squeeze(iso(k1), 2.0, 1.0),
+    ];
+    let via = unsqueeze(homogenize(2, 2, &sq).unwrap(), 2.0, 1.0);
+    assert!(rel(a, via) < 1e-4, "{a:?} vs {via:?}");
+    // the same medium drawn with 3×3 pixels per cell: the same tensor
+    assert_eq!(homogenize(12, 6, &stretch(4, 2, &t, 3, 3)).unwrap(), a);
+    // and the square checkerboard itself is still Keller–Dykhne
+    let s = homogenize(2, 2, &checkerboard(k1, k2)).unwrap();
+    assert!(rel(s, iso((k1 * k2).sqrt())) < 1e-10, "{s:?}");
+}
+
+#[test]
+fn rectangular_cells_follow_the_change_of_variables() {
+    // random tiles with every cell drawn as a kx × ky rectangle of unit cells, against the
+    // unstretched tile with the squeezed tensors F⁻¹ a F⁻ᵀ (no rectangles anywhere) and
+    // against the rigorous bracket of the stretched tile itself
+    let mut rng = Rng(SplitMix64::new(4242));
+    let mut worst: f64 = 0.0;
+    for (trial, (kx, ky)) in [(2, 1), (1, 2), (3, 1), (2, 3), (1, 4), (4, 2)]
+        .into_iter()
+        .cycle()
+        .take(12)
+        .enumerate()
+    {
+        let (w, h, t) = rng.tile(2..=4, 1.0, 10.0);
+        let (sw, sh) = (w * kx, h * ky);
+        let stretched = stretch(w, h, &t, kx, ky);
+        let a = homogenize(sw, sh, &stretched).unwrap();
+        let (fx, fy) = (kx as f64, ky as f64);
+        let sq: Vec<Tensor2> = t.iter().map(|&x| squeeze(x, fx, fy)).collect();
+        let via = unsqueeze(homogenize(w, h, &sq).unwrap(), fx, fy);
+        let e = rel(a, via);
+        worst = worst.max(e);
+        assert!(e < 2e-3, "{trial}: {w}×{h} by {kx}×{ky}: {a:?} vs {via:?}");
+        let r = (24 / sw.max(sh)).max(2);
+        let b = bracket(sw, sh, &stretched, r);
+        assert!(inside(a, &b, 1e-4), "{trial}: {a:?} outside {b:?}");
+    }
+    eprintln!("rectangular cells: largest difference from the change of variables {worst:.1e}");
+}
+
+#[test]
+fn periodic_repeats_give_the_same_tensor() {
+    // a tile repeated k times along x or y is the same medium: the reduction finds the
+    // period, so the answer is the same bits; without the reduction it is the same tensor
+    // up to the discretization
+    let mut rng = Rng(SplitMix64::new(77));
+    for trial in 0..8 {
+        let (w, h, t) = rng.tile(1..=4, 1.0, 10.0);
+        let a = homogenize(w, h, &t).unwrap();
+        for (kx, ky) in [(2, 1), (1, 3), (3, 2)] {
+            let big = repeat(w, h, &t, kx, ky);
+            let b = homogenize(w * kx, h * ky, &big).unwrap();
+            assert_eq!(a, b, "{trial}: {w}×{h} repeated {kx}×{ky}");
+            let o = HomogenizeOptions {
+                reduce: false,
+                ..Default::default()
+            };
+            let c = homogenize_with(w * kx, h * ky, &big, &o).unwrap();
+            assert!(rel(a, c) < 2e-3, "{trial}: unreduced {c:?} vs {a:?}");
+        }
+    }
+}
+
+#[test]
+fn laminates_drawn_with_rectangular_pixels_are_exact() {
+    // isotropic layers 2, 1 and 3 cells wide along x, each cell drawn as 2×3 pixels:
+    // A₁₁ is the width-weighted harmonic mean, A₂₂ the arithmetic mean
+    let layers = [(2usize, 4.0), (1, 50.0), (3, 0.5)];
+    let row: Vec<Tensor2> = layers
+        .iter()
+        .flat_map(|&(n, k)| std::iter::repeat_n(iso(k), n))
+        .collect();
+    let t = stretch(6, 1, &row, 2, 3);
+    let a = homogenize(12, 3, &t).unwrap();
+    let harmonic = 6.0 / layers.iter().map(|&(n, k)| n as f64 / k).sum::<f64>();
+    let arithmetic = layers.iter().map(|&(n, k)| n as f64 * k).sum::<f64>() / 6.0;
+    assert!(rel(a, [harmonic, 0.0, arithmetic]) < 1e-12, "{a:?}");
+}
+
+#[test]
+fn custom_ffww_grid_against_the_unreduced_solve() {
+    // the add-on's custom grid "FFWW / WWFF" with the seed's coefficients: each F borders
+    // one F (weft–weft 100) and one W (weft–warp 200) along x and W above and below
+    // (200); each W borders one W (warp–warp 500) and one F along x, F above and below
+    let tile = Tile::parse("FFWW\nWWFF").unwrap();
+    let s = cell_tensors(&tile, &PairCoefficients::default()).unwrap();
+    let (f, w) = ([150.0, 0.0, 200.0], [350.0, 0.0, 200.0]);
+    assert_eq!(s, vec![w, w, f, f, f, f, w, w]);
+    let a = homogenize(4, 2, &s).unwrap();
+    // A e_y = 200 e_y exactly: every cell has a e_y = 200 e_y, a divergence-free flux
+    assert!((a[2] - 200.0).abs() < 1e-10 && a[1].abs() < 1e-10, "{a:?}");
+    // the unreduced solve (same discrete problem, shifted by whole cells)
+    let o = HomogenizeOptions {
+        reduce: false,
+        ..Default::default()
+    };
+    let u = homogenize_with(4, 2, &s, &o).unwrap();
+    assert!(rel(a, u) < 1e-12, "{a:?} vs unreduced {u:?}");
+    // inside the rigorous bracket of a finer unreduced mesh (up to rounding: A₂₂ is exact)
+    let b = bracket(4, 2, &s, 40);
+    assert!(inside(a, &b, 1e-12), "{a:?} outside {b:?}");
+    // and the change of variables: a 2×2 checkerboard of f and w stretched by 2 along x
+    let sq = [f, w, w, f].map(|x| squeeze(x, 2.0, 1.0));
+    let via = unsqueeze(homogenize(2, 2, &sq).unwrap(), 2.0, 1.0);
+    assert!(rel(a, via) < 1e-4, "{a:?} vs {via:?}");
+    eprintln!("FFWW/WWFF: {a:?} (unreduced {u:?})");
+}
+
+#[test]
+fn cache_keeps_rectangles_apart_from_squares() {
+    let mut cache = HomogenizationCache::new(8);
+    let square = cache.homogenize(2, 2, &checkerboard(1.0, 10.0)).unwrap();
+    // the checkerboard of 2×1 rectangles is another medium: a miss, another tensor
+    let t = vec![
+        iso(1.0),
+        iso(1.0),
+        iso(10.0),
+        iso(10.0),
+        iso(10.0),
+        iso(10.0),
+        iso(1.0),
+        iso(1.0),
+    ];
+    let rect = cache.homogenize(4, 2, &t).unwrap();
+    assert_eq!((cache.hits(), cache.misses()), (0, 2));
+    assert!(rel(rect, square) > 0.1, "{rect:?} vs {square:?}");
+    // the rectangles drawn at 2×2 pixels per cell and shifted: the same medium, a hit
+    let px = stretch(4, 2, &t, 2, 2);
+    let shifted: Vec<Tensor2> = (0..8 * 4)
+        .map(|i| px[(i / 8) * 8 + (i % 8 + 3) % 8])
+        .collect();
+    assert_eq!(cache.homogenize(8, 4, &shifted).unwrap(), rect);
+    assert_eq!((cache.hits(), cache.misses()), (1, 2));
+    // the process-wide cache too
+    assert_eq!(homogenize_cached(4, 2, &t).unwrap(), rect);
+    assert_eq!(
+        homogenize_cached(2, 2, &checkerboard(1.0, 10.0)).unwrap(),
+        square
+    );
+}
+
+#[test]
+fn nan_tensors_are_errors_naming_the_cell() {
+    let mut t = vec![iso(1.0); 6];
+    t[4] = [1.0, f64::NAN, 1.0]; // row 1, column 1 of a 3 × 2 tile
+    let named = |r: Result<_, WeaveError>| {
+        matches!(
+            r,
+            Err(WeaveError::NotPositiveDefinite { row: 1, col: 1, .. })
+        )
+    };
+    assert!(named(reduce(3, 2, &t).map(|_| ())));
+    assert!(named(bounds(3, 2, &t).map(|_| ())));
+    let grid = madder::weave::Grid::new(3, 2).unwrap();
+    assert!(named(grid.effective(&t).map(|_| ())));
+    assert!(named(grid.bounds(&t, true).map(|_| ())));
+    assert!(named(homogenize_cached(3, 2, &t).map(|_| ())));
+    assert!(named(
+        HomogenizationCache::new(2).homogenize(3, 2, &t).map(|_| ())
+    ));
+    for reduce in [true, false] {
+        let o = HomogenizeOptions {
+            reduce,
+            ..Default::default()
+        };
+        assert!(named(homogenize_report(3, 2, &t, &o).map(|_| ())));
+    }
+}
+
+#[test]
+fn tiles_at_extreme_magnitudes_give_the_scaled_answer() {
+    // homogenization is 1-homogeneous in the tensors: a tile scaled by c gives c·A.
+    // Tensors with s12 ≠ 0 near 1e-170 have determinants that underflow to 0, near 1e160
+    // ones that overflow (inf − inf); both must still be judged SPD.
+    let mut rng = Rng(SplitMix64::new(11));
+    let t: Vec<Tensor2> = (0..3 * 2).map(|_| rng.spd(1.0, 10.0)).collect();
+    let a = homogenize(3, 2, &t).unwrap();
+    let b1 = bounds(3, 2, &t).unwrap();
+    for k in [-1000, -565, 531, 1000] {
+        // by a power of two, exactly the same bits scaled
+        let s: Vec<Tensor2> = t.iter().map(|&x| tensor::scale(x, k)).collect();
+        assert_eq!(homogenize(3, 2, &s).unwrap(), tensor::scale(a, k), "2^{k}");
+        let b = bounds(3, 2, &s).unwrap();
+        assert_eq!(b.upper, tensor::scale(b1.upper, k), "2^{k}");
+        assert_eq!(b.lower, tensor::scale(b1.lower, k), "2^{k}");
+    }
+    for c in [1e-170, 1e160] {
+        let s: Vec<Tensor2> = t.iter().map(|x| x.map(|v| v * c)).collect();
+        let got = homogenize(3, 2, &s).unwrap();
+        assert!(rel(got, a.map(|v| v * c)) < 1e-13, "{c:e}: {got:?}");
+    }
+    // a bad tile at 1e-170 is named compactly, not with 170 zeros
+    let mut s: Vec<Tensor2> = t.iter().map(|x| x.map(|v| v * 1e-170)).collect();
+    s[5] = [1e-170, 2e-170, 1e-170];
+    let e = homogenize(3, 2, &s).unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        matches!(e, WeaveError::NotPositiveDefinite { row: 1, col: 2, .. }),
+        "{e:?}"
+    );
+    assert!(
+        msg.contains("[s11 1.000e-170, s12 2.000e-170, s22 1.000e-170]") && msg.len() < 250,
+        "{msg}"
     );
 }

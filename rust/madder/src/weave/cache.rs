@@ -6,7 +6,11 @@
 //! library's fixed-key hasher) of the options that change the result (`method`,
 //! `max_cells`, `reduce` — not `parallel`, which changes no bit) and of the tile *after*
 //! reduction, so the same medium drawn at another size or shifted by whole cells hits the
-//! same entry. Tensors are hashed by their bits (`-0.0` folded into `0.0`). Storing hashes
+//! same entry. The reduction merges only square blocks, so tiles with the same reduced
+//! tile are the same medium up to a uniform change of scale, which leaves the effective
+//! tensor unchanged; a medium of `2 × 1` rectangles keeps its own entry, apart from the
+//! squares it was once conflated with (module doc of [`super::homogenize`]). Tensors are
+//! hashed by their bits (`-0.0` folded into `0.0`). Storing hashes
 //! rather than whole tiles keeps an entry at 40 bytes whatever the tile size; with 128 bits
 //! an accidental collision needs on the order of 2⁶⁴ distinct tiles.
 //!
@@ -19,7 +23,7 @@ use std::hash::{DefaultHasher, Hash, Hasher};
 use std::sync::{Mutex, OnceLock};
 
 use super::Tensor2;
-use super::homogenize::{HomogenizeOptions, check_tensors, homogenize_with, reduce};
+use super::homogenize::{HomogenizeOptions, bits, check_cells, homogenize_with, reduce_checked};
 use crate::error::WeaveError;
 
 /// A bounded map from tile content (hashed) to its effective tensor.
@@ -121,18 +125,19 @@ impl HomogenizationCache {
     }
 }
 
-/// The cache key of a tile under `opts` (validates the tile first, so a bad tile is
-/// reported the same way as by [`super::homogenize()`]).
+/// The cache key of a tile under `opts` (checks the cells first, so a bad tile is reported
+/// the same way as by [`super::homogenize()`]; the contrast is checked by the solve, and
+/// errors are not cached).
 pub fn key(
     width: usize,
     height: usize,
     tensors: &[Tensor2],
     opts: &HomogenizeOptions,
 ) -> Result<u128, WeaveError> {
-    check_tensors(width, height, tensors)?;
+    check_cells(width, height, tensors)?;
     let reduced;
     let (w, h, t) = if opts.reduce {
-        reduced = reduce(width, height, tensors);
+        reduced = reduce_checked(width, height, tensors);
         (reduced.0, reduced.1, &reduced.2[..])
     } else {
         (width, height, tensors)
@@ -141,8 +146,8 @@ pub fn key(
         let mut s = DefaultHasher::new();
         salt.hash(&mut s);
         (opts.method, opts.max_cells, opts.reduce, w, h).hash(&mut s);
-        for v in t.iter().flatten() {
-            (v + 0.0).to_bits().hash(&mut s);
+        for &v in t {
+            bits(v).hash(&mut s);
         }
         s.finish()
     };

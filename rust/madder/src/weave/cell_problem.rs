@@ -77,6 +77,7 @@ use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par, Side};
 use std::sync::{Arc, Mutex, OnceLock};
 
+use super::homogenize::{check_cells, scale_exponent};
 use super::{Tensor2, tensor};
 use crate::error::{SolveError, WeaveError};
 
@@ -255,27 +256,31 @@ impl Grid {
     }
 
     /// The primal P1 effective tensor `A_h ≥ A` of the `w × h` tile with per-cell tensors
-    /// `a` (row-major, row 0 at the bottom). The tensors are assumed SPD (validated by
-    /// [`super::homogenize()`] and [`super::homogenize::bounds`]); an indefinite one shows
-    /// up as a failed factorization at best.
+    /// `a` (row-major, row 0 at the bottom). A tensor that is not finite and SPD is an
+    /// error naming its cell ([`check_cells`]). The solve runs on the tile scaled by a
+    /// power of two to order 1 (exact; `A_h` is 1-homogeneous in `a`), so any magnitude
+    /// works.
     pub fn effective(&self, a: &[Tensor2]) -> Result<Tensor2, WeaveError> {
         let (w, h) = (self.w, self.h);
+        check_cells(w, h, a)?;
+        let k = scale_exponent(a);
+        self.effective_scaled(a, k).map(|t| tensor::scale(t, k))
+    }
+
+    /// [`Grid::effective`] of the checked tile `a · 2^-k`.
+    fn effective_scaled(&self, a: &[Tensor2], k: i32) -> Result<Tensor2, WeaveError> {
+        let (w, h) = (self.w, self.h);
         let nv = w * h;
-        if a.len() != nv {
-            return Err(WeaveError::CellCount {
-                width: w,
-                height: h,
-                expected: nv,
-                got: a.len(),
-            });
-        }
         if nv == 1 {
             // one cell: its four corners are one (pinned) vertex, and the condensed centre
             // does not couple to ξ, so the energy is ξᵀaξ
-            return Ok(a[0]);
+            return Ok(tensor::scale(a[0], -k));
         }
         let n = nv - 1;
-        let forms: Vec<CellForm> = a.iter().map(|&t| CellForm::new(t)).collect();
+        let forms: Vec<CellForm> = a
+            .iter()
+            .map(|&t| CellForm::new(tensor::scale(t, -k)))
+            .collect();
         let corners = |c: usize| {
             let (x, y) = (c % w, c / w);
             let (x1, y1) = ((x + 1) % w, (y + 1) % h);
@@ -349,20 +354,27 @@ impl Grid {
 
     /// Both bounds on this grid (the dual solve reuses the pattern and symbolic
     /// factorization). With `parallel`, the two solves run on two threads; each is
-    /// sequential inside, so the result is the same bits either way.
+    /// sequential inside, so the result is the same bits either way. Checked and scaled
+    /// as [`Grid::effective`]; the dual medium is formed from the scaled tensors, whose
+    /// determinants neither underflow nor overflow.
     pub fn bounds(&self, a: &[Tensor2], parallel: bool) -> Result<Bounds, WeaveError> {
+        check_cells(self.w, self.h, a)?;
+        let k = scale_exponent(a);
         let dual = || {
-            let b: Vec<Tensor2> = a.iter().map(|&t| tensor::keller_dual(t)).collect();
-            self.effective(&b).map(tensor::keller_dual)
+            let b: Vec<Tensor2> = a
+                .iter()
+                .map(|&t| tensor::keller_dual(tensor::scale(t, -k)))
+                .collect();
+            self.effective_scaled(&b, 0).map(tensor::keller_dual)
         };
         let (upper, lower) = if parallel {
-            rayon::join(|| self.effective(a), dual)
+            rayon::join(|| self.effective_scaled(a, k), dual)
         } else {
-            (self.effective(a), dual())
+            (self.effective_scaled(a, k), dual())
         };
         Ok(Bounds {
-            upper: upper?,
-            lower: lower?,
+            upper: tensor::scale(upper?, k),
+            lower: tensor::scale(lower?, k),
         })
     }
 }

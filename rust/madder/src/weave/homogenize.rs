@@ -101,24 +101,45 @@
 //!
 //! # Reduction and levels
 //!
-//! The effective tensor is a property of the medium, not of how it was drawn. Before
-//! solving, [`reduce`] shrinks the tile to its smallest period and merges runs of equal
-//! columns/rows (a tile drawn at 8 pixels per yarn becomes the yarn-level tile); the
-//! discrete problem is unchanged by both (a period-tiled discrete solution solves the
-//! larger torus, and a cell split into `b×b` equal cells is the coarse cell refined `b`
-//! times). Then the reduced `w₀ × h₀` tile is refined `r` times with `r² w₀ h₀ ≤
-//! max_cells` (default 128² = 16384, which keeps a 128×128 tile under 50 ms on two cores),
-//! and the coarse level uses `r / q`, `q` the smallest prime factor of `r` (so the meshes
-//! nest and the bounds improve monotonically). A laminate (`w₀ = 1` or `h₀ = 1`) is exact
-//! on the unrefined tile, and a uniform tile is its own answer: neither is refined.
+//! The effective tensor is a property of the medium, not of how it was drawn, and it does
+//! not change when the whole tile is scaled (eq. 2.4 is invariant under `x ↦ c x`). Before
+//! solving, [`reduce`] shrinks the tile to its smallest period, then merges **square**
+//! `b × b` blocks of equal cells, `b` the gcd of every run length of equal columns *and*
+//! of equal rows (a tile drawn at 8 pixels per yarn becomes the yarn-level tile). Neither
+//! step changes the discrete problem: a period-tiled discrete solution solves the larger
+//! torus, and a cell split into `b × b` equal cells is the coarse cell refined `b` times.
+//!
+//! Blocks must be square because the cell problem's cells are unit squares. Merging
+//! columns in pairs but rows one by one (as this module first did) leaves `2 × 1`
+//! rectangles, which were then solved as squares: the medium squeezed along `x`. A
+//! checkerboard of `2 × 1` rectangles of 1 and 10 came out as the square checkerboard's
+//! `√10 I` instead of about `diag(3.96, 2.53)` (it is anisotropic; Keller's reciprocity
+//! fixes only `A₁₁ A₂₂ = 10`), and the custom grid `FFWW/WWFF` 4% low along the weft.
+//! The alternative, solving rectangular cells with their true edge lengths, was not taken:
+//! square blocks keep every element a square, so the criss-cross mesh (module doc of
+//! [`super::cell_problem`]), its quarter-turn symmetry and the refinement rule stay as
+//! they are, and the reduced problem is exactly a coarser level of the unreduced one. The
+//! cost is a larger reduced tile where runs differ (`FFWW/WWFF` stays 4×2), which only
+//! lowers the refinement the budget allows. Along an axis where the tile is uniform (all
+//! columns equal, period 1) any block length fits, so `b` is the other axis's gcd.
+//!
+//! Then the reduced `w₀ × h₀` tile is refined `r` times with `r² w₀ h₀ ≤ max_cells`
+//! (default 128² = 16384, which keeps a 128×128 tile under 50 ms on two cores), and the
+//! coarse level uses `r / q`, `q` the smallest prime factor of `r` (so the meshes nest and
+//! the bounds improve monotonically). A laminate (`w₀ = 1` or `h₀ = 1`) is exact on the
+//! unrefined tile, and a uniform tile is its own answer: neither is refined.
 //!
 //! # Scaling and contrast
 //!
-//! `A` is 1-homogeneous in `a`, so tensors are scaled by a power of two (exact) to put the
-//! largest entry near 1 and the result scaled back. Tiles whose eigenvalues span more than
-//! [`MAX_CONTRAST`] are rejected: the pinned stiffness matrix has a condition number of
-//! about contrast × (cells per side)², and beyond 10¹² a double-precision Cholesky no
-//! longer resolves the weak phase.
+//! `A` is 1-homogeneous in `a`. Each tensor is checked for positive definiteness scaled by
+//! a power of two to order 1 ([`tensor::is_spd`]), so the check does not depend on the
+//! units: a determinant of 10⁻³⁴⁰ would underflow and one of 10³²⁰ overflow. The tile is
+//! then scaled by one power of two (exact) to put its largest diagonal entry in `[1, 2)`,
+//! solved, and the result scaled back: a tile at 10⁻¹⁷⁰ or 10¹⁶⁰ gives 10⁻¹⁷⁰ or 10¹⁶⁰
+//! times the answer at 1. Tiles whose eigenvalues span more than [`MAX_CONTRAST`] are
+//! rejected: the pinned stiffness matrix has a condition number of about contrast ×
+//! (cells per side)², and beyond 10¹² a double-precision Cholesky no longer resolves the
+//! weak phase.
 
 use super::cell_problem::{Bounds, Grid};
 use super::{Tensor2, tensor};
@@ -205,38 +226,53 @@ impl Homogenized {
     }
 }
 
-/// Checks a per-cell tensor field: dimensions, and every tensor finite and SPD; returns the
-/// contrast (largest over smallest eigenvalue) and the cell with the smallest eigenvalue.
+/// Checks a per-cell tensor field: dimensions, and every tensor finite and SPD at any
+/// magnitude ([`tensor::is_spd`]); the error names the first bad cell.
+pub fn check_cells(width: usize, height: usize, tensors: &[Tensor2]) -> Result<(), WeaveError> {
+    check_count(width, height, tensors.len())?;
+    match tensors.iter().position(|&t| !tensor::is_spd(t)) {
+        None => Ok(()),
+        Some(i) => {
+            let [s11, s12, s22] = tensors[i];
+            Err(WeaveError::NotPositiveDefinite {
+                row: i / width,
+                col: i % width,
+                s11,
+                s12,
+                s22,
+            })
+        }
+    }
+}
+
+/// A `width × height` tile must be non-empty and have `width · height` cells.
+fn check_count(width: usize, height: usize, got: usize) -> Result<(), WeaveError> {
+    if width == 0 || height == 0 {
+        return Err(WeaveError::EmptyTile);
+    }
+    let expected = width.saturating_mul(height);
+    if got != expected {
+        return Err(WeaveError::CellCount {
+            width,
+            height,
+            expected,
+            got,
+        });
+    }
+    Ok(())
+}
+
+/// [`check_cells`], then the contrast (largest over smallest eigenvalue over the tile) and
+/// the cell with the smallest eigenvalue.
 pub fn check_tensors(
     width: usize,
     height: usize,
     tensors: &[Tensor2],
 ) -> Result<(f64, usize), WeaveError> {
-    if width == 0 || height == 0 {
-        return Err(WeaveError::EmptyTile);
-    }
-    let expected = width.saturating_mul(height);
-    if tensors.len() != expected {
-        return Err(WeaveError::CellCount {
-            width,
-            height,
-            expected,
-            got: tensors.len(),
-        });
-    }
+    check_cells(width, height, tensors)?;
     let (mut lo, mut hi, mut at) = (f64::INFINITY, 0.0f64, 0);
     for (i, &t) in tensors.iter().enumerate() {
-        let ok = t.iter().all(|x| x.is_finite()) && t[0] > 0.0 && tensor::det(t) > 0.0;
-        if !ok {
-            return Err(WeaveError::NotPositiveDefinite {
-                row: i / width,
-                col: i % width,
-                s11: t[0],
-                s12: t[1],
-                s22: t[2],
-            });
-        }
-        let (l, h) = tensor::eigenvalues(t);
+        let (l, h) = tensor::eigenvalues_at_any_scale(t);
         if l < lo {
             (lo, at) = (l, i);
         }
@@ -245,37 +281,75 @@ pub fn check_tensors(
     Ok((hi / lo, at))
 }
 
-/// Smallest period, then coarsest blocks, of a tile (see the module doc). Returns the
-/// reduced size and tensors; the reduced tile may be a translate of a sub-tile (a shift by
-/// whole cells, which changes nothing).
-pub fn reduce(width: usize, height: usize, tensors: &[Tensor2]) -> (usize, usize, Vec<Tensor2>) {
-    assert_eq!(tensors.len(), width * height);
-    let at = |x: usize, y: usize| tensors[y * width + x];
-    // smallest periods (rows need checking only over one x period)
-    let px = (1..=width)
-        .filter(|p| width % p == 0)
-        .find(|&p| (0..height).all(|y| (0..width).all(|x| at(x, y) == at((x + p) % width, y))))
-        .unwrap();
-    let py = (1..=height)
-        .filter(|p| height % p == 0)
-        .find(|&p| (0..px).all(|x| (0..height).all(|y| at(x, y) == at(x, (y + p) % height))))
-        .unwrap();
+/// The power of two that brings a tile's largest diagonal entry into `[1, 2)`, as its
+/// exponent (see "Scaling and contrast" in the module doc).
+pub fn scale_exponent(tensors: &[Tensor2]) -> i32 {
+    tensor::exponent(tensors.iter().fold(0.0f64, |m, t| m.max(t[0]).max(t[2])))
+}
+
+/// Smallest period, then largest square blocks, of a tile (see the module doc). Returns
+/// the reduced size and tensors; the reduced tile may be a translate of a sub-tile (a shift
+/// by whole cells, which changes nothing). The tile is checked first ([`check_cells`]):
+/// a bad tensor is an error naming its cell.
+pub fn reduce(
+    width: usize,
+    height: usize,
+    tensors: &[Tensor2],
+) -> Result<(usize, usize, Vec<Tensor2>), WeaveError> {
+    check_cells(width, height, tensors)?;
+    Ok(reduce_checked(width, height, tensors))
+}
+
+/// [`reduce`] of a tile that passed [`check_cells`]. Cells are compared by their bits
+/// (`-0.0` folded into `0.0`), so equality is reflexive whatever the values.
+pub(crate) fn reduce_checked(
+    width: usize,
+    height: usize,
+    tensors: &[Tensor2],
+) -> (usize, usize, Vec<Tensor2>) {
+    let key = |x: usize, y: usize| bits(tensors[y * width + x]);
+    // smallest periods (rows need checking only over one x period); the full size always is
+    let period = |n: usize, same: &dyn Fn(usize) -> bool| {
+        (1..=n).find(|&p| n % p == 0 && same(p)).unwrap_or(n)
+    };
+    let px = period(width, &|p| {
+        (0..height).all(|y| (0..width).all(|x| key(x, y) == key((x + p) % width, y)))
+    });
+    let py = period(height, &|p| {
+        (0..px).all(|x| (0..height).all(|y| key(x, y) == key(x, (y + p) % height)))
+    });
     // breaks between unequal neighbouring columns (rows) of the px × py period
-    let col_eq = |a: usize, b: usize| (0..py).all(|y| at(a, y) == at(b, y));
-    let row_eq = |a: usize, b: usize| (0..px).all(|x| at(x, a) == at(x, b));
+    let col_eq = |a: usize, b: usize| (0..py).all(|y| key(a, y) == key(b, y));
+    let row_eq = |a: usize, b: usize| (0..px).all(|x| key(x, a) == key(x, b));
     let xb: Vec<usize> = (0..px).filter(|&x| !col_eq(x, (x + px - 1) % px)).collect();
     let yb: Vec<usize> = (0..py).filter(|&y| !row_eq(y, (y + py - 1) % py)).collect();
-    let (bx, ox) = blocks(px, &xb);
-    let (by, oy) = blocks(py, &yb);
-    let (w, h) = (px / bx, py / by);
+    // square blocks: the gcd of both axes' run lengths (an axis without breaks is uniform,
+    // period 1, and takes any block length)
+    let b = match (runs_gcd(px, &xb), runs_gcd(py, &yb)) {
+        (Some(bx), Some(by)) => gcd(bx, by),
+        (Some(b), None) | (None, Some(b)) => b,
+        (None, None) => 1,
+    };
+    // every break sits on a block boundary: start the sampling there
+    let (ox, oy) = (
+        xb.first().map_or(0, |x| x % b),
+        yb.first().map_or(0, |y| y % b),
+    );
+    let (w, h) = (px.div_ceil(b), py.div_ceil(b));
     let mut out = Vec::with_capacity(w * h);
     for j in 0..h {
         for i in 0..w {
-            out.push(at(ox + i * bx, oy + j * by));
+            out.push(tensors[((oy + j * b) % height) * width + (ox + i * b) % width]);
         }
     }
     let out = canonical_translate(w, h, out);
     (w, h, out)
+}
+
+/// A tensor's bits, `-0.0` folded into `0.0`: the total order and equality the reduction
+/// and the cache use.
+pub(crate) fn bits(a: Tensor2) -> [u64; 3] {
+    a.map(|x| (x + 0.0).to_bits())
 }
 
 /// The translate of a `w × h` tile whose cells, read row-major, are smallest in a fixed
@@ -284,7 +358,7 @@ pub fn reduce(width: usize, height: usize, tensors: &[Tensor2]) -> (usize, usize
 /// equal to the smallest cell; if there are more than 64 of them the tile is kept as it is
 /// (the comparison would cost up to `(w h)²`).
 fn canonical_translate(w: usize, h: usize, t: Vec<Tensor2>) -> Vec<Tensor2> {
-    let key = |a: Tensor2| a.map(|x| (x + 0.0).to_bits());
+    let key = bits;
     let Some(m) = t.iter().map(|&a| key(a)).min() else {
         return t;
     };
@@ -313,23 +387,34 @@ fn canonical_translate(w: usize, h: usize, t: Vec<Tensor2>) -> Vec<Tensor2> {
         .collect()
 }
 
-/// Block size and offset of a periodic sequence of length `p` whose value changes exactly
-/// at the positions `breaks`: the largest `b | p` with every break `≡ o (mod b)`.
-fn blocks(p: usize, breaks: &[usize]) -> (usize, usize) {
-    let Some(&first) = breaks.first() else {
-        return (p, 0);
-    };
-    let b = breaks.iter().fold(p, |g, &x| gcd(g, x - first));
-    (b, first % b)
+/// The gcd of the run lengths of a periodic sequence of length `p` whose value changes
+/// exactly at the positions `breaks` (the largest `b` with every break `≡ first (mod b)`,
+/// which divides `p`), or `None` without breaks (a constant sequence).
+fn runs_gcd(p: usize, breaks: &[usize]) -> Option<usize> {
+    let &first = breaks.first()?;
+    Some(breaks.iter().fold(p, |g, &x| gcd(g, x - first)))
 }
 
 fn gcd(a: usize, b: usize) -> usize {
     if b == 0 { a } else { gcd(b, a % b) }
 }
 
-/// Each cell split into `r × r` equal cells.
-pub fn refine(width: usize, height: usize, tensors: &[Tensor2], r: usize) -> Vec<Tensor2> {
-    assert_eq!(tensors.len(), width * height);
+/// Each cell split into `r × r` equal cells. Errors: a cell count that is not
+/// `width × height`, or `r = 0`.
+pub fn refine(
+    width: usize,
+    height: usize,
+    tensors: &[Tensor2],
+    r: usize,
+) -> Result<Vec<Tensor2>, WeaveError> {
+    check_count(width, height, tensors.len())?;
+    if r == 0 {
+        return Err(WeaveError::Option {
+            name: "refine",
+            requirement: "at least 1",
+            value: 0.0,
+        });
+    }
     let mut out = Vec::with_capacity(width * height * r * r);
     for y in 0..height * r {
         let row = &tensors[(y / r) * width..(y / r + 1) * width];
@@ -337,13 +422,13 @@ pub fn refine(width: usize, height: usize, tensors: &[Tensor2], r: usize) -> Vec
             out.push(row[x / r]);
         }
     }
-    out
+    Ok(out)
 }
 
 /// Rigorous bounds from one discretization of the tile as given: one P1 element pair per
 /// cell, no reduction and no refinement (the building block of [`homogenize_with`]).
 pub fn bounds(width: usize, height: usize, tensors: &[Tensor2]) -> Result<Bounds, WeaveError> {
-    check_tensors(width, height, tensors)?;
+    check_cells(width, height, tensors)?;
     Grid::shared(width, height)?.bounds(tensors, true)
 }
 
@@ -398,18 +483,14 @@ pub fn homogenize_report(
         });
     }
     // exact scaling by a power of two: the largest diagonal entry lands in [1, 2)
-    let top = tensors.iter().fold(0.0f64, |m, t| m.max(t[0]).max(t[2]));
-    let scale = 2f64.powi(top.log2().floor() as i32);
-    let scaled: Vec<Tensor2> = tensors
-        .iter()
-        .map(|t| [t[0] / scale, t[1] / scale + 0.0, t[2] / scale])
-        .collect();
+    let k = scale_exponent(tensors);
+    let scaled: Vec<Tensor2> = tensors.iter().map(|&t| tensor::scale(t, -k)).collect();
     let (w, h, tile) = if opts.reduce {
-        reduce(width, height, &scaled)
+        reduce_checked(width, height, &scaled)
     } else {
         (width, height, scaled)
     };
-    let unscale = |t: Tensor2| [t[0] * scale, t[1] * scale, t[2] * scale];
+    let unscale = |t: Tensor2| tensor::scale(t, k);
 
     if tile.iter().all(|&t| t == tile[0]) {
         let t = unscale(tile[0]);
@@ -435,7 +516,7 @@ pub fn homogenize_report(
     };
     let solve = |r: usize| -> Result<Level, WeaveError> {
         let grid = Grid::shared(w * r, h * r)?;
-        let bounds = grid.bounds(&refine(w, h, &tile, r), opts.parallel)?;
+        let bounds = grid.bounds(&refine(w, h, &tile, r)?, opts.parallel)?;
         Ok(Level { refine: r, bounds })
     };
     let (coarse, fine) = match coarse {
@@ -493,20 +574,85 @@ mod tests {
                 if (x / 3 + y / 3) % 2 == 0 { a } else { b }
             })
             .collect();
-        let (w, h, r) = reduce(n, n, &t);
+        let (w, h, r) = reduce(n, n, &t).unwrap();
         assert_eq!((w, h), (2, 2));
         assert_eq!(r[0], r[3]);
         assert_eq!(r[1], r[2]);
         assert_ne!(r[0], r[1]);
         // nothing to reduce, but the origin moves to the smallest translate
         let t = vec![b, b, a, a, a, a];
-        assert_eq!(reduce(3, 2, &t), (3, 2, vec![a, a, a, a, b, b]));
+        assert_eq!(reduce(3, 2, &t).unwrap(), (3, 2, vec![a, a, a, a, b, b]));
         // a shifted drawing reduces to the same tile
         let shifted = vec![b, a, b, a, a, a];
         assert_eq!(reduce(3, 2, &shifted), reduce(3, 2, &t));
-        // stripes: period along one axis only
+        // stripes: period along one axis only, and the uniform axis takes any block length
         let t = vec![a, a, b, b, a, a, b, b];
-        assert_eq!(reduce(4, 2, &t), (2, 1, vec![a, b]));
+        assert_eq!(reduce(4, 2, &t).unwrap(), (2, 1, vec![a, b]));
+        let t = vec![a, a, a, a, a, a, b, b, b, b, b, b];
+        assert_eq!(reduce(2, 6, &t).unwrap(), (1, 2, vec![a, b]));
+    }
+
+    #[test]
+    fn reduce_merges_only_square_blocks() {
+        let (a, b) = ([1.0, 0.0, 1.0], [10.0, 0.0, 10.0]);
+        // 2×1 rectangles in a checkerboard: columns run in pairs, rows one by one, so
+        // nothing merges (merging the columns alone made it the square checkerboard)
+        let t = vec![a, a, b, b, b, b, a, a];
+        assert_eq!(reduce(4, 2, &t).unwrap(), (4, 2, t.clone()));
+        // the same drawn with 2×2 pixels per cell: back to the 4×2 tile
+        let big = refine(4, 2, &t, 2).unwrap();
+        assert_eq!(reduce(8, 4, &big).unwrap(), (4, 2, t.clone()));
+        // 6×4 rectangles drawn as pixels: gcd(6, 4) = 2 → 3×2 squares per rectangle
+        let (w, h) = (12, 8);
+        let t: Vec<Tensor2> = (0..w * h)
+            .map(|i| {
+                if ((i % w) / 6 + (i / w) / 4) % 2 == 0 {
+                    a
+                } else {
+                    b
+                }
+            })
+            .collect();
+        let (rw, rh, r) = reduce(w, h, &t).unwrap();
+        assert_eq!((rw, rh), (6, 4));
+        assert_eq!(
+            r,
+            (0..24)
+                .map(|i| t[(i / 6) * 2 * w + (i % 6) * 2])
+                .collect::<Vec<_>>()
+        );
+    }
+
+    #[test]
+    fn reduce_and_refine_report_bad_tiles_instead_of_panicking() {
+        let mut t = vec![[1.0, 0.0, 1.0]; 6];
+        t[4] = [f64::NAN, 0.0, 1.0];
+        // row 1 (second from the bottom), column 1 of a 3-wide tile
+        assert!(matches!(
+            reduce(3, 2, &t),
+            Err(WeaveError::NotPositiveDefinite { row: 1, col: 1, .. })
+        ));
+        assert!(matches!(
+            reduce(3, 3, &t),
+            Err(WeaveError::CellCount {
+                expected: 9,
+                got: 6,
+                ..
+            })
+        ));
+        assert!(matches!(
+            refine(4, 2, &t, 2),
+            Err(WeaveError::CellCount {
+                expected: 8,
+                got: 6,
+                ..
+            })
+        ));
+        assert!(matches!(
+            refine(3, 2, &t, 0),
+            Err(WeaveError::Option { name: "refine", .. })
+        ));
+        assert_eq!(reduce(0, 2, &[]), Err(WeaveError::EmptyTile));
     }
 
     #[test]

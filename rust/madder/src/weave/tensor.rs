@@ -1,4 +1,10 @@
 //! Small helpers on symmetric 2×2 tensors `[s11, s12, s22]`.
+//!
+//! Homogenization is 1-homogeneous in the tensors (`A(c a) = c A(a)`, seed eq. 2.3 is
+//! linear in `a` at a fixed corrector), so tiles are worked on scaled by a power of two
+//! ([`scale`], exact) to entries of order 1. [`is_spd`] and [`eigenvalues_at_any_scale`]
+//! do the same per tensor, so a tile at 1e-170 or 1e160 is judged as the same tile at 1
+//! (its determinant would underflow or overflow unscaled).
 
 use super::Tensor2;
 
@@ -66,6 +72,73 @@ pub fn is_psd(t: Tensor2, tol: f64) -> bool {
     let m = 0.5 * (t[0] + t[2]);
     let r = (0.5 * (t[0] - t[2])).hypot(t[1]);
     m - r >= -tol
+}
+
+/// The binary exponent `e` of a finite `x ≠ 0`: `2^e ≤ |x| < 2^(e+1)` (subnormals
+/// included). Zero and non-finite values give 0.
+pub fn exponent(x: f64) -> i32 {
+    if x == 0.0 || !x.is_finite() {
+        return 0;
+    }
+    let biased = ((x.to_bits() >> 52) & 0x7ff) as i32;
+    if biased == 0 {
+        // subnormal: 2^64 times it is normal, and the product is exact
+        exponent(x * f64::from_bits((1023 + 64) << 52)) - 64
+    } else {
+        biased - 1023
+    }
+}
+
+/// `x · 2^k`, exact unless the result leaves the range of normal numbers (then rounded
+/// once, to a subnormal, zero or infinity). The steps grow before they shrink, so no
+/// intermediate result rounds.
+pub fn ldexp(x: f64, k: i32) -> f64 {
+    // 2^j for |j| ≤ 1000, from its bits
+    let pow2 = |j: i32| f64::from_bits(((j + 1023) as u64) << 52);
+    let (mut x, mut k) = (x, k);
+    while k > 1000 {
+        x *= pow2(1000);
+        k -= 1000;
+    }
+    if k >= -1000 {
+        return x * pow2(k);
+    }
+    let rest = k % 1000;
+    x *= pow2(rest);
+    k -= rest;
+    while k < 0 {
+        x *= pow2(-1000);
+        k += 1000;
+    }
+    x
+}
+
+/// `t · 2^k` entry by entry (exact in the normal range; `-0.0` becomes `0.0`).
+#[inline]
+pub fn scale(t: Tensor2, k: i32) -> Tensor2 {
+    t.map(|x| ldexp(x, k) + 0.0)
+}
+
+/// Whether `t` is finite and positive definite (`s11 > 0` and `s11 s22 − s12² > 0`),
+/// judged on `t` scaled to a largest entry in `[1, 2)`: the same answer at any magnitude.
+pub fn is_spd(t: Tensor2) -> bool {
+    if !t.iter().all(|x| x.is_finite()) {
+        return false;
+    }
+    let top = t[0].abs().max(t[1].abs()).max(t[2].abs());
+    if top == 0.0 {
+        return false;
+    }
+    let s = scale(t, -exponent(top));
+    s[0] > 0.0 && det(s) > 0.0
+}
+
+/// [`eigenvalues`] of a finite `t` of any magnitude (computed on `t` scaled to order 1).
+pub fn eigenvalues_at_any_scale(t: Tensor2) -> (f64, f64) {
+    let top = t[0].abs().max(t[1].abs()).max(t[2].abs());
+    let e = exponent(top);
+    let (lo, hi) = eigenvalues(scale(t, -e));
+    (ldexp(lo, e), ldexp(hi, e))
 }
 
 /// `t^p` for SPD `t`, through its eigendecomposition `t = λ₁ v vᵀ + λ₂ (I − v vᵀ)`.
@@ -138,5 +211,71 @@ mod tests {
         ));
         let (lo, hi) = eigenvalues([1e8, 0.0, 1e-8]);
         assert_eq!((lo, hi), (1e-8, 1e8));
+    }
+
+    #[test]
+    fn exponents_and_exact_scaling() {
+        for (x, e) in [
+            (1.0, 0),
+            (1.5, 0),
+            (2.0, 1),
+            (0.75, -1),
+            (-8.0, 3),
+            (f64::MAX, 1023),
+            (f64::MIN_POSITIVE, -1022),
+            (f64::MIN_POSITIVE / 2.0, -1023),
+            (f64::from_bits(1), -1074),
+        ] {
+            assert_eq!(exponent(x), e, "{x:e}");
+        }
+        assert_eq!(exponent(1e-170), -565); // 2^-565 ≈ 1.5e-170
+        assert_eq!(exponent(1e160), 531); // 2^531 ≈ 1.4e160
+        // round trips through the whole range are exact
+        for x in [
+            1.0,
+            3.0,
+            -1.2345678901234567,
+            1e-170,
+            1e160,
+            f64::MIN_POSITIVE,
+        ] {
+            for k in [-1074, -600, -1, 0, 1, 600, 1023] {
+                let y = ldexp(x, k);
+                if y != 0.0 && y.is_finite() && y.abs() >= f64::MIN_POSITIVE {
+                    assert_eq!(ldexp(y, -k), x, "{x:e} by 2^{k}");
+                }
+            }
+        }
+        assert_eq!(ldexp(1.0, 1023), 2f64.powi(1023));
+        assert_eq!(ldexp(1.0, -1074), f64::from_bits(1));
+        assert_eq!(ldexp(1.0, 1024), f64::INFINITY);
+        assert_eq!(ldexp(f64::from_bits(1), 1074 + 1023), 2f64.powi(1023));
+    }
+
+    #[test]
+    fn positive_definiteness_at_any_magnitude() {
+        let t = [2.0, 1.5, 3.0];
+        for k in [-1000, -565, 0, 531, 1000] {
+            let s = scale(t, k);
+            assert!(is_spd(s), "2^{k}");
+            // unscaled, the determinant underflows to 0 or overflows to inf − inf = NaN
+            if k.abs() >= 565 {
+                assert!(!(det(s) > 0.0 && det(s).is_finite()), "2^{k}");
+            }
+            let (lo, hi) = eigenvalues_at_any_scale(s);
+            let (l1, h1) = eigenvalues(t);
+            assert!((lo / ldexp(l1, k) - 1.0).abs() < 1e-15, "2^{k}");
+            assert!((hi / ldexp(h1, k) - 1.0).abs() < 1e-15, "2^{k}");
+        }
+        for bad in [
+            [1.0, 1.0, 1.0],
+            [-1.0, 0.0, 1.0],
+            [0.0; 3],
+            [f64::NAN, 0.0, 1.0],
+            [1.0, 0.0, f64::INFINITY],
+        ] {
+            assert!(!is_spd(bad), "{bad:?}");
+            assert!(!is_spd(scale(bad, -565)), "{bad:?}");
+        }
     }
 }
