@@ -134,7 +134,11 @@ class MADDER_OT_relocate_cache(bpy.types.Operator):
     bl_label = "Relocate Cache"
     bl_options = {"REGISTER", "UNDO"}
 
-    filepath: StringProperty(name="Cache File", subtype="FILE_PATH")
+    filepath: StringProperty(
+        name="Cache File",
+        description="The .madder cache file this object's stain was baked to, where it is now",
+        subtype="FILE_PATH",
+    )
     filter_glob: StringProperty(default="*" + bake.CACHE_EXT, options={"HIDDEN"})
 
     @classmethod

@@ -9,10 +9,14 @@ type passes (anything else is refused, so the test cannot pass by ignoring one):
 `--command` runs the callback an add-on registered with `bpy.utils.register_cli_command`
 (recorded here as it registers) and exits with its code, like Blender."""
 
+import os
 import sys
 import traceback
 
 import bpy
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "blend_fixtures"))
+import harness  # noqa: E402  (ends the process as bpy 4.2 needs: harness.exit)
 
 _commands = {}
 _register = bpy.utils.register_cli_command
@@ -85,4 +89,4 @@ def run(argv):
 
 
 if __name__ == "__main__":
-    sys.exit(run(sys.argv[1:]))
+    harness.exit(run(sys.argv[1:]))
