@@ -139,7 +139,11 @@ class MADDER_OT_relocate_cache(bpy.types.Operator):
         description="The .madder cache file this object's stain was baked to, where it is now",
         subtype="FILE_PATH",
     )
-    filter_glob: StringProperty(default="*" + bake.CACHE_EXT, options={"HIDDEN"})
+    filter_glob: StringProperty(
+        default="*" + bake.CACHE_EXT,
+        description="Which files the file browser lists: Madder caches",
+        options={"HIDDEN"},
+    )
 
     @classmethod
     def poll(cls, context):

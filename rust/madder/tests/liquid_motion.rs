@@ -18,23 +18,12 @@
 use faer::Par;
 use glam::{DVec2, DVec3};
 use madder::mesh::Topology;
-use madder::stain::{Conductivity, Forces, InteractionRates, Simulator, StainParams};
+use madder::stain::{Conductivity, Forces, Simulator, StainParams};
 
 mod common;
-use common::{Grid, centroid, disk};
+use common::{Grid, centroid, disk, no_interaction, spun};
 
 const G: f64 = 9.81;
-
-fn no_interaction() -> InteractionRates {
-    InteractionRates {
-        absorption: 0.0,
-        saturation: 0.0,
-        adsorption: 0.0,
-        capacity: 0.0,
-        evaporation: 0.0,
-        evaporation_boundary: 1.0,
-    }
-}
 
 /// A frictionless, inviscid liquid that does not interact with the cloth.
 fn ideal(forces: Forces, momentum_advection: bool) -> StainParams {
@@ -307,12 +296,7 @@ fn spinning_disk_path_error(omega: f64, momentum_advection: bool) -> (f64, f64) 
     let dt = 1.0 / 25.0;
     let frames = (1.5 / (omega * dt)).round() as usize;
     let (topo, rest) = disk(40, 1.0);
-    let frame = |k: usize| -> Vec<DVec3> {
-        let (s, c) = (omega * dt * k as f64).sin_cos();
-        rest.iter()
-            .map(|p| DVec3::new(c * p.x - s * p.y, s * p.x + c * p.y, p.z))
-            .collect()
-    };
+    let frame = |k: usize| spun(&rest, omega * dt * k as f64);
     let forces = Forces {
         gravity: false,
         rectilinear: true,

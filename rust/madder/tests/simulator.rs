@@ -27,22 +27,10 @@ use madder::stain::{
 use madder::{Error, MeshError, ParamError};
 
 mod common;
-use common::{Grid, centroid, covariance, disk, gaussian};
+use common::{Grid, centroid, covariance, disk, gaussian, no_interaction, spun};
 
 // ---------------------------------------------------------------------------------------
 // meshes and helpers
-
-/// No absorption, adsorption or evaporation.
-fn no_interaction() -> InteractionRates {
-    InteractionRates {
-        absorption: 0.0,
-        saturation: 0.0,
-        adsorption: 0.0,
-        capacity: 0.0,
-        evaporation: 0.0,
-        evaporation_boundary: 1.0,
-    }
-}
 
 /// A frictionless, inviscid liquid that does not interact with the cloth.
 fn ideal(forces: Forces) -> StainParams {
@@ -144,12 +132,7 @@ fn rotating_disk_path_error(coriolis: bool) -> (f64, f64) {
     let omega = 0.5 * PI;
     let dt = 1.0 / 24.0;
     let (topo, rest) = disk(40, 1.0);
-    let frame = |k: usize| -> Vec<DVec3> {
-        let (s, c) = (omega * dt * k as f64).sin_cos();
-        rest.iter()
-            .map(|p| DVec3::new(c * p.x - s * p.y, s * p.x + c * p.y, p.z))
-            .collect()
-    };
+    let frame = |k: usize| spun(&rest, omega * dt * k as f64);
     let forces = Forces {
         gravity: false,
         rectilinear: true,

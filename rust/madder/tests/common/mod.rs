@@ -19,6 +19,7 @@ use std::f64::consts::PI;
 
 use glam::{DVec2, DVec3};
 use madder::mesh::{Connection, Geometry, OneRings, Topology, VertexFrames};
+use madder::stain::InteractionRates;
 
 /// Deterministic pseudo-random number in [−½, ½) for key `k` and stream `salt`.
 pub fn hash(k: usize, salt: u64) -> f64 {
@@ -254,4 +255,25 @@ pub fn disk(rings: usize, radius: f64) -> (Topology, Vec<DVec3>) {
         }
     }
     (Topology::from_triangles(pos.len(), faces).unwrap(), pos)
+}
+
+/// `points` turned by `angle` about the z axis (a disk spinning in its plane).
+pub fn spun(points: &[DVec3], angle: f64) -> Vec<DVec3> {
+    let (s, c) = angle.sin_cos();
+    points
+        .iter()
+        .map(|p| DVec3::new(c * p.x - s * p.y, s * p.x + c * p.y, p.z))
+        .collect()
+}
+
+/// No absorption, adsorption or evaporation.
+pub fn no_interaction() -> InteractionRates {
+    InteractionRates {
+        absorption: 0.0,
+        saturation: 0.0,
+        adsorption: 0.0,
+        capacity: 0.0,
+        evaporation: 0.0,
+        evaporation_boundary: 1.0,
+    }
 }
