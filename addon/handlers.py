@@ -32,7 +32,8 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
-from . import bridge, properties
+from . import bridge, presets
+from .errors import RelocateError
 
 _readers = {}  # absolute path -> (mtime_ns, size, CacheReader)
 _corrupt = {}  # (path, mtime_ns, size) -> {frame: message}: blocks that failed to read
@@ -211,7 +212,7 @@ def apply_frame(obj, frame):
         settings = obj.madder
         refs = tuple(settings.bake_references)
         if not any(refs):  # a cache made outside a bake (a script): the object's own settings
-            refs = properties.references(settings)
+            refs = presets.references(settings)
         buffers = bridge.stain_buffers(reader.n_vertices)
         why = _read(obj, reader, at, refs, tuple(settings.stain_color), buffers)
     if why is not None:
@@ -404,24 +405,26 @@ def unregister():
 
 
 def relocate(obj, path):
-    """Points `obj` at the cache file `path` (a moved cache). Raises ValueError, naming the
-    file, when it is not a cache for this mesh; the object then keeps its path. Returns the
-    problem left at the current frame (e.g. a truncated file), or None."""
+    """Points `obj` at the cache file `path` (a moved cache). Raises RelocateError, naming
+    the file (its `filename`, `object`), when it is not a cache for this mesh; the object
+    then keeps its path. Returns the problem left at the current frame (e.g. a truncated
+    file), or None."""
     import madder
 
     from . import bake
 
     path = os.path.abspath(bpy.path.abspath(path))
+    where = dict(object=obj.name, filename=path)
     try:
         reader = madder.CacheReader(path)
     except (OSError, madder.MadderError) as e:
-        raise ValueError(f"cannot use {path} as the cache of '{obj.name}': {e}") from e
+        raise RelocateError(f"cannot use {path} as the cache of '{obj.name}': {e}", **where) from e
     n = len(obj.data.vertices)
     if reader.n_vertices != n:
-        raise ValueError(f"{path} holds {reader.n_vertices} vertices; '{obj.name}' has {n}: not its cache")
+        raise RelocateError(f"{path} holds {reader.n_vertices} vertices; '{obj.name}' has {n}: not its cache", **where)
     missing = [f for f in bridge.FIELDS if f not in reader.fields]
     if missing:
-        raise ValueError(f"{path} has no '{missing[0]}' field: not a Madder stain cache")
+        raise RelocateError(f"{path} has no '{missing[0]}' field: not a Madder stain cache", **where)
     forget(path)
     obj.madder.cache_file = bake.stored_path(path)
     frame = bpy.context.scene.frame_current
