@@ -243,7 +243,7 @@ class BakeJob:
         except madder.MadderError as e:
             self.cancel()
             raise BakeError(f"'{obj.name}' at frame {self._evaluating}: {e}",
-                            object=obj.name, frame=self._evaluating) from e
+                            object=obj.name, frame=self._evaluating, vertex=getattr(e, "vertex", None)) from e
         except BaseException:
             self.cancel()
             raise
