@@ -32,7 +32,7 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
-from . import bridge, presets
+from . import bridge, frames, presets
 from .errors import RelocateError
 
 _readers = {}  # absolute path -> (mtime_ns, size, CacheReader)
@@ -265,16 +265,7 @@ def on_load(*_args):
 # -- renders
 
 
-def _ranges(frames):
-    """'1–3, 7' for [1, 2, 3, 7]."""
-    out, start = [], None
-    for i, f in enumerate(frames):
-        if start is None:
-            start = f
-        if i + 1 == len(frames) or frames[i + 1] != f + 1:
-            out.append(str(f) if f == start else f"{start}–{f}")
-            start = None
-    return ", ".join(out)
+_ranges = frames.ranges
 
 
 @persistent

@@ -2,6 +2,7 @@
 `madder.addon.<name>` that never import bpy (presets and references, placement in the
 world, motion-file sampling, pours, the frame schedule, the add-on's typed errors)."""
 
+import argparse
 import subprocess
 import sys
 from types import SimpleNamespace
@@ -9,9 +10,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from madder.addon import errors, motion, placement, pour, presets, schedule
+from madder.addon import errors, frames, motion, placement, pour, presets, schedule
 
-BPY_FREE = ("errors", "motion", "placement", "pour", "presets", "schedule")
+BPY_FREE = ("errors", "frames", "motion", "placement", "pour", "presets", "schedule")
 
 
 def test_the_logic_modules_import_without_bpy():
@@ -200,3 +201,25 @@ def test_addon_errors_carry_their_fields():
     assert errors.BakeError("no object").object is None
     assert errors.RelocateError("x", object="A", filename="/c.madder").filename == "/c.madder"
     assert not issubclass(errors.BakeError, ValueError)
+
+
+# -- frame numbers
+
+
+@pytest.mark.parametrize("text, want", [("7", (7, 7)), ("1-250", (1, 250)), ("-5-3", (-5, 3)),
+                                        ("-5--1", (-5, -1)), (" 2 - 4 ", (2, 4))])
+def test_frame_ranges_parse_with_negative_frames(text, want):
+    assert frames.parse_range(text) == want
+
+
+@pytest.mark.parametrize("text", ["", "a-b", "5-3", "1-2-3", "1..4"])
+def test_bad_frame_ranges_are_usage_errors(text):
+    with pytest.raises(argparse.ArgumentTypeError):
+        frames.parse_range(text)
+
+
+def test_negative_frame_arguments_are_joined_and_frame_lists_shortened():
+    assert frames.join_frames(["bake", "--frames", "-5-3", "--all"]) == ["bake", "--frames=-5-3", "--all"]
+    assert frames.join_frames(["--frames"]) == ["--frames"]
+    assert frames.ranges([1, 2, 3, 7, 9, 10]) == "1–3, 7, 9–10"
+    assert frames.ranges([-2]) == "-2" and frames.ranges([]) == ""
