@@ -81,11 +81,13 @@ def test_missing_files_are_file_not_found_errors(tmp_path):
     assert e.value.errno == errno.ENOENT and e.value.filename.startswith(str(tmp_path / "no"))
 
 
-def test_a_folder_is_not_a_cache(tmp_path):
-    with pytest.raises(OSError) as e:
-        madder.CacheReader(str(tmp_path))
-    assert isinstance(e.value, madder.CacheError) and e.value.errno == errno.EISDIR
-    assert isinstance(e.value, IsADirectoryError) and e.value.filename == str(tmp_path)
+def test_a_path_under_a_file_is_not_a_directory_error(tmp_path):
+    blocker = tmp_path / "plain"
+    blocker.write_text("not a folder")
+    with pytest.raises(NotADirectoryError) as e:
+        madder.CacheWriter(str(blocker / "c.madder"), 3, ["solute"], 1, 1)
+    assert isinstance(e.value, madder.CacheError) and e.value.errno == errno.ENOTDIR
+    assert e.value.filename.startswith(str(blocker))
 
 
 def test_point_cache_errors_carry_frame_and_vertex(tmp_path):
