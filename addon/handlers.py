@@ -32,7 +32,7 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
-from . import bridge, frames, presets
+from . import bridge, frames, playback, presets
 from .errors import RelocateError
 
 _readers = {}  # absolute path -> (mtime_ns, size, CacheReader)
@@ -142,24 +142,13 @@ def _check(obj, frame):
         reader = _reader(path)
     except (OSError, madder.MadderError) as e:  # the message names the file
         return f"Cache unreadable: {e}", None, None
-    n = len(obj.data.vertices)
-    if reader.n_vertices != n:
-        return (f"Stale cache: {path} holds {reader.n_vertices} vertices, the mesh has {n} "
-                "(edited after the bake?): bake again"), None, None
-    missing = [f for f in bridge.FIELDS if f not in reader.fields]
-    if missing:
-        return f"Cache {path} has no '{missing[0]}' field (baked by an older Madder?): bake again", None, None
+    why = playback.mismatch(path, reader, len(obj.data.vertices))
+    if why is not None:
+        return why, None, None
     if settings.bake_topology and not _same_topology(obj.data, settings.bake_topology):
         return f"Stale cache: the mesh's faces changed since the bake ({path}): bake again", None, None
-    at = min(max(frame, reader.first_frame), reader.last_frame)
-    cut = reader.truncated_at
-    if cut is not None and at >= cut:
-        return (f"Damaged cache: {path} is truncated at frame {cut} "
-                f"(frames {reader.first_frame}–{cut - 1} play): bake again"), None, None
-    bad = _corrupt.get(_file_key(path, reader), {}).get(at)
-    if bad:
-        return f"Damaged cache: {bad}: bake again", None, None
-    return None, reader, at
+    why, at = playback.frame_to_read(path, reader, frame, _corrupt.get(_file_key(path, reader), {}))
+    return why, (reader if why is None else None), at
 
 
 def damage(obj):
@@ -168,10 +157,7 @@ def damage(obj):
         reader = _reader(cache_path(obj)) if obj.madder.cache_file else None
     except Exception:
         return None  # `problem()` says why
-    cut = reader.truncated_at if reader is not None else None
-    if cut is None:
-        return None
-    return f"Cache truncated at frame {cut}: frames {cut}–{reader.last_frame} show no stain (bake again)"
+    return playback.truncation(reader) if reader is not None else None
 
 
 def _probe(obj, frame):

@@ -10,9 +10,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from madder.addon import errors, frames, motion, placement, pour, presets, schedule
+from madder.addon import errors, frames, motion, placement, playback, pour, presets, schedule
 
-BPY_FREE = ("errors", "frames", "motion", "placement", "pour", "presets", "schedule")
+BPY_FREE = ("errors", "frames", "motion", "placement", "playback", "pour", "presets", "schedule")
 
 
 def test_the_logic_modules_import_without_bpy():
@@ -223,3 +223,31 @@ def test_negative_frame_arguments_are_joined_and_frame_lists_shortened():
     assert frames.join_frames(["--frames"]) == ["--frames"]
     assert frames.ranges([1, 2, 3, 7, 9, 10]) == "1–3, 7, 9–10"
     assert frames.ranges([-2]) == "-2" and frames.ranges([]) == ""
+
+
+# -- playback
+
+
+def reader(cut=None, n=4, fields=("solute", "wetness", "deposit")):
+    return SimpleNamespace(n_vertices=n, fields=list(fields), first_frame=3, last_frame=9, truncated_at=cut)
+
+
+def test_playback_refuses_a_cache_of_another_mesh():
+    assert playback.mismatch("/c.madder", reader(), 4) is None
+    assert playback.mismatch("/c.madder", reader(), 5) == (
+        "Stale cache: /c.madder holds 4 vertices, the mesh has 5 (edited after the bake?): bake again")
+    assert "has no 'deposit' field" in playback.mismatch("/c.madder", reader(fields=("solute", "wetness")), 4)
+
+
+def test_playback_clamps_the_frame_and_never_reads_past_damage():
+    whole = reader()
+    assert [playback.frame_to_read("/c", whole, f, {}) for f in (1, 3, 6, 9, 20)] == [
+        (None, 3), (None, 3), (None, 6), (None, 9), (None, 9)]
+    cut = reader(cut=7)
+    assert playback.frame_to_read("/c", cut, 6, {}) == (None, 6)
+    why, at = playback.frame_to_read("/c", cut, 12, {})
+    assert at is None and why == "Damaged cache: /c is truncated at frame 7 (frames 3–6 play): bake again"
+    why, at = playback.frame_to_read("/c", whole, 5, {5: "/c: frame 5 is corrupt"})
+    assert (why, at) == ("Damaged cache: /c: frame 5 is corrupt: bake again", None)
+    assert playback.truncation(whole) is None
+    assert playback.truncation(cut) == "Cache truncated at frame 7: frames 7–9 show no stain (bake again)"
