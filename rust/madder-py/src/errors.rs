@@ -147,7 +147,10 @@ fn build(py: Python<'_>, e: &madder::Error) -> PyResult<PyErr> {
                     name,
                     expected,
                     got,
-                } => f.set("name", name).set("expected", expected).set("got", got),
+                } => f
+                    .set("name", name)
+                    .set("expected", expected)
+                    .set("got", got),
                 P::NonFinite { name, index } | P::NotPositiveSemiDefinite { name, index } => {
                     f.set("name", name).set("index", index)
                 }
@@ -242,10 +245,14 @@ fn build(py: Python<'_>, e: &madder::Error) -> PyResult<PyErr> {
                     line,
                     expected,
                     got,
-                } => f.set("line", line).set("expected", expected).set("got", got),
-                W::UnknownCell { line, column, ch } => {
-                    f.set("line", line).set("column", column).set("char", ch.to_string())
-                }
+                } => f
+                    .set("line", line)
+                    .set("expected", expected)
+                    .set("got", got),
+                W::UnknownCell { line, column, ch } => f
+                    .set("line", line)
+                    .set("column", column)
+                    .set("char", ch.to_string()),
                 W::NonPositiveCoefficient { pair, value } => {
                     f.set("pair", pair).set("value", value)
                 }
@@ -256,7 +263,9 @@ fn build(py: Python<'_>, e: &madder::Error) -> PyResult<PyErr> {
                     value,
                 } => f.cell(*row, *col).set("pair", pair).set("value", value),
                 W::NotPositiveDefinite { row, col, .. } => f.cell(*row, *col),
-                W::Contrast { ratio, row, col, .. } => f.cell(*row, *col).set("ratio", ratio),
+                W::Contrast {
+                    ratio, row, col, ..
+                } => f.cell(*row, *col).set("ratio", ratio),
                 W::Option {
                     name,
                     requirement,
