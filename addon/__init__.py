@@ -1,15 +1,26 @@
-"""Madder: stains on moving cloth. This file only registers the add-on's parts."""
+"""Madder: stains on moving cloth. This file only registers the add-on's parts.
 
-from . import cli, fabrics, handlers, operators, panels, properties, shading
+The parts that use bpy are imported when the add-on registers (or when one is asked for,
+e.g. `madder.addon.cli`), not on import: the package's bpy-free modules (`presets`,
+`placement`, `motion`, `pour`, `schedule`, `errors`) can then be imported, and tested,
+without Blender."""
 
-_modules = (properties, fabrics, operators, shading, panels, handlers, cli)
+import importlib
+
+_PARTS = ("properties", "fabrics", "operators", "shading", "panels", "handlers", "cli")
+
+
+def __getattr__(name):
+    if name in _PARTS:
+        return importlib.import_module(f"{__name__}.{name}")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def register():
-    for m in _modules:
-        m.register()
+    for name in _PARTS:
+        importlib.import_module(f"{__name__}.{name}").register()
 
 
 def unregister():
-    for m in reversed(_modules):
-        m.unregister()
+    for name in reversed(_PARTS):
+        importlib.import_module(f"{__name__}.{name}").unregister()

@@ -1,21 +1,26 @@
 """Baking a stain: walks the scene's frames, feeds the evaluated positions to the Rust
 simulator and streams the densities into the cache file. Errors are `BakeError`s whose
-message names the object and frame; the previous cache is kept on any failure."""
+message names the object and frame (and whose `object` and `frame` attributes hold them);
+the previous cache is kept on any failure.
+
+This module is the bpy adapter: what needs no Blender lives in bpy-free modules, tested
+from tests/python: `presets` (references, the simulator's keywords), `placement` (Unit
+Scale, world placement, the collapsed-transform check), `motion` (motion-file sampling,
+the Mesh Cache modifier's timing), `pour` (spills, pours and their fall-off),
+`schedule` (the one-frame lookahead) and `errors`."""
 
 import os
-import re
 
 import bpy
 import numpy as np
 
-from . import bridge, fabrics, handlers, properties
+from . import bridge, fabrics, handlers, motion, placement, pour, presets, schedule
+from .errors import BakeError, FabricSettingsError
+from .placement import check_transform as _check_transform, placed
 
 CACHE_EXT = ".madder"
 FIELDS, COLOR_FIELDS = bridge.FIELDS, bridge.COLOR_FIELDS
-
-
-class BakeError(Exception):
-    pass
+__all__ = ["BakeError", "BakeJob", "MotionFile", "bake", "free", "placed", "simulator_settings", "unit_scale"]
 
 
 def core():
@@ -32,7 +37,7 @@ def cache_path(obj):
     settings = obj.madder
     folder = settings.cache_dir or "//madder_cache/"
     if folder.startswith("//") and not bpy.data.filepath:
-        raise BakeError(f"'{obj.name}': save the .blend first, or set an absolute cache folder")
+        raise BakeError(f"'{obj.name}': save the .blend first, or set an absolute cache folder", object=obj.name)
     folder = bpy.path.abspath(folder)
     return os.path.join(folder, bpy.path.clean_name(obj.name) + CACHE_EXT)
 
@@ -51,14 +56,15 @@ def check_object(obj, sources=()):
     if obj is None:
         raise BakeError("no active object: select the cloth (a mesh object) to bake, or use Bake All Stains")
     if obj.type != "MESH":
-        raise BakeError(f"Madder bakes mesh objects; '{obj.name}' is a {obj.type.lower()}")
+        raise BakeError(f"Madder bakes mesh objects; '{obj.name}' is a {obj.type.lower()}", object=obj.name)
     group = obj.madder.source_group
     if not group and not sources:
         raise BakeError(
-            f"'{obj.name}': no liquid: choose a Spill Group (vertex group), or mark an object as a Madder Source"
+            f"'{obj.name}': no liquid: choose a Spill Group (vertex group), or mark an object as a Madder Source",
+            object=obj.name,
         )
     if group and group not in obj.vertex_groups:
-        raise BakeError(f"'{obj.name}' has no vertex group '{group}' (its Spill Group)")
+        raise BakeError(f"'{obj.name}' has no vertex group '{group}' (its Spill Group)", object=obj.name)
 
 
 def source_objects(scene, obj):
@@ -66,51 +72,20 @@ def source_objects(scene, obj):
     sources = [o for o in scene.objects if o.madder_source.is_source and o != obj]
     for o in sources:
         if o.type != "MESH":
-            raise BakeError(f"'{o.name}' is marked as a Madder Source but is a {o.type.lower()}, not a mesh")
+            raise BakeError(f"'{o.name}' is marked as a Madder Source but is a {o.type.lower()}, not a mesh",
+                            object=o.name)
     return sources
 
 
 def unit_scale(scene):
-    """Metres per Blender unit: the scene's Unit Scale, as Blender applies it to every
-    length, velocity and acceleration it shows (not at all with the unit system None)."""
+    """Metres per Blender unit of `scene` (`placement.unit_scale`)."""
     units = scene.unit_settings
-    return float(units.scale_length) if units.system != "NONE" else 1.0
-
-
-def placed(local, matrix, unit):
-    """Object-space positions `local` (N, 3) through the 4×4 `matrix`, in metres, float32."""
-    m = np.asarray(matrix, dtype=np.float64)
-    return ((np.asarray(local, dtype=np.float64) @ m[:3, :3].T + m[:3, 3]) * unit).astype(np.float32)
+    return placement.unit_scale(units.system, units.scale_length)
 
 
 def check_transform(obj, frame, faces, local, matrix):
-    """Refuses an object transform that collapses the cloth at `frame`: a scale of 0 (or
-    nearly 0) on the axes the cloth spans leaves it no area, and the simulation nothing
-    to work on. Compares the world-space area of the triangles `faces` with their
-    object-space area times the transform's largest stretch squared (1 for any rotation
-    and uniform scale; 0 when the scale flattens the cloth to a line or a point) and
-    refuses a ratio of a millionth or less."""
-    full = np.asarray(matrix, dtype=np.float64)
-    m = full[:3, :3]
-    if not np.isfinite(full).all():
-        raise BakeError(f"'{obj.name}' at frame {frame}: its object transform is not finite")
-    stretch = np.linalg.svd(m, compute_uv=False)
-    if stretch[-1] > 1e-6 * stretch[0]:  # invertible: no area can vanish (the usual case, O(1))
-        return
-    a, b, c = (local[faces[:, k]] for k in range(3))
-    n = np.cross(b - a, c - a)  # twice the object-space area vectors
-    area_local = np.linalg.norm(n, axis=1).sum()
-    if not area_local > 0.0:  # no area even in object space: not the transform's doing
-        return
-    # the area vectors map by the cofactor matrix det(M)·M^-T, computed without inverting
-    cof = np.cross(m[:, [1, 2, 0]].T, m[:, [2, 0, 1]].T)
-    area_world = np.linalg.norm(n @ cof, axis=1).sum()
-    if not area_world > 1e-6 * stretch[0] ** 2 * area_local:
-        scale = ", ".join(f"{x:g}" for x in np.linalg.norm(m, axis=0))
-        raise BakeError(
-            f"'{obj.name}' at frame {frame}: its object scale ({scale}) collapses the cloth to no area; "
-            "give the object a non-zero scale on every axis the cloth spans (check its scale animation)"
-        )
+    """`placement.check_transform` for object `obj`."""
+    _check_transform(obj.name, frame, faces, local, matrix)
 
 
 def frame_positions(obj, depsgraph, n_vertices, frame, faces, unit):
@@ -121,101 +96,45 @@ def frame_positions(obj, depsgraph, n_vertices, frame, faces, unit):
         raise BakeError(
             f"'{obj.name}' has {n} vertices at frame {frame} but {n_vertices} in its mesh: "
             "the deformed cloth must keep its topology (move generating modifiers such as "
-            "Subdivision below the cloth and disable them for the bake)"
+            "Subdivision below the cloth and disable them for the bake)",
+            object=obj.name, frame=frame,
         )
     local = bridge.rest_positions(obj_eval.data).astype(np.float64)
-    bad = np.flatnonzero(~np.isfinite(local).all(axis=1))
-    if bad.size:
-        raise BakeError(f"'{obj.name}': vertex {bad[0]} has a non-finite position at frame {frame}")
+    bad = placement.first_non_finite(local)
+    if bad is not None:
+        raise BakeError(f"'{obj.name}': vertex {bad} has a non-finite position at frame {frame}",
+                        object=obj.name, frame=frame, vertex=bad)
     check_transform(obj, frame, faces, local, obj_eval.matrix_world)
     return placed(local, obj_eval.matrix_world, unit)
 
 
-class MotionFile:
-    """Cloth positions from a PC2/MDD file (object space, placed by the object's current
-    transform), sampled at scene frames exactly as Blender's Mesh Cache modifier shows the
-    file in its Time Mode *Frame* and Play Mode *Scene*: scene frame `f` reads sample
-    `f · frame_scale − frame_start` (0-based), whatever start, rate or times the file's
-    header gives. `frame_start` and `frame_scale` are those of the object's Mesh Cache
-    modifier that reads the same file, or 0 and 1 (the modifier's defaults) without one.
-    Between samples the positions are interpolated linearly, as the modifier does; before
-    the first sample and after the last the cloth holds that sample, as the modifier shows
-    it (the bake warns)."""
+class MotionFile(motion.MotionSamples):
+    """Cloth positions from the object's Motion File (PC2/MDD, object space, placed by the
+    object's current transform), sampled at scene frames as the object's Mesh Cache
+    modifier that reads the same file shows them (`motion.MotionSamples`; Frame Start 0
+    and Frame Scale 1 without one)."""
 
     def __init__(self, madder, obj):
         path = bpy.path.abspath(obj.madder.motion_file)
         try:
-            self.cache = madder.PointCache(path)
+            cache = madder.PointCache(path)
         except madder.MadderError as e:
-            raise BakeError(f"'{obj.name}': motion file: {_sample_message(e)}") from e
-        if self.cache.n_points != len(obj.data.vertices):
+            raise BakeError(f"'{obj.name}': motion file: {motion.sample_message(e)}", object=obj.name) from e
+        if cache.n_points != len(obj.data.vertices):
             raise BakeError(
                 f"'{obj.name}' has {len(obj.data.vertices)} vertices but its motion file {path} has "
-                f"{self.cache.n_points} points"
+                f"{cache.n_points} points",
+                object=obj.name,
             )
-        self.obj, self.path = obj, path
-        self.offset, self.scale = 0.0, 1.0
+        offset, scale = 0.0, 1.0
         for m in obj.modifiers:
             if m.type != "MESH_CACHE" or not m.filepath or os.path.normpath(bpy.path.abspath(m.filepath)) != os.path.normpath(path):
                 continue
-            if m.time_mode != "FRAME" or m.play_mode != "SCENE":
-                raise BakeError(
-                    f"'{obj.name}': its Mesh Cache modifier '{m.name}' reads the motion file with Time Mode "
-                    f"'{m.time_mode.title()}' and Play Mode '{m.play_mode.title()}'; Madder reads motion files "
-                    "as the modifier does in Time Mode Frame, Play Mode Scene: set those"
-                )
-            others = {
-                "Forward/Up Axis": (m.forward_axis, m.up_axis) != ("POS_Y", "POS_Z"),
-                "Flip Axis": any(m.flip_axis),  # a set of axes before 5.0, three booleans since
-                "Influence": m.factor != 1.0 or bool(m.vertex_group),
-                "Deform Mode": m.deform_mode != "OVERWRITE",
-                "Interpolation": m.interpolation != "LINEAR",
-            }
-            changed = [k for k, v in others.items() if v]
-            if changed:
-                raise BakeError(
-                    f"'{obj.name}': its Mesh Cache modifier '{m.name}' changes the file's positions "
-                    f"({', '.join(changed)}), which Madder's motion file reader does not do: leave those "
-                    "at their defaults, or clear Motion File to bake what the modifier stack shows"
-                )
-            self.offset, self.scale = m.frame_start, m.frame_scale
+            offset, scale = motion.modifier_timing(obj.name, m)
             break
+        super().__init__(cache, obj.name, path, offset, scale)
+        self.obj = obj
         self.matrix = np.array(obj.matrix_world, dtype=np.float64)
-
-    def sample(self, frame):
-        """The (fractional) sample the Mesh Cache modifier shows at scene `frame`."""
-        return frame * self.scale - self.offset
-
-    def outside(self, first, last):
-        """A warning when frames `first`–`last` read past the file's samples (or None)."""
-        n = self.cache.n_frames
-        out = [f for f in range(first, last + 1) if not (-1e-6 <= self.sample(f) <= n - 1 + 1e-6)]
-        if not out:
-            return None
-        return (
-            f"{len(out)} frames ({out[0]}…{out[-1]}) read past the {n} samples of its motion file "
-            f"{os.path.basename(self.path)}: the cloth holds its first or last sample there, as the "
-            "Mesh Cache modifier shows it"
-        )
-
-    def local(self, frame):
-        """Object-space positions at scene `frame`, (N, 3) float64."""
-        t, last = self.sample(frame), self.cache.n_frames - 1
-        t = min(max(t, 0.0), float(last))  # the modifier holds the first or last sample
-        k = int(min(np.floor(t + 1e-6), last))
-        try:
-            co = self.cache.read_frame(k).astype(np.float64)
-            if k < last and t - k > 1e-6:
-                co += (t - k) * (self.cache.read_frame(k + 1) - co)
-        except Exception as e:
-            raise BakeError(f"'{self.obj.name}' at frame {frame}: {_sample_message(e)}") from e
-        return co
-
-
-def _sample_message(error):
-    """A point-cache error read while baking, with its file frame called the *sample*, so
-    that the bake's message names one frame: the scene's."""
-    return re.sub(r"\bframe (\d+)", r"sample \1", str(error))
 
 
 class BakeJob:
@@ -244,16 +163,17 @@ class BakeJob:
         try:
             os.makedirs(os.path.dirname(self.path), exist_ok=True)
         except OSError as e:
-            raise BakeError(f"'{obj.name}': cannot create the cache folder {os.path.dirname(self.path)}: {e}") from e
+            raise BakeError(f"'{obj.name}': cannot create the cache folder {os.path.dirname(self.path)}: {e}",
+                            object=obj.name, filename=os.path.dirname(self.path)) from e
         self.first, self.last = frames or (scene.frame_start, scene.frame_end)
         if self.last < self.first:
-            raise BakeError(f"'{obj.name}': the frame range {self.first}-{self.last} is empty")
+            raise BakeError(f"'{obj.name}': the frame range {self.first}-{self.last} is empty", object=obj.name)
         self.dt = scene.render.fps_base / scene.render.fps
         mesh = obj.data
         faces, face_polygon, n_polygons = bridge.topology_arrays(mesh)
         self.n_vertices = len(mesh.vertices)
         if len(faces) == 0:
-            raise BakeError(f"'{obj.name}' has no faces")
+            raise BakeError(f"'{obj.name}' has no faces", object=obj.name)
         settings = obj.madder
         self.wet0 = bridge.vertex_group_weights(obj, settings.source_group) if settings.source_group else None
         # with sources, colours can differ: track them (three more fields)
@@ -264,7 +184,7 @@ class BakeJob:
         if n_nonmanifold:
             self.warnings.append(f"{n_nonmanifold} non-manifold edges (shared by 3+ faces)")
         self.conductivity = _conductivity(self.madder, obj, self.topology, face_polygon, self.warnings)
-        self.references = properties.references(settings, [o.madder_source for o in self.sources], spill=self.wet0 is not None)
+        self.references = presets.references(settings, [o.madder_source for o in self.sources], spill=self.wet0 is not None)
         if self.references[0] == 0.0:
             self.warnings.append("its liquid has no solute (concentration 0): it wets the cloth but leaves no stain")
         self.unit = unit_scale(scene)
@@ -278,7 +198,8 @@ class BakeJob:
         self.frame_before = scene.frame_current
         self.writer = self.sim = None
         self.splashed = set()  # sources whose splash is done
-        self._ahead = None  # (frame, positions, contacts) evaluated one frame early
+        # (positions, contacts) per frame, evaluated once each, one frame early
+        self._walk = schedule.Lookahead(self._visit)
         self._evaluating = self.first  # the frame being read, for error messages
         self._suspended = False
 
@@ -308,14 +229,12 @@ class BakeJob:
                 self.writer = madder.CacheWriter(self.path, self.n_vertices, self.fields, self.first, self.total)
             else:
                 frame = self.frame + 1
-                pos, contacts = self._visit(frame)
+                self._evaluating = frame
+                pos, contacts = self._walk.take(frame)
                 # one frame ahead, so the cloth's acceleration over [frame − 1, frame] is
                 # centred (and right at the first frame); every frame is still evaluated
                 # once, in order
-                after = None
-                if frame < self.last:
-                    self._ahead = (frame + 1, *self._visit(frame + 1))
-                    after = self._ahead[1]
+                after = self._walk.peek(frame + 1)[0] if frame < self.last else None
                 self._evaluating = frame
                 self.sim.step(pos, self.dt, after=after)
                 self._pour(contacts)
@@ -323,7 +242,8 @@ class BakeJob:
             self.frame = frame
         except madder.MadderError as e:
             self.cancel()
-            raise BakeError(f"'{obj.name}' at frame {self._evaluating}: {e}") from e
+            raise BakeError(f"'{obj.name}' at frame {self._evaluating}: {e}",
+                            object=obj.name, frame=self._evaluating, vertex=getattr(e, "vertex", None)) from e
         except BaseException:
             self.cancel()
             raise
@@ -344,20 +264,14 @@ class BakeJob:
         s = self.obj.madder
         if self.wet0 is None or not self.wet0.any():
             return
-        self.sim.add_liquid((self.wet0 * s.amount).astype(np.float32), s.concentration, tuple(s.stain_color))
+        self.sim.add_liquid(pour.spilled(self.wet0, s.amount), s.concentration, tuple(s.stain_color))
         if s.splash_speed > 0.0:
-            w = self.wet0.astype(np.float64)
-            centre = tuple((w @ pos.astype(np.float64)) / w.sum())
-            self.sim.splash(centre, s.splash_speed * self.unit, s.splash_seed, self.wet0)
+            self.sim.splash(pour.centroid(self.wet0, pos), s.splash_speed * self.unit, s.splash_seed, self.wet0)
 
     def _visit(self, frame):
-        """Positions at `frame` and what the sources bring there (from the lookahead when
-        the previous step already visited it)."""
+        """Positions at `frame` and what the sources bring there (`self._walk` calls it
+        once per frame, in order)."""
         self._evaluating = frame
-        if self._ahead is not None and self._ahead[0] == frame:
-            _, pos, contacts = self._ahead
-            self._ahead = None
-            return pos, contacts
         self._goto(frame)
         pos = self._positions(frame)
         return pos, self._contacts(frame, pos)
@@ -371,7 +285,7 @@ class BakeJob:
         out = []
         for src in self.sources:
             s = src.madder_source
-            if s.use_frame_range and not (s.frame_start <= frame <= s.frame_end):
+            if not pour.pours_at(frame, s.use_frame_range, s.frame_start, s.frame_end):
                 continue
             src_eval = src.evaluated_get(depsgraph)
             verts, tris = bridge.world_triangles(src_eval)
@@ -379,7 +293,7 @@ class BakeJob:
                 continue
             reach = s.distance * self.unit  # metres, like the positions
             d = self.madder.distances_within(pos, verts * np.float32(self.unit), tris, reach)
-            weight = np.clip(1.0 - d / reach, 0.0, 1.0).astype(np.float32)  # inf → 0
+            weight = pour.falloff(d, reach)
             if weight.any():
                 out.append((src, weight, tuple(np.asarray(src_eval.matrix_world.translation) * self.unit)))
         return out
@@ -390,7 +304,7 @@ class BakeJob:
         from the source's origin."""
         for src, weight, origin in contacts:
             s = src.madder_source
-            self.sim.add_liquid((s.amount * self.dt * weight).astype(np.float32), s.concentration, tuple(s.color))
+            self.sim.add_liquid(pour.poured(s.amount, self.dt, weight), s.concentration, tuple(s.color))
             if s.splash_speed > 0.0 and src.name not in self.splashed:
                 self.splashed.add(src.name)
                 self.sim.splash(origin, s.splash_speed * self.unit, s.splash_seed, weight)
@@ -419,9 +333,10 @@ class BakeJob:
         else:
             matrix = self.obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).matrix_world
         rest = placed(co, matrix, self.unit)
-        bad = np.flatnonzero(~np.isfinite(rest).all(axis=1))
-        if bad.size:
-            raise BakeError(f"'{self.obj.name}': vertex {bad[0]} has a non-finite rest position")
+        bad = placement.first_non_finite(rest)
+        if bad is not None:
+            raise BakeError(f"'{self.obj.name}': vertex {bad} has a non-finite rest position",
+                            object=self.obj.name, vertex=bad)
         return rest
 
     def finish(self):
@@ -430,7 +345,7 @@ class BakeJob:
             self.writer.finish()
         except self.madder.MadderError as e:
             self.cancel()
-            raise BakeError(f"'{self.obj.name}': {e}") from e
+            raise BakeError(f"'{self.obj.name}': {e}", object=self.obj.name) from e
         self.writer = None
         self._close()
         self.obj.madder.cache_file = stored_path(self.path)
@@ -459,29 +374,11 @@ class BakeJob:
 
 
 def simulator_settings(scene, obj, unit=None):
-    """Keyword arguments of `madder.Simulator` from the object's settings (SI units) and
-    the scene's gravity (off when either the scene's or the object's Gravity is off),
-    which Blender stores in scene units per s², so it is scaled by `unit` (metres per
-    unit; default the scene's Unit Scale) like the positions."""
-    s = obj.madder
+    """Keyword arguments of `madder.Simulator` from the object's settings and the scene's
+    gravity (`presets.simulator_keywords`), scaled by `unit` (metres per unit; default the
+    scene's Unit Scale) like the positions."""
     unit = unit_scale(scene) if unit is None else unit
-    return dict(
-        color=tuple(s.stain_color),
-        gravity=tuple(g * unit for g in scene.gravity),
-        viscosity=s.viscosity,
-        friction=s.friction,
-        absorption=s.absorption,
-        saturation=s.saturation,
-        adsorption=s.adsorption,
-        capacity=s.capacity,
-        evaporation=s.evaporation,
-        evaporation_boundary=s.evaporation_boundary,
-        substeps=s.substeps,
-        use_gravity=bool(s.use_gravity and scene.use_gravity),
-        use_rectilinear=s.use_rectilinear,
-        use_coriolis=s.use_coriolis,
-        momentum_advection=s.momentum_advection,
-    )
+    return presets.simulator_keywords(obj.madder, scene.gravity, scene.use_gravity, unit)
 
 
 def bake(scene, obj, progress=None, frames=None):
@@ -502,8 +399,8 @@ def _conductivity(madder, obj, topology, face_polygon, warnings):
     rate = obj.madder.diffusion_rate
     try:
         woven = fabrics.face_conductivity(obj, rate, face_polygon)
-    except ValueError as e:
-        raise BakeError(f"'{obj.name}': {e}") from e
+    except FabricSettingsError as e:
+        raise BakeError(f"'{obj.name}': {e}", object=obj.name, material=e.material) from e
     if woven is None:
         return {"diffusion": rate}
     uv = bridge.corner_uvs(obj.data)
@@ -523,7 +420,7 @@ def _topology(madder, obj, faces, n_vertices, face_polygon, n_polygons):
     try:
         return madder.Topology(faces, n_vertices, face_polygon, n_polygons)
     except madder.MadderError as e:
-        raise BakeError(f"'{obj.name}': {e}") from e
+        raise BakeError(f"'{obj.name}': {e}", object=obj.name) from e
 
 
 def free(obj):

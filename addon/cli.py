@@ -10,43 +10,18 @@ stderr (2 for a usage error). Without `--object`, every object with Madder Stain
 is baked."""
 
 import argparse
-import re
 import sys
 import time
 
 import bpy
 
-from . import bake
+from . import bake, frames
 
 _handle = None
 
 
-# A, or A-B; either frame may be negative (Blender's frames are): 3, -5, 1-250, -5-3, -5--1
-_FRAMES = re.compile(r"\s*(-?\d+)(?:\s*-\s*(-?\d+))?\s*")
-
-
-def _frame_range(text):
-    m = _FRAMES.fullmatch(text)
-    if m is None:
-        raise argparse.ArgumentTypeError(f"expected A-B or A (e.g. 1-250, -5-3 or 7), got '{text}'")
-    a = int(m[1])
-    b = a if m[2] is None else int(m[2])
-    if b < a:
-        raise argparse.ArgumentTypeError(f"empty frame range {text}")
-    return a, b
-
-
-def _join_frames(argv):
-    """`--frames -5-3` as `--frames=-5-3`: argparse takes a value that starts with '-' (and
-    is not a plain negative number) for an option, so a negative range needs the '='."""
-    out, args = [], iter(argv)
-    for a in args:
-        if a == "--frames":
-            value = next(args, None)
-            out.append(a if value is None else f"{a}={value}")
-        else:
-            out.append(a)
-    return out
+# the frame arguments' parsing is bpy-free, in `frames`
+_frame_range, _join_frames = frames.parse_range, frames.join_frames
 
 
 def _parser():

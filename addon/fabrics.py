@@ -13,6 +13,8 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, PointerProperty, StringProperty
 
+from .errors import FabricSettingsError
+
 WEAVES = [
     ("PLAIN", "Plain", "Over one, under one"),
     ("TWILL21", "Twill 2/1", "Diagonal ribs, weft over two"),
@@ -98,8 +100,8 @@ def effective_tensor(fabric):
 
 def face_conductivity(obj, rate, face_polygon):
     """Per-triangle tensors (F, 3) in m²/s and weft offsets (F,), or None when no material
-    of `obj` has a fabric (the cloth is then isotropic). Raises ValueError naming the
-    material whose fabric is invalid."""
+    of `obj` has a fabric (the cloth is then isotropic). Raises FabricSettingsError naming
+    the material whose fabric is invalid (its `material`)."""
     mesh = obj.data
     slots = [s.material for s in obj.material_slots]
     fabrics = [m.madder_fabric if (m is not None and m.madder_fabric.enabled) else None for m in slots]
@@ -113,7 +115,7 @@ def face_conductivity(obj, rate, face_polygon):
         try:
             per_slot[i] = effective_tensor(fab) * rate * fab.speed
         except Exception as e:
-            raise ValueError(f"material '{slots[i].name}': {e}") from e
+            raise FabricSettingsError(f"material '{slots[i].name}': {e}", material=slots[i].name) from e
         angle[i] = fab.angle
     poly_mat = np.empty(len(mesh.polygons), dtype=np.int64)
     mesh.polygons.foreach_get("material_index", poly_mat)

@@ -32,7 +32,8 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
-from . import bridge, properties
+from . import bridge, frames, playback, presets
+from .errors import RelocateError
 
 _readers = {}  # absolute path -> (mtime_ns, size, CacheReader)
 _corrupt = {}  # (path, mtime_ns, size) -> {frame: message}: blocks that failed to read
@@ -141,24 +142,13 @@ def _check(obj, frame):
         reader = _reader(path)
     except (OSError, madder.MadderError) as e:  # the message names the file
         return f"Cache unreadable: {e}", None, None
-    n = len(obj.data.vertices)
-    if reader.n_vertices != n:
-        return (f"Stale cache: {path} holds {reader.n_vertices} vertices, the mesh has {n} "
-                "(edited after the bake?): bake again"), None, None
-    missing = [f for f in bridge.FIELDS if f not in reader.fields]
-    if missing:
-        return f"Cache {path} has no '{missing[0]}' field (baked by an older Madder?): bake again", None, None
+    why = playback.mismatch(path, reader, len(obj.data.vertices))
+    if why is not None:
+        return why, None, None
     if settings.bake_topology and not _same_topology(obj.data, settings.bake_topology):
         return f"Stale cache: the mesh's faces changed since the bake ({path}): bake again", None, None
-    at = min(max(frame, reader.first_frame), reader.last_frame)
-    cut = reader.truncated_at
-    if cut is not None and at >= cut:
-        return (f"Damaged cache: {path} is truncated at frame {cut} "
-                f"(frames {reader.first_frame}–{cut - 1} play): bake again"), None, None
-    bad = _corrupt.get(_file_key(path, reader), {}).get(at)
-    if bad:
-        return f"Damaged cache: {bad}: bake again", None, None
-    return None, reader, at
+    why, at = playback.frame_to_read(path, reader, frame, _corrupt.get(_file_key(path, reader), {}))
+    return why, (reader if why is None else None), at
 
 
 def damage(obj):
@@ -167,10 +157,7 @@ def damage(obj):
         reader = _reader(cache_path(obj)) if obj.madder.cache_file else None
     except Exception:
         return None  # `problem()` says why
-    cut = reader.truncated_at if reader is not None else None
-    if cut is None:
-        return None
-    return f"Cache truncated at frame {cut}: frames {cut}–{reader.last_frame} show no stain (bake again)"
+    return playback.truncation(reader) if reader is not None else None
 
 
 def _probe(obj, frame):
@@ -211,7 +198,7 @@ def apply_frame(obj, frame):
         settings = obj.madder
         refs = tuple(settings.bake_references)
         if not any(refs):  # a cache made outside a bake (a script): the object's own settings
-            refs = properties.references(settings)
+            refs = presets.references(settings)
         buffers = bridge.stain_buffers(reader.n_vertices)
         why = _read(obj, reader, at, refs, tuple(settings.stain_color), buffers)
     if why is not None:
@@ -264,16 +251,7 @@ def on_load(*_args):
 # -- renders
 
 
-def _ranges(frames):
-    """'1–3, 7' for [1, 2, 3, 7]."""
-    out, start = [], None
-    for i, f in enumerate(frames):
-        if start is None:
-            start = f
-        if i + 1 == len(frames) or frames[i + 1] != f + 1:
-            out.append(str(f) if f == start else f"{start}–{f}")
-            start = None
-    return ", ".join(out)
+_ranges = frames.ranges
 
 
 @persistent
@@ -404,24 +382,26 @@ def unregister():
 
 
 def relocate(obj, path):
-    """Points `obj` at the cache file `path` (a moved cache). Raises ValueError, naming the
-    file, when it is not a cache for this mesh; the object then keeps its path. Returns the
-    problem left at the current frame (e.g. a truncated file), or None."""
+    """Points `obj` at the cache file `path` (a moved cache). Raises RelocateError, naming
+    the file (its `filename`, `object`), when it is not a cache for this mesh; the object
+    then keeps its path. Returns the problem left at the current frame (e.g. a truncated
+    file), or None."""
     import madder
 
     from . import bake
 
     path = os.path.abspath(bpy.path.abspath(path))
+    where = dict(object=obj.name, filename=path)
     try:
         reader = madder.CacheReader(path)
     except (OSError, madder.MadderError) as e:
-        raise ValueError(f"cannot use {path} as the cache of '{obj.name}': {e}") from e
+        raise RelocateError(f"cannot use {path} as the cache of '{obj.name}': {e}", **where) from e
     n = len(obj.data.vertices)
     if reader.n_vertices != n:
-        raise ValueError(f"{path} holds {reader.n_vertices} vertices; '{obj.name}' has {n}: not its cache")
+        raise RelocateError(f"{path} holds {reader.n_vertices} vertices; '{obj.name}' has {n}: not its cache", **where)
     missing = [f for f in bridge.FIELDS if f not in reader.fields]
     if missing:
-        raise ValueError(f"{path} has no '{missing[0]}' field: not a Madder stain cache")
+        raise RelocateError(f"{path} has no '{missing[0]}' field: not a Madder stain cache", **where)
     forget(path)
     obj.madder.cache_file = bake.stored_path(path)
     frame = bpy.context.scene.frame_current

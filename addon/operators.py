@@ -8,6 +8,7 @@ import bpy
 from bpy.props import BoolProperty, StringProperty
 
 from . import bake, handlers
+from .errors import RelocateError
 
 
 def _targets(context, all_objects):
@@ -159,7 +160,7 @@ class MADDER_OT_relocate_cache(bpy.types.Operator):
         obj = context.object
         try:
             left = handlers.relocate(obj, self.filepath)
-        except ValueError as e:
+        except RelocateError as e:
             self.report({"ERROR"}, f"Madder: {e}")
             return {"CANCELLED"}
         if left:

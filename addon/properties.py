@@ -3,7 +3,7 @@
 Units are SI throughout, as in the Rust core: densities (liquid or solute per unit area
 of cloth) in kg/m², rates in 1/s, diffusion and viscosity in m²/s. The defaults are the
 core's defaults (`StainParams::default`, `InteractionRates::default`: water on a light
-cotton cloth)."""
+cotton cloth). The presets and the bake references are bpy-free, in `presets`."""
 
 import bpy
 from bpy.props import (
@@ -16,58 +16,15 @@ from bpy.props import (
     StringProperty,
 )
 
+from . import presets
+
 # Blender 4.5+ warns when a path property holds a "//" path unless it says it supports them.
 _BLEND_RELATIVE = {"options": {"PATH_SUPPORTS_BLEND_RELATIVE"}} if bpy.app.version >= (4, 5, 0) else {}
 
-# Liquid presets. Order-of-magnitude estimates, not measurements (the seed gives only the
-# evaporation boundary coefficient, 1.2); they make the four liquids behave differently
-# in the ways one expects, and are meant to be tuned. What a preset sets is the liquid:
-# its solute (colour, concentration) and how that solute and its solvent interact with
-# the fibres. The cloth's own properties (saturation, friction) and the flow
-# (diffusion, viscosity) are left alone.
-#
-# - Water: no solute (concentration 0, so it leaves no stain, only wetness), a white-ish
-#   colour for completeness, no adsorption; the core's default rates (it wicks into thin
-#   cotton in about 0.5 s, K_p = 2 /s; dries at 5e-5 kg/(m²·s), still room air).
-# - Red wine: about 2 % dissolved solids by mass (extract: sugars, acids, tannins,
-#   anthocyanins), deep red (0.30, 0.02, 0.07). Anthocyanins and tannins bind strongly
-#   to cellulose: fast adsorption (K_d = 0.5 /s), the default capacity. The ethanol
-#   makes it evaporate a little faster than water (6e-5).
-# - Coffee: about 1.2 % dissolved solids (a typical brew's TDS), brown (0.25, 0.13, 0.05).
-#   Its particles bind weakly (K_d = 0.05 /s, capacity 1e-3), so they stay in the liquid
-#   longer, and its rim evaporates faster (boundary coefficient 1.5). A real coffee ring
-#   needs the capillary flow toward a drying rim, which the model does not have (see
-#   rust/madder/src/stain/interact.rs): do not expect a ring from this preset alone.
-# - Ink: about 5 % dye, blue-black (0.04, 0.05, 0.15). Surfactants make it wick faster
-#   (K_p = 3 /s), dyes are made to bind: fast adsorption (K_d = 1 /s) and a high
-#   capacity (5e-3 kg/m²); humectants (glycols) slow its drying (4e-5).
-LIQUIDS = {
-    "WATER": dict(
-        stain_color=(0.90, 0.93, 0.95), concentration=0.0, absorption=2.0, adsorption=0.0,
-        capacity=2e-3, evaporation=5e-5, evaporation_boundary=1.2,
-    ),
-    "RED_WINE": dict(
-        stain_color=(0.30, 0.02, 0.07), concentration=0.02, absorption=2.0, adsorption=0.5,
-        capacity=2e-3, evaporation=6e-5, evaporation_boundary=1.2,
-    ),
-    "COFFEE": dict(
-        stain_color=(0.25, 0.13, 0.05), concentration=0.012, absorption=2.0, adsorption=0.05,
-        capacity=1e-3, evaporation=5e-5, evaporation_boundary=1.5,
-    ),
-    "INK": dict(
-        stain_color=(0.04, 0.05, 0.15), concentration=0.05, absorption=3.0, adsorption=1.0,
-        capacity=5e-3, evaporation=4e-5, evaporation_boundary=1.2,
-    ),
-}
-LIQUID_ITEMS = [
-    ("CUSTOM", "Custom", "Your own values (any change to a preset's value switches to Custom)"),
-    ("WATER", "Water", "No solute: wets the cloth, leaves no stain"),
-    ("RED_WINE", "Red Wine", "Deep red, binds strongly to the fibres"),
-    ("COFFEE", "Coffee", "Brown, binds weakly to the fibres, dries faster at the rim"),
-    ("INK", "Ink", "Blue-black, concentrated, wicks and binds fast"),
-]
-# what a source's preset sets (the rates belong to the cloth it pours on)
-SOURCE_PRESET_KEYS = ("concentration", "stain_color")
+# The liquid presets (values and where they come from) and the bake references are plain
+# data and functions in `presets` (bpy-free); these names stay here for callers.
+LIQUIDS, LIQUID_ITEMS, SOURCE_PRESET_KEYS = presets.LIQUIDS, presets.LIQUID_ITEMS, presets.SOURCE_PRESET_KEYS
+references = presets.references
 
 _applying = False  # True while a preset writes its values (they must not switch it to Custom)
 
@@ -83,14 +40,15 @@ def _apply_preset(settings, values):
 
 
 def _liquid_update(self, context):
-    if self.liquid != "CUSTOM":
-        _apply_preset(self, LIQUIDS[self.liquid])
+    values = presets.object_preset(self.liquid)
+    if values is not None:
+        _apply_preset(self, values)
 
 
 def _source_liquid_update(self, context):
-    if self.liquid != "CUSTOM":
-        values = LIQUIDS[self.liquid]
-        _apply_preset(self, {("color" if k == "stain_color" else k): values[k] for k in SOURCE_PRESET_KEYS})
+    values = presets.source_preset(self.liquid)
+    if values is not None:
+        _apply_preset(self, values)
 
 
 def _mark_custom(self, context):
@@ -391,21 +349,6 @@ class MadderSourceSettings(bpy.types.PropertyGroup):
         description="Last frame this source pours on (with Frame Range on)",
         default=250,
     )
-
-
-def references(settings, sources=(), spill=True):
-    """The densities (kg/m²) that playback reads as full, `(solute, liquid, deposit)`, for
-    an object's `settings` and the `sources` (their `madder_source` settings) of a bake:
-
-    - solute: `saturation × c`, `c` the largest concentration among the liquids of the
-      bake (the object's own spill if `spill`, and each source's): a spot whose fibres are
-      saturated with the strongest liquid reads as fully stained. 0 when no liquid has
-      any solute (then nothing can stain).
-    - liquid: `saturation`: fibres holding all the liquid they can read as fully wet.
-    - deposit: `capacity`: fibres that bound all the solute they can read as fully marked.
-    """
-    c = max([settings.concentration] * bool(spill) + [s.concentration for s in sources], default=0.0)
-    return (settings.saturation * c, settings.saturation, settings.capacity)
 
 
 def register():

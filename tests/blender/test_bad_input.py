@@ -190,3 +190,43 @@ def test_parameter_out_of_range_is_named_and_keeps_the_previous_bake(open_fixtur
     assert open(path, "rb").read() == before
     assert scene.frame_current == 1
     assert not [f for f in os.listdir(os.path.dirname(path)) if ".tmp" in f]
+
+
+def test_bake_errors_carry_the_object_frame_and_vertex(open_fixture, addon):
+    """A script driving `BakeJob` gets the object, frame and vertex as attributes of the
+    BakeError, not only in its message (the NaN shape key of the test above)."""
+    import sys
+
+    bake = sys.modules[addon + ".bake"]
+    scene = open_fixture("disk.blend")
+    disk = make_active(bpy.data.objects["Disk"])
+    disk.madder.source_group = "stain_source"
+    disk.shape_key_add(name="Basis")
+    key = disk.shape_key_add(name="Bad")
+    key.data[7].co = (float("nan"), 0.0, 0.0)
+    key.value = 0.0
+    key.keyframe_insert("value", frame=4)
+    key.value = 1.0
+    key.keyframe_insert("value", frame=5)
+    with pytest.raises(bake.BakeError) as e:
+        bake.bake(scene, disk)
+    assert (e.value.object, e.value.frame, e.value.vertex) == ("Disk", 5, 7)
+    disk.madder.source_group = "no_such_group"
+    with pytest.raises(bake.BakeError) as e:
+        bake.BakeJob(scene, disk)
+    assert (e.value.object, e.value.frame) == ("Disk", None)
+
+
+def test_relocating_to_a_missing_file_names_it(open_fixture, addon, tmp_path):
+    import sys
+
+    import madder
+
+    handlers = sys.modules[addon + ".handlers"]
+    open_fixture("disk.blend")
+    disk = bpy.data.objects["Disk"]
+    missing = str(tmp_path / "gone.madder")
+    with pytest.raises(sys.modules[addon + ".errors"].RelocateError) as e:
+        handlers.relocate(disk, missing)
+    assert (e.value.object, e.value.filename) == ("Disk", missing)
+    assert isinstance(e.value.__cause__, FileNotFoundError) and isinstance(e.value.__cause__, madder.CacheError)

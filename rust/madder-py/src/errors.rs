@@ -3,15 +3,27 @@
 //! ```text
 //! MadderError
 //! ├── MeshError       (also a ValueError)  bad topology or positions; names face/vertex
-//! ├── ParameterError  (also a ValueError)  out-of-range parameters
+//! ├── ParameterError  (also a ValueError)  out-of-range parameters; names the parameter
 //! ├── FabricError     (also a ValueError)  a weave or cell tensor is invalid; names the cell
 //! ├── SolveError                           a linear solve failed
 //! └── CacheError      (also an OSError)    cache or PC2/MDD file missing, truncated or corrupt
+//!     (+ FileNotFoundError, PermissionError, IsADirectoryError, NotADirectoryError
+//!        for the I/O failures of those kinds)
 //! ```
+//!
+//! Every exception carries the fields of its core variant as attributes (`err.vertex`,
+//! `err.face`, `err.frame`, `err.cell` = (row, column), `err.name` for a parameter,
+//! `err.filename` and `err.errno` for a file...), so that a caller can act on *where*
+//! the input is wrong without parsing the message. The message itself is the core's
+//! `Display`, unchanged. This file picks the class and the fields; `madder/_errors.py`
+//! (`_from_core`) builds the instance and, for an I/O failure, the built-in kind.
+
+use std::path::Path;
 
 use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
-use pyo3::{create_exception, import_exception};
+use pyo3::types::PyDict;
+use pyo3::{IntoPyObjectExt, create_exception, import_exception};
 
 create_exception!(
     madder,
@@ -32,16 +44,256 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("MadderError", m.py().get_type::<MadderError>())
 }
 
-/// Converts a core error into the matching Python exception.
+/// The attributes of one exception, in the order they are set.
+struct Fields<'py> {
+    py: Python<'py>,
+    dict: Bound<'py, PyDict>,
+    err: Option<PyErr>,
+}
+
+impl<'py> Fields<'py> {
+    fn new(py: Python<'py>) -> Self {
+        Fields {
+            py,
+            dict: PyDict::new(py),
+            err: None,
+        }
+    }
+
+    fn set<T: IntoPyObjectExt<'py>>(mut self, name: &str, value: T) -> Self {
+        if self.err.is_none() {
+            let r = value
+                .into_bound_py_any(self.py)
+                .and_then(|v| self.dict.set_item(name, v));
+            self.err = r.err();
+        }
+        self
+    }
+
+    fn path(self, path: &Path) -> Self {
+        self.set("filename", path.to_string_lossy().into_owned())
+    }
+
+    fn io(self, path: &Path, source: &std::io::Error) -> Self {
+        self.path(path)
+            .set("errno", source.raw_os_error())
+            .set("strerror", source.to_string())
+    }
+
+    /// A cell of a weave tile: `cell` = (row, column), and both on their own.
+    fn cell(self, row: usize, col: usize) -> Self {
+        self.set("cell", (row, col)).set("row", row).set("col", col)
+    }
+}
+
+/// Converts a core error into the matching Python exception, its fields as attributes.
 pub fn to_py(e: impl Into<madder::Error>) -> PyErr {
     let e = e.into();
-    let msg = e.to_string();
-    match e {
-        madder::Error::Mesh(_) => MeshError::new_err(msg),
-        madder::Error::Param(_) => ParameterError::new_err(msg),
-        madder::Error::Solve(_) => SolveError::new_err(msg),
-        madder::Error::Cache(_) => CacheError::new_err(msg),
-        madder::Error::PointCache(_) => CacheError::new_err(msg),
-        madder::Error::Weave(_) => FabricError::new_err(msg),
+    Python::attach(|py| build(py, &e).unwrap_or_else(|err| err))
+}
+
+fn build(py: Python<'_>, e: &madder::Error) -> PyResult<PyErr> {
+    use madder::error::{
+        CacheError as C, Error, MeshError as M, ParamError as P, PointCacheError as Pc,
+        WeaveError as W,
+    };
+    let f = Fields::new(py);
+    let (class, f) = match e {
+        Error::Mesh(m) => (
+            py.get_type::<MeshError>(),
+            match m {
+                M::Empty => f,
+                M::VertexOutOfRange {
+                    face,
+                    vertex,
+                    n_vertices,
+                } => f
+                    .set("face", face)
+                    .set("vertex", vertex)
+                    .set("n_vertices", n_vertices),
+                M::RepeatedVertex { face, vertex } => f.set("face", face).set("vertex", vertex),
+                M::VertexCountMismatch { expected, got } => {
+                    f.set("expected", expected).set("got", got)
+                }
+                M::NonFinitePosition { vertex } => f.set("vertex", vertex),
+                M::PolygonMapLength { expected, got } => {
+                    f.set("expected", expected).set("got", got)
+                }
+            },
+        ),
+        Error::Param(p) => (
+            py.get_type::<ParameterError>(),
+            match p {
+                P::OutOfRange {
+                    name,
+                    requirement,
+                    value,
+                } => f
+                    .set("name", name)
+                    .set("requirement", requirement)
+                    .set("value", value),
+                P::OutOfRangeAt {
+                    name,
+                    index,
+                    requirement,
+                    value,
+                } => f
+                    .set("name", name)
+                    .set("index", index)
+                    .set("vertex", index)
+                    .set("requirement", requirement)
+                    .set("value", value),
+                P::Length {
+                    name,
+                    expected,
+                    got,
+                } => f
+                    .set("name", name)
+                    .set("expected", expected)
+                    .set("got", got),
+                P::NonFinite { name, index } | P::NotPositiveSemiDefinite { name, index } => {
+                    f.set("name", name).set("index", index)
+                }
+            },
+        ),
+        Error::Solve(s) => (py.get_type::<SolveError>(), solve_fields(f, s)),
+        Error::Cache(c) => (
+            py.get_type::<CacheError>(),
+            match c {
+                C::Io { path, source } => f.io(path, source),
+                C::BadMagic { path } => f.path(path),
+                C::Version {
+                    path,
+                    found,
+                    supported,
+                } => f.path(path).set("found", found).set("supported", supported),
+                C::Header { path, reason } => f.path(path).set("reason", reason),
+                C::Truncated {
+                    path,
+                    frame,
+                    first_cut,
+                } => f.path(path).set("frame", frame).set("first_cut", first_cut),
+                C::Checksum { path, frame } => f.path(path).set("frame", frame),
+                C::FrameMissing {
+                    path,
+                    frame,
+                    first,
+                    last,
+                } => f
+                    .path(path)
+                    .set("frame", frame)
+                    .set("first", first)
+                    .set("last", last),
+                C::FieldMissing { path, field } => f.path(path).set("field", field),
+                C::Usage { reason } => f.set("reason", reason),
+            },
+        ),
+        Error::PointCache(c) => (
+            py.get_type::<CacheError>(),
+            match c {
+                Pc::Io { path, source } => f.io(path, source),
+                Pc::UnknownFormat { path } | Pc::BadSignature { path } => f.path(path),
+                Pc::Version { path, found } => f.path(path).set("found", found),
+                Pc::Header {
+                    path,
+                    format,
+                    reason,
+                } => f
+                    .path(path)
+                    .set("format", format!("{format:?}"))
+                    .set("reason", reason),
+                Pc::Truncated {
+                    path,
+                    frame,
+                    n_frames,
+                    n_points,
+                    ..
+                } => f
+                    .path(path)
+                    .set("frame", frame)
+                    .set("n_frames", n_frames)
+                    .set("n_points", n_points),
+                Pc::FrameOutOfRange {
+                    path,
+                    frame,
+                    n_frames,
+                } => f.path(path).set("frame", frame).set("n_frames", n_frames),
+                Pc::NonFinite {
+                    path,
+                    frame,
+                    vertex,
+                    position,
+                } => f
+                    .path(path)
+                    .set("frame", frame)
+                    .set("vertex", vertex)
+                    .set("position", *position),
+                Pc::Time {
+                    path,
+                    frame,
+                    reason,
+                } => f.path(path).set("frame", frame).set("reason", reason),
+                Pc::Usage { path, reason } => f.path(path).set("reason", reason),
+            },
+        ),
+        Error::Weave(w) => (
+            py.get_type::<FabricError>(),
+            match w {
+                W::EmptyTile => f,
+                W::CellCount { expected, got, .. } => f.set("expected", expected).set("got", got),
+                W::RaggedRow {
+                    line,
+                    expected,
+                    got,
+                } => f
+                    .set("line", line)
+                    .set("expected", expected)
+                    .set("got", got),
+                W::UnknownCell { line, column, ch } => f
+                    .set("line", line)
+                    .set("column", column)
+                    .set("char", ch.to_string()),
+                W::NonPositiveCoefficient { pair, value } => {
+                    f.set("pair", pair).set("value", value)
+                }
+                W::CellCoefficient {
+                    row,
+                    col,
+                    pair,
+                    value,
+                } => f.cell(*row, *col).set("pair", pair).set("value", value),
+                W::NotPositiveDefinite { row, col, .. } => f.cell(*row, *col),
+                W::Contrast {
+                    ratio, row, col, ..
+                } => f.cell(*row, *col).set("ratio", ratio),
+                W::Option {
+                    name,
+                    requirement,
+                    value,
+                } => f
+                    .set("name", name)
+                    .set("requirement", requirement)
+                    .set("value", value),
+                W::Solve(s) => solve_fields(f, s),
+            },
+        ),
+    };
+    if let Some(err) = f.err {
+        return Err(err);
+    }
+    let make = py.import("madder._errors")?.getattr("_from_core")?;
+    let value = make.call1((class, e.to_string(), f.dict))?;
+    Ok(PyErr::from_value(value))
+}
+
+fn solve_fields<'py>(f: Fields<'py>, s: &madder::error::SolveError) -> Fields<'py> {
+    use madder::error::SolveError as S;
+    match s {
+        S::NotPositiveDefinite { pivot, n } => f.set("pivot", pivot).set("n", n),
+        S::OutOfMemory => f,
+        S::NotConverged {
+            iterations,
+            residual,
+        } => f.set("iterations", iterations).set("residual", residual),
     }
 }

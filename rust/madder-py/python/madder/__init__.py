@@ -22,11 +22,25 @@ from ._core import (
     write_mdd,
     write_pc2,
 )
-from ._errors import CacheError, FabricError, MeshError, ParameterError, SolveError
+from ._errors import (
+    CacheError,
+    CacheIsADirectoryError,
+    CacheNotADirectoryError,
+    CacheNotFoundError,
+    CachePermissionError,
+    FabricError,
+    MeshError,
+    ParameterError,
+    SolveError,
+)
 from .arrays import as_faces, as_positions
 
 __all__ = [
     "CacheError",
+    "CacheIsADirectoryError",
+    "CacheNotADirectoryError",
+    "CacheNotFoundError",
+    "CachePermissionError",
     "CacheReader",
     "CacheWriter",
     "DiffusionStepper",
