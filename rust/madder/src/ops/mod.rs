@@ -10,6 +10,7 @@ pub mod cg;
 pub mod connection;
 pub mod cotan;
 pub mod pattern;
+pub mod restrict;
 pub mod solve;
 
 pub use aniso::{Tensor2, anisotropic_stiffness, weft_angles, weft_directions};
@@ -19,4 +20,5 @@ pub use connection::{
 };
 pub use cotan::{add_lumped_mass, cotan_stiffness};
 pub use pattern::VertexPattern;
+pub use restrict::{CscPattern, Restriction, block_pattern, block_values};
 pub use solve::{LowerCsc, PrefactoredSpd, solve_spd};

@@ -9,8 +9,11 @@ pub mod extend;
 pub mod forces;
 pub mod interact;
 pub mod simulate;
+pub mod state;
+pub mod window;
 
 pub use diffuse::{Conductivity, DiffusionStepper, WovenFaces};
 pub use forces::Forces;
-pub use interact::{Fields, InteractionRates};
-pub use simulate::{Profile, Simulator, StainParams, Totals};
+pub use interact::InteractionRates;
+pub use simulate::{Profile, Simulator, StainParams};
+pub use state::{Fields, Totals};
