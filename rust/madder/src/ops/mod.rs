@@ -4,6 +4,9 @@
 //! the `N×N` vertex–vertex sparsity pattern, fixed for the whole bake. An operator is a
 //! vector of values on that pattern, so a time-stepper rebuilds only values every frame and
 //! the sparse Cholesky factorization ([`PrefactoredSpd`]) reuses its symbolic analysis.
+//! A [`Restriction`] is such an operator cut down to a set of vertices (the simulator's
+//! active region) with a no-flux diagonal; [`connection`] and [`restrict`] expand scalar
+//! operators into the `2×2` blocks of the connection Laplacian (eq. 4.6) the same way.
 
 pub mod aniso;
 pub mod cg;

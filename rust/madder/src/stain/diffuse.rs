@@ -37,8 +37,8 @@
 //! The simulator ([`super::simulate`]) solves `(M + h K_A) σ' = m` for every flowing field
 //! and the velocity's eq. 4.6 on its window's active vertices only, `K_A` the restriction
 //! of the stiffness with a Neumann boundary ([`crate::ops::restrict`]), by warm-started
-//! IC(0)-preconditioned CG ([`crate::ops::WarmCg`]): [`diffuse_densities`] and
-//! [`diffuse_velocity`]. The stepper above factorizes the whole mesh instead; both take
+//! IC(0)-preconditioned CG ([`crate::ops::WarmCg`]): `diffuse_densities` and
+//! `diffuse_velocity`. The stepper above factorizes the whole mesh instead; both take
 //! the fabric's stiffness from [`Conductivity::stiffness`].
 //!
 //! ## In the simulator: conservation and sign (why the clamps are safe)

@@ -2,7 +2,8 @@
 //!
 //! The state it steps ([`super::state`]): per vertex the tangent velocity `u_i` in the
 //! comoving–corotating frame `F_i` ([`super::forces`]) and the masses of the liquid and
-//! its solute (§4.5's fields).
+//! its solute (§4.5's fields), put there by the sources ([`super::sources`]: poured
+//! liquid, splashes).
 //!
 //! One frame `t → t + H` is `S` sub-steps of `h = H/S`, the positions interpolated
 //! linearly between the two frames, on the frame's *window*: the active region around the
@@ -80,12 +81,11 @@ use super::forces::{
     integrate_velocity, rest_frames, second_difference,
 };
 use super::interact::{InteractionRates, exposure, interact};
-use super::state::{Fields, Local, State, Totals, merge_rgb, split_rgb};
+use super::state::{Fields, Local, State, merge_rgb, split_rgb};
 use super::window::{Cloth, Window, pick};
 use crate::error::{Error, ParamError};
 use crate::mesh::geometry::check_positions;
 use crate::mesh::{Connection, Geometry, OneRings, RingAdjacency, Topology, VertexFrames};
-use crate::rng::SplitMix64;
 
 /// A vertex is "dry" for the evaporation boundary rule (eq. 4.8) below this liquid
 /// density, kg/m² (1 g/m², a film of water 1 µm thick).
@@ -190,19 +190,6 @@ pub struct Simulator {
     /// Transport sub-cycles of the last frame, all its sub-steps together (widens the
     /// next region: liquid moves at most one ring per sub-cycle).
     pub(super) last_frame_cycles: usize,
-}
-
-/// Every value finite and `≥ 0`, else the error names the first vertex that is not.
-fn check_each_nonnegative(name: &'static str, values: &[f64]) -> Result<(), ParamError> {
-    match values.iter().position(|x| !(x.is_finite() && *x >= 0.0)) {
-        None => Ok(()),
-        Some(index) => Err(ParamError::OutOfRangeAt {
-            name,
-            index,
-            requirement: "finite and ≥ 0",
-            value: values[index],
-        }),
-    }
 }
 
 /// Wall-clock seconds spent in each phase since the simulator was built (for benchmarks).
@@ -325,237 +312,6 @@ impl Simulator {
     pub fn time(&self) -> f64 {
         self.state.time
     }
-    /// Lumped vertex areas of the current frame, m² (of every vertex that holds or held
-    /// anything; a vertex that never did keeps an older area).
-    pub fn vertex_area(&self) -> &[f64] {
-        &self.state.vertex_area
-    }
-    /// Per-vertex masses, kg.
-    pub fn fields(&self) -> &Fields {
-        &self.state.fields
-    }
-    /// Velocities in the vertex frames, m/s (of each vertex's last step: a vertex outside
-    /// the window keeps the value it left it with).
-    pub fn velocity(&self) -> &[DVec2] {
-        &self.state.velocity
-    }
-    /// Velocities as world vectors, m/s (as [`Simulator::velocity`], in the frame of each
-    /// vertex's last step).
-    pub fn velocity_world(&self) -> Vec<DVec3> {
-        (0..self.state.velocity.len())
-            .map(|i| self.state.frames.to_world(i, self.state.velocity[i]))
-            .collect()
-    }
-    /// Replaces the velocity field by world vectors (projected on each vertex's tangent
-    /// plane at the current frame), e.g. an initial condition.
-    pub fn set_velocity_world(&mut self, velocity: &[DVec3]) -> Result<(), ParamError> {
-        self.check_len("velocity", velocity.len())?;
-        if let Some(index) = velocity.iter().position(|u| !u.is_finite()) {
-            return Err(ParamError::NonFinite {
-                name: "velocity",
-                index,
-            });
-        }
-        let st = &mut self.state;
-        st.frames = corotating_frames_with(
-            &self.cloth.adjacency,
-            &self.cloth.rest_frames,
-            &self.cloth.rest,
-            &st.positions,
-        );
-        st.velocity = (0..velocity.len())
-            .map(|i| st.frames.to_local(i, velocity[i]))
-            .collect();
-        st.stamp.fill(st.time);
-        Ok(())
-    }
-
-    /// Density `mass / A_i` of a mass field (0 where a vertex has no area).
-    pub fn density(&self, mass: &[f64]) -> Vec<f64> {
-        mass.iter()
-            .zip(&self.state.vertex_area)
-            .map(|(m, a)| if *a > 0.0 { m / a } else { 0.0 })
-            .collect()
-    }
-
-    /// Liquid density (free + absorbed solvent), kg/m².
-    pub fn wetness(&self) -> Vec<f64> {
-        let f = &self.state.fields;
-        let wet: Vec<f64> = f
-            .free_solvent
-            .iter()
-            .zip(&f.absorbed_solvent)
-            .map(|(a, b)| a + b)
-            .collect();
-        self.density(&wet)
-    }
-
-    /// Total solute density (dissolved + absorbed + adsorbed), kg/m².
-    pub fn solute_density(&self) -> Vec<f64> {
-        let f = &self.state.fields;
-        let s: Vec<f64> = (0..f.solute.len())
-            .map(|i| f.solute[i] + f.absorbed_solute[i] + f.adsorbed[i])
-            .collect();
-        self.density(&s)
-    }
-
-    /// Adsorbed solute density (the permanent deposit), kg/m².
-    pub fn deposit(&self) -> Vec<f64> {
-        self.density(&self.state.fields.adsorbed)
-    }
-
-    /// Colour of the solute at every vertex (mass-weighted mix of the liquids poured;
-    /// the liquid's colour where there is no solute).
-    pub fn solute_color(&self) -> Vec<[f64; 3]> {
-        let f = &self.state.fields;
-        match (&f.color_free, &f.color_held) {
-            (Some(cf), Some(ch)) => (0..f.solute.len())
-                .map(|i| {
-                    let s = f.solute[i] + f.absorbed_solute[i] + f.adsorbed[i];
-                    if s > 1e-300 {
-                        std::array::from_fn(|k| (cf[i][k] + ch[i][k]) / s)
-                    } else {
-                        self.solute_color
-                    }
-                })
-                .collect(),
-            _ => vec![self.solute_color; f.solute.len()],
-        }
-    }
-
-    /// Totals over the mesh (sums in vertex order).
-    pub fn totals(&self) -> Totals {
-        let f = &self.state.fields;
-        Totals {
-            solvent: f.total_solvent(),
-            solute: f.total_solute(),
-            evaporated: self.state.evaporated,
-        }
-    }
-
-    fn check_len(&self, name: &'static str, got: usize) -> Result<(), ParamError> {
-        let expected = self.cloth.topology.n_vertices();
-        if got == expected {
-            Ok(())
-        } else {
-            Err(ParamError::Length {
-                name,
-                expected,
-                got,
-            })
-        }
-    }
-
-    /// Pours liquid: `solvent[i]` kg/m² of solvent at vertex `i`, carrying
-    /// `concentration` kg of solute per kg of solvent, of `color` (default: the liquid's).
-    /// A colour different from the liquid's switches on per-vertex colour tracking.
-    pub fn add_liquid(
-        &mut self,
-        solvent: &[f64],
-        concentration: f64,
-        color: Option<[f64; 3]>,
-    ) -> Result<(), ParamError> {
-        self.check_len("added solvent", solvent.len())?;
-        check_each_nonnegative("added solvent", solvent)?;
-        check_range(
-            "concentration",
-            concentration,
-            concentration >= 0.0,
-            "finite and ≥ 0",
-        )?;
-        let color = color.unwrap_or(self.solute_color);
-        if let Some(index) = color.iter().position(|c| !c.is_finite()) {
-            return Err(ParamError::NonFinite {
-                name: "liquid colour",
-                index,
-            });
-        }
-        if color != self.solute_color {
-            self.enable_color();
-        }
-        for (i, &d) in solvent.iter().enumerate() {
-            if d > 0.0 {
-                // the area now (a vertex away from the liquid keeps an older one)
-                self.state.vertex_area[i] = self.current_area(i);
-                self.state.mark_stained(i);
-            }
-        }
-        let area = &self.state.vertex_area;
-        let f = &mut self.state.fields;
-        for (i, &d) in solvent.iter().enumerate() {
-            let m = d * area[i];
-            f.free_solvent[i] += m;
-            f.solute[i] += m * concentration;
-            if let Some(cf) = f.color_free.as_mut() {
-                for k in 0..3 {
-                    cf[i][k] += m * concentration * color[k];
-                }
-            }
-        }
-        self.rescan = true;
-        Ok(())
-    }
-
-    /// Tracks colour per vertex from now on (colour masses = solute × liquid colour).
-    fn enable_color(&mut self) {
-        let f = &mut self.state.fields;
-        if f.color_free.is_some() {
-            return;
-        }
-        let c = self.solute_color;
-        f.color_free = Some(f.solute.iter().map(|s| c.map(|x| x * s)).collect());
-        f.color_held = Some(
-            (0..f.solute.len())
-                .map(|i| c.map(|x| x * (f.absorbed_solute[i] + f.adsorbed[i])))
-                .collect(),
-        );
-    }
-
-    /// A splash (seed Fig. 4.3): adds a random outgoing velocity around `center` (world)
-    /// to every vertex with `weight > 0`: the tangential direction away from the centre,
-    /// turned by a random angle in ±0.5 rad, times `speed · weight` and a random factor in
-    /// [0.5, 1.5). Random numbers come from `seed` and the vertex index only, so a splash
-    /// is the same on any number of threads and any machine.
-    pub fn splash(
-        &mut self,
-        center: DVec3,
-        speed: f64,
-        seed: u64,
-        weight: &[f64],
-    ) -> Result<(), ParamError> {
-        self.check_len("splash weights", weight.len())?;
-        check_range("splash speed", speed, speed >= 0.0, "finite and ≥ 0")?;
-        if !center.is_finite() {
-            return Err(ParamError::NonFinite {
-                name: "splash centre",
-                index: 0,
-            });
-        }
-        check_each_nonnegative("splash weight", weight)?;
-        // the splashed vertices' velocities and frames, brought to now
-        let splashed: Vec<usize> = (0..weight.len()).filter(|&i| weight[i] > 0.0).collect();
-        let now: Vec<(DVec2, DMat3)> = splashed
-            .par_iter()
-            .map(|&i| self.caught_up(i, DVec3::ZERO))
-            .collect();
-        let st = &mut self.state;
-        for (&i, (u, frame)) in splashed.iter().zip(now) {
-            let mut rng = SplitMix64::new(seed ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
-            let (r1, r2, r3) = (rng.unit(), rng.unit(), rng.unit());
-            st.frames.frame[i] = frame;
-            st.stamp[i] = st.time;
-            let out = st.frames.to_local(i, st.positions[i] - center);
-            let dir = if out.length() > 0.0 {
-                out.normalize()
-            } else {
-                DVec2::from_angle(std::f64::consts::TAU * r3)
-            };
-            let turned = DVec2::from_angle(r1 - 0.5).rotate(dir);
-            st.velocity[i] = u + turned * (speed * weight[i] * (0.5 + r2));
-        }
-        Ok(())
-    }
-
     /// Advances one frame to `positions` over `dt` seconds in `params.substeps`
     /// sub-steps. `after`, if known, is the frame after `positions` (one more `dt`
     /// later): the rectilinear force then uses the frame interval's mean acceleration
