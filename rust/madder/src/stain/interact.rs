@@ -129,7 +129,8 @@
 
 use rayon::prelude::*;
 
-use super::state::Fields;
+// `Fields` lived here before it moved to `state` (issue 11)
+pub use super::state::Fields;
 use crate::error::ParamError;
 use crate::mesh::Topology;
 

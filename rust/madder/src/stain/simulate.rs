@@ -87,6 +87,14 @@ use crate::error::{Error, ParamError};
 use crate::mesh::geometry::check_positions;
 use crate::mesh::{Connection, Geometry, OneRings, RingAdjacency, Topology, VertexFrames};
 
+// the public items that lived here before the window, the diffusion solves and the state
+// got their own modules (issue 11), still reachable by their old paths
+pub use super::diffuse::{DENSITY_TOLERANCE, VELOCITY_TOLERANCE};
+pub use super::state::Totals;
+pub use super::window::{
+    ACTIVE_RINGS, ACTIVE_THRESHOLD, WINDOW_SLACK_RINGS, WINDOW_SLACK_VERTICES,
+};
+
 /// A vertex is "dry" for the evaporation boundary rule (eq. 4.8) below this liquid
 /// density, kg/m² (1 g/m², a film of water 1 µm thick).
 pub const DRY_DENSITY: f64 = 1e-3;
