@@ -7,7 +7,7 @@
 //! - [`mesh`]: fixed triangle topology and the per-frame geometry of a deforming mesh.
 //! - [`ops`]: discrete operators on that geometry (cotan stiffness, lumped mass, §4.3.3)
 //!   and a prefactored sparse SPD solver that reuses its symbolic analysis across frames.
-//! - [`stain`]: the stain simulator (§4.3.3 implicit diffusion for now).
+//! - [`stain`]: the stain simulator (chapter 4: the split step of §4.3).
 //! - [`weave`]: weave patterns (§2.2.1) and their homogenization into one effective 2×2
 //!   diffusion tensor per fabric (§2.2.2, eqs. 2.3–2.4).
 //! - [`io`]: the Madder cache file, and PC2/MDD point caches (the Mesh Cache modifier's

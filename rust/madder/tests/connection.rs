@@ -11,7 +11,11 @@
 //!   rotation, and agrees with a Kabsch built on faer's SVD;
 //! - `K_∇` kills constant fields on a flat mesh, its energy is `Σ L_ij |u_i − R_ij u_j|²`,
 //!   vector diffusion on a flat mesh is two scalar diffusions, and on the unit sphere
-//!   Killing fields have Rayleigh quotient 1 (`∇*∇ = Δ_Hodge − Ric`).
+//!   Killing fields have Rayleigh quotient 1 (`∇*∇ = Δ_Hodge − Ric`);
+//! - the operators restricted to a set of vertices (`ops::restrict`) are the whole ones
+//!   when every vertex is kept, have no flux out (`(M + K_A) 1 = A`), keep exactly the
+//!   inside edges' weights, and their block expansion kills constant fields on a flat
+//!   mesh.
 
 use std::collections::HashMap;
 use std::f64::consts::{PI, TAU};
@@ -21,8 +25,8 @@ use glam::{DMat2, DMat3, DQuat, DVec2, DVec3};
 use madder::mesh::kabsch::{best_rotation, rotation_from_covariance, svd3};
 use madder::mesh::{Connection, FanKind, Geometry, Topology, VertexFrames, one_ring_rotations};
 use madder::ops::{
-    BochnerPattern, BochnerSystem, LowerCsc, VertexPattern, add_lumped_mass, bochner_stiffness,
-    cotan_stiffness, diffuse_tangent_field, solve_spd,
+    BochnerPattern, BochnerSystem, LowerCsc, Restriction, VertexPattern, add_lumped_mass,
+    bochner_stiffness, cotan_stiffness, diffuse_tangent_field, solve_spd,
 };
 
 mod common;
@@ -936,4 +940,146 @@ fn loose_vertex_keeps_its_velocity_and_bad_input_is_reported() {
     );
     u[2] = before[2];
     assert_eq!(u, before);
+}
+
+// ---------------------------------------------------------------------------------------
+// the restriction to a set of vertices (ops::restrict): Neumann diagonal, block expansion
+
+/// `y = A x` for the symmetric matrix whose lower triangle `values` is on `p`.
+fn lower_matvec(p: &impl LowerCsc, values: &[f64], x: &[f64]) -> Vec<f64> {
+    let (cp, ri) = (p.col_ptr(), p.row_idx());
+    let mut y = vec![0.0; p.n()];
+    for j in 0..p.n() {
+        for s in cp[j] as usize..cp[j + 1] as usize {
+            let i = ri[s] as usize;
+            y[i] += values[s] * x[j];
+            if i != j {
+                y[j] += values[s] * x[i];
+            }
+        }
+    }
+    y
+}
+
+#[test]
+fn restriction_to_every_vertex_is_the_whole_operator() {
+    let (t, p) = Grid::new(10, 1.0).jitter(0.5).build();
+    let b = build(&t, &p);
+    let sp = VertexPattern::new(&t);
+    let bp = BochnerPattern::new(&sp);
+    let k = cotan_stiffness(&t, &b.geometry, &sp, 0.3);
+    let area = &b.geometry.vertex_area;
+    let r = Restriction::new(&sp, vec![true; t.n_vertices()]);
+    assert_eq!(r.scalar().col_ptr(), sp.col_ptr());
+    assert_eq!(r.scalar().row_idx(), sp.row_idx());
+    assert_eq!(r.bochner().col_ptr(), bp.col_ptr());
+    assert_eq!(r.bochner().row_idx(), bp.row_idx());
+    // M + K: the off-diagonals are K's; the diagonals A_i + K_ii to rounding (the
+    // Neumann diagonal recomputes K_ii = −Σ_j K_ij, which the whole mesh has face by face)
+    let mut whole = k.clone();
+    add_lumped_mass(&b.geometry, &sp, 1.0, &mut whole);
+    let scalar = r.scalar_values(&sp, &k, area, false);
+    for (s, (&got, &want)) in scalar.iter().zip(&whole).enumerate() {
+        if sp.diag_slot().contains(&(s as u32)) {
+            assert!(
+                (got - want).abs() < 1e-13 * want.abs(),
+                "{s}: {got} vs {want}"
+            );
+        } else {
+            assert_eq!(got, want, "entry {s}");
+        }
+    }
+    // the block values of the same matrix are bochner_stiffness's (+ M ⊗ I₂)
+    let mut blocks = bochner_stiffness(&sp, &bp, &whole, &b.connection);
+    let restricted = r.bochner_values(&scalar, &b.connection);
+    assert_eq!(restricted.len(), blocks.len());
+    for d in bp.diag_slot() {
+        for &s in d {
+            let (got, want) = (restricted[s as usize], blocks[s as usize]);
+            assert!(
+                (got - want).abs() < 1e-13 * want.abs(),
+                "{s}: {got} vs {want}"
+            );
+            blocks[s as usize] = got;
+        }
+    }
+    assert_eq!(restricted, blocks);
+}
+
+#[test]
+fn restriction_is_neumann_and_keeps_only_the_inside_edges() {
+    let (t, p) = Grid::new(14, 1.0).jitter(0.5).build();
+    let b = build(&t, &p);
+    let sp = VertexPattern::new(&t);
+    let k = cotan_stiffness(&t, &b.geometry, &sp, 1.0);
+    let area = &b.geometry.vertex_area;
+    // a disk of vertices away from the border
+    let mask: Vec<bool> = p.iter().map(|q| q.truncate().length() < 0.55).collect();
+    let kept: Vec<usize> = (0..t.n_vertices()).filter(|&v| mask[v]).collect();
+    assert!(kept.len() > 20 && kept.len() < t.n_vertices() / 2);
+    let r = Restriction::new(&sp, mask.clone());
+    assert_eq!(
+        r.vertices,
+        kept.iter().map(|&v| v as u32).collect::<Vec<_>>()
+    );
+    let inside = t
+        .edges()
+        .iter()
+        .filter(|&&[a, b]| mask[a as usize] && mask[b as usize])
+        .count();
+    assert_eq!(r.scalar().nnz(), kept.len() + inside);
+    for clamp in [false, true] {
+        let values = r.scalar_values(&sp, &k, area, clamp);
+        // no flux out: (M + K_A) 1 = the areas of the kept vertices
+        let ones = lower_matvec(r.scalar(), &values, &vec![1.0; kept.len()]);
+        for (j, &v) in kept.iter().enumerate() {
+            assert!(
+                (ones[j] - area[v]).abs() < 1e-14,
+                "{v}: {} vs {}",
+                ones[j],
+                area[v]
+            );
+        }
+        // every kept edge has the mesh's weight (clamped: the non-negative ones zeroed)
+        let local = |v: u32| kept.iter().position(|&w| w as u32 == v).unwrap() as u32;
+        let (cp, ri) = (r.scalar().col_ptr(), r.scalar().row_idx());
+        for (e, &[a, bb]) in t.edges().iter().enumerate() {
+            if !(mask[a as usize] && mask[bb as usize]) {
+                continue;
+            }
+            let (ja, jb) = (local(a), local(bb));
+            let s = (cp[ja as usize]..cp[ja as usize + 1])
+                .find(|&s| ri[s as usize] == jb)
+                .unwrap();
+            let full = k[sp.edge_slot()[e] as usize];
+            let want = if clamp { full.min(0.0) } else { full };
+            assert_eq!(values[s as usize], want, "edge {e}");
+        }
+        // the block system kills a constant field on a flat mesh whatever the cut:
+        // (M ⊗ I₂ + K_∇A) u = A u
+        let w = DVec3::new(0.7, 1.1, 0.0);
+        let u: Vec<DVec2> = kept.iter().map(|&v| b.frames.to_local(v, w)).collect();
+        let blocks = r.bochner_values(&values, &b.connection);
+        let y = lower_matvec(r.bochner(), &blocks, &flat(&u));
+        for (j, &v) in kept.iter().enumerate() {
+            let got = DVec2::new(y[2 * j], y[2 * j + 1]);
+            assert!(
+                (got - area[v] * u[j]).length() < 1e-13,
+                "{v}: {got} vs {}",
+                area[v] * u[j]
+            );
+        }
+        // a field that is not constant is not (the check can fail)
+        let u2: Vec<DVec2> = kept
+            .iter()
+            .map(|&v| b.frames.to_local(v, DVec3::new(p[v].y, 0.0, 0.0)))
+            .collect();
+        let y2 = lower_matvec(r.bochner(), &blocks, &flat(&u2));
+        let off = kept
+            .iter()
+            .enumerate()
+            .map(|(j, &v)| (DVec2::new(y2[2 * j], y2[2 * j + 1]) - area[v] * u2[j]).length())
+            .fold(0.0, f64::max);
+        assert!(off > 1e-3, "{off}");
+    }
 }

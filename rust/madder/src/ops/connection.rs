@@ -59,6 +59,7 @@
 use faer::Par;
 use glam::DVec2;
 
+use super::restrict::{block_pattern, block_values, entry_edges};
 use super::solve::LowerCsc;
 use super::{PrefactoredSpd, VertexPattern};
 use crate::error::{Error, ParamError, SolveError};
@@ -72,35 +73,22 @@ pub struct BochnerPattern {
     row_idx: Vec<u32>,
     diag_slot: Vec<[u32; 2]>,
     edge_slot: Vec<[u32; 4]>,
+    /// The edge of every off-diagonal entry of the scalar pattern.
+    entry_edge: Vec<u32>,
 }
 
 impl BochnerPattern {
-    /// The block expansion of the scalar `pattern` (see the module doc).
+    /// The block expansion of the scalar `pattern` (see the module doc;
+    /// [`super::restrict::block_pattern`]).
     pub fn new(scalar: &VertexPattern) -> Self {
         let n = scalar.n();
-        let (sp, sr) = (scalar.col_ptr(), scalar.row_idx());
-        let mut col_ptr = Vec::with_capacity(2 * n + 1);
-        col_ptr.push(0u32);
-        let mut row_idx = Vec::with_capacity(4 * scalar.nnz());
-        let mut diag_slot = Vec::with_capacity(n);
-        // scalar slot → (block column, rank within the column's off-diagonal entries)
-        let mut slot_rank = vec![0u32; scalar.nnz()];
-        for j in 0..n {
-            let (lo, hi) = (sp[j] as usize, sp[j + 1] as usize);
-            let mut d = [0u32; 2];
-            for (c, dc) in d.iter_mut().enumerate() {
-                *dc = row_idx.len() as u32;
-                row_idx.push((2 * j + c) as u32);
-                for (r, s) in (lo + 1..hi).enumerate() {
-                    let b = sr[s];
-                    row_idx.push(2 * b);
-                    row_idx.push(2 * b + 1);
-                    slot_rank[s] = r as u32;
-                }
-                col_ptr.push(row_idx.len() as u32);
-            }
-            diag_slot.push(d);
-        }
+        let sp = scalar.col_ptr();
+        let block = block_pattern(scalar);
+        let col_ptr = block.col_ptr().to_vec();
+        let diag_slot = (0..n)
+            .map(|j| [col_ptr[2 * j], col_ptr[2 * j + 1]])
+            .collect();
+        // scalar slot → its block column and rank among the column's off-diagonals
         let mut slot_col = vec![0u32; scalar.nnz()];
         for j in 0..n {
             for s in sp[j]..sp[j + 1] {
@@ -111,7 +99,8 @@ impl BochnerPattern {
             .edge_slot()
             .iter()
             .map(|&s| {
-                let (a, r) = (slot_col[s as usize] as usize, slot_rank[s as usize]);
+                let a = slot_col[s as usize] as usize;
+                let r = s - sp[a] - 1;
                 let (c0, c1) = (col_ptr[2 * a], col_ptr[2 * a + 1]);
                 [
                     c0 + 1 + 2 * r,
@@ -124,9 +113,10 @@ impl BochnerPattern {
         Self {
             n_vertices: n,
             col_ptr,
-            row_idx,
+            row_idx: block.row_idx().to_vec(),
             diag_slot,
             edge_slot,
+            entry_edge: entry_edges(scalar),
         }
     }
 
@@ -194,27 +184,17 @@ pub fn bochner_stiffness(
         scalar.edge_slot().len(),
         "connection of another topology"
     );
-    let mut values = vec![0.0; pattern.nnz()];
-    for (&s, d) in scalar.diag_slot().iter().zip(pattern.diag_slot()) {
-        let k = stiffness[s as usize];
-        values[d[0] as usize] = k;
-        values[d[1] as usize] = k;
-    }
-    for ((&s, b), cos_sin) in scalar
-        .edge_slot()
-        .iter()
-        .zip(pattern.edge_slot())
-        .zip(connection.edge_cos_sin())
-    {
-        // block (b, a) = K_ab R_ba = K_ab R_abᵀ = K [c s; −s c]
-        let k = stiffness[s as usize];
-        let [cos, sin] = *cos_sin;
-        values[b[0] as usize] = k * cos;
-        values[b[1] as usize] = -k * sin;
-        values[b[2] as usize] = k * sin;
-        values[b[3] as usize] = k * cos;
-    }
-    values
+    assert_eq!(
+        pattern.n_vertices,
+        scalar.n(),
+        "block pattern of another pattern"
+    );
+    block_values(
+        scalar,
+        stiffness,
+        &pattern.entry_edge,
+        connection.edge_cos_sin(),
+    )
 }
 
 /// Adds `scale × (M ⊗ I₂)` (lumped mass) to the diagonal of `values`.

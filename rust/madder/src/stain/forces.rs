@@ -21,7 +21,7 @@
 //! ([`Forces`]), as the seed's Figs. 4.1/4.2 do.
 //!
 //! - **Rectilinear.** `p̈_i` is the centred second difference of the vertex positions
-//!   over frames, `(p^{t+H} − 2p^t + p^{t−H})/H²` ([`frame_acceleration`]). Over the frame
+//!   over frames, `(p^{t+H} − 2p^t + p^{t−H})/H²` ([`second_difference`]). Over the frame
 //!   interval `[t_k, t_{k+1}]` the simulator applies `½(p̈_k + p̈_{k+1})` when it is given
 //!   the frame after (second order; a rotating disk's centripetal acceleration is then
 //!   right from the first frame), else `p̈_k`, and `p̈_0` is the forward difference, or
@@ -31,9 +31,9 @@
 //!   `(F^{tᵀ} F^{t+h} − F^{t+hᵀ} F^t)/2h`, whose axial vector is `sin(ϑ)/h` times the axis of
 //!   the relative rotation `Q = F^{tᵀ} F^{t+h}` of angle `ϑ`. We rescale it by `ϑ / sin ϑ`,
 //!   which makes `ω` exact for a steady rotation at any step (the seed's estimate is off
-//!   by `ϑ²/6`) ([`angular_velocity`]). Only the frame-normal component `ω_z` changes a
+//!   by `ϑ²/6`) ([`frame_angular_velocity`]). Only the frame-normal component `ω_z` changes a
 //!   tangential velocity (`ω_t × u` is normal), and `u̇ = −2 ω_z J u` (`J` the quarter turn)
-//!   is integrated exactly, as the rotation of `u` by `−2 ω_z h` ([`apply_coriolis`]):
+//!   is integrated exactly, as the rotation of `u` by `−2 ω_z h` (within [`integrate_velocity`]):
 //!   it turns the velocity without changing its speed, as the Coriolis force does, for
 //!   any step size (forward Euler would add energy every step).
 //! - **Gravity.** The tangential part of `g`: the `(x, y)` components of `F_iᵀ g` (the
@@ -44,11 +44,12 @@
 //!   which [`integrate_velocity`] solves exactly over a step for constant `a` and `ω`
 //!   (its doc says why splitting it is wrong at cloth frictions).
 
+use faer::c64;
 use glam::{DMat3, DVec2, DVec3};
 use rayon::prelude::*;
 
 use crate::error::MeshError;
-use crate::mesh::{OneRings, RingAdjacency, Topology, VertexFrames, one_ring_rotations};
+use crate::mesh::{OneRings, RingAdjacency, VertexFrames};
 
 /// Which body forces act (each can be switched off, as in the seed's Figs. 4.1/4.2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -71,19 +72,9 @@ impl Default for Forces {
     }
 }
 
-/// The comoving–corotating frames `F_i = U_i F̄_i` at `current` positions.
-pub fn corotating_frames(
-    topology: &Topology,
-    rest_frames: &VertexFrames,
-    rest: &[DVec3],
-    current: &[DVec3],
-) -> Result<VertexFrames, MeshError> {
-    let rotation = one_ring_rotations(topology, rest, current)?;
-    Ok(rest_frames.rotated(&rotation))
-}
-
-/// [`corotating_frames`] with the adjacency built once per mesh and positions already
-/// checked: each frame `U_i F̄_i` in one parallel pass (the same values).
+/// The comoving–corotating frames `F_i = U_i F̄_i` at `current` positions, `U_i` the
+/// Kabsch rotation of vertex `i`'s one-ring from `rest` (module doc), with the adjacency
+/// built once per mesh and positions already checked; one parallel pass.
 ///
 /// # Panics
 /// If `rest_frames`, `rest` or `current` does not have one entry per vertex.
@@ -114,20 +105,9 @@ pub fn rest_frames(rings: &OneRings, rest: &[DVec3]) -> Result<VertexFrames, Mes
     VertexFrames::new(rings, rest)
 }
 
-/// Angular velocity `ω_i` of every frame between `before` and `after` (`h` apart), in the
-/// coordinates of `before`: the axial vector of the antisymmetrized `F^{tᵀ} Ḟ`, rescaled
-/// to be exact for a steady rotation (module doc).
-pub fn angular_velocity(before: &VertexFrames, after: &VertexFrames, h: f64) -> Vec<DVec3> {
-    assert_eq!(before.len(), after.len(), "frames of different meshes");
-    before
-        .frame
-        .par_iter()
-        .zip(&after.frame)
-        .map(|(a, b)| frame_angular_velocity(a, b, h))
-        .collect()
-}
-
-/// `ω` of one frame turning from `a` to `b` in `h` (see [`angular_velocity`]).
+/// Angular velocity `ω` of a frame turning from `a` to `b` in `h`, in the coordinates of
+/// `a`: the axial vector of the antisymmetrized `F^{tᵀ} Ḟ`, rescaled to be exact for a
+/// steady rotation (module doc).
 pub fn frame_angular_velocity(a: &DMat3, b: &DMat3, h: f64) -> DVec3 {
     let q: DMat3 = a.transpose() * *b;
     // axial vector of (Q − Qᵀ)/2 = sin ϑ · axis
@@ -143,22 +123,6 @@ pub fn frame_angular_velocity(a: &DMat3, b: &DMat3, h: f64) -> DVec3 {
     // ϑ / sin ϑ → 1 as ϑ → 0 (below 1e-8 the ratio is 1 to rounding)
     let scale = if sin > 1e-8 { angle / sin } else { 1.0 };
     s * (scale / h)
-}
-
-/// Rotates every velocity by `−2 ω_z h`: the exact solution of `u̇ = −2 ω × u` restricted
-/// to the tangent plane over a step `h` (`omega` in frame coordinates).
-pub fn apply_coriolis(omega: &[DVec3], h: f64, velocity: &mut [DVec2]) {
-    assert_eq!(omega.len(), velocity.len());
-    velocity
-        .par_iter_mut()
-        .zip(omega)
-        .for_each(|(u, w)| *u = coriolis_turn(*w, h, *u));
-}
-
-/// `u` turned by `−2 ω_z h` (one vertex of [`apply_coriolis`]).
-pub fn coriolis_turn(omega: DVec3, h: f64, u: DVec2) -> DVec2 {
-    let (sin, cos) = (-2.0 * omega.z * h).sin_cos();
-    DVec2::new(cos * u.x - sin * u.y, sin * u.x + cos * u.y)
 }
 
 /// The exact solution over `h` of the velocity equation of one vertex,
@@ -184,91 +148,44 @@ pub fn integrate_velocity(
     friction: f64,
     h: f64,
 ) -> (DVec2, DVec2) {
-    let z = Complex(-friction * h, -2.0 * omega_z * h);
-    let (e, phi1, phi2) = z.phi();
-    let (u, a) = (Complex(u.x, u.y), Complex(a.x, a.y));
-    let end = e.mul(u).add(phi1.mul(a).scale(h));
-    let mean = phi1.mul(u).add(phi2.mul(a).scale(h));
-    (DVec2::new(end.0, end.1), DVec2::new(mean.0, mean.1))
+    let (e, phi1, phi2) = phi(c64::new(-friction * h, -2.0 * omega_z * h));
+    let (u, a) = (c64::new(u.x, u.y), c64::new(a.x, a.y));
+    let end = e * u + phi1 * a * h;
+    let mean = phi1 * u + phi2 * a * h;
+    (DVec2::new(end.re, end.im), DVec2::new(mean.re, mean.im))
 }
 
-/// A complex number `(re, im)`: just what [`integrate_velocity`] needs.
-#[derive(Debug, Clone, Copy)]
-struct Complex(f64, f64);
-
-impl Complex {
-    fn add(self, o: Self) -> Self {
-        Self(self.0 + o.0, self.1 + o.1)
+/// `(e^z, φ₁(z), φ₂(z))`; by their Taylor series for small `|z|`, where the closed forms
+/// cancel (six terms: the error is below `|z|⁶/5040 ≤ 2e-22` for `|z| ≤ 0.05`).
+fn phi(z: c64) -> (c64, c64, c64) {
+    let r = z.re.exp();
+    let (sin, cos) = z.im.sin_cos();
+    let e = c64::new(r * cos, r * sin);
+    if z.re.hypot(z.im) > 0.05 {
+        let phi1 = c64::new(e.re - 1.0, e.im) / z;
+        let phi2 = c64::new(phi1.re - 1.0, phi1.im) / z;
+        return (e, phi1, phi2);
     }
-    fn mul(self, o: Self) -> Self {
-        Self(self.0 * o.0 - self.1 * o.1, self.0 * o.1 + self.1 * o.0)
-    }
-    fn scale(self, s: f64) -> Self {
-        Self(self.0 * s, self.1 * s)
-    }
-    fn div(self, o: Self) -> Self {
-        let d = o.0 * o.0 + o.1 * o.1;
-        Self(
-            (self.0 * o.0 + self.1 * o.1) / d,
-            (self.1 * o.0 - self.0 * o.1) / d,
-        )
-    }
-    /// `(e^z, φ₁(z), φ₂(z))`; by their Taylor series for small `|z|`, where the closed
-    /// forms cancel (six terms: the error is below `|z|⁶/5040 ≤ 2e-22` for `|z| ≤ 0.05`).
-    fn phi(self) -> (Self, Self, Self) {
-        let r = self.0.exp();
-        let (sin, cos) = self.1.sin_cos();
-        let e = Self(r * cos, r * sin);
-        if self.0.hypot(self.1) > 0.05 {
-            let em1 = Self(e.0 - 1.0, e.1);
-            let phi1 = em1.div(self);
-            let phi2 = Self(phi1.0 - 1.0, phi1.1).div(self);
-            return (e, phi1, phi2);
+    // φ₁ = Σ z^k/(k+1)!, φ₂ = Σ z^k/(k+2)!, k = 0..5 (Horner)
+    let horner = |first: u32| {
+        let mut acc = c64::new(0.0, 0.0);
+        for k in (0..6u32).rev() {
+            let fact: f64 = (1..=k + first).map(f64::from).product();
+            acc = acc * z + c64::new(1.0 / fact, 0.0);
         }
-        // φ₁ = Σ z^k/(k+1)!, φ₂ = Σ z^k/(k+2)!, k = 0..5 (Horner)
-        let horner = |first: u32| {
-            let mut acc = Self(0.0, 0.0);
-            for k in (0..6u32).rev() {
-                let fact: f64 = (1..=k + first).map(f64::from).product();
-                acc = acc.mul(self).add(Self(1.0 / fact, 0.0));
-            }
-            acc
-        };
-        (e, horner(1), horner(2))
-    }
+        acc
+    };
+    (e, horner(1), horner(2))
 }
 
-/// Centred second difference `(next − 2 cur + prev) / H²` per vertex (world coordinates).
-pub fn frame_acceleration(prev: &[DVec3], cur: &[DVec3], next: &[DVec3], dt: f64) -> Vec<DVec3> {
-    prev.par_iter()
-        .zip(cur)
-        .zip(next)
-        .map(|((a, b), c)| second_difference(*a, *b, *c, dt))
-        .collect()
-}
-
-/// One vertex of [`frame_acceleration`].
+/// Centred second difference `(next − 2 cur + prev) / H²` of one vertex (world coordinates).
 pub fn second_difference(prev: DVec3, cur: DVec3, next: DVec3, dt: f64) -> DVec3 {
     (next - 2.0 * cur + prev) * (1.0 / (dt * dt))
 }
 
-/// The tangential body acceleration `(x, y)` components of `F_iᵀ (g − p̈_i)` for the
-/// enabled forces (the Coriolis term is applied separately, [`apply_coriolis`]).
-pub fn body_acceleration(
-    frames: &VertexFrames,
-    acceleration: &[DVec3],
-    gravity: DVec3,
-    forces: Forces,
-) -> Vec<DVec2> {
-    frames
-        .frame
-        .par_iter()
-        .zip(acceleration)
-        .map(|(f, &a)| frame_body_acceleration(f, a, gravity, forces))
-        .collect()
-}
-
-/// One vertex of [`body_acceleration`]: frame `f`, its acceleration `a` (world).
+/// The tangential body acceleration: the `(x, y)` components of `fᵀ (g − a)` for frame
+/// `f` and its acceleration `a` (world), for the enabled forces (the Coriolis term is
+/// [`integrate_velocity`]'s).
 pub fn frame_body_acceleration(f: &DMat3, a: DVec3, gravity: DVec3, forces: Forces) -> DVec2 {
     let g = if forces.gravity { gravity } else { DVec3::ZERO };
     let world = if forces.rectilinear { g - a } else { g };
@@ -282,12 +199,6 @@ fn frames_local(f: &DMat3, w: DVec3) -> DVec2 {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn turned(frames: &[DMat3], r: DMat3) -> VertexFrames {
-        VertexFrames {
-            frame: frames.iter().map(|f| r * *f).collect(),
-        }
-    }
 
     /// `u̇ = a − k u − 2ω J u` by classical RK4 with `steps` steps over `h`, and the
     /// trapezoid-rule mean of the samples (an independent reference).
@@ -342,7 +253,9 @@ mod tests {
         assert!((u - a / 50.0).length() < 1e-14, "{u} vs {}", a / 50.0);
         // pure rotation keeps the speed and turns by −2ωh
         let (end, _) = integrate_velocity(u0, DVec2::ZERO, 0.8, 0.0, 0.3);
-        assert!((end - coriolis_turn(DVec3::new(0.0, 0.0, 0.8), 0.3, u0)).length() < 1e-15);
+        let (sin, cos) = (-2.0f64 * 0.8 * 0.3).sin_cos();
+        let turned = DVec2::new(cos * u0.x - sin * u0.y, sin * u0.x + cos * u0.y);
+        assert!((end - turned).length() < 1e-15);
     }
 
     #[test]
@@ -353,67 +266,66 @@ mod tests {
         ];
         let axis = DVec3::new(0.3, -0.4, 0.866).normalize();
         let (w, h) = (2.5, 0.1); // ϑ = 0.25 rad per step
-        let a = VertexFrames { frame: f0.clone() };
-        let b = turned(&f0, DMat3::from_axis_angle(axis, w * h));
-        for (k, om) in angular_velocity(&a, &b, h).iter().enumerate() {
+        let turn = DMat3::from_axis_angle(axis, w * h);
+        for f in &f0 {
+            let om = frame_angular_velocity(f, &(turn * *f), h);
             // in body coordinates: Fᵀ axis
-            let expect = f0[k].transpose() * axis * w;
-            assert!((*om - expect).length() < 1e-12, "{om} vs {expect}");
+            let expect = f.transpose() * axis * w;
+            assert!((om - expect).length() < 1e-12, "{om} vs {expect}");
         }
     }
 
     #[test]
     fn coriolis_turns_the_velocity_at_twice_the_rate_and_keeps_its_speed() {
-        let mut u = vec![DVec2::new(1.0, 0.5)];
-        let omega = vec![DVec3::new(0.3, 0.1, 0.8)];
+        // no force, no friction: the Coriolis turn alone, ω_z = 0.8
+        let mut u = DVec2::new(1.0, 0.5);
         let h = 0.05;
         for _ in 0..100 {
-            apply_coriolis(&omega, h, &mut u);
+            u = integrate_velocity(u, DVec2::ZERO, 0.8, 0.0, h).0;
         }
         // total turn −2·0.8·5 = −8 rad
         let (s, c) = (-8.0f64).sin_cos();
         let expect = DVec2::new(c - s * 0.5, s + c * 0.5);
-        assert!((u[0] - expect).length() < 1e-12);
+        assert!((u - expect).length() < 1e-12);
     }
 
     #[test]
     fn body_acceleration_is_the_tangential_part_of_g_minus_the_frame_acceleration() {
         let f = DMat3::from_rotation_x(0.4);
-        let frames = VertexFrames { frame: vec![f] };
         let g = DVec3::new(0.0, 0.0, -9.81);
         let a = DVec3::new(1.0, 2.0, 0.5);
-        let all = body_acceleration(&frames, &[a], g, Forces::default())[0];
+        let all = frame_body_acceleration(&f, a, g, Forces::default());
         let w = g - a;
         assert!((all - DVec2::new(f.x_axis.dot(w), f.y_axis.dot(w))).length() < 1e-15);
-        let only_g = body_acceleration(
-            &frames,
-            &[a],
+        let only_g = frame_body_acceleration(
+            &f,
+            a,
             g,
             Forces {
                 rectilinear: false,
                 ..Forces::default()
             },
-        )[0];
+        );
         assert!((only_g - DVec2::new(0.0, f.y_axis.dot(g))).length() < 1e-15);
-        let none = body_acceleration(
-            &frames,
-            &[a],
+        let none = frame_body_acceleration(
+            &f,
+            a,
             g,
             Forces {
                 gravity: false,
                 rectilinear: false,
                 coriolis: false,
             },
-        )[0];
+        );
         assert_eq!(none, DVec2::ZERO);
     }
 
     #[test]
     fn centred_difference_is_exact_for_uniform_acceleration() {
         let acc = DVec3::new(0.3, -1.0, 2.0);
-        let p = |t: f64| vec![DVec3::new(1.0, 2.0, 3.0) + DVec3::X * t + 0.5 * acc * t * t];
+        let p = |t: f64| DVec3::new(1.0, 2.0, 3.0) + DVec3::X * t + 0.5 * acc * t * t;
         let dt = 0.04;
-        let a = frame_acceleration(&p(1.0 - dt), &p(1.0), &p(1.0 + dt), dt)[0];
+        let a = second_difference(p(1.0 - dt), p(1.0), p(1.0 + dt), dt);
         assert!((a - acc).length() < 1e-9, "{a}");
     }
 }

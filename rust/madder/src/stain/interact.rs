@@ -129,6 +129,8 @@
 
 use rayon::prelude::*;
 
+// `Fields` lived here before it moved to `state` (issue 11)
+pub use super::state::Fields;
 use crate::error::ParamError;
 use crate::mesh::Topology;
 
@@ -202,118 +204,6 @@ impl InteractionRates {
             });
         }
         Ok(())
-    }
-}
-
-/// The interacting fields of every vertex (masses in kg; colour masses optional).
-///
-/// Colour masses are solute mass × RGB colour: `color_free` accompanies `solute`,
-/// `color_held` accompanies `absorbed_solute + adsorbed`. Give both or neither.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Fields {
-    /// Free solvent `f` (flows).
-    pub free_solvent: Vec<f64>,
-    /// Dissolved solute `s` (flows with the free solvent).
-    pub solute: Vec<f64>,
-    /// Absorbed solvent `p` (held in the fibres).
-    pub absorbed_solvent: Vec<f64>,
-    /// Absorbed solute `sp` (held in the fibres).
-    pub absorbed_solute: Vec<f64>,
-    /// Adsorbed solute `sa` (deposited: the permanent mark).
-    pub adsorbed: Vec<f64>,
-    /// Colour mass of the dissolved solute.
-    pub color_free: Option<Vec<[f64; 3]>>,
-    /// Colour mass of the held solute `sp + sa`.
-    pub color_held: Option<Vec<[f64; 3]>>,
-}
-
-impl Fields {
-    /// `n` dry, clean vertices, without colour.
-    pub fn zeros(n: usize) -> Self {
-        Self {
-            free_solvent: vec![0.0; n],
-            solute: vec![0.0; n],
-            absorbed_solvent: vec![0.0; n],
-            absorbed_solute: vec![0.0; n],
-            adsorbed: vec![0.0; n],
-            color_free: None,
-            color_held: None,
-        }
-    }
-
-    /// The fields of the vertices `index` (in that order).
-    pub fn gather(&self, index: &[u32]) -> Self {
-        let pick = |v: &[f64]| index.iter().map(|&i| v[i as usize]).collect();
-        let pick3 = |v: &Option<Vec<[f64; 3]>>| {
-            v.as_ref()
-                .map(|v| index.iter().map(|&i| v[i as usize]).collect())
-        };
-        Self {
-            free_solvent: pick(&self.free_solvent),
-            solute: pick(&self.solute),
-            absorbed_solvent: pick(&self.absorbed_solvent),
-            absorbed_solute: pick(&self.absorbed_solute),
-            adsorbed: pick(&self.adsorbed),
-            color_free: pick3(&self.color_free),
-            color_held: pick3(&self.color_held),
-        }
-    }
-
-    /// Writes `part` (the fields of the vertices `index`, as [`Fields::gather`] gives
-    /// them) back into these fields.
-    ///
-    /// # Panics
-    /// If `part` tracks colour and these fields do not, or the lengths differ.
-    pub fn scatter(&mut self, index: &[u32], part: &Fields) {
-        fn put<T: Copy>(to: &mut [T], index: &[u32], from: &[T]) {
-            assert_eq!(index.len(), from.len(), "one value per index");
-            for (&i, &x) in index.iter().zip(from) {
-                to[i as usize] = x;
-            }
-        }
-        put(&mut self.free_solvent, index, &part.free_solvent);
-        put(&mut self.solute, index, &part.solute);
-        put(&mut self.absorbed_solvent, index, &part.absorbed_solvent);
-        put(&mut self.absorbed_solute, index, &part.absorbed_solute);
-        put(&mut self.adsorbed, index, &part.adsorbed);
-        for (to, from) in [
-            (&mut self.color_free, &part.color_free),
-            (&mut self.color_held, &part.color_held),
-        ] {
-            if let Some(from) = from {
-                put(
-                    to.as_mut().expect("colour tracked in the part only"),
-                    index,
-                    from,
-                );
-            }
-        }
-    }
-
-    /// Whether vertex `i` holds liquid or solute that can still change (anything but
-    /// the adsorbed deposit).
-    pub fn is_live(&self, i: usize) -> bool {
-        self.free_solvent[i] > 0.0
-            || self.solute[i] > 0.0
-            || self.absorbed_solvent[i] > 0.0
-            || self.absorbed_solute[i] > 0.0
-    }
-
-    /// `Σ_i (s_i + sp_i + sa_i)`, in vertex order.
-    pub fn total_solute(&self) -> f64 {
-        self.solute
-            .iter()
-            .zip(&self.absorbed_solute)
-            .zip(&self.adsorbed)
-            .fold(0.0, |acc, ((s, sp), sa)| acc + (s + sp + sa))
-    }
-
-    /// `Σ_i (f_i + p_i)`, in vertex order.
-    pub fn total_solvent(&self) -> f64 {
-        self.free_solvent
-            .iter()
-            .zip(&self.absorbed_solvent)
-            .fold(0.0, |acc, (f, p)| acc + (f + p))
     }
 }
 

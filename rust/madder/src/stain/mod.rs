@@ -1,7 +1,14 @@
-//! The stain simulator (seed chapter 4): the split step of §4.3 — body forces (§4.4),
-//! advection (§4.3.1–4.3.2), diffusion (§4.3.3–4.3.4) and stain–surface interactions
-//! (§4.5) — on a deforming mesh. [`Simulator`] runs it; [`DiffusionStepper`] is the
-//! diffusion alone (the first slice, kept for the fabric experiments).
+//! The stain simulator (seed chapter 4) on a deforming mesh, one concept per file:
+//!
+//! - [`simulate`]: [`Simulator`] and its parameters, the split step of §4.3 — body forces
+//!   ([`forces`], §4.4), advection ([`advect`], §4.3.1–4.3.2, with the velocity extended
+//!   over the dry cloth by [`extend`]), diffusion ([`diffuse`], §4.3.3–4.3.4) and
+//!   stain–surface interactions ([`interact`], §4.5);
+//! - [`window`]: the active region a frame works on, cut out of the cloth;
+//! - [`state`]: the per-vertex fields and the simulator's state, and what is read out of it;
+//! - [`sources`]: liquid poured, splashes and initial velocities;
+//! - [`DiffusionStepper`] ([`diffuse`]): the diffusion alone (the first slice, kept for the
+//!   fabric experiments).
 
 pub mod advect;
 pub mod diffuse;
@@ -9,8 +16,12 @@ pub mod extend;
 pub mod forces;
 pub mod interact;
 pub mod simulate;
+pub mod sources;
+pub mod state;
+pub mod window;
 
 pub use diffuse::{Conductivity, DiffusionStepper, WovenFaces};
 pub use forces::Forces;
-pub use interact::{Fields, InteractionRates};
-pub use simulate::{Profile, Simulator, StainParams, Totals};
+pub use interact::InteractionRates;
+pub use simulate::{Profile, Simulator, StainParams};
+pub use state::{Fields, Totals};

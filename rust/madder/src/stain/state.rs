@@ -1,0 +1,288 @@
+//! The state of the stain simulator (seed §4.3, §4.5): the per-vertex fields it steps and
+//! their totals.
+//!
+//! State per vertex: the tangent velocity `u_i` (in the comoving–corotating frame `F_i`,
+//! [`super::forces`]), the free solvent `σ_f` and the solute dissolved in it `σ_s` (which
+//! flow), the absorbed solvent `σ_p` and absorbed solute (held in the fibres), and the
+//! adsorbed solute (the permanent deposit). Densities are per unit area; the simulator
+//! stores **masses** `m_i = A_i σ_i` (`A_i` the lumped vertex area) because the liquid in
+//! a cloth moves with the cloth: when the mesh stretches, the masses ride on the
+//! vertices and the densities are re-read on the new areas. Total solute is then a plain
+//! sum that only rounding can change.
+//!
+//!
+//! [`Fields`] are the five masses of §4.5 (and the optional colour masses), the ones the
+//! interactions ([`super::interact`]) exchange. The simulator's `State` adds the velocity,
+//! the vertex frames and the areas, with the bookkeeping of the window
+//! ([`super::window`]): when each vertex was last stepped and which ever held liquid. A
+//! frame works on a `Local` copy of its window's part and commits it only when the whole
+//! frame succeeded (module doc of [`super::simulate`], "Failure").
+
+use glam::{DVec2, DVec3};
+
+use super::simulate::Simulator;
+use crate::mesh::VertexFrames;
+
+/// The interacting fields of every vertex (masses in kg; colour masses optional).
+///
+/// Colour masses are solute mass × RGB colour: `color_free` accompanies `solute`,
+/// `color_held` accompanies `absorbed_solute + adsorbed`. Give both or neither.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Fields {
+    /// Free solvent `f` (flows).
+    pub free_solvent: Vec<f64>,
+    /// Dissolved solute `s` (flows with the free solvent).
+    pub solute: Vec<f64>,
+    /// Absorbed solvent `p` (held in the fibres).
+    pub absorbed_solvent: Vec<f64>,
+    /// Absorbed solute `sp` (held in the fibres).
+    pub absorbed_solute: Vec<f64>,
+    /// Adsorbed solute `sa` (deposited: the permanent mark).
+    pub adsorbed: Vec<f64>,
+    /// Colour mass of the dissolved solute.
+    pub color_free: Option<Vec<[f64; 3]>>,
+    /// Colour mass of the held solute `sp + sa`.
+    pub color_held: Option<Vec<[f64; 3]>>,
+}
+
+impl Fields {
+    /// `n` dry, clean vertices, without colour.
+    pub fn zeros(n: usize) -> Self {
+        Self {
+            free_solvent: vec![0.0; n],
+            solute: vec![0.0; n],
+            absorbed_solvent: vec![0.0; n],
+            absorbed_solute: vec![0.0; n],
+            adsorbed: vec![0.0; n],
+            color_free: None,
+            color_held: None,
+        }
+    }
+
+    /// The fields of the vertices `index` (in that order).
+    pub fn gather(&self, index: &[u32]) -> Self {
+        let pick = |v: &[f64]| index.iter().map(|&i| v[i as usize]).collect();
+        let pick3 = |v: &Option<Vec<[f64; 3]>>| {
+            v.as_ref()
+                .map(|v| index.iter().map(|&i| v[i as usize]).collect())
+        };
+        Self {
+            free_solvent: pick(&self.free_solvent),
+            solute: pick(&self.solute),
+            absorbed_solvent: pick(&self.absorbed_solvent),
+            absorbed_solute: pick(&self.absorbed_solute),
+            adsorbed: pick(&self.adsorbed),
+            color_free: pick3(&self.color_free),
+            color_held: pick3(&self.color_held),
+        }
+    }
+
+    /// Writes `part` (the fields of the vertices `index`, as [`Fields::gather`] gives
+    /// them) back into these fields.
+    ///
+    /// # Panics
+    /// If `part` tracks colour and these fields do not, or the lengths differ.
+    pub fn scatter(&mut self, index: &[u32], part: &Fields) {
+        fn put<T: Copy>(to: &mut [T], index: &[u32], from: &[T]) {
+            assert_eq!(index.len(), from.len(), "one value per index");
+            for (&i, &x) in index.iter().zip(from) {
+                to[i as usize] = x;
+            }
+        }
+        put(&mut self.free_solvent, index, &part.free_solvent);
+        put(&mut self.solute, index, &part.solute);
+        put(&mut self.absorbed_solvent, index, &part.absorbed_solvent);
+        put(&mut self.absorbed_solute, index, &part.absorbed_solute);
+        put(&mut self.adsorbed, index, &part.adsorbed);
+        for (to, from) in [
+            (&mut self.color_free, &part.color_free),
+            (&mut self.color_held, &part.color_held),
+        ] {
+            if let Some(from) = from {
+                put(
+                    to.as_mut().expect("colour tracked in the part only"),
+                    index,
+                    from,
+                );
+            }
+        }
+    }
+
+    /// Whether vertex `i` holds liquid or solute that can still change (anything but
+    /// the adsorbed deposit).
+    pub fn is_live(&self, i: usize) -> bool {
+        self.free_solvent[i] > 0.0
+            || self.solute[i] > 0.0
+            || self.absorbed_solvent[i] > 0.0
+            || self.absorbed_solute[i] > 0.0
+    }
+
+    /// `Σ_i (s_i + sp_i + sa_i)`, in vertex order.
+    pub fn total_solute(&self) -> f64 {
+        self.solute
+            .iter()
+            .zip(&self.absorbed_solute)
+            .zip(&self.adsorbed)
+            .fold(0.0, |acc, ((s, sp), sa)| acc + (s + sp + sa))
+    }
+
+    /// `Σ_i (f_i + p_i)`, in vertex order.
+    pub fn total_solvent(&self) -> f64 {
+        self.free_solvent
+            .iter()
+            .zip(&self.absorbed_solvent)
+            .fold(0.0, |acc, (f, p)| acc + (f + p))
+    }
+}
+
+/// Everything that changes during a bake (committed frame by frame).
+#[derive(Debug, Clone)]
+pub(super) struct State {
+    pub(super) positions: Vec<DVec3>,
+    pub(super) previous: Option<Vec<DVec3>>,
+    /// The frame of every vertex at `stamp`, the time its velocity was last stepped
+    /// (vertices outside the window are not stepped: [`super::window`]).
+    pub(super) frames: VertexFrames,
+    pub(super) stamp: Vec<f64>,
+    /// Lumped areas at the current frame of every vertex that holds anything (and of the
+    /// window's vertices); other vertices keep the area they had when last needed.
+    pub(super) vertex_area: Vec<f64>,
+    pub(super) velocity: Vec<DVec2>,
+    pub(super) fields: Fields,
+    pub(super) evaporated: f64,
+    pub(super) time: f64,
+    /// Vertices that have ever held liquid or solute (their areas are kept current).
+    pub(super) stained: Vec<u32>,
+    pub(super) is_stained: Vec<bool>,
+}
+
+impl State {
+    /// Adds vertex `v` to the vertices that have held liquid (once).
+    pub(super) fn mark_stained(&mut self, v: usize) {
+        if !self.is_stained[v] {
+            self.is_stained[v] = true;
+            self.stained.push(v as u32);
+        }
+    }
+}
+
+/// Totals over the mesh (kg), for conservation checks and reports.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Totals {
+    /// Free + absorbed solvent.
+    pub solvent: f64,
+    /// Dissolved + absorbed + adsorbed solute.
+    pub solute: f64,
+    /// Solvent evaporated since the start.
+    pub evaporated: f64,
+}
+
+/// One frame's work on a window, committed when the whole frame succeeded.
+pub(super) struct Local {
+    pub(super) velocity: Vec<DVec2>,
+    pub(super) frames: VertexFrames,
+    pub(super) fields: Fields,
+    pub(super) area: Vec<f64>,
+    pub(super) evaporated: f64,
+    /// Transport sub-cycles of the last sub-step.
+    pub(super) cycles: usize,
+}
+
+/// The colour masses `[r, g, b]` per vertex as three fields (what the solves take).
+pub(super) fn split_rgb(c: &[[f64; 3]]) -> [Vec<f64>; 3] {
+    std::array::from_fn(|k| c.iter().map(|x| x[k]).collect())
+}
+
+/// The inverse of [`split_rgb`], into `out`.
+pub(super) fn merge_rgb(c: &[Vec<f64>; 3], out: &mut [[f64; 3]]) {
+    for (i, o) in out.iter_mut().enumerate() {
+        *o = [c[0][i], c[1][i], c[2][i]];
+    }
+}
+
+/// What can be read out of the state (the cache's fields, the totals).
+impl Simulator {
+    /// Lumped vertex areas of the current frame, m² (of every vertex that holds or held
+    /// anything; a vertex that never did keeps an older area).
+    pub fn vertex_area(&self) -> &[f64] {
+        &self.state.vertex_area
+    }
+    /// Per-vertex masses, kg.
+    pub fn fields(&self) -> &Fields {
+        &self.state.fields
+    }
+    /// Velocities in the vertex frames, m/s (of each vertex's last step: a vertex outside
+    /// the window keeps the value it left it with).
+    pub fn velocity(&self) -> &[DVec2] {
+        &self.state.velocity
+    }
+    /// Velocities as world vectors, m/s (as [`Simulator::velocity`], in the frame of each
+    /// vertex's last step).
+    pub fn velocity_world(&self) -> Vec<DVec3> {
+        (0..self.state.velocity.len())
+            .map(|i| self.state.frames.to_world(i, self.state.velocity[i]))
+            .collect()
+    }
+    /// Density `mass / A_i` of a mass field (0 where a vertex has no area).
+    pub fn density(&self, mass: &[f64]) -> Vec<f64> {
+        mass.iter()
+            .zip(&self.state.vertex_area)
+            .map(|(m, a)| if *a > 0.0 { m / a } else { 0.0 })
+            .collect()
+    }
+
+    /// Liquid density (free + absorbed solvent), kg/m².
+    pub fn wetness(&self) -> Vec<f64> {
+        let f = &self.state.fields;
+        let wet: Vec<f64> = f
+            .free_solvent
+            .iter()
+            .zip(&f.absorbed_solvent)
+            .map(|(a, b)| a + b)
+            .collect();
+        self.density(&wet)
+    }
+
+    /// Total solute density (dissolved + absorbed + adsorbed), kg/m².
+    pub fn solute_density(&self) -> Vec<f64> {
+        let f = &self.state.fields;
+        let s: Vec<f64> = (0..f.solute.len())
+            .map(|i| f.solute[i] + f.absorbed_solute[i] + f.adsorbed[i])
+            .collect();
+        self.density(&s)
+    }
+
+    /// Adsorbed solute density (the permanent deposit), kg/m².
+    pub fn deposit(&self) -> Vec<f64> {
+        self.density(&self.state.fields.adsorbed)
+    }
+
+    /// Colour of the solute at every vertex (mass-weighted mix of the liquids poured;
+    /// the liquid's colour where there is no solute).
+    pub fn solute_color(&self) -> Vec<[f64; 3]> {
+        let f = &self.state.fields;
+        match (&f.color_free, &f.color_held) {
+            (Some(cf), Some(ch)) => (0..f.solute.len())
+                .map(|i| {
+                    let s = f.solute[i] + f.absorbed_solute[i] + f.adsorbed[i];
+                    if s > 1e-300 {
+                        std::array::from_fn(|k| (cf[i][k] + ch[i][k]) / s)
+                    } else {
+                        self.solute_color
+                    }
+                })
+                .collect(),
+            _ => vec![self.solute_color; f.solute.len()],
+        }
+    }
+
+    /// Totals over the mesh (sums in vertex order).
+    pub fn totals(&self) -> Totals {
+        let f = &self.state.fields;
+        Totals {
+            solvent: f.total_solvent(),
+            solute: f.total_solute(),
+            evaporated: self.state.evaporated,
+        }
+    }
+}

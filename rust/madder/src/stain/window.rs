@@ -1,0 +1,444 @@
+//! The window a frame works on: the active region around the liquid (seed §4.3; the
+//! restricted operators of §4.3.3 are [`crate::ops::restrict`]).
+//!
+//! A stain usually covers a small part of the cloth, so with `active_region` (the
+//! default) a frame works on a *window*, a mesh of its own cut out of the cloth:
+//!
+//! - the **active** vertices: those holding flowing liquid — free solvent or dissolved
+//!   solute density above [`ACTIVE_THRESHOLD`] (1e-12) of that field's peak — grown by
+//!   [`ACTIVE_RINGS`] (3) rings plus one ring per transport sub-cycle of the frame's
+//!   sub-steps (liquid moves at most one ring per sub-cycle, so it cannot reach the
+//!   region's edge within the frame). Every phase runs on them. (A threshold of exactly
+//!   zero would not do: implicit diffusion gives every vertex of the region a positive,
+//!   if 1e-30-level, mass, so the region would grow every step until it covered the
+//!   cloth.)
+//! - the **held** vertices: not flowing, but holding absorbed solvent or solute above
+//!   the same fraction of its peak, which the interactions still change. What is left
+//!   below the thresholds everywhere else is *dust* (the far tail of implicit diffusion,
+//!   1e-12 of the peaks and less): it stays untouched until liquid comes near again, and
+//!   keeps the area of its last step.
+//! - the **halo**: the other corners of the active and held vertices' faces, so that
+//!   their one-rings are whole: their areas, Kabsch frames, connection and exposure are
+//!   exactly the cloth's. The halo holds nothing that can change; it is not written back.
+//!
+//! Geometry, frames, connection, forces, advection, diffusion and interactions all run on
+//! the window only; the cloth outside it costs nothing per frame but reading the
+//! positions. A frame gathers the window's state, steps it, and writes it back. The window
+//! is kept from frame to frame while the liquid's needed region stays inside its active
+//! vertices and is at least half of it; a new one reaches twice as far as the frame
+//! needs, plus [`WINDOW_SLACK_RINGS`] rings, so that it lasts a few frames (building one
+//! is a topology, fans, patterns and solvers on the window). With `active_region` off, the
+//! window is the whole mesh, every vertex active: one code path.
+//!
+//! - **Diffusion.** `(M + h K_A) σ' = m` on the active vertices, `K_A` the stiffness
+//!   restricted to them with a Neumann (no-flux) boundary at the region's edge
+//!   ([`crate::ops::restrict`]): `1ᵀK_A = 0`, so the restricted solve conserves mass
+//!   exactly like the whole one, and the total is restored over the region after the
+//!   solve; the negative-mass repair draws only from active vertices
+//!   ([`super::diffuse`]). The velocity's Bochner system is restricted the same way
+//!   (block rows and columns of the active vertices, `K_ii = Σ_{j active} L_ij` with the
+//!   clamped weights).
+//! - **Advection.** The semi-Lagrangian back-trace runs for active vertices only, and the
+//!   flux across every edge with an end outside the active region is zero: the upwind
+//!   transport is closed inside it.
+//! - **Velocities outside.** The velocity of a vertex that is not in the window is not
+//!   stepped. Each vertex keeps the time of its last step and its frame then; when it
+//!   enters a window, its velocity is brought to now by the exact solution of the force
+//!   equation over the time between, with the current body force and the frame's mean
+//!   turn since ([`super::forces::integrate_velocity`]). For forces that did not change in
+//!   between this is what stepping it all along would have given: uniform acceleration
+//!   (`u + a t` without friction), terminal velocity, steady rotation. (A turn of more
+//!   than half a revolution between is aliased.) Dry liquid velocity is a fiction
+//!   anyway: it only matters once liquid arrives, and by then the vertex has been
+//!   active for [`ACTIVE_RINGS`] sub-steps at least.
+//! - **Areas outside.** The window writes back the areas of its active and held vertices;
+//!   after each frame the areas of every other vertex that holds a deposit are recomputed
+//!   from their faces, so the densities read out are current everywhere.
+//!
+//! What it truncates: the far tail of implicit diffusion, which on the whole mesh spreads
+//! mass beyond the three rings at levels ~1e-12 of the peak and below, and the viscous
+//! coupling of the liquid's velocity to the velocity of the dry cloth more than three
+//! rings away. With no evaporation the two steps agree to rounding (tests: 6e-15 of the
+//! peak after 200 steps). Evaporation drains every vertex holding less than one step's
+//! evaporation to zero, so the wet edge is sharp and the whole-mesh step leaks about
+//! 1e-10 of the peak per step past three rings, where it evaporates at once; the region
+//! keeps that liquid (measured: up to 1e-5 of the peak after 200 steps).
+
+use glam::{DMat3, DVec2, DVec3};
+use rayon::prelude::*;
+
+use super::diffuse::{Conductivity, solvers};
+use super::forces::{frame_angular_velocity, frame_body_acceleration, integrate_velocity};
+use super::simulate::Simulator;
+use super::state::{Fields, Local};
+use crate::error::Error;
+use crate::mesh::geometry::vertex_area;
+use crate::mesh::{OneRings, RingAdjacency, Topology, VertexFrames};
+use crate::ops::{Restriction, VertexPattern, WarmCg};
+
+/// Rings of vertices the active region keeps around the flowing liquid, on top of one ring
+/// per transport sub-cycle of the previous sub-step (module doc).
+pub const ACTIVE_RINGS: usize = 3;
+
+/// A vertex holds flowing liquid when its free-solvent or dissolved-solute density is
+/// above this fraction of that field's largest density (module doc).
+pub const ACTIVE_THRESHOLD: f64 = 1e-12;
+
+/// Rings a new window's active region gets beyond what the frame needs, on top of the
+/// frame's own reach again (room for about two more frames of the same flow), so that the
+/// window is not rebuilt every frame (module doc).
+pub const WINDOW_SLACK_RINGS: usize = 4;
+
+/// A window is rebuilt when its active region exceeds twice the needed one plus this
+/// many vertices (the liquid shrank or dried).
+pub const WINDOW_SLACK_VERTICES: usize = 256;
+
+/// A triangle mesh with what every phase reads: the whole cloth, or a window cut out of it.
+#[derive(Debug)]
+pub(super) struct Cloth {
+    pub(super) topology: Topology,
+    /// Fans of faces around every vertex.
+    pub(super) rings: OneRings,
+    /// Vertex neighbours in edge order (the Kabsch sums, the negative-mass repair).
+    pub(super) adjacency: RingAdjacency,
+    pub(super) rest: Vec<DVec3>,
+    pub(super) rest_frames: VertexFrames,
+    /// The fabric's diffusion of the densities.
+    pub(super) conductivity: Conductivity,
+    /// The cloth's border, per vertex.
+    pub(super) boundary: Vec<bool>,
+}
+
+/// The part of the cloth a frame works on (module doc): the *active* vertices
+/// (every phase), the *held* ones (wet but not flowing: interactions only), and the
+/// *halo*, the other corners of their faces, as a mesh of its own.
+#[derive(Debug)]
+pub(super) struct Window {
+    /// Mesh vertex of every window vertex, increasing.
+    pub(super) vertices: Vec<u32>,
+    /// The window as a mesh of its own (its `boundary` is the cloth's border, not the
+    /// window's edge).
+    pub(super) cloth: Cloth,
+    pub(super) pattern: VertexPattern,
+    /// Window vertices that are active or held: their whole one-ring is in the window,
+    /// so their areas, frames and interactions are those of the cloth.
+    pub(super) whole: Vec<u32>,
+    /// The active vertices and the restricted operators on them (window numbering).
+    pub(super) region: Restriction,
+    pub(super) cg: Option<(WarmCg, WarmCg)>,
+    /// Per mesh vertex: active.
+    pub(super) mask: Vec<bool>,
+    /// Per mesh vertex: active or held.
+    pub(super) whole_mask: Vec<bool>,
+}
+
+impl Window {
+    /// The window of the mesh vertices flagged `active` or `held`.
+    pub(super) fn new(
+        cloth: &Cloth,
+        mask: Vec<bool>,
+        held: &[bool],
+    ) -> Result<Option<Self>, Error> {
+        let topo = &cloth.topology;
+        let n = topo.n_vertices();
+        let whole_mask: Vec<bool> = (0..n).map(|v| mask[v] || held[v]).collect();
+        let mut faces: Vec<u32> = (0..n)
+            .filter(|&v| whole_mask[v])
+            .flat_map(|v| cloth.rings.wedges(v).iter().map(|w| w.face))
+            .collect();
+        if faces.is_empty() {
+            return Ok(None);
+        }
+        faces.sort_unstable();
+        faces.dedup();
+        let mut local = vec![u32::MAX; n];
+        for &f in &faces {
+            for v in topo.faces()[f as usize] {
+                local[v as usize] = 0;
+            }
+        }
+        let vertices: Vec<u32> = (0..n as u32).filter(|&v| local[v as usize] == 0).collect();
+        for (j, &v) in vertices.iter().enumerate() {
+            local[v as usize] = j as u32;
+        }
+        let tris = faces
+            .iter()
+            .map(|&f| topo.faces()[f as usize].map(|v| local[v as usize]))
+            .collect();
+        let topology = Topology::from_triangles(vertices.len(), tris)?;
+        // the fans walked in the cloth's sense (its harmonized orientation)
+        let flipped = faces
+            .iter()
+            .map(|&f| cloth.rings.face_flipped()[f as usize])
+            .collect();
+        let rings = OneRings::with_orientation(&topology, flipped);
+        let adjacency = RingAdjacency::new(&topology);
+        let pattern = VertexPattern::new(&topology);
+        let region = Restriction::new(&pattern, pick(&vertices, &mask));
+        let cg = solvers(&region);
+        let part = Cloth {
+            rest: pick(&vertices, &cloth.rest),
+            rest_frames: VertexFrames {
+                frame: pick(&vertices, &cloth.rest_frames.frame),
+            },
+            conductivity: cloth.conductivity.faces(&faces),
+            boundary: pick(&vertices, &cloth.boundary),
+            topology,
+            rings,
+            adjacency,
+        };
+        Ok(Some(Self {
+            whole: (0..vertices.len() as u32)
+                .filter(|&j| whole_mask[vertices[j as usize] as usize])
+                .collect(),
+            vertices,
+            cloth: part,
+            pattern,
+            region,
+            cg,
+            mask,
+            whole_mask,
+        }))
+    }
+
+    /// `values` of every mesh vertex, in window order.
+    pub(super) fn gather<T: Copy>(&self, values: &[T]) -> Vec<T> {
+        pick(&self.vertices, values)
+    }
+}
+
+/// `values[i]` for every `i` of `index`, in that order.
+pub(super) fn pick<T: Copy>(index: &[u32], values: &[T]) -> Vec<T> {
+    index.iter().map(|&i| values[i as usize]).collect()
+}
+
+/// Where the liquid is (module doc): among the vertices `scan`, those holding
+/// flowing liquid — free solvent or dissolved solute density above [`ACTIVE_THRESHOLD`]
+/// of that field's peak over `scan` — and the others holding absorbed solvent or solute
+/// above that fraction of its peak (held). What is left below the thresholds is *dust*
+/// (1e-12 of the peaks and less, the far tail of implicit diffusion): it stays where it
+/// is, untouched, until liquid comes near again. Loose vertices are neither.
+pub(super) fn find_liquid(
+    scan: &[u32],
+    loose: &[bool],
+    fields: &Fields,
+    area: &[f64],
+) -> (Vec<u32>, Vec<u32>) {
+    let floor = |m: &[f64]| {
+        ACTIVE_THRESHOLD
+            * scan
+                .iter()
+                .map(|&v| v as usize)
+                .filter(|&v| area[v] > 0.0)
+                .map(|v| m[v] / area[v])
+                .fold(0.0, f64::max)
+    };
+    let f = fields;
+    let flowing_floor = [floor(&f.free_solvent), floor(&f.solute)];
+    let held_floor = [floor(&f.absorbed_solvent), floor(&f.absorbed_solute)];
+    let (mut flowing, mut held) = (Vec::new(), Vec::new());
+    for &v in scan {
+        let i = v as usize;
+        let above = |m: &[f64], floor: f64| m[i] > 0.0 && m[i] > floor * area[i];
+        if loose[i] {
+        } else if above(&f.free_solvent, flowing_floor[0]) || above(&f.solute, flowing_floor[1]) {
+            flowing.push(v);
+        } else if above(&f.absorbed_solvent, held_floor[0])
+            || above(&f.absorbed_solute, held_floor[1])
+        {
+            held.push(v);
+        }
+    }
+    (flowing, held)
+}
+
+/// `seeds` grown by `rings` rings of neighbours (loose vertices excluded), as a mask and
+/// as a list.
+pub(super) fn grow(
+    adjacency: &RingAdjacency,
+    loose: &[bool],
+    seeds: &[u32],
+    rings: usize,
+) -> (Vec<bool>, Vec<u32>) {
+    let mut mask = vec![false; loose.len()];
+    let mut front = seeds.to_vec();
+    let mut all = seeds.to_vec();
+    for &v in seeds {
+        mask[v as usize] = true;
+    }
+    for _ in 0..rings {
+        let mut next = Vec::new();
+        for &v in &front {
+            for &w in adjacency.neighbours(v as usize) {
+                if !mask[w as usize] && !loose[w as usize] {
+                    mask[w as usize] = true;
+                    next.push(w);
+                }
+            }
+        }
+        all.extend_from_slice(&next);
+        front = next;
+    }
+    (mask, all)
+}
+
+impl Simulator {
+    /// Finds the liquid and keeps or rebuilds the window for the next frame (module
+    /// doc). Returns whether it was rebuilt.
+    pub(super) fn prepare_window(&mut self) -> Result<bool, Error> {
+        let n = self.cloth.topology.n_vertices();
+        if !self.params.active_region {
+            // the whole mesh, every vertex with a face active, once
+            if self.window.is_some() {
+                return Ok(false);
+            }
+            let mask = self.loose.iter().map(|l| !l).collect();
+            self.window = Window::new(&self.cloth, mask, &vec![false; n])?;
+            return Ok(true);
+        }
+        // the liquid is inside the window's whole vertices, unless some was poured since
+        // (no window and no pour: there is none but dust)
+        let scan: Vec<u32> = match (&self.window, self.rescan) {
+            (Some(w), false) => w.whole.iter().map(|&j| w.vertices[j as usize]).collect(),
+            (None, false) => return Ok(false),
+            _ => (0..n as u32).collect(),
+        };
+        let st = &self.state;
+        let (flowing, held) = find_liquid(&scan, &self.loose, &st.fields, &st.vertex_area);
+        // liquid moves at most one ring per transport sub-cycle
+        let reach = ACTIVE_RINGS + self.last_frame_cycles;
+        let (_, needed) = grow(&self.cloth.adjacency, &self.loose, &flowing, reach);
+        let fits = self.window.as_ref().is_some_and(|w| {
+            needed.iter().all(|&v| w.mask[v as usize])
+                && held.iter().all(|&v| w.whole_mask[v as usize])
+                && w.region.vertices.len() <= 2 * needed.len() + WINDOW_SLACK_VERTICES
+        });
+        self.rescan = false;
+        if fits {
+            return Ok(false);
+        }
+        let (mask, _) = grow(
+            &self.cloth.adjacency,
+            &self.loose,
+            &flowing,
+            // room for about two more frames of the same flow
+            2 * reach + WINDOW_SLACK_RINGS - ACTIVE_RINGS,
+        );
+        let mut is_held = vec![false; n];
+        held.iter().for_each(|&v| is_held[v as usize] = true);
+        self.window = Window::new(&self.cloth, mask, &is_held)?;
+        Ok(true)
+    }
+
+    /// The velocity and frame of vertex `v` at the start of the frame: a vertex that was
+    /// outside the window is brought from its last step to now by the exact solution of
+    /// its force equation ([`integrate_velocity`]) over the time between, with the body
+    /// acceleration of `acceleration` (`p̈`, world) and the frame's mean turn since
+    /// (module doc).
+    pub(super) fn caught_up(&self, v: usize, acceleration: DVec3) -> (DVec2, DMat3) {
+        let st = &self.state;
+        let (u, f) = (st.velocity[v], st.frames.frame[v]);
+        let gap = st.time - st.stamp[v];
+        if gap <= 0.0 {
+            return (u, f);
+        }
+        let now = self
+            .cloth
+            .adjacency
+            .rotation(&self.cloth.rest, &st.positions, v)
+            * self.cloth.rest_frames.frame[v];
+        if self.loose[v] {
+            return (DVec2::ZERO, now);
+        }
+        let p = &self.params;
+        let a = frame_body_acceleration(&now, acceleration, p.gravity, p.forces);
+        let turn = if p.forces.coriolis {
+            frame_angular_velocity(&f, &now, gap).z
+        } else {
+            0.0
+        };
+        (integrate_velocity(u, a, turn, p.friction, gap).0, now)
+    }
+
+    /// Writes a successful frame on `w` back (module doc): fields of every
+    /// window vertex (the halo's are unchanged), velocities, frames and areas of the
+    /// active and held vertices, stamped `time`.
+    pub(super) fn commit(&mut self, w: &Window, local: Local, time: f64) {
+        let st = &mut self.state;
+        st.fields.scatter(&w.vertices, &local.fields);
+        st.evaporated += local.evaporated;
+        for &j in &w.whole {
+            let (j, v) = (j as usize, w.vertices[j as usize] as usize);
+            st.velocity[v] = local.velocity[j];
+            st.frames.frame[v] = local.frames.frame[j];
+            st.stamp[v] = time;
+            st.vertex_area[v] = local.area[j];
+            if st.fields.is_live(v) || st.fields.adsorbed[v] > 0.0 {
+                st.mark_stained(v);
+            }
+        }
+        self.last_frame_cycles = local.cycles;
+    }
+
+    /// The lumped area of vertex `v` at the current positions.
+    pub(super) fn current_area(&self, v: usize) -> f64 {
+        let faces = self.cloth.topology.faces();
+        vertex_area(
+            self.cloth
+                .rings
+                .wedges(v)
+                .iter()
+                .map(|w| faces[w.face as usize]),
+            &self.state.positions,
+        )
+    }
+
+    /// Brings the areas of the stained vertices outside the window to the current frame
+    /// (the densities read out are their masses over these areas). Dust — a vertex
+    /// holding less than [`ACTIVE_THRESHOLD`] of the largest stain density — is dropped
+    /// from the list and keeps its last area (its density is 1e-12 of the peak's; a
+    /// window that reaches it again puts it back).
+    pub(super) fn refresh_areas(&mut self) {
+        let st = &self.state;
+        let f = &st.fields;
+        let density = |v: usize| {
+            let m = f.free_solvent[v]
+                + f.solute[v]
+                + f.absorbed_solvent[v]
+                + f.absorbed_solute[v]
+                + f.adsorbed[v];
+            if st.vertex_area[v] > 0.0 {
+                m / st.vertex_area[v]
+            } else {
+                0.0
+            }
+        };
+        let floor = ACTIVE_THRESHOLD
+            * st.stained
+                .iter()
+                .map(|&v| density(v as usize))
+                .fold(0.0, f64::max);
+        let whole = self.window.as_ref().map(|w| &w.whole_mask);
+        let (keep, dust): (Vec<u32>, Vec<u32>) = st
+            .stained
+            .iter()
+            .partition(|&&v| density(v as usize) > floor);
+        let stale: Vec<u32> = keep
+            .iter()
+            .copied()
+            .filter(|&v| whole.is_none_or(|m| !m[v as usize]))
+            .collect();
+        let area: Vec<f64> = stale
+            .par_iter()
+            .map(|&v| self.current_area(v as usize))
+            .collect();
+        let st = &mut self.state;
+        for (v, a) in stale.into_iter().zip(area) {
+            st.vertex_area[v as usize] = a;
+        }
+        for v in dust {
+            st.is_stained[v as usize] = false;
+        }
+        st.stained = keep;
+    }
+}
