@@ -79,7 +79,10 @@ pub fn extend_velocity(
 ) {
     let n = topology.n_vertices();
     assert_eq!(wet.len(), n, "one wet flag per vertex");
-    assert!(fields.iter().all(|f| f.len() == n), "one velocity per vertex");
+    assert!(
+        fields.iter().all(|f| f.len() == n),
+        "one velocity per vertex"
+    );
     let mut known = wet.to_vec();
     let mut front: Vec<u32> = (0..n as u32).filter(|&v| wet[v as usize]).collect();
     let mut ring: Vec<u32> = Vec::new();
@@ -100,7 +103,9 @@ pub fn extend_velocity(
         for field in fields.iter_mut() {
             values.clear();
             for &i in &ring {
-                values.push(mean_of_known(topology, connection, &known, field, i as usize));
+                values.push(mean_of_known(
+                    topology, connection, &known, field, i as usize,
+                ));
             }
             for (&i, &u) in ring.iter().zip(&values) {
                 field[i as usize] = u;
