@@ -75,11 +75,13 @@ def main(argv=None):
 
 
 def _exit(code):
-    """bpy 4.2 from PyPI crashes (SIGSEGV) when the interpreter exits after an add-on with
-    property update callbacks was enabled, as Madder is here; end at once with the real
-    status there (4.5 and 5.0 exit normally; a Blender binary never runs this file)."""
+    """The bpy modules from PyPI before 5.0 crash (SIGSEGV) when the interpreter exits after
+    this command ran: 4.2 once an add-on with property update callbacks was enabled, 4.5
+    after the add-on packaged in the wheel was registered (every time, on 4.5.15). End at
+    once with the real status there (5.0 exits normally; a Blender binary never runs this
+    file)."""
     bpy = sys.modules.get("bpy")
-    if bpy is not None and bpy.app.version < (4, 5, 0):
+    if bpy is not None and bpy.app.version < (5, 0, 0):
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(code)
