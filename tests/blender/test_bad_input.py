@@ -52,18 +52,23 @@ def test_vertex_count_changing_between_frames_names_the_frame(open_fixture):
     assert not [f for f in os.listdir(os.path.dirname(path)) if ".tmp" in f]
 
 
-def test_nan_positions_name_vertex_and_frame(open_fixture):
-    open_fixture("disk.blend")
-    disk = make_active(bpy.data.objects["Disk"])
-    disk.madder.source_group = "stain_source"
-    # a shape key whose value is animated to NaN at frame 5 poisons every vertex it moves
-    disk.shape_key_add(name="Basis")
-    key = disk.shape_key_add(name="Bad")
+def poison_vertex_7_at_frame_5(obj):
+    """A shape key that moves vertex 7 to NaN, its value animated from 0 (frame 4) to 1
+    (frame 5)."""
+    obj.shape_key_add(name="Basis")
+    key = obj.shape_key_add(name="Bad")
     key.data[7].co = (float("nan"), 0.0, 0.0)
     key.value = 0.0
     key.keyframe_insert("value", frame=4)
     key.value = 1.0
     key.keyframe_insert("value", frame=5)
+
+
+def test_nan_positions_name_vertex_and_frame(open_fixture):
+    open_fixture("disk.blend")
+    disk = make_active(bpy.data.objects["Disk"])
+    disk.madder.source_group = "stain_source"
+    poison_vertex_7_at_frame_5(disk)
     msg = bake_error()
     assert "Disk" in msg and "vertex 7" in msg and "frame 5" in msg
 
@@ -201,13 +206,7 @@ def test_bake_errors_carry_the_object_frame_and_vertex(open_fixture, addon):
     scene = open_fixture("disk.blend")
     disk = make_active(bpy.data.objects["Disk"])
     disk.madder.source_group = "stain_source"
-    disk.shape_key_add(name="Basis")
-    key = disk.shape_key_add(name="Bad")
-    key.data[7].co = (float("nan"), 0.0, 0.0)
-    key.value = 0.0
-    key.keyframe_insert("value", frame=4)
-    key.value = 1.0
-    key.keyframe_insert("value", frame=5)
+    poison_vertex_7_at_frame_5(disk)
     with pytest.raises(bake.BakeError) as e:
         bake.bake(scene, disk)
     assert (e.value.object, e.value.frame, e.value.vertex) == ("Disk", 5, 7)
