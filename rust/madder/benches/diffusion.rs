@@ -11,7 +11,7 @@ use std::time::Instant;
 use common::{grid, wave};
 use faer::Par;
 use glam::DVec3;
-use madder::mesh::{Connection, Geometry, OneRings, VertexFrames};
+use madder::mesh::{Geometry, OneRings, Transport, VertexFrames};
 use madder::ops::cg::Preconditioner;
 use madder::ops::{
     BochnerPattern, PrefactoredSpd, VertexPattern, WarmCg, add_lumped_mass, add_lumped_mass_blocks,
@@ -208,10 +208,10 @@ fn bench_flag(nx: usize, frames: usize) {
         mass = (0..n).map(|i| g.vertex_area[i] * sigma[i]).collect();
 
         let frames_f = VertexFrames::new(&rings, &p).unwrap();
-        let conn = Connection::new(&topo, &rings, &g, &frames_f, &p);
+        let transport = Transport::new(&topo, &rings, &g, &frames_f, &p);
         let mut stiff = cotan_stiffness(&topo, &g, &pattern, h * 1e-4);
         clamp_weights(&pattern, &mut stiff);
-        let mut bv = bochner_stiffness(&pattern, &bochner, &stiff, &conn);
+        let mut bv = bochner_stiffness(&pattern, &bochner, &stiff, &transport);
         add_lumped_mass_blocks(&g, &bochner, 1.0, &mut bv);
         let rhs: Vec<f64> = (0..2 * n).map(|i| g.vertex_area[i / 2] * vel[i]).collect();
         let mut u = Vec::new();

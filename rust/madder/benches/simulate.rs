@@ -65,7 +65,7 @@ fn bench(nx: usize, ny: usize, frames: usize) {
         (h ^ b).wrapping_mul(0x0100_0000_01b3)
     });
     println!(
-        "{n:>7} vertices, {frames} frames: {total:7.2} ms/frame ({:.1} sub-steps, setup {setup:.0} ms) = window {:.2}, geometry+frames+connection {:.2}, forces {:.2}, advection {:.2}, diffusion {:.2} (density {:.1} + velocity {:.1} CG it.), interactions {:.2}; window {:.1} %, active {:.1} % of the vertices ({} rebuilds); state checksum {checksum:016x}",
+        "{n:>7} vertices, {frames} frames: {total:7.2} ms/frame ({:.1} sub-steps, setup {setup:.0} ms) = window {:.2}, geometry+frames+transport {:.2}, forces {:.2}, advection {:.2}, diffusion {:.2} (density {:.1} + velocity {:.1} CG it.), interactions {:.2}; window {:.1} %, active {:.1} % of the vertices ({} rebuilds); state checksum {checksum:016x}",
         p.substeps as f64 / frames as f64,
         per(p.window),
         per(p.geometry),
@@ -98,7 +98,7 @@ fn main() {
 
 /// `MADDER_BENCH_PARTS=1`: the step's pieces timed one by one on the whole mesh.
 fn parts(nx: usize, ny: usize, reps: usize) {
-    use madder::mesh::{Connection, Geometry, OneRings, VertexFrames, one_ring_rotations};
+    use madder::mesh::{Geometry, OneRings, Transport, VertexFrames, one_ring_rotations};
     use madder::stain::advect::{UpwindPlan, advect_velocity, dual_fluxes};
     let (topo, rest) = grid(nx, ny);
     let q = wave(&rest, 0.3);
@@ -122,16 +122,16 @@ fn parts(nx: usize, ny: usize, reps: usize) {
     });
     let mut fr = rf.clone();
     time("frames rotated", &mut || fr = rf.rotated(&rot));
-    let mut con = Connection::new(&topo, &rings, &g, &fr, &q);
-    time("connection", &mut || {
-        con = Connection::new(&topo, &rings, &g, &fr, &q)
+    let mut transport = Transport::new(&topo, &rings, &g, &fr, &q);
+    time("transport", &mut || {
+        transport = Transport::new(&topo, &rings, &g, &fr, &q)
     });
     let u: Vec<glam::DVec2> = (0..topo.n_vertices())
         .map(|i| glam::DVec2::new(0.1, 0.05 * (i as f64).sin()))
         .collect();
     let mut a = Vec::new();
     time("advect velocity", &mut || {
-        a = advect_velocity(&topo, &rings, &g, &con, &u, 1.0 / 24.0)
+        a = advect_velocity(&topo, &rings, &g, &transport, &u, 1.0 / 24.0)
     });
     let mut fl = Vec::new();
     time("dual fluxes", &mut || fl = dual_fluxes(&topo, &q, &fr, &a));

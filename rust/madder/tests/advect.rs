@@ -100,7 +100,7 @@ fn constant_velocity_is_advected_unchanged() {
     // feet at 0.3, 1.5 and 4.5 mean edge lengths: one-ring, and strips of several triangles
     for reach in [0.3, 1.5, 4.5] {
         let h = reach * ell / w.length();
-        let out = advect_velocity(&t, &b.rings, &b.geometry, &b.connection, &u, h);
+        let out = advect_velocity(&t, &b.rings, &b.geometry, &b.transport, &u, h);
         let err = (0..p.len())
             .map(|i| (to_world(&b, i, out[i]) - w).length())
             .fold(0.0, f64::max);
@@ -120,7 +120,7 @@ fn linear_field_error(b: &Built, t: &Topology, p: &[DVec3], h: f64) -> (f64, usi
     let u: Vec<DVec2> = (0..p.len())
         .map(|i| to_local(b, i, linear(xy(p[i]))))
         .collect();
-    let out = advect_velocity(t, &b.rings, &b.geometry, &b.connection, &u, h);
+    let out = advect_velocity(t, &b.rings, &b.geometry, &b.transport, &u, h);
     let (mut err, mut inside, mut reach) = (0.0f64, 0, 0.0f64);
     for i in 0..p.len() {
         let x = xy(p[i]);
@@ -185,7 +185,7 @@ fn back_trace_leaving_the_cloth_stops_on_the_border() {
         .map(|i| to_local(&b, i, field(xy(p[i]))))
         .collect();
     let h = 0.5;
-    let out = advect_velocity(&t, &b.rings, &b.geometry, &b.connection, &u, h);
+    let out = advect_velocity(&t, &b.rings, &b.geometry, &b.transport, &u, h);
     let (mut err, mut stopped) = (0.0f64, 0);
     for i in 0..p.len() {
         let x = xy(p[i]);
@@ -237,8 +237,8 @@ fn cylinder(nphi: usize, nz: usize) -> (Topology, Vec<DVec3>, Vec<DVec2>) {
 /// the one behind, on the last row or column).
 fn development_axis(b: &Built, dev: &[DVec2], i: usize, axis: usize) -> DVec2 {
     let spokes = b.rings.spokes(i);
-    let alpha = b.connection.polar_angles(i);
-    let delta = b.connection.frame_offset(i);
+    let alpha = b.transport.polar_angles(i);
+    let delta = b.transport.frame_offset(i);
     for sign in [1.0, -1.0] {
         for (k, &j) in spokes.iter().enumerate() {
             let d = dev[j as usize] - dev[i];
@@ -295,7 +295,7 @@ fn linear_fields_of_the_development_are_exact_on_a_cylinder() {
     for (name, field) in &fields {
         let u: Vec<DVec2> = (0..n).map(|i| to_frame(i, field(dev[i]))).collect();
         for h in [0.05, 0.5, 1.0] {
-            let out = advect_velocity(&t, &b.rings, &b.geometry, &b.connection, &u, h);
+            let out = advect_velocity(&t, &b.rings, &b.geometry, &b.transport, &u, h);
             let (mut err, mut count, mut reach) = (0.0f64, 0, 0.0f64);
             for i in 0..n {
                 let foot = dev[i] - h * field(dev[i]);
@@ -604,7 +604,7 @@ fn momentum_advection_keeps_uniform_fields_and_conserves_momentum() {
     let plan = UpwindPlan::new(&t, area, &flux, 0.1).unwrap();
     let before = area.clone();
     let fallback = vec![DVec2::splat(f64::NAN); p.len()];
-    let out = plan.momentum_velocity(&t, &b.connection, &before, &u, &fallback);
+    let out = plan.momentum_velocity(&t, &b.transport, &before, &u, &fallback);
     let mut after = before.clone();
     plan.transport(&t, &mut after);
     let err_u = (0..p.len())
@@ -628,7 +628,7 @@ fn momentum_advection_keeps_uniform_fields_and_conserves_momentum() {
         let flux = dual_fluxes(&t, &p, &b.frames, &u);
         let plan = UpwindPlan::new(&t, area, &flux, 0.15).unwrap();
         substeps = substeps.max(plan.substeps());
-        let next = plan.momentum_velocity(&t, &b.connection, &mass, &u, &fallback);
+        let next = plan.momentum_velocity(&t, &b.transport, &mass, &u, &fallback);
         plan.transport(&t, &mut mass);
         u = next;
         assert!(u.iter().all(|v| v.is_finite()), "no fallback was needed");
@@ -653,7 +653,7 @@ fn dry_vertices_take_the_fallback_velocity() {
     let wet = p.len() / 2 + 3;
     mass[wet] = 1e-3;
     let fallback: Vec<DVec2> = (0..p.len()).map(|i| DVec2::new(i as f64, -1.0)).collect();
-    let out = plan.momentum_velocity(&t, &b.connection, &mass, &u, &fallback);
+    let out = plan.momentum_velocity(&t, &b.transport, &mass, &u, &fallback);
     let mut after = mass.clone();
     plan.transport(&t, &mut after);
     for i in 0..p.len() {
@@ -661,7 +661,7 @@ fn dry_vertices_take_the_fallback_velocity() {
             assert_eq!(out[i], fallback[i]);
         } else {
             // a single donor: its velocity, turned into the receiver's frame
-            let expected = b.connection.transport(i, wet, u[wet]).unwrap();
+            let expected = b.transport.transport(i, wet, u[wet]).unwrap();
             assert!((out[i] - expected).length() < 1e-12, "vertex {i}");
         }
     }
@@ -676,13 +676,13 @@ fn results_are_bit_identical_with_one_and_two_threads() {
     let b = build(&t, &p);
     let u = rotating(&b, &p);
     let run = || {
-        let adv = advect_velocity(&t, &b.rings, &b.geometry, &b.connection, &u, 0.2);
+        let adv = advect_velocity(&t, &b.rings, &b.geometry, &b.transport, &u, 0.2);
         let flux = dual_fluxes(&t, &p, &b.frames, &u);
         let plan = UpwindPlan::new(&t, &b.geometry.vertex_area, &flux, 0.5).unwrap();
         let before = blob(&b, &p, DVec2::new(0.1, 0.2), 0.3, 0.01);
         let mut mass = before.clone();
         plan.transport(&t, &mut mass);
-        let mom = plan.momentum_velocity(&t, &b.connection, &before, &u, &adv);
+        let mom = plan.momentum_velocity(&t, &b.transport, &before, &u, &adv);
         let mut bits: Vec<u64> = Vec::new();
         bits.extend(adv.iter().flat_map(|v| [v.x.to_bits(), v.y.to_bits()]));
         bits.extend(flux.iter().map(|x| x.to_bits()));

@@ -23,7 +23,7 @@ use std::f64::consts::{PI, TAU};
 use faer::Par;
 use glam::{DMat2, DMat3, DQuat, DVec2, DVec3};
 use madder::mesh::kabsch::{best_rotation, rotation_from_covariance, svd3};
-use madder::mesh::{Connection, FanKind, Geometry, Topology, VertexFrames, one_ring_rotations};
+use madder::mesh::{FanKind, Geometry, Topology, Transport, VertexFrames, one_ring_rotations};
 use madder::ops::{
     BochnerPattern, BochnerSystem, LowerCsc, Restriction, VertexPattern, add_lumped_mass,
     bochner_stiffness, cotan_stiffness, diffuse_tangent_field, solve_spd,
@@ -170,7 +170,7 @@ fn flat_transport_error(t: &Topology, b: &Built, frames: &VertexFrames, w: DVec3
         let (i, j) = (i as usize, j as usize);
         let (ui, uj) = (frames.to_local(i, w), frames.to_local(j, w));
         for (a, b_, ua, ub) in [(i, j, ui, uj), (j, i, uj, ui)] {
-            let moved = b.connection.transport(a, b_, ub).unwrap();
+            let moved = b.transport.transport(a, b_, ub).unwrap();
             worst = worst.max((moved - ua).length());
         }
     }
@@ -194,15 +194,15 @@ fn flat_cloth_transports_a_constant_field_exactly() {
         // x is the reference spoke's direction
         let e = p[b.rings.spokes(v)[0] as usize] - p[v];
         assert!((b.frames.frame[v].x_axis - e.normalize()).length() < 1e-15);
-        assert!(b.connection.frame_offset(v).abs() < 1e-15);
+        assert!(b.transport.frame_offset(v).abs() < 1e-15);
     }
     let w = DVec3::new(0.8, -0.35, 0.0);
     let err = flat_transport_error(&t, &b, &b.frames, w);
     eprintln!("flat jittered grid: max |R_ij u_j − u_i| = {err:.2e}");
     assert!(err < 1e-12, "flat transport error {err}");
     // corners have tip-angle sum π/2, straight borders π: no rescaling keeps them exact
-    assert!((b.connection.angle_sum(0) - PI / 2.0).abs() < 1e-14);
-    assert!((b.connection.angle_sum(3) - PI).abs() < 1e-13);
+    assert!((b.transport.angle_sum(0) - PI / 2.0).abs() < 1e-14);
+    assert!((b.transport.angle_sum(3) - PI).abs() < 1e-13);
 }
 
 #[test]
@@ -246,15 +246,15 @@ fn any_in_plane_frames_keep_the_flat_transport_exact() {
         .map(|v| DMat3::from_rotation_z(TAU * hash(v, 5)))
         .collect();
     let frames = b.frames.rotated(&turns);
-    let conn = Connection::new(&t, &b.rings, &b.geometry, &frames, &p);
+    let transport = Transport::new(&t, &b.rings, &b.geometry, &frames, &p);
     let b2 = Built {
         rings: b.rings.clone(),
         geometry: b.geometry.clone(),
         frames: frames.clone(),
-        connection: conn,
+        transport: transport,
     };
     for v in 0..t.n_vertices() {
-        let d = wrap(b2.connection.frame_offset(v) + TAU * hash(v, 5));
+        let d = wrap(b2.transport.frame_offset(v) + TAU * hash(v, 5));
         assert!(d.abs() < 1e-13, "vertex {v}: offset off by {d}");
     }
     let err = flat_transport_error(&t, &b2, &frames, DVec3::new(0.3, 0.9, 0.0));
@@ -278,7 +278,7 @@ fn apex_defect(t: &Topology, p: &[DVec3]) -> f64 {
 }
 
 /// Holonomy `R_{j1 jk} ⋯ R_{j3 j2} R_{j2 j1}` around the apex's ring, counter-clockwise.
-fn ring_holonomy(c: &Connection, k: usize) -> DMat2 {
+fn ring_holonomy(c: &Transport, k: usize) -> DMat2 {
     let mut h = DMat2::IDENTITY;
     for m in 0..k {
         let (from, to) = (1 + m, 1 + (m + 1) % k);
@@ -303,21 +303,21 @@ fn cone_apex_holonomy_is_the_angle_defect() {
         assert_eq!(b.rings.kind(0), FanKind::Interior);
         let d = apex_defect(&t, &p);
         assert!(d > 0.05, "a cone has positive defect ({d})");
-        let h = angle_of(ring_holonomy(&b.connection, k));
+        let h = angle_of(ring_holonomy(&b.transport, k));
         eprintln!(
             "cone height {height}: holonomy {h:.15}, angle defect {d:.15}, diff {:.2e}",
             (h - d).abs()
         );
         assert!((h - d).abs() < 1e-12, "holonomy {h} vs defect {d}");
         // the interior apex is rescaled; its polar angles end at 2π
-        assert!((b.connection.angle_sum(0) - (TAU - d)).abs() < 1e-12);
+        assert!((b.transport.angle_sum(0) - (TAU - d)).abs() < 1e-12);
         // that rescaling gives each face around the apex the share φ/γ of the defect (the
         // ring's border corners, not rescaled, add nothing): loop j_m → j_m+1 → apex → j_m
         for m in 0..k {
             let (a, bb) = (1 + m, 1 + (m + 1) % k);
-            let h = b.connection.rotation(a, 0).unwrap()
-                * b.connection.rotation(0, bb).unwrap()
-                * b.connection.rotation(bb, a).unwrap();
+            let h = b.transport.rotation(a, 0).unwrap()
+                * b.transport.rotation(0, bb).unwrap()
+                * b.transport.rotation(bb, a).unwrap();
             let phi = (p[a] - p[0]).angle_between(p[bb] - p[0]);
             let share = d * phi / (TAU - d);
             assert!(
@@ -343,7 +343,7 @@ fn saddle_apex_holonomy_is_the_negative_angle_defect() {
     let b = build(&t, &p);
     let d = apex_defect(&t, &p);
     assert!(d < -0.5, "a monkey saddle has negative defect ({d})");
-    let h = angle_of(ring_holonomy(&b.connection, k));
+    let h = angle_of(ring_holonomy(&b.transport, k));
     eprintln!(
         "saddle: holonomy {h:.15}, angle defect {d:.15}, diff {:.2e}",
         (h - wrap(d)).abs()
@@ -352,7 +352,7 @@ fn saddle_apex_holonomy_is_the_negative_angle_defect() {
 }
 
 /// Sum over faces of the holonomy around each face, counter-clockwise.
-fn total_face_holonomy(t: &Topology, c: &Connection) -> (f64, f64) {
+fn total_face_holonomy(t: &Topology, c: &Transport) -> (f64, f64) {
     let mut sum = 0.0;
     let mut largest = 0.0f64;
     for &[a, b, cc] in t.faces() {
@@ -369,7 +369,7 @@ fn total_face_holonomy(t: &Topology, c: &Connection) -> (f64, f64) {
 fn face_holonomies_obey_gauss_bonnet() {
     let (t, p) = icosphere(3);
     let b = build(&t, &p);
-    let (sum, largest) = total_face_holonomy(&t, &b.connection);
+    let (sum, largest) = total_face_holonomy(&t, &b.transport);
     eprintln!(
         "icosphere(3): Σ face holonomies = {sum:.14} (4π = {:.14}), largest face {largest:.3e}",
         4.0 * PI
@@ -379,7 +379,7 @@ fn face_holonomies_obey_gauss_bonnet() {
 
     let (t, p) = torus(32, 16, 1.0, 0.35);
     let b = build(&t, &p);
-    let (sum, largest) = total_face_holonomy(&t, &b.connection);
+    let (sum, largest) = total_face_holonomy(&t, &b.transport);
     eprintln!("torus: Σ face holonomies = {sum:.3e} (χ = 0), largest face {largest:.3e}");
     assert!(largest < 0.1);
     assert!(sum.abs() < 1e-10);
@@ -391,7 +391,7 @@ fn reverse_rotation_is_the_transpose_and_matches_the_polar_angles() {
         .jitter(0.4)
         .build_with(|x, y| DVec3::new(x, y, 0.3 * (2.0 * x).sin() * (1.5 * y).cos()));
     let b = build(&t, &p);
-    let c = &b.connection;
+    let c = &b.transport;
     // angle of spoke j in the frame of i, from the stored polar angles and offsets
     let polar = |i: usize, j: usize| {
         let k = b
@@ -431,7 +431,7 @@ fn frames_on_a_sphere_are_orthonormal_and_normal() {
         assert!(frame_error(f) < 1e-14);
         assert!(f.z_axis.dot(pv) > 0.999, "vertex {v}: normal {}", f.z_axis);
         // interior: polar angles span [0, 2π)
-        let a = b.connection.polar_angles(v);
+        let a = b.transport.polar_angles(v);
         assert_eq!(a[0], 0.0);
         assert!(a.iter().all(|&x| (0.0..TAU).contains(&x)));
     }
@@ -451,14 +451,14 @@ fn comoving_frames_follow_a_rigid_motion() {
     let u = one_ring_rotations(&t, &rest, &moved).unwrap();
     let frames = b0.frames.rotated(&u);
     let g1 = Geometry::new(&t, &moved).unwrap();
-    let c1 = Connection::new(&t, &b0.rings, &g1, &frames, &moved);
+    let c1 = Transport::new(&t, &b0.rings, &g1, &frames, &moved);
     let b1 = build(&t, &moved);
     let mut worst = 0.0f64;
     for e in 0..t.n_edges() {
         let th = c1.edge_angles()[e];
         worst = worst
-            .max(wrap(th - b0.connection.edge_angles()[e]).abs())
-            .max(wrap(th - b1.connection.edge_angles()[e]).abs());
+            .max(wrap(th - b0.transport.edge_angles()[e]).abs())
+            .max(wrap(th - b1.transport.edge_angles()[e]).abs());
     }
     eprintln!("rigid motion: comoving vs rest connection angles differ by {worst:.2e}");
     assert!(worst < 1e-12);
@@ -495,13 +495,13 @@ fn irregular_fans_stay_finite() {
     assert_eq!(b.frames.frame[9], DMat3::IDENTITY);
     for v in 0..14 {
         assert!(frame_error(&b.frames.frame[v]) < 1e-14, "vertex {v}");
-        assert!(b.connection.polar_angles(v).iter().all(|a| a.is_finite()));
-        assert!(b.connection.frame_offset(v).is_finite());
+        assert!(b.transport.polar_angles(v).iter().all(|a| a.is_finite()));
+        assert!(b.transport.frame_offset(v).is_finite());
     }
-    assert!(b.connection.edge_angles().iter().all(|a| a.is_finite()));
+    assert!(b.transport.edge_angles().iter().all(|a| a.is_finite()));
     // the bow-tie's fans are laid side by side: its angles add up
-    let g = b.connection.angle_sum(0);
-    let a = b.connection.polar_angles(0);
+    let g = b.transport.angle_sum(0);
+    let a = b.transport.polar_angles(0);
     assert!((a.iter().cloned().fold(0.0, f64::max) - g).abs() < 1e-14);
 }
 
@@ -540,7 +540,7 @@ fn mobius_strip_has_orientation_reversing_edges() {
     let rev = b.rings.orientation_reversing_edges();
     eprintln!("Möbius band: {} orientation-reversing edges", rev.len());
     assert!(!rev.is_empty());
-    assert!(b.connection.edge_angles().iter().all(|a| a.is_finite()));
+    assert!(b.transport.edge_angles().iter().all(|a| a.is_finite()));
 }
 
 #[test]
@@ -555,7 +555,7 @@ fn connection_is_bit_identical_across_thread_counts() {
                 let b = build(&t, &p);
                 let u = one_ring_rotations(&t, &p, &p.iter().map(|x| 2.0 * *x).collect::<Vec<_>>())
                     .unwrap();
-                (b.connection.edge_angles().to_vec(), b.frames.frame, u)
+                (b.transport.edge_angles().to_vec(), b.frames.frame, u)
             })
     };
     assert_eq!(run(1), run(3));
@@ -708,7 +708,7 @@ fn constant_field_is_in_the_kernel_on_a_flat_mesh() {
     let sp = VertexPattern::new(&t);
     let bp = BochnerPattern::new(&sp);
     let k = cotan_stiffness(&t, &b.geometry, &sp, 1.0);
-    let kv = bochner_stiffness(&sp, &bp, &k, &b.connection);
+    let kv = bochner_stiffness(&sp, &bp, &k, &b.transport);
     let w = DVec3::new(1.3, -0.4, 0.0);
     let u: Vec<DVec2> = (0..t.n_vertices())
         .map(|v| b.frames.to_local(v, w))
@@ -740,7 +740,7 @@ fn flat_vector_diffusion_is_two_scalar_diffusions() {
     let sp = VertexPattern::new(&t);
     let k = cotan_stiffness(&t, &b.geometry, &sp, nu);
     let u: Vec<DVec2> = (0..n).map(|v| b.frames.to_local(v, w[v])).collect();
-    let u1 = diffuse_tangent_field(&t, &b.geometry, &k, &b.connection, h, &u).unwrap();
+    let u1 = diffuse_tangent_field(&t, &b.geometry, &k, &b.transport, h, &u).unwrap();
     // independent: scalar (M + h ν K) c' = M c for each global component
     let mut a = cotan_stiffness(&t, &b.geometry, &sp, h * nu);
     add_lumped_mass(&b.geometry, &sp, 1.0, &mut a);
@@ -768,7 +768,7 @@ fn flat_vector_diffusion_is_two_scalar_diffusions() {
 }
 
 /// `Σ_edges L_ij |u_i − R_ij u_j|²` with `L_ij = −K_ij`.
-fn edge_energy(t: &Topology, sp: &VertexPattern, k: &[f64], c: &Connection, u: &[DVec2]) -> f64 {
+fn edge_energy(t: &Topology, sp: &VertexPattern, k: &[f64], c: &Transport, u: &[DVec2]) -> f64 {
     t.edges()
         .iter()
         .enumerate()
@@ -794,7 +794,7 @@ fn energy_is_the_sum_of_transport_residuals_and_nonnegative() {
         let sp = VertexPattern::new(&t);
         let bp = BochnerPattern::new(&sp);
         let k = cotan_stiffness(&t, &b.geometry, &sp, 1.0);
-        let kv = bochner_stiffness(&sp, &bp, &k, &b.connection);
+        let kv = bochner_stiffness(&sp, &bp, &k, &b.transport);
         let delaunay = sp.edge_slot().iter().all(|&s| k[s as usize] <= 1e-14);
         let mut worst = 0.0f64;
         let mut least = f64::INFINITY;
@@ -808,7 +808,7 @@ fn energy_is_the_sum_of_transport_residuals_and_nonnegative() {
                 .zip(bp.sym_matvec(&kv, &x))
                 .map(|(a, b)| a * b)
                 .sum();
-            let ee = edge_energy(&t, &sp, &k, &b.connection, &u);
+            let ee = edge_energy(&t, &sp, &k, &b.transport, &u);
             worst = worst.max((e - ee).abs() / ee.abs());
             least = least.min(e);
         }
@@ -835,7 +835,7 @@ fn killing_fields_on_the_unit_sphere_have_rayleigh_quotient_one() {
         let sp = VertexPattern::new(&t);
         let bp = BochnerPattern::new(&sp);
         let k = cotan_stiffness(&t, &b.geometry, &sp, 1.0);
-        let kv = bochner_stiffness(&sp, &bp, &k, &b.connection);
+        let kv = bochner_stiffness(&sp, &bp, &k, &b.transport);
         let mut worst = 0.0f64;
         for omega in [DVec3::Z, DVec3::new(0.3, -0.8, 0.5).normalize()] {
             let u: Vec<DVec2> = (0..t.n_vertices())
@@ -877,10 +877,10 @@ fn system_is_spd_on_curved_meshes_and_reuses_its_factorization() {
         let b = build(&t, &q);
         let k = cotan_stiffness(&t, &b.geometry, sys.scalar_pattern(), 0.5);
         let mut u = u0.clone();
-        sys.diffuse(&b.geometry, &k, &b.connection, h, &mut u)
+        sys.diffuse(&b.geometry, &k, &b.transport, h, &mut u)
             .unwrap();
         // residual of (M ⊗ I + h K_∇) u' = (M ⊗ I) u
-        let kv = bochner_stiffness(sys.scalar_pattern(), sys.pattern(), &k, &b.connection);
+        let kv = bochner_stiffness(sys.scalar_pattern(), sys.pattern(), &k, &b.transport);
         let ku = sys.pattern().sym_matvec(&kv, &flat(&u));
         let mut res = 0.0f64;
         let mut rhs = 0.0f64;
@@ -896,7 +896,7 @@ fn system_is_spd_on_curved_meshes_and_reuses_its_factorization() {
         );
         assert!(res < 1e-10 * rhs);
         // the one-shot form gives the same bits
-        let once = diffuse_tangent_field(&t, &b.geometry, &k, &b.connection, h, &u0).unwrap();
+        let once = diffuse_tangent_field(&t, &b.geometry, &k, &b.transport, h, &u0).unwrap();
         assert_eq!(once, u);
         // no field on a sphere is parallel: diffusion strictly loses energy
         let norm = |u: &[DVec2]| -> f64 {
@@ -920,22 +920,22 @@ fn loose_vertex_keeps_its_velocity_and_bad_input_is_reported() {
     let k = cotan_stiffness(&t, &b.geometry, sys.scalar_pattern(), 1.0);
     let mut u = vec![DVec2::new(1.0, 0.0); p.len()];
     u[16] = DVec2::new(-2.0, 3.0);
-    sys.diffuse(&b.geometry, &k, &b.connection, 0.1, &mut u)
+    sys.diffuse(&b.geometry, &k, &b.transport, 0.1, &mut u)
         .unwrap();
     assert_eq!(u[16], DVec2::new(-2.0, 3.0));
     assert!(u.iter().all(|v| v.is_finite()));
     let before = u.clone();
     assert!(
-        sys.diffuse(&b.geometry, &k, &b.connection, -1.0, &mut u)
+        sys.diffuse(&b.geometry, &k, &b.transport, -1.0, &mut u)
             .is_err()
     );
     assert!(
-        sys.diffuse(&b.geometry, &k[1..], &b.connection, 0.1, &mut u)
+        sys.diffuse(&b.geometry, &k[1..], &b.transport, 0.1, &mut u)
             .is_err()
     );
     u[2].x = f64::NAN;
     assert!(
-        sys.diffuse(&b.geometry, &k, &b.connection, 0.1, &mut u)
+        sys.diffuse(&b.geometry, &k, &b.transport, 0.1, &mut u)
             .is_err()
     );
     u[2] = before[2];
@@ -990,8 +990,8 @@ fn restriction_to_every_vertex_is_the_whole_operator() {
         }
     }
     // the block values of the same matrix are bochner_stiffness's (+ M ⊗ I₂)
-    let mut blocks = bochner_stiffness(&sp, &bp, &whole, &b.connection);
-    let restricted = r.bochner_values(&scalar, &b.connection);
+    let mut blocks = bochner_stiffness(&sp, &bp, &whole, &b.transport);
+    let restricted = r.bochner_values(&scalar, &b.transport);
     assert_eq!(restricted.len(), blocks.len());
     for d in bp.diag_slot() {
         for &s in d {
@@ -1059,7 +1059,7 @@ fn restriction_is_neumann_and_keeps_only_the_inside_edges() {
         // (M ⊗ I₂ + K_∇A) u = A u
         let w = DVec3::new(0.7, 1.1, 0.0);
         let u: Vec<DVec2> = kept.iter().map(|&v| b.frames.to_local(v, w)).collect();
-        let blocks = r.bochner_values(&values, &b.connection);
+        let blocks = r.bochner_values(&values, &b.transport);
         let y = lower_matvec(r.bochner(), &blocks, &flat(&u));
         for (j, &v) in kept.iter().enumerate() {
             let got = DVec2::new(y[2 * j], y[2 * j + 1]);

@@ -393,7 +393,7 @@ fn the_extension_continues_a_uniform_flow_exactly_and_zeroes_what_it_cannot_reac
         })
         .collect();
     let mut copy = u.clone();
-    extend_velocity(&topo, &built.connection, &wet, &mut [&mut u, &mut copy]);
+    extend_velocity(&topo, &built.transport, &wet, &mut [&mut u, &mut copy]);
     assert_eq!(u, copy, "every field gets the same extension");
     for (i, &ui) in u.iter().enumerate() {
         if i < n {

@@ -47,6 +47,7 @@ use rayon::prelude::*;
 
 use super::Topology;
 use super::geometry::check_positions;
+use super::rings::RingAdjacency;
 use crate::error::MeshError;
 
 /// Relative size below which the second singular value is treated as zero.
@@ -158,44 +159,9 @@ fn outer(a: DVec3, b: DVec3) -> DMat3 {
     DMat3::from_cols(a * b.x, a * b.y, a * b.z)
 }
 
-/// The neighbours of every vertex in the order the rotations sum over them (that of
-/// [`Topology::edges`], fixed by the topology): built once per mesh, so that a bake's
-/// per-frame rotations ([`RingAdjacency::rotations`]) only read it.
-#[derive(Debug, Clone)]
-pub struct RingAdjacency {
-    ptr: Vec<u32>,
-    nbr: Vec<u32>,
-}
-
+/// The one-ring rotations over a topology's fixed adjacency ([`RingAdjacency`], built once
+/// per mesh): the per-frame part.
 impl RingAdjacency {
-    /// The vertex adjacency of `topology`: each vertex's neighbours in the order of its
-    /// incident edges ([`Topology::vertex_edges`]).
-    pub fn new(topology: &Topology) -> Self {
-        let n = topology.n_vertices();
-        let mut ptr = Vec::with_capacity(n + 1);
-        let mut nbr = Vec::with_capacity(2 * topology.n_edges());
-        ptr.push(0u32);
-        for v in 0..n {
-            nbr.extend(
-                topology
-                    .vertex_edges(v)
-                    .iter()
-                    .map(|&e| topology.other_end(e as usize, v)),
-            );
-            ptr.push(nbr.len() as u32);
-        }
-        Self { ptr, nbr }
-    }
-
-    pub fn n_vertices(&self) -> usize {
-        self.ptr.len() - 1
-    }
-
-    /// Neighbours of `v` (each vertex sharing an edge with it), in edge order.
-    pub fn neighbours(&self, v: usize) -> &[u32] {
-        &self.nbr[self.ptr[v] as usize..self.ptr[v + 1] as usize]
-    }
-
     /// `U_i` of vertex `i` (see [`one_ring_rotations`]); positions are not checked.
     pub fn rotation(&self, rest: &[DVec3], current: &[DVec3], i: usize) -> DMat3 {
         let h = self.neighbours(i).iter().fold(DMat3::ZERO, |h, &j| {

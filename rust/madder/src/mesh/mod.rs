@@ -6,9 +6,13 @@ pub mod frames;
 pub mod geometry;
 pub mod kabsch;
 pub mod proximity;
+pub mod rings;
 pub mod topology;
+pub mod transport;
 
-pub use frames::{Connection, FanKind, OneRings, VertexFrames, Wedge};
+pub use frames::VertexFrames;
 pub use geometry::Geometry;
-pub use kabsch::{RingAdjacency, one_ring_rotations};
+pub use kabsch::one_ring_rotations;
+pub use rings::{FanKind, OneRings, RingAdjacency, Wedge};
 pub use topology::{EdgeKind, Topology};
+pub use transport::Transport;

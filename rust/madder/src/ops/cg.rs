@@ -49,7 +49,7 @@
 //!   factor fails to converge is solved again with Jacobi from the same warm start, so
 //!   nothing Jacobi solves fails. The factor is built once per [`WarmCg::solve`], before
 //!   the columns, which only read it. On the Bochner system the 2×2 diagonal blocks are
-//!   diagonal (`(M_jj + h K_jj) I₂`, see [`crate::ops::connection`]): block-Jacobi *is*
+//!   diagonal (`(M_jj + h K_jj) I₂`, see [`crate::ops::bochner`]): block-Jacobi *is*
 //!   Jacobi there, so the same IC(0) is used on the block pattern.
 //!
 //! Measured (`cargo bench -p madder --bench diffusion`, the flag case: cells
@@ -699,7 +699,7 @@ impl Precond<f64> for Factor<'_> {}
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::{Connection, Geometry, OneRings, Topology, VertexFrames};
+    use crate::mesh::{Geometry, OneRings, Topology, Transport, VertexFrames};
     use crate::ops::{
         BochnerPattern, PrefactoredSpd, VertexPattern, add_lumped_mass, add_lumped_mass_blocks,
         anisotropic_stiffness, bochner_stiffness, cotan_stiffness,
@@ -858,11 +858,11 @@ mod tests {
         let geom = Geometry::new(&topo, &pos).unwrap();
         let rings = OneRings::new(&topo);
         let frames = VertexFrames::new(&rings, &pos).unwrap();
-        let conn = Connection::new(&topo, &rings, &geom, &frames, &pos);
+        let transport = Transport::new(&topo, &rings, &geom, &frames, &pos);
         let scalar = VertexPattern::new(&topo);
         let pattern = BochnerPattern::new(&scalar);
         let stiffness = cotan_stiffness(&topo, &geom, &scalar, 0.05);
-        let mut values = bochner_stiffness(&scalar, &pattern, &stiffness, &conn);
+        let mut values = bochner_stiffness(&scalar, &pattern, &stiffness, &transport);
         add_lumped_mass_blocks(&geom, &pattern, 1.0, &mut values);
         let b: Vec<f64> = (0..2 * n * n)
             .map(|i| ((i * 7 % 11) as f64).cos())

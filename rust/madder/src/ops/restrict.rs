@@ -15,20 +15,20 @@
 //! the sub-pattern (fixed while the active set is) and assembles `M + K_A` from the whole
 //! mesh's stiffness each step ([`Restriction::scalar_values`]). For the velocity's
 //! viscosity the edge weights may be clamped (`K_ij ≤ 0`, i.e. `L_ij ≥ 0`): with negative
-//! weights `K_∇` can be indefinite ([`super::connection`]), and clamped it is positive
+//! weights `K_∇` can be indefinite ([`super::bochner`]), and clamped it is positive
 //! semi-definite on every mesh.
 //!
 //! **Block expansion.** The Bochner matrix is the scalar one with every entry a `2×2`
 //! block: `(K_∇)_ii = K_ii I₂`, `(K_∇)_ij = K_ij R_ij` (module doc of
-//! [`super::connection`]). [`block_pattern`] expands a lower-triangle scalar pattern
+//! [`super::bochner`]). [`block_pattern`] expands a lower-triangle scalar pattern
 //! (column `j`: its diagonal, then its rows `b > j`) into columns `2j`, `2j+1`, each holding
 //! its diagonal then rows `2b, 2b+1` (the diagonal block's zero off-diagonal is not
-//! stored), and [`block_values`] fills it from the scalar values and the connection's
+//! stored), and [`block_values`] fills it from the scalar values and the transport's
 //! angle per edge. The whole mesh's [`super::BochnerPattern`] and a restriction use the
 //! same two functions, so the operator of eq. 4.6 is assembled in one place.
 
 use super::{LowerCsc, VertexPattern};
-use crate::mesh::Connection;
+use crate::mesh::Transport;
 
 /// A lower-triangle CSC pattern built at run time (a restriction or a block expansion).
 #[derive(Debug, Clone)]
@@ -77,7 +77,7 @@ pub fn block_pattern(scalar: &impl LowerCsc) -> CscPattern {
 /// Values of the block expansion ([`block_pattern`]) of the scalar matrix `values` on
 /// `scalar`: diagonal blocks `v I₂`, and for the entry of edge `e = entry_edge[s]` the
 /// block `(b, a) = K_ab R_abᵀ = K [c s; −s c]` with `[c, s] = cos_sin[e]` (the
-/// connection's rotation of that edge). `entry_edge` is ignored on the diagonals.
+/// transport's rotation of that edge). `entry_edge` is ignored on the diagonals.
 pub fn block_values(
     scalar: &impl LowerCsc,
     values: &[f64],
@@ -219,8 +219,8 @@ impl Restriction {
     }
 
     /// Values of `M ⊗ I₂ + K_∇` on [`Restriction::bochner`] from the scalar values of
-    /// [`Restriction::scalar_values`] and the connection ([`block_values`]).
-    pub fn bochner_values(&self, scalar: &[f64], connection: &Connection) -> Vec<f64> {
-        block_values(&self.scalar, scalar, &self.edge, connection.edge_cos_sin())
+    /// [`Restriction::scalar_values`] and the transport ([`block_values`]).
+    pub fn bochner_values(&self, scalar: &[f64], transport: &Transport) -> Vec<f64> {
+        block_values(&self.scalar, scalar, &self.edge, transport.edge_cos_sin())
     }
 }

@@ -8,7 +8,7 @@
 //!
 //! The solver works on any fixed lower-triangular CSC pattern ([`LowerCsc`]): the scalar
 //! [`VertexPattern`] (the default) or, e.g., the `2N×2N` block pattern of the connection
-//! Laplacian ([`crate::ops::connection::BochnerPattern`]).
+//! Laplacian ([`crate::ops::bochner::BochnerPattern`]).
 //!
 //! Parallelism is an argument ([`faer::Par`]); the factorization and the triangular solves
 //! follow the elimination tree in a fixed order, and the default `Par::Seq` is bit-identical

@@ -8,7 +8,7 @@
 //! ## Velocity: semi-Lagrangian back-trace with strip following (§4.3.1)
 //! For each vertex `i` the foot of the characteristic is the point `p = −h u_i`, written in
 //! the `(x, y)` coordinates of `F_i`. The one-ring is flattened by the geodesic polar map
-//! of [`Connection`]: spoke `j` is laid at
+//! of [`Transport`]: spoke `j` is laid at
 //!
 //! ```text
 //! P_j = |e_ij| (cos(α_ij + δ_i), sin(α_ij + δ_i)),
@@ -50,7 +50,7 @@
 //! `(s_c − 1) φ_c`, the holonomy share of the corner at a curved `c`; they agree on
 //! developable cloth). For `j` and `k` of the first triangle this formula is eq. 4.4
 //! itself (`α_ij + δ_i + π − (α_ji + δ_j) = θ_ij`), so `R_ij` is taken from the
-//! [`Connection`] and the one-ring case is bit-identical to the seed's formula. A vertex
+//! [`Transport`] and the one-ring case is bit-identical to the seed's formula. A vertex
 //! keeps the rotation it was given when first placed while the strip passes it.
 //!
 //! The walk is the "straight walk" of point location: each new vertex is classified once
@@ -76,7 +76,7 @@
 //! velocity returns `u_i` exactly.
 //!
 //! *Irregular vertices* (bow-ties, non-manifold spokes) use the fallback polar layout of
-//! [`Connection`] (fans side by side, not rescaled) and the first wedge, in fan order,
+//! [`Transport`] (fans side by side, not rescaled) and the first wedge, in fan order,
 //! that contains the direction; the strip then stops at the first non-manifold edge.
 //! *Degenerate layouts*: a wedge whose layout is not convex (a collapsed face, or a
 //! rescaled tip angle ≥ π at a very sharp cone vertex) is skipped; a triangle whose layout
@@ -160,7 +160,8 @@ use glam::{DMat2, DVec2, DVec3};
 use rayon::prelude::*;
 
 use crate::error::ParamError;
-use crate::mesh::{Connection, EdgeKind, Geometry, OneRings, Topology, VertexFrames};
+use crate::mesh::transport::wrap_angle;
+use crate::mesh::{EdgeKind, Geometry, OneRings, Topology, Transport, VertexFrames};
 
 /// Most triangle crossings of one back-trace. Reached only when `h|u|` spans hundreds of
 /// edges; the trace then stops at its last crossing point.
@@ -211,17 +212,17 @@ struct Placed {
 /// velocities keep their value.
 ///
 /// # Panics
-/// If `rings`, `geometry`, `connection` or `velocity` do not belong to `topology`'s vertices
+/// If `rings`, `geometry`, `transport` or `velocity` do not belong to `topology`'s vertices
 /// (a programming error).
 pub fn advect_velocity(
     topology: &Topology,
     rings: &OneRings,
     geometry: &Geometry,
-    connection: &Connection,
+    transport: &Transport,
     velocity: &[DVec2],
     h: f64,
 ) -> Vec<DVec2> {
-    advect_velocity_where(topology, rings, geometry, connection, velocity, h, None)
+    advect_velocity_where(topology, rings, geometry, transport, velocity, h, None)
 }
 
 /// [`advect_velocity`] on the vertices where `active` is `true` only (the simulator's
@@ -234,7 +235,7 @@ pub fn advect_velocity_in(
     topology: &Topology,
     rings: &OneRings,
     geometry: &Geometry,
-    connection: &Connection,
+    transport: &Transport,
     velocity: &[DVec2],
     h: f64,
     active: &[bool],
@@ -244,7 +245,7 @@ pub fn advect_velocity_in(
         topology,
         rings,
         geometry,
-        connection,
+        transport,
         velocity,
         h,
         Some(active),
@@ -255,7 +256,7 @@ fn advect_velocity_where(
     topology: &Topology,
     rings: &OneRings,
     geometry: &Geometry,
-    connection: &Connection,
+    transport: &Transport,
     velocity: &[DVec2],
     h: f64,
     active: Option<&[bool]>,
@@ -272,7 +273,7 @@ fn advect_velocity_where(
         .into_par_iter()
         .map(|i| {
             if active.is_none_or(|a| a[i]) {
-                back_trace(topology, rings, geometry, connection, velocity, h, i)
+                back_trace(topology, rings, geometry, transport, velocity, h, i)
             } else {
                 velocity[i]
             }
@@ -284,7 +285,7 @@ fn back_trace(
     topology: &Topology,
     rings: &OneRings,
     geometry: &Geometry,
-    connection: &Connection,
+    transport: &Transport,
     velocity: &[DVec2],
     h: f64,
     i: usize,
@@ -298,7 +299,7 @@ fn back_trace(
         topology,
         rings,
         geometry,
-        connection,
+        transport,
         velocity,
         target,
         scale: target.length(),
@@ -316,7 +317,7 @@ struct Trace<'a> {
     topology: &'a Topology,
     rings: &'a OneRings,
     geometry: &'a Geometry,
-    connection: &'a Connection,
+    transport: &'a Transport,
     velocity: &'a [DVec2],
     target: DVec2,
     scale: f64,
@@ -341,13 +342,13 @@ impl Trace<'_> {
     /// The walk from vertex `i` with points on the line counted as left (`ties_left`) or
     /// right; `None` if no wedge of `i` contains the direction of the foot.
     fn walk(&self, i: usize, ties_left: bool) -> Option<DVec2> {
-        let (rings, connection, target) = (self.rings, self.connection, self.target);
+        let (rings, transport, target) = (self.rings, self.transport, self.target);
         let is_left = |s: f64| if ties_left { s >= 0.0 } else { s > 0.0 };
         // first triangle: the wedge whose sector contains the direction of `target`
         let spokes = rings.spokes(i);
         let spoke_edges = rings.spoke_edges(i);
-        let alpha = connection.polar_angles(i);
-        let delta = connection.frame_offset(i);
+        let alpha = transport.polar_angles(i);
+        let delta = transport.frame_offset(i);
         let place = |s: u32| {
             let s = s as usize;
             let len = self.geometry.edge_length[spoke_edges[s] as usize];
@@ -368,7 +369,7 @@ impl Trace<'_> {
                 .then_some((w, pa, pb))
         })?;
         let rot = |s: u32| {
-            let r = connection.edge_rotation(spoke_edges[s as usize] as usize);
+            let r = transport.edge_rotation(spoke_edges[s as usize] as usize);
             if i < spokes[s as usize] as usize {
                 r
             } else {
@@ -435,8 +436,8 @@ impl Trace<'_> {
     /// third vertex, placed in the layout. `None` at a border or non-manifold edge, or if the
     /// geometry is too degenerate to place it.
     fn across(&self, face: usize, r: &Placed, l: &Placed, f: f64) -> Option<(usize, Placed)> {
-        let (topology, rings, geometry, connection) =
-            (self.topology, self.rings, self.geometry, self.connection);
+        let (topology, rings, geometry, transport) =
+            (self.topology, self.rings, self.geometry, self.transport);
         let local_l = rings.spokes(r.v).iter().position(|&s| s as usize == l.v)?;
         let e = rings.spoke_edges(r.v)[local_l] as usize;
         if topology.edge_kind(e) != EdgeKind::Interior {
@@ -470,8 +471,8 @@ impl Trace<'_> {
         }
         // rotation F_c → layout from the directions of c → r and c → l
         let spokes_c = rings.spokes(c);
-        let alpha_c = connection.polar_angles(c);
-        let delta_c = connection.frame_offset(c);
+        let alpha_c = transport.polar_angles(c);
+        let delta_c = transport.frame_offset(c);
         let turn = |m: usize, pm: DVec2| {
             let k = spokes_c.iter().position(|&s| s as usize == m)?;
             let dir = pm - p;
@@ -505,13 +506,6 @@ fn barycentric(a: DVec2, b: DVec2, c: DVec2, p: DVec2) -> Option<[f64; 3]> {
     let sum = l[0] + l[1] + l[2];
     let out = l.map(|x| x / sum);
     (sum > 0.0 && out.iter().all(|x| x.is_finite())).then_some(out)
-}
-
-/// `a` wrapped to `(−π, π]`.
-fn wrap_angle(a: f64) -> f64 {
-    use std::f64::consts::{PI, TAU};
-    let r = (a + PI).rem_euclid(TAU) - PI;
-    if r == -PI { PI } else { r }
 }
 
 // ---------------------------------------------------------------------------------------
@@ -827,7 +821,7 @@ impl UpwindPlan {
     pub fn momentum_velocity(
         &self,
         topology: &Topology,
-        connection: &Connection,
+        transport: &Transport,
         solvent_before: &[f64],
         velocity: &[DVec2],
         fallback: &[DVec2],
@@ -848,7 +842,7 @@ impl UpwindPlan {
                         out += fraction * momentum[v];
                     }
                     for &(fraction, d, e) in flows.received(v) {
-                        let r = connection.edge_rotation(e as usize);
+                        let r = transport.edge_rotation(e as usize);
                         let r = if v < d as usize { r } else { r.transpose() };
                         inflow += r * (fraction * momentum[d as usize]);
                     }
@@ -925,7 +919,7 @@ mod tests {
         rings: OneRings,
         geometry: Geometry,
         frames: VertexFrames,
-        connection: Connection,
+        transport: Transport,
     }
 
     fn mesh(n: usize, faces: Vec<[u32; 3]>, p: Vec<DVec3>) -> Mesh {
@@ -933,19 +927,19 @@ mod tests {
         let rings = OneRings::new(&t);
         let geometry = Geometry::new(&t, &p).unwrap();
         let frames = VertexFrames::new(&rings, &p).unwrap();
-        let connection = Connection::new(&t, &rings, &geometry, &frames, &p);
+        let transport = Transport::new(&t, &rings, &geometry, &frames, &p);
         Mesh {
             t,
             p,
             rings,
             geometry,
             frames,
-            connection,
+            transport,
         }
     }
 
     fn advect(m: &Mesh, u: &[DVec2], h: f64) -> Vec<DVec2> {
-        advect_velocity(&m.t, &m.rings, &m.geometry, &m.connection, u, h)
+        advect_velocity(&m.t, &m.rings, &m.geometry, &m.transport, u, h)
     }
 
     #[test]
@@ -1050,7 +1044,7 @@ mod tests {
             assert!(mass.iter().all(|&x| x >= 0.0));
             let (s0, s1): (f64, f64) = (before.iter().sum(), mass.iter().sum());
             assert!((s1 - s0).abs() < 1e-14 * s0);
-            let mom = plan.momentum_velocity(&m.t, &m.connection, &before, &u, &out);
+            let mom = plan.momentum_velocity(&m.t, &m.transport, &before, &u, &out);
             assert!(mom.iter().all(|v| v.is_finite()));
             // several fields at once: bit-identical to one by one
             let mut a: Vec<f64> = (0..11).map(|i| (i as f64 * 0.7).sin().abs()).collect();

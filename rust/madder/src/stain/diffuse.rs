@@ -54,7 +54,7 @@
 //! conservative by construction ([`super::advect`]); so are the interactions.
 //!
 //! For the velocity's Bochner Laplacian the edge weights are clamped at zero: with
-//! negative (non-Delaunay) weights `K_∇` can be indefinite ([`crate::ops::connection`]),
+//! negative (non-Delaunay) weights `K_∇` can be indefinite ([`crate::ops::bochner`]),
 //! and the velocity diffusion is a viscosity, whose job is smoothing; clamping makes it
 //! positive semi-definite on every mesh (the scalar diffusion of the densities keeps the
 //! consistent weights).
@@ -66,7 +66,7 @@ use glam::{DVec2, DVec3};
 use super::state::{Fields, merge_rgb, split_rgb};
 use crate::error::{Error, ParamError};
 use crate::mesh::geometry::check_positions;
-use crate::mesh::{Connection, Geometry, RingAdjacency, Topology};
+use crate::mesh::{Geometry, RingAdjacency, Topology, Transport};
 use crate::ops::{
     PrefactoredSpd, Restriction, Tensor2, VertexPattern, WarmCg, add_lumped_mass,
     anisotropic_stiffness, cotan_stiffness, weft_angles,
@@ -519,14 +519,14 @@ pub(super) fn diffuse_velocity(
     cg: &mut WarmCg,
     velocity: &mut [DVec2],
     geometry: &Geometry,
-    connection: &Connection,
+    transport: &Transport,
     scale: f64,
 ) -> Result<usize, Error> {
     let region = ops.region;
     let stiffness = cotan_stiffness(ops.topology, geometry, ops.pattern, scale);
     let area = &geometry.vertex_area;
     let scalar = region.scalar_values(ops.pattern, &stiffness, area, true);
-    let values = region.bochner_values(&scalar, connection);
+    let values = region.bochner_values(&scalar, transport);
     let nv = region.vertices.len();
     let mut rhs = Vec::with_capacity(2 * nv);
     let mut x = Vec::with_capacity(2 * nv);

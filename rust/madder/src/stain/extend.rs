@@ -39,7 +39,7 @@
 
 use glam::DVec2;
 
-use crate::mesh::{Connection, Topology};
+use crate::mesh::{Topology, Transport};
 
 /// A vertex carries a velocity of its own when its free-solvent density is above this
 /// fraction of the largest among the vertices considered (module doc).
@@ -65,7 +65,7 @@ pub fn wet_vertices(mass: &[f64], area: &[f64], region: &[bool]) -> Vec<bool> {
 
 /// Replaces the velocity of every vertex that is not `wet` in each of `fields` by the
 /// extension of the module doc: ring by ring from the wet vertices, the mean of the known
-/// neighbours' values transported by `connection`'s `R_ij`; zero where no wet vertex
+/// neighbours' values transported by `transport`'s `R_ij`; zero where no wet vertex
 /// reaches. Every field gets the same weights. Sequential and in edge order: the result
 /// does not depend on the thread count.
 ///
@@ -73,7 +73,7 @@ pub fn wet_vertices(mass: &[f64], area: &[f64], region: &[bool]) -> Vec<bool> {
 /// If `wet` or a field does not have one entry per vertex of `topology`.
 pub fn extend_velocity(
     topology: &Topology,
-    connection: &Connection,
+    transport: &Transport,
     wet: &[bool],
     fields: &mut [&mut [DVec2]],
 ) {
@@ -104,7 +104,7 @@ pub fn extend_velocity(
             values.clear();
             for &i in &ring {
                 values.push(mean_of_known(
-                    topology, connection, &known, field, i as usize,
+                    topology, transport, &known, field, i as usize,
                 ));
             }
             for (&i, &u) in ring.iter().zip(&values) {
@@ -126,7 +126,7 @@ pub fn extend_velocity(
 /// `(1/|K|) Σ_{j ∈ K} R_ij u_j` over the known neighbours `K` of `i` (at least one).
 fn mean_of_known(
     topology: &Topology,
-    connection: &Connection,
+    transport: &Transport,
     known: &[bool],
     u: &[DVec2],
     i: usize,
@@ -135,7 +135,7 @@ fn mean_of_known(
     for &e in topology.vertex_edges(i) {
         let j = topology.other_end(e as usize, i) as usize;
         if known[j] {
-            let r = connection.edge_rotation(e as usize);
+            let r = transport.edge_rotation(e as usize);
             let r = if i < j { r } else { r.transpose() };
             sum += r * u[j];
             count += 1;

@@ -85,7 +85,7 @@ use super::state::{Fields, Local, State, merge_rgb, split_rgb};
 use super::window::{Cloth, Window, pick};
 use crate::error::{Error, ParamError};
 use crate::mesh::geometry::check_positions;
-use crate::mesh::{Connection, Geometry, OneRings, RingAdjacency, Topology, VertexFrames};
+use crate::mesh::{Geometry, OneRings, RingAdjacency, Topology, Transport, VertexFrames};
 
 // the public items that lived here before the window, the diffusion solves and the state
 // got their own modules (issue 11), still reachable by their old paths
@@ -205,7 +205,7 @@ pub struct Simulator {
 pub struct Profile {
     /// Finding the liquid and (re)building the window.
     pub window: f64,
-    /// Geometry, comoving–corotating frames (Kabsch) and the connection.
+    /// Geometry, comoving–corotating frames (Kabsch) and the transport `R_ij`.
     pub geometry: f64,
     /// Body forces (and bringing the velocities of vertices entering the window up to
     /// date).
@@ -494,7 +494,7 @@ impl Simulator {
         let geometry = Geometry::new(topo, q)?;
         let frames =
             corotating_frames_with(&w.cloth.adjacency, &w.cloth.rest_frames, &w.cloth.rest, q);
-        let connection = Connection::new(topo, &w.cloth.rings, &geometry, &frames, q);
+        let transport = Transport::new(topo, &w.cloth.rings, &geometry, &frames, q);
         prof.active_vertices += w.region.vertices.len();
         prof.window_vertices += n;
         lap(&mut prof.geometry);
@@ -531,7 +531,7 @@ impl Simulator {
             &geometry.vertex_area,
             &w.region.mask,
         );
-        extend_velocity(topo, &connection, &wet, &mut [&mut forced, &mut mean]);
+        extend_velocity(topo, &transport, &wet, &mut [&mut forced, &mut mean]);
         lap(&mut prof.forces);
 
         // 2. advection (§4.3.1–4.3.2), closed inside the active region
@@ -540,7 +540,7 @@ impl Simulator {
             topo,
             &w.cloth.rings,
             &geometry,
-            &connection,
+            &transport,
             &forced,
             h,
             active,
@@ -582,7 +582,7 @@ impl Simulator {
             }
         }
         let arrived = match solvent_before {
-            Some(before) => plan.momentum_velocity(topo, &connection, &before, &forced, &advected),
+            Some(before) => plan.momentum_velocity(topo, &transport, &before, &forced, &advected),
             None => advected,
         };
         lap(&mut prof.advection);
@@ -611,7 +611,7 @@ impl Simulator {
                 || {
                     if p.viscosity > 0.0 {
                         let scale = h * p.viscosity;
-                        diffuse_velocity(&ops, vector_cg, velocity, &geometry, &connection, scale)
+                        diffuse_velocity(&ops, vector_cg, velocity, &geometry, &transport, scale)
                     } else {
                         Ok(0)
                     }

@@ -18,10 +18,10 @@
 //!   1e-12 of the peaks and less): it stays untouched until liquid comes near again, and
 //!   keeps the area of its last step.
 //! - the **halo**: the other corners of the active and held vertices' faces, so that
-//!   their one-rings are whole: their areas, Kabsch frames, connection and exposure are
+//!   their one-rings are whole: their areas, Kabsch frames, transport and exposure are
 //!   exactly the cloth's. The halo holds nothing that can change; it is not written back.
 //!
-//! Geometry, frames, connection, forces, advection, diffusion and interactions all run on
+//! Geometry, frames, transport, forces, advection, diffusion and interactions all run on
 //! the window only; the cloth outside it costs nothing per frame but reading the
 //! positions. A frame gathers the window's state, steps it, and writes it back. The window
 //! is kept from frame to frame while the liquid's needed region stays inside its active

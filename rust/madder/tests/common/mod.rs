@@ -9,7 +9,7 @@
 //!   to `±jitter/2 · dx` in x and y, from [`hash`] (or another hash); the
 //!   border stays straight. Positions are `(x, y, 0)` or any `place(x, y)`.
 //! - [`hash`] (and [`hash_unmixed_salt`]): deterministic pseudo-random numbers in [−½, ½).
-//! - [`Built`]: one-rings, geometry, vertex frames and connection of a mesh.
+//! - [`Built`]: one-rings, geometry, vertex frames and transport of a mesh.
 //! - [`gaussian`], [`centroid`], [`covariance`]: a blob at every vertex and the mass-weighted
 //!   moments of a field.
 
@@ -18,7 +18,7 @@
 use std::f64::consts::PI;
 
 use glam::{DVec2, DVec3};
-use madder::mesh::{Connection, Geometry, OneRings, Topology, VertexFrames};
+use madder::mesh::{Geometry, OneRings, Topology, Transport, VertexFrames};
 use madder::stain::InteractionRates;
 
 /// Deterministic pseudo-random number in [−½, ½) for key `k` and stream `salt`.
@@ -156,12 +156,12 @@ impl Grid {
     }
 }
 
-/// The per-mesh structures of the connection: one-rings, geometry, frames, connection.
+/// The per-mesh structures of the transport: one-rings, geometry, frames, transport.
 pub struct Built {
     pub rings: OneRings,
     pub geometry: Geometry,
     pub frames: VertexFrames,
-    pub connection: Connection,
+    pub transport: Transport,
 }
 
 /// [`Built`] with the default vertex frames of `p`.
@@ -174,12 +174,12 @@ pub fn build(t: &Topology, p: &[DVec3]) -> Built {
 /// [`Built`] with the given one-rings and frames.
 pub fn build_with(t: &Topology, p: &[DVec3], rings: OneRings, frames: VertexFrames) -> Built {
     let geometry = Geometry::new(t, p).unwrap();
-    let connection = Connection::new(t, &rings, &geometry, &frames, p);
+    let transport = Transport::new(t, &rings, &geometry, &frames, p);
     Built {
         rings,
         geometry,
         frames,
-        connection,
+        transport,
     }
 }
 

@@ -28,7 +28,7 @@
 //! ```
 //!
 //! **Symmetry.** The transpose of block `(i, j)` is `K_ij R_ijᵀ`; block `(j, i)` is
-//! `K_ji R_ji`. They agree iff `R_ji = R_ijᵀ`, which [`Connection`] guarantees exactly
+//! `K_ji R_ji`. They agree iff `R_ji = R_ijᵀ`, which [`Transport`] guarantees exactly
 //! (one angle per edge, the reverse rotation is the transpose), so `K_∇` is symmetric
 //! and only its lower triangle is stored.
 //!
@@ -63,7 +63,7 @@ use super::restrict::{block_pattern, block_values, entry_edges};
 use super::solve::LowerCsc;
 use super::{PrefactoredSpd, VertexPattern};
 use crate::error::{Error, ParamError, SolveError};
-use crate::mesh::{Connection, Geometry, Topology};
+use crate::mesh::{Geometry, Topology, Transport};
 
 /// Lower triangle of the `2N×2N` block matrix of a connection Laplacian, CSC.
 #[derive(Debug, Clone)]
@@ -167,12 +167,12 @@ impl LowerCsc for BochnerPattern {
 }
 
 /// Values of `K_∇` on `pattern` from the scalar stiffness `stiffness` (values on `scalar`,
-/// e.g. [`crate::ops::cotan_stiffness`]) and the connection.
+/// e.g. [`crate::ops::cotan_stiffness`]) and the transport `R_ij`.
 pub fn bochner_stiffness(
     scalar: &VertexPattern,
     pattern: &BochnerPattern,
     stiffness: &[f64],
-    connection: &Connection,
+    transport: &Transport,
 ) -> Vec<f64> {
     assert_eq!(
         stiffness.len(),
@@ -180,9 +180,9 @@ pub fn bochner_stiffness(
         "stiffness is not on the pattern"
     );
     assert_eq!(
-        connection.edge_angles().len(),
+        transport.edge_angles().len(),
         scalar.edge_slot().len(),
-        "connection of another topology"
+        "transport of another topology"
     );
     assert_eq!(
         pattern.n_vertices,
@@ -193,7 +193,7 @@ pub fn bochner_stiffness(
         scalar,
         stiffness,
         &pattern.entry_edge,
-        connection.edge_cos_sin(),
+        transport.edge_cos_sin(),
     )
 }
 
@@ -242,14 +242,14 @@ impl BochnerSystem {
 
     /// One backward-Euler step of eq. 4.6 over `h`: solves
     /// `(M ⊗ I₂ + h K_∇) u' = (M ⊗ I₂) u` in place of `velocity` (per vertex, in the
-    /// frames of `connection`), with `M` the lumped mass of `geometry` and `K_∇` built
+    /// frames of `transport`), with `M` the lumped mass of `geometry` and `K_∇` built
     /// from the scalar `stiffness` (values on [`Self::scalar_pattern`], with the viscosity
-    /// inside) and `connection`. On error `velocity` is unchanged.
+    /// inside) and `transport`. On error `velocity` is unchanged.
     pub fn diffuse(
         &mut self,
         geometry: &Geometry,
         stiffness: &[f64],
-        connection: &Connection,
+        transport: &Transport,
         h: f64,
         velocity: &mut [DVec2],
     ) -> Result<(), Error> {
@@ -269,7 +269,7 @@ impl BochnerSystem {
             (
                 "connection angles",
                 self.scalar.edge_slot().len(),
-                connection.edge_angles().len(),
+                transport.edge_angles().len(),
             ),
         ] {
             if expected != got {
@@ -289,7 +289,7 @@ impl BochnerSystem {
             .into());
         }
         let pattern = self.solver.pattern();
-        let mut values: Vec<f64> = bochner_stiffness(&self.scalar, pattern, stiffness, connection)
+        let mut values: Vec<f64> = bochner_stiffness(&self.scalar, pattern, stiffness, transport)
             .into_iter()
             .map(|v| h * v)
             .collect();
@@ -319,13 +319,13 @@ pub fn diffuse_tangent_field(
     topology: &Topology,
     geometry: &Geometry,
     stiffness: &[f64],
-    connection: &Connection,
+    transport: &Transport,
     h: f64,
     velocity: &[DVec2],
 ) -> Result<Vec<DVec2>, Error> {
     let mut system = BochnerSystem::new(topology, Par::Seq)?;
     let mut u = velocity.to_vec();
-    system.diffuse(geometry, stiffness, connection, h, &mut u)?;
+    system.diffuse(geometry, stiffness, transport, h, &mut u)?;
     Ok(u)
 }
 

@@ -1,0 +1,543 @@
+//! One-ring fans (seed §4.3.1): the topology-lifetime structures around every vertex,
+//! built once per mesh and read by every frame.
+//!
+//! - [`OneRings`]: the fan of faces around every vertex, ordered counter-clockwise, and its
+//!   *spokes* (the neighbours, in the order the fan meets them). Spoke 0 is the vertex's
+//!   *reference edge* `e_ik`, which the vertex frames ([`super::frames`]) and the polar map
+//!   of the transport ([`super::transport`]) measure angles from.
+//! - [`RingAdjacency`]: the neighbours of every vertex in edge order, the sum the one-ring
+//!   rotations of §4.4 ([`super::kabsch`]) run over.
+//!
+//! ## One-ring ordering, non-manifold fans and orientation
+//! Blender meshes are usually, not always, consistently oriented. Face orientations are
+//! first *harmonized*: a breadth-first walk over faces through edges shared by exactly two
+//! faces flips faces so that neighbours agree, and each connected component keeps the
+//! orientation of the majority of its faces (so one stray flipped face is corrected, not
+//! the rest of the cloth). This is deterministic (lowest face first) and changes nothing on
+//! a consistently oriented mesh.
+//!
+//! The fan of a vertex is then walked wedge to wedge through shared spokes, in the
+//! harmonized orientation but without relying on it (an inconsistency left over, on a
+//! non-orientable mesh, does not break the walk): a spoke shared by exactly two wedges
+//! links them, any other spoke (one wedge: a border; three or more: a non-manifold edge)
+//! ends the walk. Walks start, in this priority and in face order, at a wedge entered
+//! through an open spoke in its (harmonized) orientation, at a wedge entered through an
+//! open spoke against it, then (only closed loops remain) at the first unvisited wedge.
+//! Each walk (component) is given the orientation of the majority of its faces (ties keep
+//! the walk's), and its wedges record whether they run with or against their face as
+//! stored. The vertex normal sums the wedge normals *as walked*, so it always agrees with
+//! the counter-clockwise sense of the polar angles.
+//!
+//! [`FanKind`] classifies the result: `Interior` (one closed loop, the polar map is a
+//! disk, `s_i = 2π/γ_i`), `Boundary` (one open fan, `s_i = 1`), `Loose` (no face) and
+//! `Irregular` (several fans meeting at the vertex — a bow-tie — or a non-manifold spoke).
+//! The polar map of an irregular vertex is not defined; as a fallback its fans are laid
+//! side by side in walk order without rescaling, a spoke met twice keeps its first angle,
+//! and everything stays finite. An edge whose two endpoints walk a shared face in opposite
+//! senses (a Möbius seam) has a reflection, not a rotation, as its true transport; such
+//! edges are listed by [`OneRings::orientation_reversing_edges`] so callers can warn.
+
+use rayon::prelude::*;
+
+use super::Topology;
+
+/// The shape of the fan of faces around a vertex.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FanKind {
+    /// No incident face.
+    Loose,
+    /// One closed fan: the one-ring is a topological disk around the vertex.
+    Interior,
+    /// One open fan whose two end spokes are border edges.
+    Boundary,
+    /// Several fans meeting at the vertex, or a spoke shared by three or more faces.
+    Irregular,
+}
+
+/// One corner of the fan around a vertex, as the walk passes it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Wedge {
+    /// The face.
+    pub face: u32,
+    /// The face's corner at the vertex (0, 1 or 2).
+    pub corner: u8,
+    /// `true` if the walk passes the face in its own orientation, i.e. enters through the
+    /// spoke to corner `corner + 1` and leaves through the spoke to corner `corner + 2`.
+    pub forward: bool,
+    /// Local index (into the vertex's spokes) of the spoke the walk enters through.
+    pub from: u32,
+    /// Local index of the spoke the walk leaves through.
+    pub to: u32,
+}
+
+/// Ordered fans of faces and spokes around every vertex (topology only).
+#[derive(Debug, Clone)]
+pub struct OneRings {
+    wedge_ptr: Vec<u32>,
+    wedges: Vec<Wedge>,
+    pub(super) spoke_ptr: Vec<u32>,
+    pub(super) spoke_vertex: Vec<u32>,
+    spoke_edge: Vec<u32>,
+    kind: Vec<FanKind>,
+    pub(super) edge_ptr: Vec<u32>,
+    pub(super) edge_end: Vec<u32>,
+    /// Per edge `(a, b)`: the index of its spoke among the spokes of `a` and of `b`
+    /// (global, into the per-spoke arrays; `u32::MAX` if the edge is in no fan).
+    pub(super) edge_spoke: Vec<[u32; 2]>,
+    reversing: Vec<u32>,
+    /// Per face: walked against its vertex order.
+    flipped: Vec<bool>,
+}
+
+/// The walk of one fan component: wedges (index into the vertex's corner list, forward)
+/// and whether it closed on itself.
+struct Walk {
+    steps: Vec<(usize, bool)>,
+    closed: bool,
+}
+
+impl OneRings {
+    /// Orders the fan of every vertex of `topology` (in parallel; deterministic).
+    pub fn new(topology: &Topology) -> Self {
+        Self::with_orientation(topology, harmonize_orientation(topology))
+    }
+
+    /// [`OneRings::new`] with the faces' orientation given: `flipped[f]` if face `f` is
+    /// walked against its own vertex order. A part of a mesh cut out with the whole
+    /// mesh's [`OneRings::face_flipped`] walks every fan it shares with the whole mesh in
+    /// the same sense (its own harmonization could choose another on a part that does
+    /// not reach the whole mesh's deciding faces).
+    ///
+    /// # Panics
+    /// If `flipped` does not have one flag per face.
+    pub fn with_orientation(topology: &Topology, flipped: Vec<bool>) -> Self {
+        assert_eq!(flipped.len(), topology.n_faces(), "one flag per face");
+        let n = topology.n_vertices();
+        let faces = topology.faces();
+        // vertex → incident (face, corner), in face order
+        let (corner_ptr, corners) = incidence(n, faces);
+        // edge lookup: edges are sorted by (a, b), so those starting at a are contiguous
+        let edges = topology.edges();
+        let mut edge_ptr = vec![0u32; n + 1];
+        for &[a, _] in edges {
+            edge_ptr[a as usize + 1] += 1;
+        }
+        for v in 0..n {
+            edge_ptr[v + 1] += edge_ptr[v];
+        }
+        let edge_end: Vec<u32> = edges.iter().map(|&[_, b]| b).collect();
+        let lookup = |i: u32, j: u32| find_edge(&edge_ptr, &edge_end, i, j);
+
+        let fans: Vec<(Vec<Wedge>, Vec<u32>, FanKind)> = (0..n)
+            .into_par_iter()
+            .map(|v| {
+                let c = &corners[corner_ptr[v] as usize..corner_ptr[v + 1] as usize];
+                order_fan(faces, &flipped, c)
+            })
+            .collect();
+
+        let mut wedge_ptr = Vec::with_capacity(n + 1);
+        let mut spoke_ptr = Vec::with_capacity(n + 1);
+        wedge_ptr.push(0u32);
+        spoke_ptr.push(0u32);
+        let mut wedges = Vec::with_capacity(corners.len());
+        let mut spoke_vertex = Vec::new();
+        let mut spoke_edge = Vec::new();
+        let mut kind = Vec::with_capacity(n);
+        for (v, (w, s, k)) in fans.into_iter().enumerate() {
+            wedges.extend_from_slice(&w);
+            for &j in &s {
+                spoke_edge.push(lookup(v as u32, j).expect("a spoke is an edge") as u32);
+            }
+            spoke_vertex.extend_from_slice(&s);
+            kind.push(k);
+            wedge_ptr.push(wedges.len() as u32);
+            spoke_ptr.push(spoke_vertex.len() as u32);
+        }
+
+        // sense in which each face corner is walked; an edge is orientation-reversing if a
+        // face on it is walked forward at one end and backward at the other
+        let mut corner_forward = vec![[true; 3]; faces.len()];
+        for w in &wedges {
+            corner_forward[w.face as usize][w.corner as usize] = w.forward;
+        }
+        let mut reversing: Vec<u32> = Vec::new();
+        for (fe, fwd) in topology.face_edges().iter().zip(&corner_forward) {
+            for k in 0..3 {
+                if fwd[(k + 1) % 3] != fwd[(k + 2) % 3] {
+                    reversing.push(fe[k]);
+                }
+            }
+        }
+        reversing.sort_unstable();
+        reversing.dedup();
+
+        // a vertex's spokes are distinct neighbours, so every edge is met once per end
+        let mut edge_spoke = vec![[u32::MAX; 2]; edges.len()];
+        for v in 0..n {
+            for s in spoke_ptr[v]..spoke_ptr[v + 1] {
+                let e = spoke_edge[s as usize] as usize;
+                edge_spoke[e][usize::from(edges[e][0] as usize != v)] = s;
+            }
+        }
+
+        Self {
+            wedge_ptr,
+            wedges,
+            spoke_ptr,
+            spoke_vertex,
+            spoke_edge,
+            kind,
+            edge_ptr,
+            edge_end,
+            edge_spoke,
+            reversing,
+            flipped,
+        }
+    }
+
+    /// Per face: whether the fans walk it against its own vertex order (the harmonized
+    /// orientation).
+    pub fn face_flipped(&self) -> &[bool] {
+        &self.flipped
+    }
+
+    pub fn n_vertices(&self) -> usize {
+        self.kind.len()
+    }
+
+    /// The fan of vertex `v`, in walk (counter-clockwise) order.
+    pub fn wedges(&self, v: usize) -> &[Wedge] {
+        &self.wedges[self.wedge_ptr[v] as usize..self.wedge_ptr[v + 1] as usize]
+    }
+
+    /// Neighbours of `v` in the order the fan meets them; spoke 0 is the reference edge.
+    pub fn spokes(&self, v: usize) -> &[u32] {
+        &self.spoke_vertex[self.spoke_ptr[v] as usize..self.spoke_ptr[v + 1] as usize]
+    }
+
+    /// Edge index (into [`Topology::edges`]) of every spoke of `v`.
+    pub fn spoke_edges(&self, v: usize) -> &[u32] {
+        &self.spoke_edge[self.spoke_ptr[v] as usize..self.spoke_ptr[v + 1] as usize]
+    }
+
+    /// Offset of vertex `v`'s spokes in arrays laid out per spoke (like
+    /// [`Transport::polar_angles`](super::Transport::polar_angles)).
+    pub fn spoke_offset(&self, v: usize) -> usize {
+        self.spoke_ptr[v] as usize
+    }
+
+    pub fn kind(&self, v: usize) -> FanKind {
+        self.kind[v]
+    }
+
+    /// Index of the edge between `i` and `j`, if any.
+    pub fn edge_between(&self, i: usize, j: usize) -> Option<usize> {
+        find_edge(&self.edge_ptr, &self.edge_end, i as u32, j as u32)
+    }
+
+    /// Edges across which the two endpoints' fans have opposite senses (a non-orientable
+    /// mesh's seam): their true transport is a reflection, which [`Transport`](super::Transport) cannot
+    /// express. Empty on any orientable mesh, however its faces are oriented.
+    pub fn orientation_reversing_edges(&self) -> &[u32] {
+        &self.reversing
+    }
+}
+
+/// Index of the edge `{i, j}` in the sorted edge list (`edge_ptr`: the first edge of each
+/// lower endpoint, `edge_end`: every edge's upper endpoint); `None` if there is none.
+pub(super) fn find_edge(edge_ptr: &[u32], edge_end: &[u32], i: u32, j: u32) -> Option<usize> {
+    let (a, b) = (i.min(j) as usize, i.max(j));
+    if a == b as usize || a + 1 >= edge_ptr.len() {
+        return None;
+    }
+    let (lo, hi) = (edge_ptr[a] as usize, edge_ptr[a + 1] as usize);
+    edge_end[lo..hi].binary_search(&b).ok().map(|k| lo + k)
+}
+
+/// Groups per-face triples of keys (vertices or edges, `< n`) by key with a counting sort:
+/// `items[ptr[k]..ptr[k+1]]` are the `(face, slot)` where key `k` appears, in face order.
+fn incidence(n: usize, per_face: &[[u32; 3]]) -> (Vec<u32>, Vec<(u32, u8)>) {
+    let mut ptr = vec![0u32; n + 1];
+    for t in per_face {
+        for &k in t {
+            ptr[k as usize + 1] += 1;
+        }
+    }
+    for k in 0..n {
+        ptr[k + 1] += ptr[k];
+    }
+    let mut next = ptr[..n].to_vec();
+    let mut items = vec![(0u32, 0u8); ptr[n] as usize];
+    for (f, t) in per_face.iter().enumerate() {
+        for (slot, &k) in t.iter().enumerate() {
+            items[next[k as usize] as usize] = (f as u32, slot as u8);
+            next[k as usize] += 1;
+        }
+    }
+    (ptr, items)
+}
+
+/// Which faces to flip so that every edge shared by exactly two faces is crossed
+/// consistently: a breadth-first walk over faces through such edges, from the
+/// lowest-numbered face of each connected component; each component then keeps the
+/// orientation of the majority of its faces (ties: that of its first face). On a
+/// non-orientable component some edges stay inconsistent whatever the flips.
+fn harmonize_orientation(topology: &Topology) -> Vec<bool> {
+    let (faces, face_edges) = (topology.faces(), topology.face_edges());
+    let n_edges = topology.n_edges();
+    // edge → its incident (face, corner opposite the edge)
+    let (ptr, inc) = incidence(n_edges, face_edges);
+    // the edge as face f walks it, from corner k+1 to corner k+2
+    let run = |f: u32, k: u8| {
+        let t = faces[f as usize];
+        (t[(k as usize + 1) % 3], t[(k as usize + 2) % 3])
+    };
+    let mut flipped = vec![false; faces.len()];
+    let mut seen = vec![false; faces.len()];
+    let mut queue = std::collections::VecDeque::new();
+    let mut component = Vec::new();
+    for root in 0..faces.len() {
+        if seen[root] {
+            continue;
+        }
+        seen[root] = true;
+        queue.push_back(root as u32);
+        component.clear();
+        while let Some(f) = queue.pop_front() {
+            component.push(f);
+            for (k, &e) in face_edges[f as usize].iter().enumerate() {
+                let pair = &inc[ptr[e as usize] as usize..ptr[e as usize + 1] as usize];
+                if pair.len() != 2 {
+                    continue;
+                }
+                let (g, l) = if pair[0].0 == f { pair[1] } else { pair[0] };
+                if seen[g as usize] {
+                    continue;
+                }
+                // consistent faces walk their shared edge in opposite directions
+                let (a, b) = run(f, k as u8);
+                let consistent = run(g, l) == (b, a);
+                flipped[g as usize] = flipped[f as usize] == consistent;
+                seen[g as usize] = true;
+                queue.push_back(g);
+            }
+        }
+        let n_flipped = component.iter().filter(|&&f| flipped[f as usize]).count();
+        if 2 * n_flipped > component.len() {
+            component.iter().for_each(|&f| flipped[f as usize] ^= true);
+        }
+    }
+    flipped
+}
+
+/// Orders the fan of one vertex from its incident `(face, corner)` list, walking faces in
+/// their harmonized orientation (`flipped`).
+fn order_fan(
+    faces: &[[u32; 3]],
+    flipped: &[bool],
+    corners: &[(u32, u8)],
+) -> (Vec<Wedge>, Vec<u32>, FanKind) {
+    let m = corners.len();
+    if m == 0 {
+        return (Vec::new(), Vec::new(), FanKind::Loose);
+    }
+    // the two spokes of each wedge in the face's harmonized orientation
+    let ends: Vec<[u32; 2]> = corners
+        .iter()
+        .map(|&(f, k)| {
+            let t = faces[f as usize];
+            let (p, q) = (t[(k as usize + 1) % 3], t[(k as usize + 2) % 3]);
+            if flipped[f as usize] { [q, p] } else { [p, q] }
+        })
+        .collect();
+    // spoke → wedges touching it
+    let mut touch: Vec<(u32, u32)> = Vec::with_capacity(2 * m);
+    for (w, e) in ends.iter().enumerate() {
+        touch.push((e[0], w as u32));
+        touch.push((e[1], w as u32));
+    }
+    touch.sort_unstable();
+    let touching = |s: u32| {
+        let lo = touch.partition_point(|&(x, _)| x < s);
+        let hi = touch.partition_point(|&(x, _)| x <= s);
+        &touch[lo..hi]
+    };
+    let open = |s: u32| touching(s).len() != 2;
+
+    let mut visited = vec![false; m];
+    let mut walks: Vec<Walk> = Vec::new();
+    let mut n_visited = 0;
+    while n_visited < m {
+        let start = (0..m)
+            .find(|&w| !visited[w] && open(ends[w][0]))
+            .map(|w| (w, true))
+            .or_else(|| {
+                (0..m)
+                    .find(|&w| !visited[w] && open(ends[w][1]))
+                    .map(|w| (w, false))
+            })
+            .or_else(|| (0..m).find(|&w| !visited[w]).map(|w| (w, true)))
+            .expect("an unvisited wedge remains");
+        let (mut w, mut fwd) = start;
+        let first_spoke = ends[w][if fwd { 0 } else { 1 }];
+        let mut steps = Vec::new();
+        let closed = loop {
+            visited[w] = true;
+            n_visited += 1;
+            steps.push((w, fwd));
+            let exit = ends[w][if fwd { 1 } else { 0 }];
+            let t = touching(exit);
+            if t.len() != 2 {
+                break false;
+            }
+            let other = if t[0].1 as usize == w { t[1].1 } else { t[0].1 } as usize;
+            if visited[other] {
+                break exit == first_spoke && other == start.0;
+            }
+            w = other;
+            fwd = ends[w][0] == exit;
+        };
+        // give the walk the orientation of the majority of its faces
+        let n_fwd = steps.iter().filter(|s| s.1).count();
+        if 2 * n_fwd < steps.len() {
+            steps.reverse();
+            steps.iter_mut().for_each(|s| s.1 = !s.1);
+        }
+        walks.push(Walk { steps, closed });
+    }
+
+    // spokes in order of first meeting; wedges refer to them by local index
+    let mut distinct: Vec<u32> = touch.iter().map(|t| t.0).collect();
+    distinct.dedup();
+    let mut local = vec![u32::MAX; distinct.len()];
+    let mut spokes: Vec<u32> = Vec::with_capacity(distinct.len());
+    let mut slot = |s: u32, spokes: &mut Vec<u32>| {
+        let k = distinct.binary_search(&s).expect("a wedge's spoke");
+        if local[k] == u32::MAX {
+            local[k] = spokes.len() as u32;
+            spokes.push(s);
+        }
+        local[k]
+    };
+    let mut wedges = Vec::with_capacity(m);
+    for walk in &walks {
+        for &(w, fwd) in &walk.steps {
+            let (a, b) = if fwd {
+                (ends[w][0], ends[w][1])
+            } else {
+                (ends[w][1], ends[w][0])
+            };
+            let from = slot(a, &mut spokes);
+            let to = slot(b, &mut spokes);
+            wedges.push(Wedge {
+                face: corners[w].0,
+                corner: corners[w].1,
+                forward: fwd != flipped[corners[w].0 as usize],
+                from,
+                to,
+            });
+        }
+    }
+    let manifold = spokes.iter().all(|&s| touching(s).len() <= 2);
+    let kind = match (walks.len(), manifold) {
+        (1, true) if walks[0].closed => FanKind::Interior,
+        (1, true) => FanKind::Boundary,
+        _ => FanKind::Irregular,
+    };
+    (wedges, spokes, kind)
+}
+
+/// The neighbours of every vertex in the order the rotations sum over them (that of
+/// [`Topology::edges`], fixed by the topology): built once per mesh, so that a bake's
+/// per-frame rotations ([`RingAdjacency::rotations`]) only read it.
+#[derive(Debug, Clone)]
+pub struct RingAdjacency {
+    ptr: Vec<u32>,
+    nbr: Vec<u32>,
+}
+
+impl RingAdjacency {
+    /// The vertex adjacency of `topology`: each vertex's neighbours in the order of its
+    /// incident edges ([`Topology::vertex_edges`]).
+    pub fn new(topology: &Topology) -> Self {
+        let n = topology.n_vertices();
+        let mut ptr = Vec::with_capacity(n + 1);
+        let mut nbr = Vec::with_capacity(2 * topology.n_edges());
+        ptr.push(0u32);
+        for v in 0..n {
+            nbr.extend(
+                topology
+                    .vertex_edges(v)
+                    .iter()
+                    .map(|&e| topology.other_end(e as usize, v)),
+            );
+            ptr.push(nbr.len() as u32);
+        }
+        Self { ptr, nbr }
+    }
+
+    pub fn n_vertices(&self) -> usize {
+        self.ptr.len() - 1
+    }
+
+    /// Neighbours of `v` (each vertex sharing an edge with it), in edge order.
+    pub fn neighbours(&self, v: usize) -> &[u32] {
+        &self.nbr[self.ptr[v] as usize..self.ptr[v + 1] as usize]
+    }
+}
+
+#[cfg(test)]
+pub(super) mod tests {
+    use std::f64::consts::TAU;
+
+    use glam::DVec3;
+
+    use super::*;
+
+    /// Vertex 0 at the centre of a unit hexagon in the plane `z = 0`, with its six faces
+    /// counter-clockwise seen from `+z` (`closed`) or only the first four.
+    pub(in crate::mesh) fn fan(closed: bool) -> (Topology, Vec<DVec3>) {
+        let mut p = vec![DVec3::ZERO];
+        for k in 0..6 {
+            let t = TAU * k as f64 / 6.0;
+            p.push(DVec3::new(t.cos(), t.sin(), 0.0));
+        }
+        let n = if closed { 6 } else { 4 };
+        let faces = (0..n)
+            .map(|k| [0, 1 + k as u32, 1 + ((k + 1) % 6) as u32])
+            .collect();
+        (Topology::from_triangles(7, faces).unwrap(), p)
+    }
+
+    #[test]
+    fn closed_fan_is_interior_and_ordered_counter_clockwise() {
+        let (t, _) = fan(true);
+        let r = OneRings::new(&t);
+        assert_eq!(r.kind(0), FanKind::Interior);
+        assert_eq!(r.spokes(0), &[1, 2, 3, 4, 5, 6]);
+        assert!(r.wedges(0).iter().all(|w| w.forward));
+        assert_eq!(r.kind(1), FanKind::Boundary);
+        // vertex 1 = (1, 0) is on the border: counter-clockwise, its spokes point at 120°
+        // (vertex 2, a border edge: the walk starts there), 180° (0) and 240° (6)
+        assert_eq!(r.spokes(1), &[2, 0, 6]);
+    }
+
+    #[test]
+    fn open_fan_is_a_boundary() {
+        let (t, _) = fan(false);
+        assert_eq!(OneRings::new(&t).kind(0), FanKind::Boundary);
+    }
+
+    #[test]
+    fn edge_lookup() {
+        let (t, _) = fan(true);
+        let r = OneRings::new(&t);
+        for (e, &[a, b]) in t.edges().iter().enumerate() {
+            assert_eq!(r.edge_between(a as usize, b as usize), Some(e));
+            assert_eq!(r.edge_between(b as usize, a as usize), Some(e));
+        }
+        assert_eq!(r.edge_between(1, 4), None);
+        assert_eq!(r.edge_between(3, 3), None);
+    }
+}
