@@ -152,8 +152,12 @@ def clear_stain(mesh):
 
 def degenerate_uv_faces(uv):
     """How many triangles of `uv` (F, 3, 2) have degenerate UVs (no weft direction; the
-    simulator then takes an edge), by the core's test |det| ≤ 1e-12·|a|·|b|."""
+    simulator then takes an edge), by the core's test |det| ≤ ε·|a|·|b| with the core's
+    ε (`madder._core.DEGENERATE_UV_REL`)."""
+    from madder._core import DEGENERATE_UV_REL
+
     uv = np.asarray(uv, dtype=np.float64)
     a, b = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
     det = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
-    return int(np.count_nonzero(~(np.abs(det) > 1e-12 * np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))))
+    bound = DEGENERATE_UV_REL * np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1)
+    return int(np.count_nonzero(~(np.abs(det) > bound)))

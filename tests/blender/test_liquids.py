@@ -21,10 +21,11 @@ PRESETS = {
     "INK": dict(concentration=0.05, stain_color=(0.04, 0.05, 0.15), absorption=3.0, adsorption=1.0,
                 capacity=5e-3, evaporation=4e-5, evaporation_boundary=1.2),
 }
-# StainParams::default and InteractionRates::default in the Rust core, and the binding's
-# default isotropic diffusion
-RUST_DEFAULTS = dict(diffusion_rate=2e-4, viscosity=1e-4, friction=50.0, absorption=2.0, saturation=0.1,
-                     adsorption=0.1, capacity=2e-3, evaporation=5e-5, evaporation_boundary=1.2, substeps=1)
+# StainParams::default and InteractionRates::default in the Rust core, and the core's
+# default isotropic diffusion and solute colour (the constants the binding exports)
+RUST_DEFAULTS = dict(diffusion_rate=madder.DEFAULT_DIFFUSION, stain_color=madder.DEFAULT_SOLUTE_COLOR,
+                     viscosity=1e-4, friction=50.0, absorption=2.0, saturation=0.1, adsorption=0.1,
+                     capacity=2e-3, evaporation=5e-5, evaporation_boundary=1.2, substeps=1)
 
 
 def assert_values(settings, expected, rel=1e-6):

@@ -93,10 +93,8 @@ pub fn to_py(e: impl Into<madder::Error>) -> PyErr {
 }
 
 fn build(py: Python<'_>, e: &madder::Error) -> PyResult<PyErr> {
-    use madder::error::{
-        CacheError as C, Error, MeshError as M, ParamError as P, PointCacheError as Pc,
-        WeaveError as W,
-    };
+    use madder::error::{CacheError as C, Error, MeshError as M, ParamError as P, WeaveError as W};
+    use madder::io::point_cache::PointCacheError as Pc;
     let f = Fields::new(py);
     let (class, f) = match e {
         Error::Mesh(m) => (

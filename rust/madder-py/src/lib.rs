@@ -19,6 +19,11 @@ mod weave;
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    // the core's defaults and thresholds Python needs (one definition, in the core)
+    m.add("DEFAULT_DIFFUSION", madder::stain::DEFAULT_DIFFUSION)?;
+    let [r, g, b] = madder::stain::DEFAULT_SOLUTE_COLOR;
+    m.add("DEFAULT_SOLUTE_COLOR", (r, g, b))?;
+    m.add("DEGENERATE_UV_REL", madder::ops::DEGENERATE_UV_REL)?;
     errors::register(m)?;
     m.add_class::<mesh::Topology>()?;
     m.add_function(wrap_pyfunction!(mesh::weft_directions, m)?)?;

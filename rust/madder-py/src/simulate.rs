@@ -17,7 +17,7 @@ use crate::threads::Pool;
 /// dissolved, absorbed and adsorbed solute (seed chapter 4).
 ///
 /// `Simulator(topology, rest, positions, *, diffusion=None, face_tensors=None,
-/// face_uv=None, face_angle=None, color=(0.45, 0.05, 0.1), gravity=(0, 0, -9.81),
+/// face_uv=None, face_angle=None, color=DEFAULT_SOLUTE_COLOR, gravity=(0, 0, -9.81),
 /// viscosity=..., friction=..., absorption=..., saturation=..., adsorption=...,
 /// capacity=..., evaporation=..., evaporation_boundary=1.2, substeps=1, use_gravity=True,
 /// use_rectilinear=True, use_coriolis=True, momentum_advection=True, threads=None)`.
@@ -27,8 +27,9 @@ use crate::threads::Pool;
 /// row per vertex of the topology. The densities diffuse isotropically at `diffusion`
 /// m²/s, or per face along the weave (`face_tensors` `(F, 3)` float64 in m²/s, `face_uv`
 /// `(F, 3, 2)`, `face_angle` `(F,)`, as for `DiffusionStepper`; `face_angle` only with
-/// the other two); the default is isotropic, 2e-4 m²/s (wicking in cotton, whose front
-/// advances about a centimetre in the first second: `D ≈ L²/2t`).
+/// the other two); the default is isotropic, `DEFAULT_DIFFUSION` m²/s (2e-4: wicking in
+/// cotton, whose front advances about a centimetre in the first second: `D ≈ L²/2t`).
+/// `DEFAULT_SOLUTE_COLOR` is (0.45, 0.05, 0.1), a dark red.
 /// Units are SI: densities in kg/m², rates in 1/s, evaporation in kg/(m²·s).
 /// `threads` caps the worker threads; results do not depend on it.
 #[pyclass(module = "madder")]
@@ -47,6 +48,12 @@ impl Simulator {
         pool.run(py, || f(inner))
     }
 }
+
+/// The core's default solute colour as the tuple the `color` argument takes.
+const DEFAULT_COLOR: (f64, f64, f64) = {
+    let [r, g, b] = madder::stain::DEFAULT_SOLUTE_COLOR;
+    (r, g, b)
+};
 
 fn f64s(a: &PyReadonlyArray1<'_, f32>) -> Vec<f64> {
     a.as_array().iter().map(|&x| x as f64).collect()
@@ -109,7 +116,7 @@ fn out2<'py, const K: usize>(
 impl Simulator {
     #[new]
     #[pyo3(signature = (topology, rest, positions, *, diffusion=None, face_tensors=None,
-        face_uv=None, face_angle=None, color=(0.45, 0.05, 0.1), gravity=(0.0, 0.0, -9.81),
+        face_uv=None, face_angle=None, color=DEFAULT_COLOR, gravity=(0.0, 0.0, -9.81),
         viscosity=None, friction=None, absorption=None, saturation=None, adsorption=None,
         capacity=None, evaporation=None, evaporation_boundary=None, substeps=1,
         use_gravity=true, use_rectilinear=true, use_coriolis=true, momentum_advection=true,
@@ -185,7 +192,7 @@ impl Simulator {
             )));
         }
         let conductivity = if diffusion.is_none() && face_tensors.is_none() {
-            conductivity(Some(2e-4), None, None, None)?
+            madder::stain::Conductivity::default()
         } else {
             conductivity(diffusion, face_tensors, face_uv, face_angle)?
         };

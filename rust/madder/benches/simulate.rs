@@ -22,7 +22,7 @@ fn bench(nx: usize, ny: usize, frames: usize) {
         topo,
         &rest,
         &wave(&rest, 0.0),
-        Conductivity::Isotropic(2e-4), // the add-on's default
+        Conductivity::default(), // the add-on's default, DEFAULT_DIFFUSION
         StainParams {
             // MADDER_BENCH_WHOLE: step the whole mesh (no active region)
             active_region: std::env::var("MADDER_BENCH_WHOLE").is_err(),

@@ -3,6 +3,8 @@
 
 use std::path::PathBuf;
 
+use crate::io::point_cache::PointCacheError;
+
 /// Bad mesh input: topology or per-frame positions.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum MeshError {
@@ -106,63 +108,6 @@ pub enum CacheError {
     FieldMissing { path: PathBuf, field: String },
     #[error("cache writer: {reason}")]
     Usage { reason: String },
-}
-
-/// Reading or writing a PC2 or MDD point cache (module [`crate::io::point_cache`]). Frames
-/// are counted from 0 in file order and vertices from 0, as the file stores them.
-#[derive(Debug, thiserror::Error)]
-pub enum PointCacheError {
-    #[error("{path}: {source}")]
-    Io {
-        path: PathBuf,
-        source: std::io::Error,
-    },
-    #[error(
-        "{path}: unknown point cache format: no PC2 signature, and the name does not end in .pc2 or .mdd (MDD files carry no signature; open it as MDD explicitly)"
-    )]
-    UnknownFormat { path: PathBuf },
-    #[error("{path}: not a PC2 file (it does not start with the signature \"POINTCACHE2\\0\")")]
-    BadSignature { path: PathBuf },
-    #[error("{path}: PC2 file version {found} is not supported (this build reads version 1)")]
-    Version { path: PathBuf, found: i32 },
-    #[error("{path}: corrupt {format} header: {reason}")]
-    Header {
-        path: PathBuf,
-        format: crate::io::point_cache::Format,
-        reason: String,
-    },
-    #[error(
-        "{path}: file is truncated: frame {frame} is incomplete (the header declares {n_frames} frames of {n_points} points, {expected} bytes; the file has {len})"
-    )]
-    Truncated {
-        path: PathBuf,
-        frame: usize,
-        n_frames: usize,
-        n_points: usize,
-        expected: u64,
-        len: u64,
-    },
-    #[error("{path}: frame {frame} is not in the file (it holds frames 0..={last})", last = .n_frames.saturating_sub(1))]
-    FrameOutOfRange {
-        path: PathBuf,
-        frame: usize,
-        n_frames: usize,
-    },
-    #[error("{path}: frame {frame}, vertex {vertex} has a non-finite position {position:?}")]
-    NonFinite {
-        path: PathBuf,
-        frame: usize,
-        vertex: usize,
-        position: [f32; 3],
-    },
-    #[error("{path}: frame {frame}: {reason}")]
-    Time {
-        path: PathBuf,
-        frame: usize,
-        reason: String,
-    },
-    #[error("{path}: {reason}")]
-    Usage { path: PathBuf, reason: String },
 }
 
 /// A number in an error message, at most four significant digits: plain from 10⁻³ to

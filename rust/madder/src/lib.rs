@@ -26,3 +26,4 @@ pub mod stain;
 pub mod weave;
 
 pub use error::{CacheError, Error, MeshError, ParamError, Result, SolveError, WeaveError};
+pub use io::point_cache::PointCacheError;

@@ -4,8 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use madder::error::PointCacheError;
-use madder::io::point_cache::{Format, PointCache, Timing, write_mdd, write_pc2};
+use madder::io::point_cache::{Format, PointCache, PointCacheError, Timing, write_mdd, write_pc2};
 
 fn tmpdir(tag: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("madder-pc-test-{tag}-{}", std::process::id()));

@@ -5,6 +5,9 @@ adds small bpy-free helpers (array conversion) used by the Blender add-on and th
 """
 
 from ._core import (
+    DEFAULT_DIFFUSION,
+    DEFAULT_SOLUTE_COLOR,
+    DEGENERATE_UV_REL,
     CacheReader,
     CacheWriter,
     DiffusionStepper,
@@ -36,6 +39,9 @@ from ._errors import (
 from .arrays import as_faces, as_positions
 
 __all__ = [
+    "DEFAULT_DIFFUSION",
+    "DEFAULT_SOLUTE_COLOR",
+    "DEGENERATE_UV_REL",
     "CacheError",
     "CacheIsADirectoryError",
     "CacheNotADirectoryError",

@@ -59,7 +59,10 @@ fuzz_target!(|input: &[u8]| {
         let (first, last) = (r.first_frame(), r.last_frame());
         assert_eq!(last as i64 - first as i64 + 1, r.n_frames() as i64);
         let cut = r.truncated_at().map_or(i64::MAX, i64::from);
-        assert_eq!(cut.min(last as i64 + 1) - first as i64, r.complete_frames() as i64);
+        assert_eq!(
+            cut.min(last as i64 + 1) - first as i64,
+            r.complete_frames() as i64
+        );
         // a short file may declare billions of frames: the cut ones past the first two
         // fail alike, so stop there
         let end = (last as i64).min(first as i64 + r.complete_frames() as i64 + 1);

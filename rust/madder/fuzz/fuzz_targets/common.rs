@@ -3,8 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use madder::error::PointCacheError;
-use madder::io::point_cache::{Format, PointCache, Timing, write_mdd, write_pc2};
+use madder::io::point_cache::{Format, PointCache, PointCacheError, Timing, write_mdd, write_pc2};
 
 /// A per-process scratch directory, in memory when `/dev/shm` exists.
 fn scratch() -> &'static Path {

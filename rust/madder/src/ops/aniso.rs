@@ -20,7 +20,8 @@
 //! `J = [x_1−x_0, x_2−x_0] [u_1−u_0, u_2−u_0]⁻¹` and the weft is `J (1, 0)ᵀ` normalized.
 //! It is recomputed every frame from the deformed geometry, so it follows the cloth as it
 //! shears. A mirrored UV island (negative `det`) still yields the true `∂x/∂u`.
-//! A face whose UV triangle is degenerate (`|det| ≤ 10⁻¹² |u_1−u_0| |u_2−u_0|`, or zero)
+//! A face whose UV triangle is degenerate (`|det| ≤ ε |u_1−u_0| |u_2−u_0|` with
+//! `ε` = [`DEGENERATE_UV_REL`], or not finite)
 //! has no defined `u` axis: its weft falls back to the edge 0→1 and it is counted, so the
 //! caller can warn. A per-face angle offset (a fabric cut on the bias) is added to `θ_T`.
 
@@ -29,9 +30,18 @@ use glam::{DVec2, DVec3};
 use super::VertexPattern;
 use super::cotan::assemble_face_weights;
 use crate::mesh::{Geometry, Topology};
+use crate::weave::Tensor2;
 
-/// A symmetric 2×2 tensor `[s11, s12, s22]` in a face's (weft, warp) basis.
-pub type Tensor2 = [f64; 3];
+/// Relative size `ε` of the UV determinant below which a face's UV triangle is degenerate
+/// (`|det| ≤ ε |u_1−u_0| |u_2−u_0|`: no `u` axis, the weft falls back to the edge 0→1).
+/// The add-on counts such faces with the same test, reading this value from Python.
+pub const DEGENERATE_UV_REL: f64 = 1e-12;
+
+/// Whether the UV edges `a = u_1 − u_0`, `b = u_2 − u_0` with `det = a × b` define a `u`
+/// axis (see [`DEGENERATE_UV_REL`]); a NaN determinant or UV does not.
+fn has_uv_axis(a: DVec2, b: DVec2, det: f64) -> bool {
+    det.abs() > DEGENERATE_UV_REL * a.length() * b.length()
+}
 
 /// Corner positions of face `f` in its intrinsic layout.
 fn layout(l: [f64; 3], area: f64) -> [DVec2; 3] {
@@ -65,9 +75,7 @@ pub fn weft_angles(
             let u = uv[f].map(DVec2::from_array);
             let (a, b) = (u[1] - u[0], u[2] - u[0]);
             let det = a.perp_dot(b);
-            // negated on purpose: a NaN determinant (or UV) must count as degenerate too
-            #[allow(clippy::neg_cmp_op_on_partial_ord)]
-            if !(det.abs() > 1e-12 * a.length() * b.length()) {
+            if !has_uv_axis(a, b, det) {
                 degenerate += 1;
                 return offset[f];
             }
@@ -98,7 +106,7 @@ pub fn weft_directions(
             let u = uv.map(DVec2::from_array);
             let (a, b) = (u[1] - u[0], u[2] - u[0]);
             let det = a.perp_dot(b);
-            let w = if det.abs() > 1e-12 * a.length() * b.length() {
+            let w = if has_uv_axis(a, b, det) {
                 ((p[1] - p[0]) * b.y - (p[2] - p[0]) * a.y) / det
             } else {
                 p[1] - p[0]

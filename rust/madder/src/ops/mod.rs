@@ -16,7 +16,7 @@ pub mod pattern;
 pub mod restrict;
 pub mod solve;
 
-pub use aniso::{Tensor2, anisotropic_stiffness, weft_angles, weft_directions};
+pub use aniso::{DEGENERATE_UV_REL, anisotropic_stiffness, weft_angles, weft_directions};
 pub use bochner::{
     BochnerPattern, BochnerSystem, add_lumped_mass_blocks, bochner_stiffness, diffuse_tangent_field,
 };

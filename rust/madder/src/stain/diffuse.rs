@@ -68,9 +68,10 @@ use crate::error::{Error, ParamError};
 use crate::mesh::geometry::check_positions;
 use crate::mesh::{Geometry, RingAdjacency, Topology, Transport};
 use crate::ops::{
-    PrefactoredSpd, Restriction, Tensor2, VertexPattern, WarmCg, add_lumped_mass,
-    anisotropic_stiffness, cotan_stiffness, weft_angles,
+    PrefactoredSpd, Restriction, VertexPattern, WarmCg, add_lumped_mass, anisotropic_stiffness,
+    cotan_stiffness, weft_angles,
 };
+use crate::weave::Tensor2;
 
 /// Relative residual at which the density solves stop. The total is restored exactly
 /// after each solve (module doc), so this only limits the accuracy of the profile: 1e-9
@@ -83,6 +84,11 @@ pub const DENSITY_TOLERANCE: f64 = 1e-9;
 /// velocity, which then moves the liquid over one step, so 1e-8 is ample.
 pub const VELOCITY_TOLERANCE: f64 = 1e-8;
 
+/// The default diffusion coefficient of the densities, m²/s (the add-on's and the Python
+/// simulator's default rate): wicking in cotton, whose front advances about a centimetre
+/// in the first second (`D ≈ L²/2t`).
+pub const DEFAULT_DIFFUSION: f64 = 2e-4;
+
 /// How fast the stain diffuses, and in which directions.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Conductivity {
@@ -90,6 +96,13 @@ pub enum Conductivity {
     Isotropic(f64),
     /// A woven cloth: per face, a tensor (m²/s) in the face's (weft, warp) basis.
     Woven(WovenFaces),
+}
+
+impl Default for Conductivity {
+    /// Isotropic at [`DEFAULT_DIFFUSION`].
+    fn default() -> Self {
+        Self::Isotropic(DEFAULT_DIFFUSION)
+    }
 }
 
 /// Per-face fabric data of a woven cloth.

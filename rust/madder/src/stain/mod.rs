@@ -20,8 +20,8 @@ pub mod sources;
 pub mod state;
 pub mod window;
 
-pub use diffuse::{Conductivity, DiffusionStepper, WovenFaces};
+pub use diffuse::{Conductivity, DEFAULT_DIFFUSION, DiffusionStepper, WovenFaces};
 pub use forces::Forces;
 pub use interact::InteractionRates;
-pub use simulate::{Profile, Simulator, StainParams};
+pub use simulate::{DEFAULT_SOLUTE_COLOR, Profile, Simulator, StainParams};
 pub use state::{Fields, Totals};

@@ -107,6 +107,10 @@ pub const MAX_TURN: f64 = 0.1;
 /// [`MAX_TURN`] (a frame turning by 6.4 rad, a full turn, in one frame).
 pub const MAX_AUTO_SUBSTEPS: usize = 64;
 
+/// The default colour of the liquid's solute (linear RGB, a dark red; the add-on's and
+/// the Python simulator's default).
+pub const DEFAULT_SOLUTE_COLOR: [f64; 3] = [0.45, 0.05, 0.1];
+
 /// Physical parameters of the liquid and the cloth (SI units).
 #[derive(Debug, Clone, PartialEq)]
 pub struct StainParams {

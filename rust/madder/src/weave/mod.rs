@@ -45,7 +45,8 @@ pub use pattern::{Cell, PairCoefficients, Tile, Weave, cell_tensors};
 
 pub use crate::error::WeaveError;
 
-/// A symmetric 2×2 tensor `[s11, s12, s22]` in the (weft, warp) basis of the tile.
+/// A symmetric 2×2 tensor `[s11, s12, s22]` in a (weft, warp) basis: the tile's here, a
+/// face's once the homogenized tensor is laid on the cloth ([`crate::ops::aniso`]).
 pub type Tensor2 = [f64; 3];
 
 /// The diffusion ellipse of a tensor, for display: `(λ_max / λ_min, θ)` with `θ ∈ (−π/2,
