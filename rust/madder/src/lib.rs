@@ -1,3 +1,4 @@
+#![warn(unreachable_pub)]
 //! # madder — stain simulation on deforming cloth
 //!
 //! Pure Rust core (no Python) of the Madder Blender extension. The science follows the

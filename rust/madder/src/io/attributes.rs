@@ -14,7 +14,7 @@
 
 /// The colour of the stain: one for the whole bake, or per vertex (r, g, b slices).
 #[derive(Clone, Copy, Debug)]
-pub enum StainColour<'a> {
+pub(crate) enum StainColour<'a> {
     Uniform([f32; 3]),
     PerVertex([&'a [f32]; 3]),
 }
@@ -35,7 +35,7 @@ fn fraction(x: f32, reference: f32) -> f32 {
 /// # Panics
 /// When the slices' lengths disagree (the caller checks them).
 #[allow(clippy::too_many_arguments)]
-pub fn stain_attributes(
+pub(crate) fn stain_attributes(
     solute: &[f32],
     liquid: &[f32],
     adsorbed: &[f32],

@@ -2,6 +2,6 @@
 //! frames), and the PC2/MDD point caches of Blender's Mesh Cache modifier (positions of a
 //! deforming mesh, read per frame).
 
-pub mod attributes;
+pub(crate) mod attributes;
 pub mod cache;
 pub mod point_cache;

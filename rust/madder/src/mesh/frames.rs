@@ -27,7 +27,7 @@ use crate::error::MeshError;
 /// Smallest sine of the angle between a spoke and the frame normal for the spoke to define
 /// the frame's `x` axis (or, in [`super::Transport`], to measure the frame's offset). Below
 /// it the projected direction would carry a relative rounding error above `10⁻¹⁰`.
-pub const SPOKE_MIN_SINE: f64 = 1e-6;
+pub(crate) const SPOKE_MIN_SINE: f64 = 1e-6;
 
 /// Per-vertex orthonormal tangent frames (columns `x, y, z`; `z` the vertex normal).
 #[derive(Debug, Clone, PartialEq)]

@@ -2,13 +2,13 @@
 //! with every frame of its motion ([`Geometry`]). Keeping them apart is what lets the
 //! simulator build sparse patterns and symbolic factorizations once per bake.
 
-pub mod frames;
+pub(crate) mod frames;
 pub mod geometry;
 pub mod kabsch;
 pub mod proximity;
-pub mod rings;
-pub mod topology;
-pub mod transport;
+pub(crate) mod rings;
+pub(crate) mod topology;
+pub(crate) mod transport;
 
 pub use frames::VertexFrames;
 pub use geometry::Geometry;

@@ -8,13 +8,13 @@
 //! active region) with a no-flux diagonal; [`bochner`] and [`restrict`] expand scalar
 //! operators into the `2×2` blocks of the connection Laplacian (eq. 4.6) the same way.
 
-pub mod aniso;
-pub mod bochner;
+pub(crate) mod aniso;
+pub(crate) mod bochner;
 pub mod cg;
-pub mod cotan;
-pub mod pattern;
-pub mod restrict;
-pub mod solve;
+pub(crate) mod cotan;
+pub(crate) mod pattern;
+pub(crate) mod restrict;
+pub(crate) mod solve;
 
 pub use aniso::{DEGENERATE_UV_REL, anisotropic_stiffness, weft_angles, weft_directions};
 pub use bochner::{

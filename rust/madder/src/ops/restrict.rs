@@ -106,7 +106,7 @@ pub fn block_values(
 
 /// The edge of every off-diagonal entry of `pattern` (`u32::MAX` on the diagonal): the
 /// inverse of [`VertexPattern::edge_slot`].
-pub fn entry_edges(pattern: &VertexPattern) -> Vec<u32> {
+pub(crate) fn entry_edges(pattern: &VertexPattern) -> Vec<u32> {
     let mut edge = vec![u32::MAX; pattern.nnz()];
     for (e, &s) in pattern.edge_slot().iter().enumerate() {
         edge[s as usize] = e as u32;

@@ -78,11 +78,11 @@ use crate::weave::Tensor2;
 /// of the field's norm is far below what a frame can show (a stain is read to ~1e-3).
 /// On the waving-flag benchmark at 10k vertices it takes 13 iterations per field, against
 /// 15 at 1e-10.
-pub const DENSITY_TOLERANCE: f64 = 1e-9;
+pub(crate) const DENSITY_TOLERANCE: f64 = 1e-9;
 
 /// Relative residual of the velocity's (Bochner) solve: the viscosity only smooths the
 /// velocity, which then moves the liquid over one step, so 1e-8 is ample.
-pub const VELOCITY_TOLERANCE: f64 = 1e-8;
+pub(crate) const VELOCITY_TOLERANCE: f64 = 1e-8;
 
 /// The default diffusion coefficient of the densities, m²/s (the add-on's and the Python
 /// simulator's default rate): wicking in cotton, whose front advances about a centimetre

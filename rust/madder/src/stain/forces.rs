@@ -78,7 +78,7 @@ impl Default for Forces {
 ///
 /// # Panics
 /// If `rest_frames`, `rest` or `current` does not have one entry per vertex.
-pub fn corotating_frames_with(
+pub(crate) fn corotating_frames_with(
     adjacency: &RingAdjacency,
     rest_frames: &VertexFrames,
     rest: &[DVec3],
@@ -101,14 +101,14 @@ pub fn corotating_frames_with(
 }
 
 /// The rest frames `F̄_i` (seed §4.3.1 frames of the rest positions).
-pub fn rest_frames(rings: &OneRings, rest: &[DVec3]) -> Result<VertexFrames, MeshError> {
+pub(crate) fn rest_frames(rings: &OneRings, rest: &[DVec3]) -> Result<VertexFrames, MeshError> {
     VertexFrames::new(rings, rest)
 }
 
 /// Angular velocity `ω` of a frame turning from `a` to `b` in `h`, in the coordinates of
 /// `a`: the axial vector of the antisymmetrized `F^{tᵀ} Ḟ`, rescaled to be exact for a
 /// steady rotation (module doc).
-pub fn frame_angular_velocity(a: &DMat3, b: &DMat3, h: f64) -> DVec3 {
+pub(crate) fn frame_angular_velocity(a: &DMat3, b: &DMat3, h: f64) -> DVec3 {
     let q: DMat3 = a.transpose() * *b;
     // axial vector of (Q − Qᵀ)/2 = sin ϑ · axis
     let s = 0.5
@@ -141,7 +141,7 @@ pub fn frame_angular_velocity(a: &DMat3, b: &DMat3, h: f64) -> DVec3 {
 /// friction (`k = 50/s`) and a 24 fps frame (`kh ≈ 2`) that is 30 % of it. The exact
 /// solution has the right terminal velocity, transient and Coriolis turn at any step;
 /// without friction and rotation it is the plain `u₀ + h a` (mean `u₀ + h a/2`).
-pub fn integrate_velocity(
+pub(crate) fn integrate_velocity(
     u: DVec2,
     a: DVec2,
     omega_z: f64,
@@ -179,14 +179,14 @@ fn phi(z: c64) -> (c64, c64, c64) {
 }
 
 /// Centred second difference `(next − 2 cur + prev) / H²` of one vertex (world coordinates).
-pub fn second_difference(prev: DVec3, cur: DVec3, next: DVec3, dt: f64) -> DVec3 {
+pub(crate) fn second_difference(prev: DVec3, cur: DVec3, next: DVec3, dt: f64) -> DVec3 {
     (next - 2.0 * cur + prev) * (1.0 / (dt * dt))
 }
 
 /// The tangential body acceleration: the `(x, y)` components of `fᵀ (g − a)` for frame
 /// `f` and its acceleration `a` (world), for the enabled forces (the Coriolis term is
 /// [`integrate_velocity`]'s).
-pub fn frame_body_acceleration(f: &DMat3, a: DVec3, gravity: DVec3, forces: Forces) -> DVec2 {
+pub(crate) fn frame_body_acceleration(f: &DMat3, a: DVec3, gravity: DVec3, forces: Forces) -> DVec2 {
     let g = if forces.gravity { gravity } else { DVec3::ZERO };
     let world = if forces.rectilinear { g - a } else { g };
     frames_local(f, world)

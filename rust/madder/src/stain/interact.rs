@@ -129,8 +129,7 @@
 
 use rayon::prelude::*;
 
-// `Fields` lived here before it moved to `state` (issue 11)
-pub use super::state::Fields;
+use super::state::Fields;
 use crate::error::ParamError;
 use crate::mesh::Topology;
 
@@ -215,7 +214,7 @@ impl InteractionRates {
 ///
 /// # Panics
 /// If `boundary` or `wet` does not have one value per vertex of `topology`.
-pub fn exposure(
+pub(crate) fn exposure(
     topology: &Topology,
     boundary: &[bool],
     wet: &[f64],
@@ -252,7 +251,7 @@ const CHUNK: usize = 1024;
 /// Errors: `h` not finite and `> 0` (`"time step"`), invalid `rates`, a length that differs
 /// from `area.len()` (a missing colour pool when the other is present counts as length 0),
 /// a non-finite value, a negative area or exposure. On error nothing is modified.
-pub fn interact(
+pub(crate) fn interact(
     rates: &InteractionRates,
     area: &[f64],
     exposure: &[f64],

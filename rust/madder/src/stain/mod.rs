@@ -11,14 +11,14 @@
 //!   fabric experiments).
 
 pub mod advect;
-pub mod diffuse;
+pub(crate) mod diffuse;
 pub mod extend;
-pub mod forces;
-pub mod interact;
-pub mod simulate;
-pub mod sources;
-pub mod state;
-pub mod window;
+pub(crate) mod forces;
+pub(crate) mod interact;
+pub(crate) mod simulate;
+pub(crate) mod sources;
+pub(crate) mod state;
+pub(crate) mod window;
 
 pub use diffuse::{Conductivity, DEFAULT_DIFFUSION, DiffusionStepper, WovenFaces};
 pub use forces::Forces;

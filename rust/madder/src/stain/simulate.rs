@@ -87,25 +87,17 @@ use crate::error::{Error, ParamError};
 use crate::mesh::geometry::check_positions;
 use crate::mesh::{Geometry, OneRings, RingAdjacency, Topology, Transport, VertexFrames};
 
-// the public items that lived here before the window, the diffusion solves and the state
-// got their own modules (issue 11), still reachable by their old paths
-pub use super::diffuse::{DENSITY_TOLERANCE, VELOCITY_TOLERANCE};
-pub use super::state::Totals;
-pub use super::window::{
-    ACTIVE_RINGS, ACTIVE_THRESHOLD, WINDOW_SLACK_RINGS, WINDOW_SLACK_VERTICES,
-};
-
 /// A vertex is "dry" for the evaporation boundary rule (eq. 4.8) below this liquid
 /// density, kg/m² (1 g/m², a film of water 1 µm thick).
-pub const DRY_DENSITY: f64 = 1e-3;
+pub(crate) const DRY_DENSITY: f64 = 1e-3;
 
 /// Largest turn of a vertex frame about its normal in one sub-step, rad (module doc,
 /// "Fast rotation"): a frame that turns faster gets more sub-steps.
-pub const MAX_TURN: f64 = 0.1;
+pub(crate) const MAX_TURN: f64 = 0.1;
 
 /// Most sub-steps a frame takes on its own to keep the turn per sub-step below
 /// [`MAX_TURN`] (a frame turning by 6.4 rad, a full turn, in one frame).
-pub const MAX_AUTO_SUBSTEPS: usize = 64;
+pub(crate) const MAX_AUTO_SUBSTEPS: usize = 64;
 
 /// The default colour of the liquid's solute (linear RGB, a dark red; the add-on's and
 /// the Python simulator's default).

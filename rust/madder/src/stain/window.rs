@@ -78,20 +78,20 @@ use crate::ops::{Restriction, VertexPattern, WarmCg};
 
 /// Rings of vertices the active region keeps around the flowing liquid, on top of one ring
 /// per transport sub-cycle of the previous sub-step (module doc).
-pub const ACTIVE_RINGS: usize = 3;
+pub(crate) const ACTIVE_RINGS: usize = 3;
 
 /// A vertex holds flowing liquid when its free-solvent or dissolved-solute density is
 /// above this fraction of that field's largest density (module doc).
-pub const ACTIVE_THRESHOLD: f64 = 1e-12;
+pub(crate) const ACTIVE_THRESHOLD: f64 = 1e-12;
 
 /// Rings a new window's active region gets beyond what the frame needs, on top of the
 /// frame's own reach again (room for about two more frames of the same flow), so that the
 /// window is not rebuilt every frame (module doc).
-pub const WINDOW_SLACK_RINGS: usize = 4;
+pub(crate) const WINDOW_SLACK_RINGS: usize = 4;
 
 /// A window is rebuilt when its active region exceeds twice the needed one plus this
 /// many vertices (the liquid shrank or dried).
-pub const WINDOW_SLACK_VERTICES: usize = 256;
+pub(crate) const WINDOW_SLACK_VERTICES: usize = 256;
 
 /// A triangle mesh with what every phase reads: the whole cloth, or a window cut out of it.
 #[derive(Debug)]

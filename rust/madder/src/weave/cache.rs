@@ -128,7 +128,7 @@ impl HomogenizationCache {
 /// The cache key of a tile under `opts` (checks the cells first, so a bad tile is reported
 /// the same way as by [`super::homogenize()`]; the contrast is checked by the solve, and
 /// errors are not cached).
-pub fn key(
+pub(crate) fn key(
     width: usize,
     height: usize,
     tensors: &[Tensor2],

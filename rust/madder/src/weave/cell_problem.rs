@@ -102,7 +102,7 @@ const NONE: u32 = u32::MAX;
 
 /// How many grids [`Grid::shared`] keeps: the two levels of two tile sizes. A 128×128 grid
 /// holds about 10 MB (mostly the symbolic factor).
-pub const SHARED_GRIDS: usize = 4;
+pub(crate) const SHARED_GRIDS: usize = 4;
 
 /// Everything about one `w × h` torus grid that does not depend on the tensors: the sparse
 /// pattern of the reduced stiffness, where each cell's entries go, and the symbolic

@@ -29,10 +29,10 @@
 //! assert!(ratio > 1.0 && angle.abs() <= std::f64::consts::FRAC_PI_2);
 //! ```
 
-pub mod cache;
-pub mod cell_problem;
+pub(crate) mod cache;
+pub(crate) mod cell_problem;
 pub mod homogenize;
-pub mod pattern;
+pub(crate) mod pattern;
 pub mod tensor;
 
 pub use cache::{HomogenizationCache, homogenize_cached};
