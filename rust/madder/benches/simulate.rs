@@ -118,20 +118,20 @@ fn parts(nx: usize, ny: usize, reps: usize) {
     time("geometry", &mut || g = Geometry::new(&topo, &q).unwrap());
     let mut rot = Vec::new();
     time("kabsch rotations", &mut || {
-        rot = one_ring_rotations(&topo, &rest, &q).unwrap()
+        rot = one_ring_rotations(&topo, &rest, &q).unwrap();
     });
     let mut fr = rf.clone();
     time("frames rotated", &mut || fr = rf.rotated(&rot));
     let mut transport = Transport::new(&topo, &rings, &g, &fr, &q);
     time("transport", &mut || {
-        transport = Transport::new(&topo, &rings, &g, &fr, &q)
+        transport = Transport::new(&topo, &rings, &g, &fr, &q);
     });
     let u: Vec<glam::DVec2> = (0..topo.n_vertices())
         .map(|i| glam::DVec2::new(0.1, 0.05 * (i as f64).sin()))
         .collect();
     let mut a = Vec::new();
     time("advect velocity", &mut || {
-        a = advect_velocity(&topo, &rings, &g, &transport, &u, 1.0 / 24.0)
+        a = advect_velocity(&topo, &rings, &g, &transport, &u, 1.0 / 24.0);
     });
     let mut fl = Vec::new();
     time("dual fluxes", &mut || fl = dual_fluxes(&topo, &q, &fr, &a));

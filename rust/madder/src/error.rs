@@ -228,8 +228,6 @@ pub enum Error {
     PointCache(#[from] PointCacheError),
 }
 
-pub type Result<T, E = Error> = std::result::Result<T, E>;
-
 #[cfg(test)]
 mod tests {
     use super::Compact;

@@ -1,22 +1,52 @@
-#![warn(unreachable_pub)]
 //! # madder — stain simulation on deforming cloth
 //!
-//! Pure Rust core (no Python) of the Madder Blender extension. The science follows the
-//! dissertation *Fluid animation on deforming surface meshes* (`shared/seed`), one module per
-//! seed section:
+//! Pure Rust core (no Python) of the Madder Blender extension. The science is the
+//! dissertation *Fluid animation on deforming surface meshes* (`shared/seed`); every module
+//! doc cites the sections and equations it implements. The map, seed section by section:
 //!
-//! - [`mesh`]: fixed triangle topology and the per-frame geometry of a deforming mesh.
-//! - [`ops`]: discrete operators on that geometry (cotan stiffness, lumped mass, §4.3.3)
-//!   and a prefactored sparse SPD solver that reuses its symbolic analysis across frames.
-//! - [`stain`]: the stain simulator (chapter 4: the split step of §4.3).
-//! - [`weave`]: weave patterns (§2.2.1) and their homogenization into one effective 2×2
-//!   diffusion tensor per fabric (§2.2.2, eqs. 2.3–2.4).
-//! - [`io`]: the Madder cache file, and PC2/MDD point caches (the Mesh Cache modifier's
-//!   formats) read and written directly, so exported cloth bakes without a scene.
+//! ## Chapter 2: homogenization — [`weave`]
+//! | seed | what | where |
+//! |---|---|---|
+//! | §2.2, eq. 2.1–2.2 | a weave's rapidly varying tensor replaced by one effective tensor | [`weave`] (overview), [`weave::Tensor2`] |
+//! | §2.2.1 | the input tensors: a tile of warp/weft/gap cells, pair coefficients, per-cell tensors | [`weave::Tile`], [`weave::PairCoefficients`], [`weave::cell_tensors`] |
+//! | §2.2.2, eq. 2.4 | the periodic cell problem, P1 on the torus: rigorous upper and lower bounds | [`weave::Grid`], [`weave::Bounds`] (`weave/cell_problem.rs`) |
+//! | §2.2.2, eq. 2.3 | the effective tensor: tile reduction, levels, primal–dual extrapolation; memoized | [`weave::homogenize()`], [`weave::homogenize_cached`] |
+//!
+//! ## Chapter 3: angle-based surface representation — not built yet
+//!
+//! ## Chapter 4: fluid simulation on a deforming surface — [`mesh`], [`ops`], [`stain`]
+//! | seed | what | where |
+//! |---|---|---|
+//! | §4.3, eqs. 4.1–4.3, Fig. 1.3 | the split step: forces, advection, diffusion, interactions | [`stain::Simulator`] (`stain/simulate.rs`), its state [`stain::Fields`] (`stain/state.rs`), the active region it steps (`stain/window.rs`), poured liquid and splashes (`stain/sources.rs`) |
+//! | §4.3.1 | the fixed connectivity, and the one-ring fans the frames and the polar map walk | [`mesh::Topology`], [`mesh::OneRings`] and the adjacency `RingAdjacency` (`mesh/topology.rs`, `mesh/rings.rs`) |
+//! | §4.3.1 | the vertex frames `F_i` | [`mesh::VertexFrames`] (`mesh/frames.rs`) |
+//! | §4.3.1, eq. 4.4 | the geodesic polar map and the transport `R_ij` | [`mesh::Transport`] (`mesh/transport.rs`) |
+//! | §4.3.1, eq. 4.5 | semi-Lagrangian velocity; finite-volume densities with cotan weights | [`stain::advect`] |
+//! | §4.3.2 | momentum advection | [`stain::advect::UpwindPlan::momentum_velocity`] |
+//! | §4.3.3 | per-frame geometry (lengths, areas, cotans), cotan stiffness, lumped mass | [`mesh::Geometry`], [`ops::cotan_stiffness`], [`ops::add_lumped_mass`] |
+//! | §4.3.3 | implicit diffusion `(M + hL_S) σ' = M σ`, prefactored or warm-started CG | [`stain::DiffusionStepper`] (`stain/diffuse.rs`), [`ops::PrefactoredSpd`], [`ops::WarmCg`] |
+//! | §4.3.3, eq. 4.6 | the Bochner (connection) Laplacian of the velocity | [`ops::BochnerSystem`] (`ops/bochner.rs`), restricted to the active region by [`ops::Restriction`] |
+//! | §4.3.4 | anisotropic stiffness of a woven face, weft from the UVs | [`ops::weft_directions`], [`stain::Conductivity`] (`ops/aniso.rs`) |
+//! | §4.4 | comoving–corotating frames by Kabsch, fictitious forces | [`mesh::kabsch`], [`stain::Forces`] (`stain/forces.rs`) |
+//! | §4.5, eqs. 4.7–4.10 | absorption, adsorption, evaporation | [`stain::InteractionRates`] (`stain/interact.rs`) |
+//!
+//! Beyond the seed, for the same chapter: the velocity extended over the dry cloth
+//! ([`stain::extend`]) and the distance from a brush to the cloth ([`mesh::proximity`]).
+//!
+//! ## Chapter 5: Lagrangian coherent structures — not built yet
+//!
+//! ## Around the science
+//! - [`io`]: the Madder cache file and the playback attributes read from it; PC2/MDD point
+//!   caches (the Mesh Cache modifier's formats), so exported cloth bakes without a scene.
+//! - [`error`]: one enum per kind of failure, each variant naming the element that failed.
+//! - [`rng`]: a seeded generator for splashes and randomized tests.
 //!
 //! Conventions: `f64` inside solves, `f32` for bulk arrays at the boundary, `u32` indices;
 //! every loop that runs in parallel writes disjoint outputs, so results are bit-identical
 //! whatever the number of threads.
+
+#![warn(missing_docs)]
+#![warn(unreachable_pub)]
 
 pub mod error;
 pub mod io;
@@ -26,5 +56,5 @@ pub mod rng;
 pub mod stain;
 pub mod weave;
 
-pub use error::{CacheError, Error, MeshError, ParamError, Result, SolveError, WeaveError};
+pub use error::{CacheError, Error, MeshError, ParamError, SolveError, WeaveError};
 pub use io::point_cache::PointCacheError;

@@ -82,7 +82,7 @@ fn a_cache_cut_at_any_byte_keeps_every_whole_frame() {
                         first_cut: c,
                         ..
                     } => {
-                        assert_eq!((*f, *c), (frame, first_cut), "cut at {len}")
+                        assert_eq!((*f, *c), (frame, first_cut), "cut at {len}");
                     }
                     other => panic!("cut at {len}, frame {frame}: {other:?}"),
                 }

@@ -251,7 +251,7 @@ fn any_in_plane_frames_keep_the_flat_transport_exact() {
         rings: b.rings.clone(),
         geometry: b.geometry.clone(),
         frames: frames.clone(),
-        transport: transport,
+        transport,
     };
     for v in 0..t.n_vertices() {
         let d = wrap(b2.transport.frame_offset(v) + TAU * hash(v, 5));

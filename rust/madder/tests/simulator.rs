@@ -973,7 +973,7 @@ fn a_nan_position_names_the_vertex_and_leaves_the_state_unchanged() {
     bad[17].y = f64::NAN;
     match sim.step(&bad, dt, Some(&at(t + dt))) {
         Err(e @ Error::Mesh(MeshError::NonFinitePosition { vertex: 17 })) => {
-            assert!(e.to_string().contains("17"), "{e}")
+            assert!(e.to_string().contains("17"), "{e}");
         }
         other => panic!("NaN position: {other:?}"),
     }
@@ -981,7 +981,7 @@ fn a_nan_position_names_the_vertex_and_leaves_the_state_unchanged() {
     bad_after[23].z = f64::INFINITY;
     match sim.step(&at(t), dt, Some(&bad_after)) {
         Err(e @ Error::Mesh(MeshError::NonFinitePosition { vertex: 23 })) => {
-            assert!(e.to_string().contains("23"), "{e}")
+            assert!(e.to_string().contains("23"), "{e}");
         }
         other => panic!("infinite 'after' position: {other:?}"),
     }
@@ -1118,7 +1118,7 @@ fn max_difference(x: &[f64], y: &[f64]) -> (f64, f64) {
 #[test]
 fn the_active_region_matches_the_whole_mesh_and_never_misses_liquid() {
     let whole = region_run(false, NO_FORCES, &no_interaction(), 200, |sim, _| {
-        assert!(sim.active_region().is_none())
+        assert!(sim.active_region().is_none());
     });
     let mut smallest = usize::MAX;
     let mut largest = 0;

@@ -40,8 +40,8 @@ use std::path::{Path, PathBuf};
 use crate::error::CacheError;
 use crate::io::attributes::{StainColour, stain_attributes};
 
-pub const MAGIC: &[u8; 8] = b"MADDERC\0";
-pub const VERSION: u32 = 1;
+pub(crate) const MAGIC: &[u8; 8] = b"MADDERC\0";
+pub(crate) const VERSION: u32 = 1;
 const NAME_LEN: usize = 32;
 
 /// Streams frames into a new cache file; the target is replaced only on [`finish`](Self::finish).

@@ -180,13 +180,13 @@ pub enum PointCacheError {
 }
 
 /// The 12 bytes that start every PC2 file.
-pub const PC2_SIGNATURE: &[u8; 12] = b"POINTCACHE2\0";
+pub(crate) const PC2_SIGNATURE: &[u8; 12] = b"POINTCACHE2\0";
 /// The only PC2 version there is.
-pub const PC2_VERSION: i32 = 1;
+pub(crate) const PC2_VERSION: i32 = 1;
 /// Bytes before the first PC2 frame.
-pub const PC2_HEADER_LEN: u64 = 32;
+pub(crate) const PC2_HEADER_LEN: u64 = 32;
 /// Bytes of the fixed MDD header (before the time table).
-pub const MDD_HEADER_LEN: u64 = 8;
+pub(crate) const MDD_HEADER_LEN: u64 = 8;
 /// Bytes per stored point: three `f32`.
 const POINT_LEN: u64 = 12;
 
@@ -201,7 +201,7 @@ pub enum Format {
 
 impl Format {
     /// The format a file name implies: `.pc2` or `.mdd`, any case.
-    pub fn from_extension(path: &Path) -> Option<Format> {
+    pub(crate) fn from_extension(path: &Path) -> Option<Format> {
         let ext = path.extension()?.to_str()?.to_ascii_lowercase();
         match ext.as_str() {
             "pc2" => Some(Format::Pc2),
@@ -211,7 +211,7 @@ impl Format {
     }
 
     /// `"PC2"` or `"MDD"`.
-    pub fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             Format::Pc2 => "PC2",
             Format::Mdd => "MDD",

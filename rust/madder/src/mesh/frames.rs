@@ -87,11 +87,8 @@ impl VertexFrames {
         }
     }
 
-    pub fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.frame.len()
-    }
-    pub fn is_empty(&self) -> bool {
-        self.frame.is_empty()
     }
 
     /// The 3-D vector `u.x x_i + u.y y_i` of tangent components `u` at vertex `i`.

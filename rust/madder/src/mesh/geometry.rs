@@ -35,7 +35,7 @@ use super::Topology;
 use crate::error::MeshError;
 
 /// Relative size of the mollification margin, as a fraction of the mean edge length.
-pub const MOLLIFY_EPS_REL: f64 = 1e-6;
+pub(crate) const MOLLIFY_EPS_REL: f64 = 1e-6;
 
 /// Geometry of one frame of a mesh with fixed [`Topology`].
 #[derive(Debug, Clone)]
@@ -77,7 +77,7 @@ impl Geometry {
     }
 
     /// Geometry from (unmollified) intrinsic edge lengths, indexed like [`Topology::edges`].
-    pub fn from_edge_lengths(topology: &Topology, mut edge_length: Vec<f64>) -> Self {
+    pub(crate) fn from_edge_lengths(topology: &Topology, mut edge_length: Vec<f64>) -> Self {
         let mean = edge_length.iter().sum::<f64>() / edge_length.len().max(1) as f64;
         let eps = MOLLIFY_EPS_REL * mean;
         let margin = |f: &[u32; 3]| {
@@ -115,7 +115,8 @@ impl Geometry {
     }
 
     /// Total area of the mesh.
-    pub fn total_area(&self) -> f64 {
+    #[cfg(test)]
+    pub(crate) fn total_area(&self) -> f64 {
         self.face_area.iter().sum()
     }
 }
@@ -159,7 +160,7 @@ fn heron(l: [f64; 3]) -> f64 {
 /// The lumped area `A_v = Σ_{T∋v} A_T / 3` of one vertex from the positions of its
 /// faces' corners (the [`Geometry`] value, unmollified), for a vertex whose area is
 /// needed without the whole mesh's geometry.
-pub fn vertex_area<P: Copy + Into<DVec3>>(
+pub(crate) fn vertex_area<P: Copy + Into<DVec3>>(
     faces: impl Iterator<Item = [u32; 3]>,
     positions: &[P],
 ) -> f64 {

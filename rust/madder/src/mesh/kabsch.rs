@@ -163,7 +163,7 @@ fn outer(a: DVec3, b: DVec3) -> DMat3 {
 /// per mesh): the per-frame part.
 impl RingAdjacency {
     /// `U_i` of vertex `i` (see [`one_ring_rotations`]); positions are not checked.
-    pub fn rotation(&self, rest: &[DVec3], current: &[DVec3], i: usize) -> DMat3 {
+    pub(crate) fn rotation(&self, rest: &[DVec3], current: &[DVec3], i: usize) -> DMat3 {
         let h = self.neighbours(i).iter().fold(DMat3::ZERO, |h, &j| {
             let j = j as usize;
             h + outer(current[j] - current[i], rest[j] - rest[i])
@@ -176,7 +176,7 @@ impl RingAdjacency {
     ///
     /// # Panics
     /// If `rest` or `current` does not have one position per vertex.
-    pub fn rotations(&self, rest: &[DVec3], current: &[DVec3]) -> Vec<DMat3> {
+    pub(crate) fn rotations(&self, rest: &[DVec3], current: &[DVec3]) -> Vec<DMat3> {
         let n = self.n_vertices();
         assert!(
             rest.len() == n && current.len() == n,

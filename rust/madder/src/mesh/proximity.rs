@@ -15,7 +15,7 @@ use rayon::prelude::*;
 const MAX_CELLS_PER_AXIS: usize = 64;
 
 /// Closest point to `p` on the triangle `(a, b, c)`.
-pub fn closest_point_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> DVec3 {
+pub(crate) fn closest_point_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> DVec3 {
     let (ab, ac, ap) = (b - a, c - a, p - a);
     let (d1, d2) = (ab.dot(ap), ac.dot(ap));
     if d1 <= 0.0 && d2 <= 0.0 {

@@ -110,7 +110,7 @@ impl OneRings {
     ///
     /// # Panics
     /// If `flipped` does not have one flag per face.
-    pub fn with_orientation(topology: &Topology, flipped: Vec<bool>) -> Self {
+    pub(crate) fn with_orientation(topology: &Topology, flipped: Vec<bool>) -> Self {
         assert_eq!(flipped.len(), topology.n_faces(), "one flag per face");
         let n = topology.n_vertices();
         let faces = topology.faces();
@@ -198,11 +198,11 @@ impl OneRings {
 
     /// Per face: whether the fans walk it against its own vertex order (the harmonized
     /// orientation).
-    pub fn face_flipped(&self) -> &[bool] {
+    pub(crate) fn face_flipped(&self) -> &[bool] {
         &self.flipped
     }
 
-    pub fn n_vertices(&self) -> usize {
+    pub(crate) fn n_vertices(&self) -> usize {
         self.kind.len()
     }
 
@@ -217,14 +217,8 @@ impl OneRings {
     }
 
     /// Edge index (into [`Topology::edges`]) of every spoke of `v`.
-    pub fn spoke_edges(&self, v: usize) -> &[u32] {
+    pub(crate) fn spoke_edges(&self, v: usize) -> &[u32] {
         &self.spoke_edge[self.spoke_ptr[v] as usize..self.spoke_ptr[v + 1] as usize]
-    }
-
-    /// Offset of vertex `v`'s spokes in arrays laid out per spoke (like
-    /// [`Transport::polar_angles`](super::Transport::polar_angles)).
-    pub fn spoke_offset(&self, v: usize) -> usize {
-        self.spoke_ptr[v] as usize
     }
 
     pub fn kind(&self, v: usize) -> FanKind {
@@ -232,7 +226,8 @@ impl OneRings {
     }
 
     /// Index of the edge between `i` and `j`, if any.
-    pub fn edge_between(&self, i: usize, j: usize) -> Option<usize> {
+    #[cfg(test)]
+    pub(crate) fn edge_between(&self, i: usize, j: usize) -> Option<usize> {
         find_edge(&self.edge_ptr, &self.edge_end, i as u32, j as u32)
     }
 
@@ -452,7 +447,7 @@ fn order_fan(
 /// [`Topology::edges`], fixed by the topology): built once per mesh, so that a bake's
 /// per-frame rotations ([`RingAdjacency::rotations`]) only read it.
 #[derive(Debug, Clone)]
-pub struct RingAdjacency {
+pub(crate) struct RingAdjacency {
     ptr: Vec<u32>,
     nbr: Vec<u32>,
 }
@@ -460,7 +455,7 @@ pub struct RingAdjacency {
 impl RingAdjacency {
     /// The vertex adjacency of `topology`: each vertex's neighbours in the order of its
     /// incident edges ([`Topology::vertex_edges`]).
-    pub fn new(topology: &Topology) -> Self {
+    pub(crate) fn new(topology: &Topology) -> Self {
         let n = topology.n_vertices();
         let mut ptr = Vec::with_capacity(n + 1);
         let mut nbr = Vec::with_capacity(2 * topology.n_edges());
@@ -477,12 +472,12 @@ impl RingAdjacency {
         Self { ptr, nbr }
     }
 
-    pub fn n_vertices(&self) -> usize {
+    pub(crate) fn n_vertices(&self) -> usize {
         self.ptr.len() - 1
     }
 
     /// Neighbours of `v` (each vertex sharing an edge with it), in edge order.
-    pub fn neighbours(&self, v: usize) -> &[u32] {
+    pub(crate) fn neighbours(&self, v: usize) -> &[u32] {
         &self.nbr[self.ptr[v] as usize..self.ptr[v + 1] as usize]
     }
 }

@@ -14,7 +14,7 @@ use crate::error::MeshError;
 
 /// How many faces share an edge.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum EdgeKind {
+pub(crate) enum EdgeKind {
     /// Exactly one incident face.
     Boundary,
     /// Exactly two incident faces.
@@ -117,12 +117,12 @@ impl Topology {
     }
 
     /// The edges incident to vertex `v`, in increasing edge order.
-    pub fn vertex_edges(&self, v: usize) -> &[u32] {
+    pub(crate) fn vertex_edges(&self, v: usize) -> &[u32] {
         &self.vertex_edge[self.vertex_edge_ptr[v] as usize..self.vertex_edge_ptr[v + 1] as usize]
     }
 
     /// The end of edge `e` that is not `v` (`v` must be an end of `e`).
-    pub fn other_end(&self, e: usize, v: usize) -> u32 {
+    pub(crate) fn other_end(&self, e: usize, v: usize) -> u32 {
         let [a, b] = self.edges[e];
         if a as usize == v { b } else { a }
     }
@@ -154,7 +154,7 @@ impl Topology {
         &self.face_polygon
     }
 
-    pub fn edge_kind(&self, e: usize) -> EdgeKind {
+    pub(crate) fn edge_kind(&self, e: usize) -> EdgeKind {
         match self.edge_face_count[e] {
             1 => EdgeKind::Boundary,
             2 => EdgeKind::Interior,

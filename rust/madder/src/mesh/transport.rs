@@ -198,13 +198,13 @@ impl Transport {
     }
 
     /// `(cos θ_ab, sin θ_ab)` of every edge (the entries of [`Self::edge_rotation`]).
-    pub fn edge_cos_sin(&self) -> &[[f64; 2]] {
+    pub(crate) fn edge_cos_sin(&self) -> &[[f64; 2]] {
         &self.cos_sin
     }
 
     /// `R_ab` of edge `e = (a, b)`, `a < b` (transport from `F_b` to `F_a`); the same
     /// matrix as `DMat2::from_angle(θ_ab)`, from the stored cosine and sine.
-    pub fn edge_rotation(&self, e: usize) -> DMat2 {
+    pub(crate) fn edge_rotation(&self, e: usize) -> DMat2 {
         let [c, s] = self.cos_sin[e];
         DMat2::from_cols_array(&[c, s, -s, c])
     }

@@ -4,12 +4,12 @@
 //! of the velocity, eq. 4.6) every sub-step with new values on the same pattern. At
 //! cloth time steps the matrix is strongly diagonally dominant (`M` dominates `hK` unless
 //! `h D` is many times the squared edge length), and the solution changes little from one
-//! step to the next. Measured on the waving-flag grid (`make bench`, 2 cores): starting CG
-//! from the previous solution, with a Jacobi preconditioner (before IC(0), below), takes
-//! 11 iterations at relative tolerance 1e-12 and 2.4 ms per step at 10k vertices, against
-//! 9–12 ms for the numeric refactorization of the prefactored Cholesky
-//! ([`super::PrefactoredSpd`]); 67 against 95 ms at 100k. So the stepper uses this
-//! solver; the Cholesky stays for direct solves and as the reference in the tests.
+//! step to the next: CG started from the previous solution converges in a few iterations,
+//! in a fraction of the time the numeric refactorization of the prefactored Cholesky
+//! ([`super::PrefactoredSpd`]) takes. So the stepper uses this solver; the Cholesky stays
+//! for direct solves and as the reference in the tests. (The figures behind this and the
+//! choices below are in ARCHITECTURE.md, "Solver"; `cargo bench -p madder --bench
+//! diffusion` prints them.)
 //!
 //! [`WarmCg`] expands the lower-triangle pattern ([`LowerCsc`]) once into the full
 //! symmetric matrix that faer's matrix-free CG multiplies with, with the lower slot of every
@@ -18,16 +18,15 @@
 //! is gathered along its row, `y_i = Σ_k a_ik x_k` in increasing `k` — the order in which
 //! faer's compressed-column product accumulates `y_i` (column after column), so the
 //! result is the same to the last bit, without the scatter and with 32-bit indices
-//! (measured 2–3× faster). Each CG runs with `Par::Seq`: its
+//! (faster). Each CG runs with `Par::Seq`: its
 //! reductions are then in a fixed order and the result is bit-identical whatever the
 //! number of threads. The parallelism is across right-hand sides instead: the columns
 //! (solvent and solute, colour) are solved side by side on the rayon pool.
 //!
 //! The iteration itself is faer's. A hand-written Jacobi-PCG with the same stopping rule
-//! (three fused passes per iteration, no allocation) measured about 1.2–1.6 ms faster per
-//! frame at 10k vertices (faer runs a single column's vector updates through its dense
-//! block product); we keep the library's, as the project's dependency policy asks, and
-//! note the figure for whoever revisits it.
+//! (three fused passes per iteration, no allocation) measured a little faster (faer runs
+//! a single column's vector updates through its dense block product); we keep the
+//! library's, as the project's dependency policy asks.
 //!
 //! ## Preconditioner: IC(0)
 //! Writing `A = L + D + Lᵀ` (`L` strictly lower), the preconditioner is
@@ -42,8 +41,8 @@
 //!   entries, `d_k = a_kk − Σ_{j<k} l̃_kj² d_j`, `l̃_ik = (a_ik − Σ_{j<k} l̃_ij l̃_kj d_j) / d_k`
 //!   for `(i, k)` in the pattern. The updates `(i, j) ← (i, k)(j, k)` that stay in the
 //!   pattern are listed once in [`WarmCg::new`], so refactoring every solve (the values
-//!   change every sub-step) is one pass over them: 1.7 ms at 100k vertices, about one
-//!   Jacobi-CG iteration (one IC(0) iteration: 2.7 ms). A pivot `d_k ≤ 10⁻⁸ a_kk`
+//!   change every sub-step) is one pass over them, about the cost of one Jacobi-CG
+//!   iteration. A pivot `d_k ≤ 10⁻⁸ a_kk`
 //!   (possible when `A` is not an M-matrix: obtuse triangles, anisotropy) restarts the factorization of `A + α diag(A)`, `α = 10⁻²`
 //!   then `10⁻¹` (Manteuffel's shift), then falls back to Jacobi; and a column the
 //!   factor fails to converge is solved again with Jacobi from the same warm start, so
@@ -52,37 +51,16 @@
 //!   diagonal (`(M_jj + h K_jj) I₂`, see [`crate::ops::bochner`]): block-Jacobi *is*
 //!   Jacobi there, so the same IC(0) is used on the block pattern.
 //!
-//! Measured (`cargo bench -p madder --bench diffusion`, the flag case: cells
-//! 3.2 × 1.9 mm, `S` = 2·10⁻⁴ m²/s along the weft and 5·10⁻⁵ along the warp,
-//! `h` = 1/24 s, a sharp-edged stain, one field per solve, warm start `m / A`, setup
-//! included; 2 busy cores, medians of three runs, ±15 %):
-//!
-//! ```text
-//!                                   Jacobi           SGS              IC(0)
-//! density  1e-9,   10k vertices   16.7 it  1.9 ms   6.9 it  1.9 ms   6.3 it  1.7 ms
-//! density  1e-9,  100k vertices   20.1 it 28   ms   7.8 it 23   ms   7.0 it 22   ms
-//! Bochner  1e-8,   10k vertices   18.1 it  5.6 ms   7.1 it  4.4 ms   6.0 it  4.6 ms
-//! Bochner  1e-8,  100k vertices   18.0 it 73   ms   7.2 it 69   ms   6.1 it 68   ms
-//! density, S × 4, 100k vertices   38.9 it 57   ms  14.4 it 40   ms  12.5 it 37   ms
-//! ```
-//!
-//! (The last row is a one-off run with the tensor four times larger, not in the bench.)
-//! IC(0) divides the iterations by ~3 but an iteration costs ~2.3 Jacobi ones (the two
-//! sweeps are latency-bound, one dependent row after another, and cost more than the
-//! product), so the wall time gains 15–25 % on the densities and 7–20 % on the Bochner
-//! system, more as the system gets stiffer (last row: 35 %). Symmetric Gauss–Seidel
-//! needs no factorization but ~15 % more iterations, and comes out level with IC(0)
-//! within the noise; IC(0) is kept for its fewer iterations, whose advantage grows with
-//! `h D / Δx²`. (This case needs ~20 Jacobi iterations, not the ~80 reported on the
-//! production flag, which it does not reproduce; there the gain should be nearer the
-//! last row's.)
+//! IC(0) divides the iterations by about three, but an iteration costs more than two
+//! Jacobi ones (its two sweeps are latency-bound), so it wins on wall time by less, and by
+//! more as the system gets stiffer (`h D / Δx²`); symmetric Gauss–Seidel needs no
+//! factorization and comes out about level. IC(0) is kept for its fewer iterations.
 //!
 //! Each right-hand side column (solvent, solute, colour) is solved on its own, from its
 //! own warm start, so a field a thousand times smaller than another still gets its own
 //! relative tolerance. (faer's block CG, which shares the sparse products between
-//! columns, converges in the same number of iterations per column but measured 30–60 %
-//! slower for two columns at 10k vertices, its dense block updates costing more than the
-//! products it saves.)
+//! columns, converges in the same number of iterations per column but measured slower,
+//! its dense block updates costing more than the products it saves.)
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::matrix_free::conjugate_gradient::{
@@ -99,11 +77,11 @@ use crate::error::SolveError;
 /// residual (`1ᵀ(M + hK) = 1ᵀM`), and the stepper restores it exactly afterwards, so the
 /// tolerance only sets how accurately the *profile* is resolved; callers choose it per
 /// system ([`WarmCg::with_tolerance`]).
-pub const RELATIVE_TOLERANCE: f64 = 1e-12;
+pub(crate) const RELATIVE_TOLERANCE: f64 = 1e-12;
 
 /// Iteration cap: a solve that has not converged after this many iterations is an error
 /// (the matrix was not positive definite, or the data was not finite).
-pub const MAX_ITERATIONS: usize = 2000;
+pub(crate) const MAX_ITERATIONS: usize = 2000;
 
 /// A symmetric positive definite system on a fixed pattern, solved by warm-started
 /// CG preconditioned by IC(0) (module doc).
@@ -324,11 +302,6 @@ impl WarmCg {
     pub fn with_preconditioner(mut self, precond: Preconditioner) -> Self {
         self.precond = precond;
         self
-    }
-
-    /// Dimension of the system.
-    pub fn n(&self) -> usize {
-        self.n
     }
 
     /// Solves `A x = b` for every column, `A` given by its lower-triangle `values` on the

@@ -16,12 +16,15 @@ pub(crate) mod pattern;
 pub(crate) mod restrict;
 pub(crate) mod solve;
 
-pub use aniso::{DEGENERATE_UV_REL, anisotropic_stiffness, weft_angles, weft_directions};
+pub use aniso::{DEGENERATE_UV_REL, weft_directions};
+
+pub use aniso::{anisotropic_stiffness, weft_angles};
 pub use bochner::{
     BochnerPattern, BochnerSystem, add_lumped_mass_blocks, bochner_stiffness, diffuse_tangent_field,
 };
 pub use cg::WarmCg;
 pub use cotan::{add_lumped_mass, cotan_stiffness};
 pub use pattern::VertexPattern;
-pub use restrict::{CscPattern, Restriction, block_pattern, block_values};
-pub use solve::{LowerCsc, PrefactoredSpd, solve_spd};
+pub use restrict::{CscPattern, Restriction};
+pub use solve::PrefactoredSpd;
+pub use solve::{LowerCsc, solve_spd};

@@ -59,7 +59,7 @@ impl VertexPattern {
         self.n
     }
     /// Number of stored entries (lower triangle with diagonal).
-    pub fn nnz(&self) -> usize {
+    pub(crate) fn nnz(&self) -> usize {
         self.row_idx.len()
     }
     pub fn col_ptr(&self) -> &[u32] {
@@ -78,7 +78,8 @@ impl VertexPattern {
     }
 
     /// `y = A x` for the symmetric matrix whose lower triangle is `values`.
-    pub fn sym_matvec(&self, values: &[f64], x: &[f64]) -> Vec<f64> {
+    #[cfg(test)]
+    pub(crate) fn sym_matvec(&self, values: &[f64], x: &[f64]) -> Vec<f64> {
         assert_eq!(values.len(), self.nnz());
         let mut y = vec![0.0; self.n];
         for j in 0..self.n {

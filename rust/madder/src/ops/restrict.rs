@@ -52,7 +52,7 @@ impl LowerCsc for CscPattern {
 
 /// The `2×2` block expansion of the lower-triangle `scalar` pattern whose every column
 /// starts with its diagonal (module doc).
-pub fn block_pattern(scalar: &impl LowerCsc) -> CscPattern {
+pub(crate) fn block_pattern(scalar: &impl LowerCsc) -> CscPattern {
     let (cp, ri) = (scalar.col_ptr(), scalar.row_idx());
     let n = scalar.n();
     let mut col_ptr = Vec::with_capacity(2 * n + 1);
@@ -78,7 +78,7 @@ pub fn block_pattern(scalar: &impl LowerCsc) -> CscPattern {
 /// `scalar`: diagonal blocks `v I₂`, and for the entry of edge `e = entry_edge[s]` the
 /// block `(b, a) = K_ab R_abᵀ = K [c s; −s c]` with `[c, s] = cos_sin[e]` (the
 /// transport's rotation of that edge). `entry_edge` is ignored on the diagonals.
-pub fn block_values(
+pub(crate) fn block_values(
     scalar: &impl LowerCsc,
     values: &[f64],
     entry_edge: &[u32],

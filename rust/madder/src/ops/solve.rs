@@ -99,7 +99,7 @@ impl<P: LowerCsc> PrefactoredSpd<P> {
         })
     }
 
-    pub fn pattern(&self) -> &P {
+    pub(crate) fn pattern(&self) -> &P {
         &self.pattern
     }
 

@@ -165,32 +165,32 @@ use crate::mesh::{EdgeKind, Geometry, OneRings, Topology, Transport, VertexFrame
 
 /// Most triangle crossings of one back-trace. Reached only when `h|u|` spans hundreds of
 /// edges; the trace then stops at its last crossing point.
-pub const MAX_CROSSINGS: usize = 256;
+pub(crate) const MAX_CROSSINGS: usize = 256;
 
 /// Largest number of sub-steps of one upwind step; beyond it the limiter keeps masses
 /// non-negative.
-pub const MAX_SUBSTEPS: usize = 64;
+pub(crate) const MAX_SUBSTEPS: usize = 64;
 
 /// Largest fraction of its mass a vertex gives away in one sub-step before sub-cycling.
-pub const SUBSTEP_COURANT: f64 = 0.9;
+pub(crate) const SUBSTEP_COURANT: f64 = 0.9;
 
 /// A face whose `|e_ij × e_ik|` is below this fraction of its longest squared edge (the
 /// sine of its largest angle, roughly) has a normal dominated by rounding (`≈ 10⁻¹⁶ ℓ²`
 /// absolute error, so more than `10⁻⁴` relative below this bound): its dual area vectors
 /// are set to zero.
-pub const FLAT_FACE_REL: f64 = 1e-12;
+pub(crate) const FLAT_FACE_REL: f64 = 1e-12;
 
 /// Relative tolerance (an angle, in radians) within which a point counts as lying on the
 /// line of the back-trace. The layout positions carry rounding errors of order
 /// `10⁻¹⁶ × (number of unfoldings)` relative; a segment running along a straight border
 /// must see the border vertices *on* its line, whatever the rounding, to follow it.
-pub const SIDE_TOLERANCE: f64 = 1e-12;
+pub(crate) const SIDE_TOLERANCE: f64 = 1e-12;
 
 /// Solvent mass, relative to the largest mass before the step, below which the momentum
 /// velocity is not formed. The momentum of a vertex carries an absolute rounding error of
 /// a few `10⁻¹⁶` times the mass that passed through it; above this bound that error is
 /// below `10⁻³` of the velocity.
-pub const MOMENTUM_MIN_MASS_REL: f64 = 1e-12;
+pub(crate) const MOMENTUM_MIN_MASS_REL: f64 = 1e-12;
 
 // ---------------------------------------------------------------------------------------
 // velocity
@@ -231,7 +231,7 @@ pub fn advect_velocity(
 ///
 /// # Panics
 /// As [`advect_velocity`], and if `active` does not have one entry per vertex.
-pub fn advect_velocity_in(
+pub(crate) fn advect_velocity_in(
     topology: &Topology,
     rings: &OneRings,
     geometry: &Geometry,

@@ -120,7 +120,7 @@ impl Conductivity {
     /// The stiffness `scale · K_S` on `pattern` for this geometry: `D` times the cotan
     /// stiffness, or the anisotropic stiffness with the weft recomputed from the UVs on
     /// the deformed faces.
-    pub fn stiffness(
+    pub(crate) fn stiffness(
         &self,
         topology: &Topology,
         geometry: &Geometry,
@@ -138,7 +138,7 @@ impl Conductivity {
 
     /// The conductivity of a sub-mesh made of `faces` (indices into this one's faces, in
     /// the sub-mesh's face order).
-    pub fn faces(&self, faces: &[u32]) -> Self {
+    pub(crate) fn faces(&self, faces: &[u32]) -> Self {
         match self {
             Conductivity::Isotropic(d) => Conductivity::Isotropic(*d),
             Conductivity::Woven(w) => Conductivity::Woven(WovenFaces {
@@ -150,7 +150,7 @@ impl Conductivity {
     }
 
     /// Faces whose UVs are degenerate (the weft falls back to an edge), at `geometry`.
-    pub fn degenerate_uv_faces(&self, topology: &Topology, geometry: &Geometry) -> usize {
+    pub(crate) fn degenerate_uv_faces(&self, topology: &Topology, geometry: &Geometry) -> usize {
         match self {
             Conductivity::Woven(w) => weft_angles(topology, geometry, &w.uv, &w.angle).1,
             Conductivity::Isotropic(_) => 0,
@@ -158,7 +158,7 @@ impl Conductivity {
     }
 
     /// Checks the rate or the per-face data (lengths, finiteness, tensors PSD).
-    pub fn validate(&self, n_faces: usize) -> Result<(), ParamError> {
+    pub(crate) fn validate(&self, n_faces: usize) -> Result<(), ParamError> {
         match self {
             Conductivity::Isotropic(d) => {
                 check_range("diffusion rate", *d, *d >= 0.0, "finite and ≥ 0")
@@ -264,10 +264,6 @@ impl DiffusionStepper {
         })
     }
 
-    pub fn topology(&self) -> &Topology {
-        &self.topology
-    }
-
     /// Density per unit area at every vertex.
     pub fn density(&self) -> &[f64] {
         &self.fields[..self.topology.n_vertices()]
@@ -302,7 +298,7 @@ impl DiffusionStepper {
     }
 
     /// `true` once [`Self::enable_color`] was called.
-    pub fn has_color(&self) -> bool {
+    pub(crate) fn has_color(&self) -> bool {
         self.fields.len() > self.topology.n_vertices()
     }
 

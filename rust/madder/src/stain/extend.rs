@@ -43,12 +43,12 @@ use crate::mesh::{Topology, Transport};
 
 /// A vertex carries a velocity of its own when its free-solvent density is above this
 /// fraction of the largest among the vertices considered (module doc).
-pub const WET_FRACTION: f64 = 1e-6;
+pub(crate) const WET_FRACTION: f64 = 1e-6;
 
 /// Per vertex: wet (carries a velocity of its own). Only vertices flagged in `region` are
 /// considered (and can be wet); `mass` and `area` are per vertex (a vertex without area is
 /// dry).
-pub fn wet_vertices(mass: &[f64], area: &[f64], region: &[bool]) -> Vec<bool> {
+pub(crate) fn wet_vertices(mass: &[f64], area: &[f64], region: &[bool]) -> Vec<bool> {
     let density = |i: usize| {
         if area[i] > 0.0 && region[i] {
             mass[i] / area[i]

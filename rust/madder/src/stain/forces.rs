@@ -186,7 +186,12 @@ pub(crate) fn second_difference(prev: DVec3, cur: DVec3, next: DVec3, dt: f64) -
 /// The tangential body acceleration: the `(x, y)` components of `fᵀ (g − a)` for frame
 /// `f` and its acceleration `a` (world), for the enabled forces (the Coriolis term is
 /// [`integrate_velocity`]'s).
-pub(crate) fn frame_body_acceleration(f: &DMat3, a: DVec3, gravity: DVec3, forces: Forces) -> DVec2 {
+pub(crate) fn frame_body_acceleration(
+    f: &DMat3,
+    a: DVec3,
+    gravity: DVec3,
+    forces: Forces,
+) -> DVec2 {
     let g = if forces.gravity { gravity } else { DVec3::ZERO };
     let world = if forces.rectilinear { g - a } else { g };
     frames_local(f, world)

@@ -177,7 +177,7 @@ impl Default for InteractionRates {
 impl InteractionRates {
     /// Every rate and capacity finite and `≥ 0`; `evaporation_boundary` finite and `≥ 1`.
     /// The error names the parameter.
-    pub fn validate(&self) -> Result<(), ParamError> {
+    pub(crate) fn validate(&self) -> Result<(), ParamError> {
         let nonneg = [
             ("absorption rate", self.absorption),
             ("saturation", self.saturation),

@@ -147,7 +147,7 @@ impl Default for StainParams {
 
 impl StainParams {
     /// Checks every parameter, naming the first one out of range.
-    pub fn validate(&self) -> Result<(), ParamError> {
+    pub(crate) fn validate(&self) -> Result<(), ParamError> {
         if let Some(k) = (0..3).find(|&k| !self.gravity[k].is_finite()) {
             return Err(ParamError::NonFinite {
                 name: "gravity",
@@ -308,9 +308,6 @@ impl Simulator {
     /// Time spent per phase so far.
     pub fn profile(&self) -> Profile {
         self.profile
-    }
-    pub fn params(&self) -> &StainParams {
-        &self.params
     }
     /// Simulated time since the start, s.
     pub fn time(&self) -> f64 {

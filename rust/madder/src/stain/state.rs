@@ -47,7 +47,7 @@ pub struct Fields {
 
 impl Fields {
     /// `n` dry, clean vertices, without colour.
-    pub fn zeros(n: usize) -> Self {
+    pub(crate) fn zeros(n: usize) -> Self {
         Self {
             free_solvent: vec![0.0; n],
             solute: vec![0.0; n],
@@ -60,7 +60,7 @@ impl Fields {
     }
 
     /// The fields of the vertices `index` (in that order).
-    pub fn gather(&self, index: &[u32]) -> Self {
+    pub(crate) fn gather(&self, index: &[u32]) -> Self {
         let pick = |v: &[f64]| index.iter().map(|&i| v[i as usize]).collect();
         let pick3 = |v: &Option<Vec<[f64; 3]>>| {
             v.as_ref()
@@ -82,7 +82,7 @@ impl Fields {
     ///
     /// # Panics
     /// If `part` tracks colour and these fields do not, or the lengths differ.
-    pub fn scatter(&mut self, index: &[u32], part: &Fields) {
+    pub(crate) fn scatter(&mut self, index: &[u32], part: &Fields) {
         fn put<T: Copy>(to: &mut [T], index: &[u32], from: &[T]) {
             assert_eq!(index.len(), from.len(), "one value per index");
             for (&i, &x) in index.iter().zip(from) {
@@ -110,7 +110,7 @@ impl Fields {
 
     /// Whether vertex `i` holds liquid or solute that can still change (anything but
     /// the adsorbed deposit).
-    pub fn is_live(&self, i: usize) -> bool {
+    pub(crate) fn is_live(&self, i: usize) -> bool {
         self.free_solvent[i] > 0.0
             || self.solute[i] > 0.0
             || self.absorbed_solvent[i] > 0.0
@@ -118,7 +118,7 @@ impl Fields {
     }
 
     /// `Σ_i (s_i + sp_i + sa_i)`, in vertex order.
-    pub fn total_solute(&self) -> f64 {
+    pub(crate) fn total_solute(&self) -> f64 {
         self.solute
             .iter()
             .zip(&self.absorbed_solute)
@@ -127,7 +127,7 @@ impl Fields {
     }
 
     /// `Σ_i (f_i + p_i)`, in vertex order.
-    pub fn total_solvent(&self) -> f64 {
+    pub(crate) fn total_solvent(&self) -> f64 {
         self.free_solvent
             .iter()
             .zip(&self.absorbed_solvent)

@@ -118,11 +118,6 @@ impl HomogenizationCache {
     pub fn misses(&self) -> u64 {
         self.misses
     }
-
-    pub fn clear(&mut self) {
-        self.map.clear();
-        self.order.clear();
-    }
 }
 
 /// The cache key of a tile under `opts` (checks the cells first, so a bad tile is reported

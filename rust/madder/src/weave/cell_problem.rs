@@ -90,14 +90,6 @@ pub struct Bounds {
     pub lower: Tensor2,
 }
 
-impl Bounds {
-    /// The midpoint `(upper + lower) / 2`; its error is at most half the gap in every
-    /// direction.
-    pub fn mid(&self) -> Tensor2 {
-        tensor::lerp(self.lower, self.upper, 0.5)
-    }
-}
-
 const NONE: u32 = u32::MAX;
 
 /// How many grids [`Grid::shared`] keeps: the two levels of two tile sizes. A 128×128 grid
@@ -216,7 +208,7 @@ impl Grid {
     /// The `w × h` grid from a small process-wide cache of the most recently used ones
     /// ([`SHARED_GRIDS`]), built on a miss. A grid is a pure function of its size, so
     /// sharing it changes no result.
-    pub fn shared(w: usize, h: usize) -> Result<Arc<Grid>, WeaveError> {
+    pub(crate) fn shared(w: usize, h: usize) -> Result<Arc<Grid>, WeaveError> {
         let lock = || shared_grids().lock().unwrap_or_else(|e| e.into_inner());
         {
             let mut c = lock();
@@ -240,14 +232,6 @@ impl Grid {
             .lock()
             .unwrap_or_else(|e| e.into_inner())
             .clear();
-    }
-
-    pub fn width(&self) -> usize {
-        self.w
-    }
-
-    pub fn height(&self) -> usize {
-        self.h
     }
 
     /// Number of nonzeros of the Cholesky factor.

@@ -228,7 +228,11 @@ impl Homogenized {
 
 /// Checks a per-cell tensor field: dimensions, and every tensor finite and SPD at any
 /// magnitude ([`tensor::is_spd`]); the error names the first bad cell.
-pub fn check_cells(width: usize, height: usize, tensors: &[Tensor2]) -> Result<(), WeaveError> {
+pub(crate) fn check_cells(
+    width: usize,
+    height: usize,
+    tensors: &[Tensor2],
+) -> Result<(), WeaveError> {
     check_count(width, height, tensors.len())?;
     match tensors.iter().position(|&t| !tensor::is_spd(t)) {
         None => Ok(()),
@@ -264,7 +268,7 @@ fn check_count(width: usize, height: usize, got: usize) -> Result<(), WeaveError
 
 /// [`check_cells`], then the contrast (largest over smallest eigenvalue over the tile) and
 /// the cell with the smallest eigenvalue.
-pub fn check_tensors(
+pub(crate) fn check_tensors(
     width: usize,
     height: usize,
     tensors: &[Tensor2],
@@ -283,7 +287,7 @@ pub fn check_tensors(
 
 /// The power of two that brings a tile's largest diagonal entry into `[1, 2)`, as its
 /// exponent (see "Scaling and contrast" in the module doc).
-pub fn scale_exponent(tensors: &[Tensor2]) -> i32 {
+pub(crate) fn scale_exponent(tensors: &[Tensor2]) -> i32 {
     tensor::exponent(tensors.iter().fold(0.0f64, |m, t| m.max(t[0]).max(t[2])))
 }
 
@@ -434,7 +438,7 @@ pub fn bounds(width: usize, height: usize, tensors: &[Tensor2]) -> Result<Bounds
 
 /// The primal–dual extrapolation of the module doc from a coarse and a fine level; returns
 /// the estimate and its weight `φ`.
-pub fn extrapolate(coarse: &Bounds, fine: &Bounds) -> (Tensor2, f64) {
+pub(crate) fn extrapolate(coarse: &Bounds, fine: &Bounds) -> (Tensor2, f64) {
     let du = (tensor::det(coarse.upper) / tensor::det(fine.upper)).ln();
     let dl = (tensor::det(fine.lower) / tensor::det(coarse.lower)).ln();
     // both ≥ 0 for nested meshes; rounding can make a converged one slightly negative

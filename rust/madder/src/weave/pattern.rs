@@ -99,7 +99,7 @@ impl Cell {
     }
 
     /// Inverse of [`Cell::to_char`].
-    pub fn from_char(c: char) -> Option<Cell> {
+    pub(crate) fn from_char(c: char) -> Option<Cell> {
         Some(match c {
             '.' => Cell::Gap,
             'W' => Cell::Warp { up: true },
@@ -131,7 +131,7 @@ impl Weave {
     ];
 
     /// Side of the draft's repeat (ends = picks).
-    pub fn repeat(self) -> usize {
+    pub(crate) fn repeat(self) -> usize {
         match self {
             Weave::Plain => 2,
             Weave::Twill21 => 3,
@@ -141,7 +141,7 @@ impl Weave {
     }
 
     /// Whether warp end `i` passes over weft pick `j` (indices modulo the repeat).
-    pub fn warp_over(self, i: usize, j: usize) -> bool {
+    pub(crate) fn warp_over(self, i: usize, j: usize) -> bool {
         let n = self.repeat();
         let (i, j) = (i % n, j % n);
         match self {
@@ -367,13 +367,8 @@ impl PairCoefficients {
         Ok(())
     }
 
-    /// The coefficient of the pair (`a`, `b`) of cells adjacent along `x` (`along_x`) or
-    /// along `y`; see the module table.
-    pub fn pair(&self, a: Cell, b: Cell, along_x: bool) -> f64 {
-        self.pair_kind(a, b, along_x).1
-    }
-
-    /// The name and coefficient of the pair (`a`, `b`), as in [`PairCoefficients::pair`].
+    /// The name and coefficient of the pair (`a`, `b`) of cells adjacent along `x`
+    /// (`along_x`) or along `y`; see the module table.
     pub fn pair_kind(&self, a: Cell, b: Cell, along_x: bool) -> (&'static str, f64) {
         use Cell::*;
         let weft_warp = ("weft–warp", self.weft_warp);

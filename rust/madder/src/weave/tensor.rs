@@ -10,19 +10,19 @@ use super::Tensor2;
 
 /// `t · v`.
 #[inline]
-pub fn apply(t: Tensor2, v: [f64; 2]) -> [f64; 2] {
+pub(crate) fn apply(t: Tensor2, v: [f64; 2]) -> [f64; 2] {
     [t[0] * v[0] + t[1] * v[1], t[1] * v[0] + t[2] * v[1]]
 }
 
 /// Entry `(i, j)`, `i, j ∈ {0, 1}`.
 #[inline]
-pub fn entry(t: Tensor2, i: usize, j: usize) -> f64 {
+pub(crate) fn entry(t: Tensor2, i: usize, j: usize) -> f64 {
     t[i + j]
 }
 
 /// `vᵀ t v`.
-#[inline]
-pub fn quad(t: Tensor2, v: [f64; 2]) -> f64 {
+#[cfg(test)]
+pub(crate) fn quad(t: Tensor2, v: [f64; 2]) -> f64 {
     t[0] * v[0] * v[0] + 2.0 * t[1] * v[0] * v[1] + t[2] * v[1] * v[1]
 }
 
@@ -57,7 +57,7 @@ pub fn keller_dual(t: Tensor2) -> Tensor2 {
 }
 
 /// Eigenvalues `(λ_min, λ_max)`.
-pub fn eigenvalues(t: Tensor2) -> (f64, f64) {
+pub(crate) fn eigenvalues(t: Tensor2) -> (f64, f64) {
     let m = 0.5 * (t[0] + t[2]);
     let r = (0.5 * (t[0] - t[2])).hypot(t[1]);
     // the smaller one from the determinant avoids cancellation when λ_min ≪ λ_max
@@ -76,7 +76,7 @@ pub fn is_psd(t: Tensor2, tol: f64) -> bool {
 
 /// The binary exponent `e` of a finite `x ≠ 0`: `2^e ≤ |x| < 2^(e+1)` (subnormals
 /// included). Zero and non-finite values give 0.
-pub fn exponent(x: f64) -> i32 {
+pub(crate) fn exponent(x: f64) -> i32 {
     if x == 0.0 || !x.is_finite() {
         return 0;
     }
@@ -92,7 +92,7 @@ pub fn exponent(x: f64) -> i32 {
 /// `x · 2^k`, exact unless the result leaves the range of normal numbers (then rounded
 /// once, to a subnormal, zero or infinity). The steps grow before they shrink, so no
 /// intermediate result rounds.
-pub fn ldexp(x: f64, k: i32) -> f64 {
+pub(crate) fn ldexp(x: f64, k: i32) -> f64 {
     // 2^j for |j| ≤ 1000, from its bits
     let pow2 = |j: i32| f64::from_bits(((j + 1023) as u64) << 52);
     let (mut x, mut k) = (x, k);
@@ -121,7 +121,7 @@ pub fn scale(t: Tensor2, k: i32) -> Tensor2 {
 
 /// Whether `t` is finite and positive definite (`s11 > 0` and `s11 s22 − s12² > 0`),
 /// judged on `t` scaled to a largest entry in `[1, 2)`: the same answer at any magnitude.
-pub fn is_spd(t: Tensor2) -> bool {
+pub(crate) fn is_spd(t: Tensor2) -> bool {
     if !t.iter().all(|x| x.is_finite()) {
         return false;
     }
@@ -134,7 +134,7 @@ pub fn is_spd(t: Tensor2) -> bool {
 }
 
 /// [`eigenvalues`] of a finite `t` of any magnitude (computed on `t` scaled to order 1).
-pub fn eigenvalues_at_any_scale(t: Tensor2) -> (f64, f64) {
+pub(crate) fn eigenvalues_at_any_scale(t: Tensor2) -> (f64, f64) {
     let top = t[0].abs().max(t[1].abs()).max(t[2].abs());
     let e = exponent(top);
     let (lo, hi) = eigenvalues(scale(t, -e));
@@ -142,7 +142,7 @@ pub fn eigenvalues_at_any_scale(t: Tensor2) -> (f64, f64) {
 }
 
 /// `t^p` for SPD `t`, through its eigendecomposition `t = λ₁ v vᵀ + λ₂ (I − v vᵀ)`.
-pub fn power(t: Tensor2, p: f64) -> Tensor2 {
+pub(crate) fn power(t: Tensor2, p: f64) -> Tensor2 {
     let (lo, hi) = eigenvalues(t);
     let (lp, hp) = (lo.powf(p), hi.powf(p));
     if hi == lo {
@@ -156,7 +156,7 @@ pub fn power(t: Tensor2, p: f64) -> Tensor2 {
 }
 
 /// `x m x` for symmetric `x`, `m` (a congruence; SPD in, SPD out).
-pub fn congruence(x: Tensor2, m: Tensor2) -> Tensor2 {
+pub(crate) fn congruence(x: Tensor2, m: Tensor2) -> Tensor2 {
     // x m = [[p, q], [r, s]]
     let (p, q) = (x[0] * m[0] + x[1] * m[1], x[0] * m[1] + x[1] * m[2]);
     let (r, s) = (x[1] * m[0] + x[2] * m[1], x[1] * m[1] + x[2] * m[2]);
@@ -171,7 +171,7 @@ pub fn congruence(x: Tensor2, m: Tensor2) -> Tensor2 {
 /// matrices (the weighted geometric mean `a #ₛ b = a^½ (a^-½ b a^-½)^s a^½`). For
 /// commuting `a`, `b` it is `a^{1−s} b^s`; if `b ≤ a` as quadratic forms, every point of
 /// the geodesic lies between them, `b ≤ a #ₛ b ≤ a`. Covariant under rotations.
-pub fn geodesic(a: Tensor2, b: Tensor2, s: f64) -> Tensor2 {
+pub(crate) fn geodesic(a: Tensor2, b: Tensor2, s: f64) -> Tensor2 {
     let ah = power(a, 0.5);
     let aih = inverse(ah);
     let m = congruence(aih, b);
