@@ -49,7 +49,7 @@ endif
 RUST_SRC   := Cargo.toml Cargo.lock pyproject.toml $(shell find rust -name '*.rs' -o -name 'Cargo.toml' -o -name '*.py')
 ADDON_SRC  := $(wildcard addon/*.py addon/farm/*.js) addon/blender_manifest.toml
 
-.PHONY: all venv wheel addon test test-rust test-python test-blender test-farm demo bench fixtures clean
+.PHONY: all venv wheel addon lint rust-tools test test-rust test-python test-blender test-farm demo bench fixtures clean
 
 all: addon
 
@@ -97,6 +97,24 @@ $(ZIP): $(WHEEL) $(ADDON_SRC)
 	$(PY) $(BLENDER_EXT) build --source-dir addon --output-filepath $@
 	$(PY) $(BLENDER_EXT) validate $@
 	@echo "Extension: $@"
+
+# Static checks (.ci/run runs them before `make test`): rustfmt and clippy (warnings are
+# errors; the lints are Cargo.toml's [workspace.lints]) on the workspace; rustfmt and a
+# compile check of the fuzz targets (their own workspace, rust/madder/fuzz); ruff on the
+# Python (configured in pyproject.toml); the type stubs against the built binding.
+FUZZ := rust/madder/fuzz/Cargo.toml
+lint: rust-tools $(WHEELDIR)/.stamp
+	cargo fmt --all --check
+	cargo fmt --manifest-path $(FUZZ) --check
+	cargo clippy --workspace --all-targets -- -D warnings
+	CARGO_TARGET_DIR=$(abspath target/fuzz) cargo check --manifest-path $(FUZZ)
+	$(VENV)/bin/ruff check addon tests blend_fixtures rust/madder-py/python
+	PYTHONPATH=$(abspath $(WHEELDIR)) $(PY) -m pytest -q tests/python/test_stubs.py
+
+# rustfmt and clippy come with rustup's default profile; a minimal toolchain gets them here
+rust-tools:
+	@cargo fmt --version >/dev/null 2>&1 || rustup component add rustfmt
+	@cargo clippy --version >/dev/null 2>&1 || rustup component add clippy
 
 test: test-rust test-python test-blender test-farm
 

@@ -128,7 +128,9 @@ class MotionFile(motion.MotionSamples):
             )
         offset, scale = 0.0, 1.0
         for m in obj.modifiers:
-            if m.type != "MESH_CACHE" or not m.filepath or os.path.normpath(bpy.path.abspath(m.filepath)) != os.path.normpath(path):
+            if m.type != "MESH_CACHE" or not m.filepath:
+                continue
+            if os.path.normpath(bpy.path.abspath(m.filepath)) != os.path.normpath(path):
                 continue
             offset, scale = motion.modifier_timing(obj.name, m)
             break
@@ -184,7 +186,9 @@ class BakeJob:
         if n_nonmanifold:
             self.warnings.append(f"{n_nonmanifold} non-manifold edges (shared by 3+ faces)")
         self.conductivity = _conductivity(self.madder, obj, self.topology, face_polygon, self.warnings)
-        self.references = presets.references(settings, [o.madder_source for o in self.sources], spill=self.wet0 is not None)
+        self.references = presets.references(
+            settings, [o.madder_source for o in self.sources], spill=self.wet0 is not None
+        )
         if self.references[0] == 0.0:
             self.warnings.append("its liquid has no solute (concentration 0): it wets the cloth but leaves no stain")
         self.unit = unit_scale(scene)

@@ -88,5 +88,6 @@ class MotionSamples:
             if k < last and t - k > 1e-6:
                 co += (t - k) * (self.cache.read_frame(k + 1) - co)
         except Exception as e:
-            raise BakeError(f"'{self.name}' at frame {frame}: {sample_message(e)}", object=self.name, frame=frame) from e
+            message = f"'{self.name}' at frame {frame}: {sample_message(e)}"
+            raise BakeError(message, object=self.name, frame=frame) from e
         return co

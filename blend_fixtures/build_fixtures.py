@@ -289,7 +289,7 @@ def add_soft_group(obj, name, rest_co, centre, radius) -> int:
     inside = np.flatnonzero(dist < radius)
     weights = 0.5 * (1.0 + np.cos(np.pi * dist[inside] / radius))
     group = obj.vertex_groups.new(name=name)
-    for index, weight in zip(inside.tolist(), weights.tolist()):
+    for index, weight in zip(inside.tolist(), weights.tolist(), strict=True):
         group.add([index], weight, "REPLACE")
     return len(inside)
 
@@ -497,7 +497,8 @@ def build_disk(path: str) -> dict:
 
     co, faces, uv = disk_arrays(radius=1.0, n_rings=20)
     disk = link(scene, bpy.data.objects.new("Disk", mesh_from_arrays("Disk", co, faces, uv)))
-    disk.data.materials.append(make_material("DiskMaterial", (0.80, 0.80, 0.78, 1.0), checker=((0.55, 0.57, 0.60, 1.0), 8.0)))
+    disk_material = make_material("DiskMaterial", (0.80, 0.80, 0.78, 1.0), checker=((0.55, 0.57, 0.60, 1.0), 8.0))
+    disk.data.materials.append(disk_material)
     add_soft_group(disk, STAIN_GROUP, co, centre=(0.5, 0.0, 0.0), radius=0.25)
 
     first, last = DISK_TURN_FRAMES

@@ -46,8 +46,8 @@ os.environ.setdefault("BLENDER_USER_RESOURCES", tempfile.mkdtemp(prefix="madder-
 
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
-from mathutils import Vector  # noqa: E402
 from build_fixtures import add_cloth, bake_all, grid_arrays, mesh_from_arrays  # noqa: E402
+from mathutils import Vector  # noqa: E402
 
 FPS = 24
 FLAG_SIZE = (1.0, 0.6)  # along x (away from the pole) and z (up), metres

@@ -22,7 +22,6 @@ FIXTURES = os.environ.get("MADDER_FIXTURES") or HARNESS
 os.environ["BLENDER_USER_RESOURCES"] = tempfile.mkdtemp(prefix="madder-blender-user-")
 
 import bpy  # noqa: E402
-
 import harness  # noqa: E402
 
 ZIP = os.environ.get("MADDER_ZIP") or os.path.join(ROOT, "dist", "madder-0.1.0.zip")

@@ -56,7 +56,7 @@ def test_command_errors_exit_non_zero_with_the_reason(tmp_path, capsys, argv, co
 
 
 def test_command_failure_names_object_and_frame_and_keeps_the_cache(tmp_path, capsys):
-    path = flag_file(tmp_path)
+    flag_file(tmp_path)
     assert cli.main(["bake", "--no-save"]) == 0
     cache = tmp_path / "madder_cache" / "Flag.madder"
     before = cache.read_bytes()

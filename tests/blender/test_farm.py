@@ -114,7 +114,8 @@ def test_farm_job_bakes_each_object_then_renders_on_factory_startup_workers(tmp_
 
     for name in names:
         cache = madder.CacheReader(str(blend.parent / "madder_cache" / f"{name}.madder"))
-        assert (cache.first_frame, cache.last_frame) == scene_range  # the bake covers the scene, not the rendered frames
+        # the bake covers the scene, not the rendered frames
+        assert (cache.first_frame, cache.last_frame) == scene_range
     bpy.ops.wm.open_mainfile(filepath=str(blend))  # both bakes' saves are in the file
     assert [bpy.data.objects[n].madder.cache_file for n in names] == [f"//madder_cache/{n}.madder" for n in names]
     out = tmp_path / "render" / "stains"

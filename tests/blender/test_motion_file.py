@@ -99,7 +99,9 @@ def test_motion_file_reads_the_samples_the_mesh_cache_modifier_shows(
     bake = __import__(addon + ".bake", fromlist=["MotionFile"])
     reader = bake.MotionFile(madder, flag)
     for frame in range(scene.frame_start, scene.frame_end + 1):
-        np.testing.assert_allclose(reader.local(frame), evaluated(scene, flag, frame), atol=1e-6, err_msg=f"frame {frame}")
+        np.testing.assert_allclose(
+            reader.local(frame), evaluated(scene, flag, frame), atol=1e-6, err_msg=f"frame {frame}"
+        )
 
 
 def test_half_sampled_pc2_is_interpolated(flag_and_motion, tmp_path):

@@ -43,7 +43,9 @@ def fresh_venv(where):
 def test_readme_python_module_command_runs_with_the_wheel_alone(tmp_path):
     section = readme_farm_section()
     assert README_COMMAND in section.splitlines(), "the README's farm section no longer shows the command tested here"
-    assert re.search(r"pip install bpy==5\.0\.1 addon/wheels/madder-\S+\.whl", section), "the README must say what to install"
+    assert re.search(r"pip install bpy==5\.0\.1 addon/wheels/madder-\S+\.whl", section), (
+        "the README must say what to install"
+    )
 
     # the scene: the flag fixture with its spill enabled, saved under the README's name
     bpy.ops.wm.open_mainfile(filepath=os.path.join(FIXTURES, "flag.blend"))
@@ -61,7 +63,8 @@ def test_readme_python_module_command_runs_with_the_wheel_alone(tmp_path):
     env = {k: v for k, v in os.environ.items() if not k.startswith("PYTHON")}
     env["PATH"] = f"{bindir}{os.pathsep}{env['PATH']}"
     env["BLENDER_USER_RESOURCES"] = str(tmp_path / "blender-user")  # empty: nothing installed
-    install = [sys.executable, "-m", "pip", "--python", str(bindir / "python"), "install", "--no-index", "--quiet", wheel_path()]
+    install = [sys.executable, "-m", "pip", "--python", str(bindir / "python"), "install", "--no-index", "--quiet",
+               wheel_path()]
     subprocess.run(install, check=True, env=env)
 
     run = subprocess.run(["bash", "-c", README_COMMAND], cwd=tmp_path, env=env, capture_output=True, text=True)
@@ -71,7 +74,7 @@ def test_readme_python_module_command_runs_with_the_wheel_alone(tmp_path):
 
     r = madder.CacheReader(str(tmp_path / "madder_cache" / "Flag.madder"))
     assert (r.first_frame, r.last_frame) == (first, last)
-    solute = dict(zip(r.fields, r.read_frame(first)))["solute"]
+    solute = dict(zip(r.fields, r.read_frame(first), strict=True))["solute"]
     assert solute[source].min() > 0.0  # the spill is where the source group is
     bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "scene.blend"))  # the saved file knows its cache
     assert bpy.data.objects["Flag"].madder.cache_file == "//madder_cache/Flag.madder"

@@ -43,7 +43,8 @@ def test_weft_directions_follow_the_uv_u_axis():
     faces, pos = grid(6)
     t = madder.Topology(faces, len(pos))
     w = madder.weft_directions(t, pos, corner_uv(faces, pos, np.radians(30)))
-    np.testing.assert_allclose(w, np.tile([np.cos(np.radians(-30)), np.sin(np.radians(-30)), 0], (len(faces), 1)), atol=1e-6)
+    along = [np.cos(np.radians(-30)), np.sin(np.radians(-30)), 0]
+    np.testing.assert_allclose(w, np.tile(along, (len(faces), 1)), atol=1e-6)
     turned = madder.weft_directions(
         t, pos, corner_uv(faces, pos), np.full(len(faces), np.pi / 2, dtype=np.float32)
     )

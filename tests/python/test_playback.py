@@ -17,14 +17,17 @@ def cache(path, colors):
     for _ in range(3):
         values = [rng.uniform(-0.01, 0.3, N).astype(np.float32) for _ in fields]
         w.push_frame(values)
-        frames.append(dict(zip(fields, values)))
+        frames.append(dict(zip(fields, values, strict=True)))
     w.finish()
     return frames
 
 
 def expected(values, refs, color):
     cov = np.clip(values["solute"] / np.float32(refs[0]), 0, 1)
-    tint = np.stack([values[c] for c in ("color_r", "color_g", "color_b")], 1) if "color_r" in values else np.float32(color)
+    if "color_r" in values:
+        tint = np.stack([values[c] for c in ("color_r", "color_g", "color_b")], 1)
+    else:
+        tint = np.float32(color)
     rgba = np.concatenate([cov[:, None] * tint, cov[:, None]], axis=1)
     wet = np.clip(values["wetness"] / np.float32(refs[1]), 0, 1)
     return rgba.ravel(), wet, np.zeros(N, dtype=np.float32)  # deposit reference 0: no deposit
@@ -38,7 +41,7 @@ def test_read_stain_matches_numpy(tmp_path, colors):
     refs, color = (0.05, 0.1, 0.0), (0.5, 0.25, 1.0)
     for k in range(3):
         r.read_stain(4 + k, refs, color, rgba, wet, dep)
-        for got, want in zip((rgba, wet, dep), expected(frames[k], refs, color)):
+        for got, want in zip((rgba, wet, dep), expected(frames[k], refs, color), strict=True):
             np.testing.assert_allclose(got, want, rtol=1e-6, atol=0)
 
 

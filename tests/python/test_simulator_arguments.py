@@ -40,7 +40,8 @@ def test_float64_positions_bake_like_the_same_float32_ones():
 @pytest.mark.parametrize(
     "make, words",
     [
-        (lambda faces, pos: madder.Simulator(faces, pos.astype(np.int32), pos), ["rest", "float32 or float64", "int32"]),
+        (lambda faces, pos: madder.Simulator(faces, pos.astype(np.int32), pos),
+         ["rest", "float32 or float64", "int32"]),
         (lambda faces, pos: madder.Simulator(faces, pos, pos[:, :2].copy()), ["positions", "(N, 3)", "(169, 2)"]),
         (lambda faces, pos: madder.Simulator(faces, pos[:-5], pos), ["rest has 164 rows", "positions has 169"]),
         (lambda faces, pos: madder.Simulator(madder.Topology(faces, 169), pos[:-5], pos[:-5]),
