@@ -8,106 +8,211 @@ use crate::io::point_cache::PointCacheError;
 /// Bad mesh input: topology or per-frame positions.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum MeshError {
+    /// The mesh has no triangle.
     #[error("mesh has no triangles")]
     Empty,
+    /// A face names a vertex the mesh does not have.
     #[error("face {face} references vertex {vertex}, but the mesh has only {n_vertices} vertices")]
     VertexOutOfRange {
+        /// The face (index into the topology's faces).
         face: usize,
+        /// The vertex.
         vertex: u32,
+        /// How many vertices the mesh has.
         n_vertices: usize,
     },
+    /// A face uses one vertex twice (a degenerate triangle by construction).
     #[error("face {face} uses vertex {vertex} more than once")]
-    RepeatedVertex { face: usize, vertex: u32 },
+    RepeatedVertex {
+        /// The face (index into the topology's faces).
+        face: usize,
+        /// The vertex.
+        vertex: u32,
+    },
+    /// Positions given for another number of vertices.
     #[error("expected {expected} vertex positions, got {got}")]
-    VertexCountMismatch { expected: usize, got: usize },
+    VertexCountMismatch {
+        /// How many were expected.
+        expected: usize,
+        /// How many there were.
+        got: usize,
+    },
+    /// A position with a NaN or infinite coordinate.
     #[error("vertex {vertex} has a non-finite position")]
-    NonFinitePosition { vertex: usize },
+    NonFinitePosition {
+        /// The vertex.
+        vertex: usize,
+    },
+    /// A triangle-to-polygon map of the wrong length.
     #[error("polygon map has {got} entries for {expected} triangles")]
-    PolygonMapLength { expected: usize, got: usize },
+    PolygonMapLength {
+        /// How many were expected.
+        expected: usize,
+        /// How many there were.
+        got: usize,
+    },
 }
 
 /// Parameters out of their valid range.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ParamError {
+    /// A scalar parameter outside its range.
     #[error("{name} must be {requirement}, got {value}")]
     OutOfRange {
+        /// The parameter (or array).
         name: &'static str,
+        /// What it must be.
         requirement: &'static str,
+        /// The value given.
         value: f64,
     },
+    /// A per-vertex value outside its range.
     #[error("{name} at vertex {index} must be {requirement}, got {value}")]
     OutOfRangeAt {
+        /// The parameter (or array).
         name: &'static str,
+        /// The vertex or entry at fault.
         index: usize,
+        /// What it must be.
         requirement: &'static str,
+        /// The value given.
         value: f64,
     },
+    /// An array with the wrong number of values.
     #[error("{name} has {got} values, expected {expected}")]
     Length {
+        /// The parameter (or array).
         name: &'static str,
+        /// How many were expected.
         expected: usize,
+        /// How many there were.
         got: usize,
     },
+    /// A NaN or infinite value in an array.
     #[error("{name} value {index} is not finite")]
-    NonFinite { name: &'static str, index: usize },
+    NonFinite {
+        /// The parameter (or array).
+        name: &'static str,
+        /// The vertex or entry at fault.
+        index: usize,
+    },
+    /// A tensor that is not symmetric positive semi-definite.
     #[error("{name} {index} is not symmetric positive semi-definite")]
-    NotPositiveSemiDefinite { name: &'static str, index: usize },
+    NotPositiveSemiDefinite {
+        /// The parameter (or array).
+        name: &'static str,
+        /// The vertex or entry at fault.
+        index: usize,
+    },
 }
 
 /// A linear solve that failed (the system was not numerically positive definite).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SolveError {
+    /// The Cholesky factorization met a non-positive pivot.
     #[error("the system matrix is not positive definite (pivot {pivot} of {n})")]
-    NotPositiveDefinite { pivot: usize, n: usize },
+    NotPositiveDefinite {
+        /// The column of the failing pivot.
+        pivot: usize,
+        /// The dimension of the system.
+        n: usize,
+    },
+    /// The solver could not allocate its workspace.
     #[error("the linear solver ran out of memory")]
     OutOfMemory,
+    /// The iterative solver reached its iteration limit.
     #[error(
         "the iterative solver did not converge in {iterations} iterations (relative residual {residual:e})"
     )]
-    NotConverged { iterations: usize, residual: f64 },
+    NotConverged {
+        /// Iterations run.
+        iterations: usize,
+        /// The relative residual reached.
+        residual: f64,
+    },
 }
 
 /// Reading or writing a Madder cache file.
 #[derive(Debug, thiserror::Error)]
 pub enum CacheError {
+    /// The operating system refused a read or a write.
     #[error("{path}: {source}")]
     Io {
+        /// The file.
         path: PathBuf,
+        /// The operating system's error.
         source: std::io::Error,
     },
+    /// The file does not start with the Madder magic bytes.
     #[error("{path}: not a Madder cache file (bad magic)")]
-    BadMagic { path: PathBuf },
+    BadMagic {
+        /// The file.
+        path: PathBuf,
+    },
+    /// A format version this build cannot read.
     #[error("{path}: cache format version {found} is not supported (this build reads {supported})")]
     Version {
+        /// The file.
         path: PathBuf,
+        /// The version in the file.
         found: u32,
+        /// The version this build reads.
         supported: u32,
     },
+    /// A header whose values contradict each other or the file.
     #[error("{path}: corrupt header: {reason}")]
-    Header { path: PathBuf, reason: String },
+    Header {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+    /// A frame after the point where the file is cut off.
     #[error(
         "{path}: file is truncated at frame {first_cut}: frame {frame} is not in it (the frames before {first_cut} still read)"
     )]
     Truncated {
+        /// The file.
         path: PathBuf,
         /// the frame that was read
         frame: i32,
         /// the first frame whose block is cut off
         first_cut: i32,
     },
+    /// A frame whose block fails its checksum.
     #[error("{path}: frame {frame} is corrupt (checksum mismatch)")]
-    Checksum { path: PathBuf, frame: i32 },
+    Checksum {
+        /// The file.
+        path: PathBuf,
+        /// The frame.
+        frame: i32,
+    },
+    /// A frame outside the cache's range.
     #[error("{path}: frame {frame} is not in the cache (frames {first}..={last})")]
     FrameMissing {
+        /// The file.
         path: PathBuf,
+        /// The frame.
         frame: i32,
+        /// The first frame in the cache.
         first: i32,
+        /// The last frame in the cache.
         last: i32,
     },
+    /// A field the cache does not store.
     #[error("{path}: field '{field}' is not in the cache")]
-    FieldMissing { path: PathBuf, field: String },
+    FieldMissing {
+        /// The file.
+        path: PathBuf,
+        /// The field asked for.
+        field: String,
+    },
+    /// The writer was used out of order (wrong frame count or field lengths).
     #[error("cache writer: {reason}")]
-    Usage { reason: String },
+    Usage {
+        /// What is wrong.
+        reason: String,
+    },
 }
 
 /// A number in an error message, at most four significant digits: plain from 10⁻³ to
@@ -144,69 +249,110 @@ impl std::fmt::Display for Compact {
 /// their 1-based `line` counted from the top, as an editor shows them.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum WeaveError {
+    /// A tile without cells.
     #[error("the weave tile is empty (it needs at least one row and one column of cells)")]
     EmptyTile,
+    /// A tile given with the wrong number of cells.
     #[error("a {width}×{height} weave tile needs {expected} cells, got {got}")]
     CellCount {
+        /// Columns of the tile.
         width: usize,
+        /// Rows of the tile.
         height: usize,
+        /// How many were expected.
         expected: usize,
+        /// How many there were.
         got: usize,
     },
+    /// A text grid whose lines differ in length.
     #[error(
         "weave grid line {line} has {got} cells, but the lines above have {expected} (every line is one row of the tile)"
     )]
     RaggedRow {
+        /// The line of the grid, 1-based from the top.
         line: usize,
+        /// How many were expected.
         expected: usize,
+        /// How many there were.
         got: usize,
     },
+    /// A character of a text grid that is not a cell.
     #[error(
         "weave grid line {line}, character {column}: {ch:?} is not a cell (W warp up, w warp down, F weft up, f weft down, . gap)"
     )]
     UnknownCell {
+        /// The line of the grid, 1-based from the top.
         line: usize,
+        /// The character in the line, 1-based.
         column: usize,
+        /// The character.
         ch: char,
     },
+    /// A pair coefficient that is not finite and positive.
     #[error("pair coefficient {pair} must be finite and > 0, got {}", Compact(*.value))]
-    NonPositiveCoefficient { pair: &'static str, value: f64 },
+    NonPositiveCoefficient {
+        /// The pair, e.g. `weft–warp`.
+        pair: &'static str,
+        /// The value given.
+        value: f64,
+    },
+    /// A cell next to a pair whose coefficient is not finite and positive.
     #[error(
         "cell (row {row}, column {col}) borders a {pair} pair, whose coefficient must be finite and > 0, got {}",
         Compact(*.value)
     )]
     CellCoefficient {
+        /// The cell's row (0 = bottom).
         row: usize,
+        /// The cell's column (0 = left).
         col: usize,
+        /// The pair, e.g. `weft–warp`.
         pair: &'static str,
+        /// The value given.
         value: f64,
     },
+    /// A cell tensor that is not symmetric positive definite.
     #[error(
         "cell (row {row}, column {col}) has diffusion tensor [s11 {}, s12 {}, s22 {}], which is not symmetric positive definite (needs finite entries, s11 > 0 and s11·s22 − s12² > 0)",
         Compact(*.s11), Compact(*.s12), Compact(*.s22)
     )]
     NotPositiveDefinite {
+        /// The cell's row (0 = bottom).
         row: usize,
+        /// The cell's column (0 = left).
         col: usize,
+        /// The tensor's `s11`.
         s11: f64,
+        /// The tensor's `s12`.
         s12: f64,
+        /// The tensor's `s22`.
         s22: f64,
     },
+    /// Cell tensors too far apart for double precision to homogenize.
     #[error(
         "the tile's diffusion tensors span a contrast of {ratio:.3e} (largest over smallest eigenvalue; the smallest is in cell (row {row}, column {col})), beyond the {limit:.0e} that double precision can homogenize"
     )]
     Contrast {
+        /// The largest eigenvalue over the smallest.
         ratio: f64,
+        /// The largest contrast allowed.
         limit: f64,
+        /// The cell's row (0 = bottom).
         row: usize,
+        /// The cell's column (0 = left).
         col: usize,
     },
+    /// A homogenization option outside its range.
     #[error("homogenization option {name} must be {requirement}, got {}", Compact(*.value))]
     Option {
+        /// The parameter (or array).
         name: &'static str,
+        /// What it must be.
         requirement: &'static str,
+        /// The value given.
         value: f64,
     },
+    /// The cell problem's solve failed.
     #[error("homogenization: {0}")]
     Solve(#[from] SolveError),
 }
@@ -214,16 +360,22 @@ pub enum WeaveError {
 /// Any core error. The binding crate maps each variant to a typed Python exception.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
+    /// Bad mesh input.
     #[error(transparent)]
     Mesh(#[from] MeshError),
+    /// A parameter out of range.
     #[error(transparent)]
     Param(#[from] ParamError),
+    /// A failed linear solve.
     #[error(transparent)]
     Solve(#[from] SolveError),
+    /// A Madder cache file that cannot be read or written.
     #[error(transparent)]
     Cache(#[from] CacheError),
+    /// Bad weave input or a failed homogenization.
     #[error(transparent)]
     Weave(#[from] WeaveError),
+    /// A PC2 or MDD file that cannot be read or written.
     #[error(transparent)]
     PointCache(#[from] PointCacheError),
 }

@@ -9,6 +9,7 @@
 pub struct SplitMix64(u64);
 
 impl SplitMix64 {
+    /// The stream of `seed`.
     pub fn new(seed: u64) -> Self {
         Self(seed)
     }

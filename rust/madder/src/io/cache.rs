@@ -210,6 +210,8 @@ pub struct CacheReader {
 }
 
 impl CacheReader {
+    /// Opens a cache and checks its header (a truncated file opens: see
+    /// [`Self::truncated_at`]); every error names the file.
     pub fn open(path: impl AsRef<Path>) -> Result<Self, CacheError> {
         let path = path.as_ref().to_path_buf();
         let io = |source| CacheError::Io {
@@ -303,21 +305,27 @@ impl CacheReader {
         Ok(reader)
     }
 
+    /// The file.
     pub fn path(&self) -> &Path {
         &self.path
     }
+    /// Values per field and frame.
     pub fn n_vertices(&self) -> usize {
         self.n_vertices
     }
+    /// The fields of every frame, in stored order.
     pub fn field_names(&self) -> &[String] {
         &self.names
     }
+    /// The first frame the header declares.
     pub fn first_frame(&self) -> i32 {
         self.first_frame
     }
+    /// Frames the header declares (a truncated file holds fewer).
     pub fn n_frames(&self) -> u32 {
         self.n_frames
     }
+    /// The last frame the header declares.
     pub fn last_frame(&self) -> i32 {
         // fits: the range was checked at open
         (self.first_frame as i64 + self.n_frames as i64 - 1) as i32

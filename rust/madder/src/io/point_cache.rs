@@ -126,57 +126,104 @@ use std::sync::atomic::{AtomicU64, Ordering};
 /// which refers to it for [`crate::Error::PointCache`]: one direction only.)
 #[derive(Debug, thiserror::Error)]
 pub enum PointCacheError {
+    /// The operating system refused a read or a write.
     #[error("{path}: {source}")]
     Io {
+        /// The file.
         path: PathBuf,
+        /// The operating system's error.
         source: std::io::Error,
     },
+    /// Neither a PC2 signature nor a `.pc2`/`.mdd` name.
     #[error(
         "{path}: unknown point cache format: no PC2 signature, and the name does not end in .pc2 or .mdd (MDD files carry no signature; open it as MDD explicitly)"
     )]
-    UnknownFormat { path: PathBuf },
+    UnknownFormat {
+        /// The file.
+        path: PathBuf,
+    },
+    /// A file opened as PC2 without the PC2 signature.
     #[error("{path}: not a PC2 file (it does not start with the signature \"POINTCACHE2\\0\")")]
-    BadSignature { path: PathBuf },
+    BadSignature {
+        /// The file.
+        path: PathBuf,
+    },
+    /// A PC2 version other than 1.
     #[error("{path}: PC2 file version {found} is not supported (this build reads version 1)")]
-    Version { path: PathBuf, found: i32 },
+    Version {
+        /// The file.
+        path: PathBuf,
+        /// The version in the file.
+        found: i32,
+    },
+    /// A header whose counts or times are impossible.
     #[error("{path}: corrupt {format} header: {reason}")]
     Header {
+        /// The file.
         path: PathBuf,
+        /// The format the file was read as.
         format: Format,
+        /// What is wrong.
         reason: String,
     },
+    /// A file shorter than its header declares.
     #[error(
         "{path}: file is truncated: frame {frame} is incomplete (the header declares {n_frames} frames of {n_points} points, {expected} bytes; the file has {len})"
     )]
     Truncated {
+        /// The file.
         path: PathBuf,
+        /// The first incomplete frame.
         frame: usize,
+        /// Frames the header declares.
         n_frames: usize,
+        /// Points per frame the header declares.
         n_points: usize,
+        /// Bytes the header implies.
         expected: u64,
+        /// Bytes the file has.
         len: u64,
     },
+    /// A frame the file does not hold.
     #[error("{path}: frame {frame} is not in the file (it holds frames 0..={last})", last = .n_frames.saturating_sub(1))]
     FrameOutOfRange {
+        /// The file.
         path: PathBuf,
+        /// The frame.
         frame: usize,
+        /// Frames the header declares.
         n_frames: usize,
     },
+    /// A NaN or infinite coordinate in a frame.
     #[error("{path}: frame {frame}, vertex {vertex} has a non-finite position {position:?}")]
     NonFinite {
+        /// The file.
         path: PathBuf,
+        /// The frame.
         frame: usize,
+        /// The vertex (0-based, file order).
         vertex: usize,
+        /// The coordinates read.
         position: [f32; 3],
     },
+    /// A frame time that is not finite or not after the previous one.
     #[error("{path}: frame {frame}: {reason}")]
     Time {
+        /// The file.
         path: PathBuf,
+        /// The frame.
         frame: usize,
+        /// What is wrong.
         reason: String,
     },
+    /// The writer was given frames it cannot write.
     #[error("{path}: {reason}")]
-    Usage { path: PathBuf, reason: String },
+    Usage {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
 }
 
 /// The 12 bytes that start every PC2 file.
@@ -259,7 +306,12 @@ impl std::fmt::Display for Format {
 #[derive(Debug, Clone, PartialEq)]
 pub enum Timing {
     /// PC2: frame `k` is at scene frame `start + k·rate`.
-    Frames { start: f32, rate: f32 },
+    Frames {
+        /// The scene frame of the first sample.
+        start: f32,
+        /// Scene frames between samples.
+        rate: f32,
+    },
     /// MDD: frame `k` is at `times[k]` seconds.
     Seconds(Vec<f32>),
 }
@@ -422,9 +474,11 @@ impl PointCache {
         })
     }
 
+    /// The file.
     pub fn path(&self) -> &Path {
         &self.path
     }
+    /// The format it is read as.
     pub fn format(&self) -> Format {
         self.format
     }

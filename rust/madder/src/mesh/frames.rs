@@ -32,6 +32,7 @@ pub(crate) const SPOKE_MIN_SINE: f64 = 1e-6;
 /// Per-vertex orthonormal tangent frames (columns `x, y, z`; `z` the vertex normal).
 #[derive(Debug, Clone, PartialEq)]
 pub struct VertexFrames {
+    /// `F_i` of every vertex, columns `x_i, y_i, z_i`.
     pub frame: Vec<DMat3>,
 }
 

@@ -59,8 +59,11 @@ const MAX_SWEEPS: usize = 64;
 /// in descending order; `u` and `v` orthogonal (determinant ±1).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Svd3 {
+    /// Left singular vectors (columns).
     pub u: DMat3,
+    /// Singular values, descending.
     pub sigma: DVec3,
+    /// Right singular vectors (columns).
     pub v: DMat3,
 }
 

@@ -221,6 +221,7 @@ impl OneRings {
         &self.spoke_edge[self.spoke_ptr[v] as usize..self.spoke_ptr[v + 1] as usize]
     }
 
+    /// The shape of the fan around `v`.
     pub fn kind(&self, v: usize) -> FanKind {
         self.kind[v]
     }

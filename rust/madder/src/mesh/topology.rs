@@ -127,18 +127,23 @@ impl Topology {
         if a as usize == v { b } else { a }
     }
 
+    /// Vertices, used by a face or not.
     pub fn n_vertices(&self) -> usize {
         self.n_vertices
     }
+    /// Triangles.
     pub fn n_faces(&self) -> usize {
         self.faces.len()
     }
+    /// Unique edges.
     pub fn n_edges(&self) -> usize {
         self.edges.len()
     }
+    /// Source polygons (the triangles' number when no polygon map was given).
     pub fn n_polygons(&self) -> usize {
         self.n_polygons
     }
+    /// The triangles' vertex indices.
     pub fn faces(&self) -> &[[u32; 3]] {
         &self.faces
     }
@@ -150,6 +155,7 @@ impl Topology {
     pub fn face_edges(&self) -> &[[u32; 3]] {
         &self.face_edges
     }
+    /// The source polygon of every triangle (the identity when no polygon map was given).
     pub fn face_polygon(&self) -> &[u32] {
         &self.face_polygon
     }

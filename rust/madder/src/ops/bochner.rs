@@ -120,6 +120,7 @@ impl BochnerPattern {
         }
     }
 
+    /// Vertices of the scalar pattern (the matrix is `2N×2N`).
     pub fn n_vertices(&self) -> usize {
         self.n_vertices
     }
@@ -236,6 +237,7 @@ impl BochnerSystem {
         &self.scalar
     }
 
+    /// The block pattern of the system.
     pub fn pattern(&self) -> &BochnerPattern {
         self.solver.pattern()
     }

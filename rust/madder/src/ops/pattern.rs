@@ -8,6 +8,9 @@
 
 use crate::mesh::Topology;
 
+/// The lower triangle (diagonal included) of the `N×N` vertex–vertex sparsity pattern of
+/// a topology, compressed by columns: column `j` holds its diagonal, then the rows `b > j`
+/// of its edges `(j, b)` in increasing order. Fixed for a bake (module doc of [`super`]).
 #[derive(Debug, Clone)]
 pub struct VertexPattern {
     n: usize,
@@ -18,6 +21,7 @@ pub struct VertexPattern {
 }
 
 impl VertexPattern {
+    /// The pattern of `topology`'s vertices and edges.
     pub fn new(topology: &Topology) -> Self {
         let n = topology.n_vertices();
         let edges = topology.edges();
@@ -62,9 +66,11 @@ impl VertexPattern {
     pub(crate) fn nnz(&self) -> usize {
         self.row_idx.len()
     }
+    /// Start of every column in [`Self::row_idx`] (`N + 1` entries).
     pub fn col_ptr(&self) -> &[u32] {
         &self.col_ptr
     }
+    /// Row of every stored entry, column after column.
     pub fn row_idx(&self) -> &[u32] {
         &self.row_idx
     }

@@ -215,8 +215,9 @@ pub struct Profile {
     pub interaction: f64,
     /// Sub-steps taken.
     pub substeps: usize,
-    /// CG iterations of the density solves (all fields) and of the velocity solve.
+    /// CG iterations of the density solves (all fields).
     pub density_iterations: usize,
+    /// CG iterations of the velocity solve.
     pub velocity_iterations: usize,
     /// Transport sub-cycles of the density advection (≥ 1 per sub-step; more when the
     /// liquid crosses more than about one dual cell per step).
@@ -293,6 +294,7 @@ impl Simulator {
         })
     }
 
+    /// The cloth's topology.
     pub fn topology(&self) -> &Topology {
         &self.cloth.topology
     }

@@ -101,10 +101,12 @@ impl HomogenizationCache {
         }
     }
 
+    /// Tiles whose tensor the cache holds.
     pub fn len(&self) -> usize {
         self.map.len()
     }
 
+    /// Whether the cache holds no tile.
     pub fn is_empty(&self) -> bool {
         self.map.is_empty()
     }

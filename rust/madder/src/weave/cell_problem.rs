@@ -132,6 +132,7 @@ fn reduced(v: usize) -> Option<usize> {
 }
 
 impl Grid {
+    /// The grid of a `w × h` tile (fails on an empty one).
     pub fn new(w: usize, h: usize) -> Result<Grid, WeaveError> {
         if w == 0 || h == 0 {
             return Err(WeaveError::EmptyTile);

@@ -165,6 +165,7 @@ pub enum Method {
 /// Accuracy knobs of [`homogenize_with`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct HomogenizeOptions {
+    /// How the estimate is made from the bounds (default [`Method::Extrapolated`]).
     pub method: Method,
     /// Budget of the finest level: at most this many grid cells (unless the reduced tile
     /// alone is larger; it is never coarsened). Default 128² = 16384.
@@ -192,6 +193,7 @@ impl Default for HomogenizeOptions {
 pub struct Level {
     /// Each reduced-tile cell is split into `refine × refine` elements.
     pub refine: usize,
+    /// The bounds computed at that level.
     pub bounds: Bounds,
 }
 
@@ -202,6 +204,7 @@ pub struct Homogenized {
     pub tensor: Tensor2,
     /// Rigorous bracket from the finest level: `lower ≤ A ≤ upper` (up to rounding).
     pub upper: Tensor2,
+    /// The lower end of that bracket.
     pub lower: Tensor2,
     /// Where the estimate sits on the geodesic from `upper` (0) to `lower` (1).
     pub weight: f64,

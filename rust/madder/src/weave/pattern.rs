@@ -80,9 +80,15 @@ pub enum Cell {
     /// Open space between yarns.
     Gap,
     /// A warp yarn (runs along `y`); `up` = on the face of the fabric.
-    Warp { up: bool },
+    Warp {
+        /// On the face of the fabric (else on its back).
+        up: bool,
+    },
     /// A weft yarn (runs along `x`); `up` = on the face of the fabric.
-    Weft { up: bool },
+    Weft {
+        /// On the face of the fabric (else on its back).
+        up: bool,
+    },
 }
 
 impl Cell {
@@ -114,14 +120,20 @@ impl Cell {
 /// The built-in weaves (see the module table for their drafts).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Weave {
+    /// Plain (tabby): over one, under one.
     Plain,
+    /// Twill 2/1: over two, under one, stepping right.
     Twill21,
+    /// Twill 3/1: over three, under one.
     Twill31,
+    /// Five-harness satin (warp-faced, move number 2).
     Satin5,
+    /// Basket (2×2 hopsack).
     Basket,
 }
 
 impl Weave {
+    /// Every built-in weave, in the order above.
     pub const ALL: [Weave; 5] = [
         Weave::Plain,
         Weave::Twill21,
@@ -289,10 +301,12 @@ impl Tile {
         }
     }
 
+    /// Columns of cells (along `x`, the weft).
     pub fn width(&self) -> usize {
         self.width
     }
 
+    /// Rows of cells (along `y`, the warp).
     pub fn height(&self) -> usize {
         self.height
     }
@@ -327,11 +341,17 @@ impl fmt::Display for Tile {
 /// gap–weft 10, gap–warp 50, weft–warp 200.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PairCoefficients {
+    /// Two gap cells.
     pub gap_gap: f64,
+    /// Two weft cells (see the module table for which layers).
     pub weft_weft: f64,
+    /// Two warp cells (see the module table for which layers).
     pub warp_warp: f64,
+    /// A gap and a weft cell.
     pub gap_weft: f64,
+    /// A gap and a warp cell.
     pub gap_warp: f64,
+    /// A weft and a warp cell, or parallel yarns in different layers.
     pub weft_warp: f64,
 }
 

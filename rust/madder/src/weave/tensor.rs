@@ -26,6 +26,7 @@ pub(crate) fn quad(t: Tensor2, v: [f64; 2]) -> f64 {
     t[0] * v[0] * v[0] + 2.0 * t[1] * v[0] * v[1] + t[2] * v[1] * v[1]
 }
 
+/// The determinant `s11 s22 − s12²`.
 #[inline]
 pub fn det(t: Tensor2) -> f64 {
     t[0] * t[2] - t[1] * t[1]
