@@ -44,9 +44,14 @@
 //! Conventions: `f64` inside solves, `f32` for bulk arrays at the boundary, `u32` indices;
 //! every loop that runs in parallel writes disjoint outputs, so results are bit-identical
 //! whatever the number of threads.
+//!
+//! The public surface is what the binding (`rust/madder-py`), the tests, the benches and
+//! the fuzz targets use; the rest is `pub(crate)`. The module docs still link the internal
+//! modules and items they explain: `cargo doc --document-private-items` follows them.
 
 #![warn(missing_docs)]
 #![warn(unreachable_pub)]
+#![allow(rustdoc::private_intra_doc_links)]
 
 pub mod error;
 pub mod io;

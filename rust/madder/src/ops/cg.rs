@@ -18,10 +18,10 @@
 //! is gathered along its row, `y_i = Σ_k a_ik x_k` in increasing `k` — the order in which
 //! faer's compressed-column product accumulates `y_i` (column after column), so the
 //! result is the same to the last bit, without the scatter and with 32-bit indices
-//! (faster). Each CG runs with `Par::Seq`: its
-//! reductions are then in a fixed order and the result is bit-identical whatever the
-//! number of threads. The parallelism is across right-hand sides instead: the columns
-//! (solvent and solute, colour) are solved side by side on the rayon pool.
+//! (faster). Each CG runs with `Par::Seq`: its reductions are then in a fixed order and the
+//! result is bit-identical whatever the number of threads. The parallelism is across
+//! right-hand sides instead: the columns (solvent and solute, colour) are solved side by
+//! side on the rayon pool.
 //!
 //! The iteration itself is faer's. A hand-written Jacobi-PCG with the same stopping rule
 //! (three fused passes per iteration, no allocation) measured a little faster (faer runs
@@ -42,8 +42,8 @@
 //!   for `(i, k)` in the pattern. The updates `(i, j) ← (i, k)(j, k)` that stay in the
 //!   pattern are listed once in [`WarmCg::new`], so refactoring every solve (the values
 //!   change every sub-step) is one pass over them, about the cost of one Jacobi-CG
-//!   iteration. A pivot `d_k ≤ 10⁻⁸ a_kk`
-//!   (possible when `A` is not an M-matrix: obtuse triangles, anisotropy) restarts the factorization of `A + α diag(A)`, `α = 10⁻²`
+//!   iteration. A pivot `d_k ≤ 10⁻⁸ a_kk` (possible when `A` is not an M-matrix: obtuse
+//!   triangles, anisotropy) restarts the factorization of `A + α diag(A)`, `α = 10⁻²`
 //!   then `10⁻¹` (Manteuffel's shift), then falls back to Jacobi; and a column the
 //!   factor fails to converge is solved again with Jacobi from the same warm start, so
 //!   nothing Jacobi solves fails. The factor is built once per [`WarmCg::solve`], before

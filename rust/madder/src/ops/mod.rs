@@ -6,7 +6,10 @@
 //! the sparse Cholesky factorization ([`PrefactoredSpd`]) reuses its symbolic analysis.
 //! A [`Restriction`] is such an operator cut down to a set of vertices (the simulator's
 //! active region) with a no-flux diagonal; [`bochner`] and [`restrict`] expand scalar
-//! operators into the `2×2` blocks of the connection Laplacian (eq. 4.6) the same way.
+//! operators into the `2×2` blocks of the Bochner (connection) Laplacian (eq. 4.6) the
+//! same way. One file per operator: [`cotan`] (§4.3.3), [`aniso`] (§4.3.4), [`bochner`]
+//! (eq. 4.6), [`restrict`]; the solvers in [`solve`] (prefactored Cholesky) and [`cg`]
+//! (warm-started CG).
 
 pub(crate) mod aniso;
 pub(crate) mod bochner;
@@ -16,9 +19,7 @@ pub(crate) mod pattern;
 pub(crate) mod restrict;
 pub(crate) mod solve;
 
-pub use aniso::{DEGENERATE_UV_REL, weft_directions};
-
-pub use aniso::{anisotropic_stiffness, weft_angles};
+pub use aniso::{DEGENERATE_UV_REL, anisotropic_stiffness, weft_angles, weft_directions};
 pub use bochner::{
     BochnerPattern, BochnerSystem, add_lumped_mass_blocks, bochner_stiffness, diffuse_tangent_field,
 };
@@ -26,5 +27,4 @@ pub use cg::WarmCg;
 pub use cotan::{add_lumped_mass, cotan_stiffness};
 pub use pattern::VertexPattern;
 pub use restrict::{CscPattern, Restriction};
-pub use solve::PrefactoredSpd;
-pub use solve::{LowerCsc, solve_spd};
+pub use solve::{LowerCsc, PrefactoredSpd, solve_spd};

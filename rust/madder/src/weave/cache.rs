@@ -9,7 +9,7 @@
 //! same entry. The reduction merges only square blocks, so tiles with the same reduced
 //! tile are the same medium up to a uniform change of scale, which leaves the effective
 //! tensor unchanged; a medium of `2 × 1` rectangles keeps its own entry, apart from the
-//! squares it was once conflated with (module doc of [`super::homogenize`]). Tensors are
+//! squares it was once conflated with (module doc of [`super::homogenize`](mod@super::homogenize)). Tensors are
 //! hashed by their bits (`-0.0` folded into `0.0`). Storing hashes
 //! rather than whole tiles keeps an entry at 40 bytes whatever the tile size; with 128 bits
 //! an accidental collision needs on the order of 2⁶⁴ distinct tiles.
