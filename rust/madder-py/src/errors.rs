@@ -119,6 +119,11 @@ fn build(py: Python<'_>, e: &madder::Error) -> PyResult<PyErr> {
                 M::PolygonMapLength { expected, got } => {
                     f.set("expected", expected).set("got", got)
                 }
+                M::DetailTooLarge {
+                    level,
+                    vertices,
+                    max,
+                } => f.set("level", level).set("vertices", vertices).set("max", max),
             },
         ),
         Error::Param(p) => (

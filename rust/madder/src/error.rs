@@ -22,6 +22,15 @@ pub enum MeshError {
     NonFinitePosition { vertex: usize },
     #[error("polygon map has {got} entries for {expected} triangles")]
     PolygonMapLength { expected: usize, got: usize },
+    #[error(
+        "Detail level {level} would refine the cloth to {vertices} vertices, more than the \
+         {max} Madder allows: choose a lower Detail level"
+    )]
+    DetailTooLarge {
+        level: u32,
+        vertices: usize,
+        max: usize,
+    },
 }
 
 /// Parameters out of their valid range.

@@ -6,9 +6,11 @@ pub mod frames;
 pub mod geometry;
 pub mod kabsch;
 pub mod proximity;
+pub mod refine;
 pub mod topology;
 
 pub use frames::{Connection, FanKind, OneRings, VertexFrames, Wedge};
 pub use geometry::Geometry;
 pub use kabsch::{RingAdjacency, one_ring_rotations};
+pub use refine::Refinement;
 pub use topology::{EdgeKind, Topology};

@@ -11,6 +11,7 @@
 //!   fabric experiments).
 
 pub mod advect;
+pub mod detail;
 pub mod diffuse;
 pub mod extend;
 pub mod forces;
@@ -20,6 +21,7 @@ pub mod sources;
 pub mod state;
 pub mod window;
 
+pub use detail::Detailed;
 pub use diffuse::{Conductivity, DiffusionStepper, WovenFaces};
 pub use forces::Forces;
 pub use interact::InteractionRates;

@@ -18,7 +18,7 @@ use crate::error::ParamError;
 use crate::rng::SplitMix64;
 
 /// Every value finite and `≥ 0`, else the error names the first vertex that is not.
-fn check_each_nonnegative(name: &'static str, values: &[f64]) -> Result<(), ParamError> {
+pub(super) fn check_each_nonnegative(name: &'static str, values: &[f64]) -> Result<(), ParamError> {
     match values.iter().position(|x| !(x.is_finite() && *x >= 0.0)) {
         None => Ok(()),
         Some(index) => Err(ParamError::OutOfRangeAt {
