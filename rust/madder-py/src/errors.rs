@@ -123,7 +123,10 @@ fn build(py: Python<'_>, e: &madder::Error) -> PyResult<PyErr> {
                     level,
                     vertices,
                     max,
-                } => f.set("level", level).set("vertices", vertices).set("max", max),
+                } => f
+                    .set("level", level)
+                    .set("vertices", vertices)
+                    .set("max", max),
             },
         ),
         Error::Param(p) => (

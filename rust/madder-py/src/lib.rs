@@ -21,6 +21,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     errors::register(m)?;
     m.add_class::<mesh::Topology>()?;
+    m.add_class::<mesh::Refinement>()?;
     m.add_function(wrap_pyfunction!(mesh::weft_directions, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::distances_within, m)?)?;
     m.add_class::<stain::DiffusionStepper>()?;

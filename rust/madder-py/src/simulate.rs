@@ -20,7 +20,8 @@ use crate::threads::Pool;
 /// face_uv=None, face_angle=None, color=(0.45, 0.05, 0.1), gravity=(0, 0, -9.81),
 /// viscosity=..., friction=..., absorption=..., saturation=..., adsorption=...,
 /// capacity=..., evaporation=..., evaporation_boundary=1.2, substeps=1, use_gravity=True,
-/// use_rectilinear=True, use_coriolis=True, momentum_advection=True, threads=None)`.
+/// use_rectilinear=True, use_coriolis=True, momentum_advection=True, detail=0,
+/// threads=None)`.
 ///
 /// `topology` is a `Topology` or an `(F, 3)` uint32 face array; `rest` and `positions`
 /// `(N, 3)` float32 or float64 world positions in metres (rest pose; first frame), one
@@ -30,10 +31,14 @@ use crate::threads::Pool;
 /// the other two); the default is isotropic, 2e-4 m²/s (wicking in cotton, whose front
 /// advances about a centimetre in the first second: `D ≈ L²/2t`).
 /// Units are SI: densities in kg/m², rates in 1/s, evaporation in kg/(m²·s).
+/// `detail` (0–3) runs the simulation on the cloth's triangles each split into
+/// `4**detail` (the fine vertices placed on the cloth's triangles every frame): `step`,
+/// `add_liquid`, `splash` and every read-out still take and give one value per cloth
+/// vertex (mass-exact transfers); `fine=True` read-outs give the refined cloth's.
 /// `threads` caps the worker threads; results do not depend on it.
 #[pyclass(module = "madder")]
 pub struct Simulator {
-    inner: madder::stain::Simulator,
+    inner: madder::stain::Detailed,
     pool: Pool,
 }
 
@@ -41,7 +46,7 @@ impl Simulator {
     fn run<T: Send>(
         &mut self,
         py: Python<'_>,
-        f: impl FnOnce(&mut madder::stain::Simulator) -> T + Send,
+        f: impl FnOnce(&mut madder::stain::Detailed) -> T + Send,
     ) -> T {
         let Self { inner, pool } = self;
         pool.run(py, || f(inner))
@@ -113,7 +118,7 @@ impl Simulator {
         viscosity=None, friction=None, absorption=None, saturation=None, adsorption=None,
         capacity=None, evaporation=None, evaporation_boundary=None, substeps=1,
         use_gravity=true, use_rectilinear=true, use_coriolis=true, momentum_advection=true,
-        threads=None))]
+        detail=0, threads=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -139,6 +144,7 @@ impl Simulator {
         use_rectilinear: bool,
         use_coriolis: bool,
         momentum_advection: bool,
+        detail: u32,
         threads: Option<usize>,
     ) -> PyResult<Self> {
         let rest = positions_arg("rest", rest)?;
@@ -217,13 +223,14 @@ impl Simulator {
         let pool = Pool::new(threads)?;
         let solute_color = [color.0, color.1, color.2];
         let inner = pool.run(py, || {
-            madder::stain::Simulator::new(
+            madder::stain::Detailed::new(
                 topo,
                 &rest,
                 &pos,
                 conductivity,
                 params,
                 solute_color,
+                detail,
                 faer::Par::Seq,
             )
         });
@@ -281,16 +288,28 @@ impl Simulator {
         self.inner.splash(c, speed, seed, &w).map_err(to_py)
     }
 
-    /// Liquid (free + absorbed solvent) per unit area, kg/m², `(N,)` float32.
-    fn wetness<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f32>> {
-        out1(py, &self.inner.wetness())
+    /// Liquid (free + absorbed solvent) per unit area, kg/m², `(N,)` float32; with
+    /// `fine=True`, per vertex of the refined cloth (`n_fine_vertices`; the cloth's own
+    /// at detail 0).
+    #[pyo3(signature = (*, fine=false))]
+    fn wetness<'py>(&self, py: Python<'py>, fine: bool) -> Bound<'py, PyArray1<f32>> {
+        if fine {
+            out1(py, &self.inner.fine().wetness())
+        } else {
+            out1(py, &self.inner.wetness())
+        }
     }
 
     /// The stain for shading, `(N, 4)` float32: RGB = solute colour × total solute
-    /// density (kg/m²), A = total solute density.
-    fn stain<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f32>>> {
-        let s = self.inner.solute_density();
-        let c = self.inner.solute_color();
+    /// density (kg/m²), A = total solute density; `fine=True` as for `wetness`.
+    #[pyo3(signature = (*, fine=false))]
+    fn stain<'py>(&self, py: Python<'py>, fine: bool) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        let (s, c) = if fine {
+            let f = self.inner.fine();
+            (f.solute_density(), f.solute_color())
+        } else {
+            (self.inner.solute_density(), self.inner.solute_color())
+        };
         out2(
             py,
             s.iter()
@@ -299,20 +318,52 @@ impl Simulator {
         )
     }
 
-    /// Adsorbed solute per unit area (the permanent deposit), kg/m², `(N,)` float32.
-    fn deposit<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f32>> {
-        out1(py, &self.inner.deposit())
+    /// Adsorbed solute per unit area (the permanent deposit), kg/m², `(N,)` float32;
+    /// `fine=True` as for `wetness`.
+    #[pyo3(signature = (*, fine=false))]
+    fn deposit<'py>(&self, py: Python<'py>, fine: bool) -> Bound<'py, PyArray1<f32>> {
+        if fine {
+            out1(py, &self.inner.fine().deposit())
+        } else {
+            out1(py, &self.inner.deposit())
+        }
     }
 
-    /// Solute colour at every vertex (mass-weighted mix), `(N, 3)` float32.
-    fn solute_color<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f32>>> {
-        out2(py, self.inner.solute_color().into_iter())
+    /// Solute colour at every vertex (mass-weighted mix), `(N, 3)` float32; `fine=True`
+    /// as for `wetness`.
+    #[pyo3(signature = (*, fine=false))]
+    fn solute_color<'py>(
+        &self,
+        py: Python<'py>,
+        fine: bool,
+    ) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        if fine {
+            out2(py, self.inner.fine().solute_color().into_iter())
+        } else {
+            out2(py, self.inner.solute_color().into_iter())
+        }
+    }
+
+    /// The Detail level: the cloth's triangles are each split into `4**detail` for the
+    /// simulation (0: the cloth's own vertices).
+    #[getter]
+    fn detail(&self) -> u32 {
+        self.inner.level()
+    }
+
+    /// Vertices of the refined cloth the simulation runs on (the cloth's at detail 0):
+    /// the length of the `fine=True` read-outs, numbered as `Refinement(topology,
+    /// detail)` numbers them.
+    #[getter]
+    fn n_fine_vertices(&self) -> usize {
+        self.inner.fine().topology().n_vertices()
     }
 
     /// Densities (kg/m², float64) of every field: a dict with `free_solvent`, `solute`,
     /// `absorbed_solvent`, `absorbed_solute`, `adsorbed`.
     fn densities<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let f = self.inner.fields();
+        let f = f.as_ref();
         let d = PyDict::new(py);
         for (name, m) in [
             ("free_solvent", &f.free_solvent),
