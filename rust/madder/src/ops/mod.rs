@@ -16,7 +16,9 @@ pub mod pattern;
 pub mod restrict;
 pub mod solve;
 
-pub use aniso::{Tensor2, anisotropic_stiffness, weft_angles, weft_directions};
+pub use aniso::{
+    Tensor2, anisotropic_stiffness, anisotropic_stiffness_scaled, weft_angles, weft_directions,
+};
 pub use cg::WarmCg;
 pub use connection::{
     BochnerPattern, BochnerSystem, add_lumped_mass_blocks, bochner_stiffness, diffuse_tangent_field,

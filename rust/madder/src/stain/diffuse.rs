@@ -67,9 +67,10 @@ use super::state::{Fields, merge_rgb, split_rgb};
 use crate::error::{Error, ParamError};
 use crate::mesh::geometry::check_positions;
 use crate::mesh::{Connection, Geometry, RingAdjacency, Topology};
+use crate::ops::cotan::assemble_face_weights;
 use crate::ops::{
     PrefactoredSpd, Restriction, Tensor2, VertexPattern, WarmCg, add_lumped_mass,
-    anisotropic_stiffness, cotan_stiffness, weft_angles,
+    anisotropic_stiffness, anisotropic_stiffness_scaled, cotan_stiffness, weft_angles,
 };
 
 /// Relative residual at which the density solves stop. The total is restored exactly
@@ -82,6 +83,83 @@ pub const DENSITY_TOLERANCE: f64 = 1e-9;
 /// Relative residual of the velocity's (Bochner) solve: the viscosity only smooths the
 /// velocity, which then moves the liquid over one step, so 1e-8 is ample.
 pub const VELOCITY_TOLERANCE: f64 = 1e-8;
+
+/// Wicking (issue 13): a fabric draws liquid in faster where it is wetter, so the rate of
+/// the density diffusion grows with the saturation `θ`,
+///
+/// ```text
+/// D(θ) = D₀ θⁿ,    θ = min(σ_liquid / σ_w, 1),
+/// ```
+///
+/// a porous-medium (Richards-type) law: `σ̇ = ∇·(D₀ θⁿ ∇σ)` has a front of finite speed
+/// where the liquid meets dry cloth, instead of the Gaussian tail of linear diffusion.
+/// `σ_liquid` is the free plus absorbed solvent density, `σ_w` [`Wicking::density`] (θ
+/// stops at 1: a puddle above it spreads at `D₀`, and runs by the flow).
+///
+/// Discretized per face: face `T` diffuses at `D₀ g_T` with `g_T` the mean of `θ_iⁿ` over
+/// its corners (the P1 stiffness with a piecewise-constant coefficient), so a face with
+/// one wet corner conducts and the front moves into the next ring. The coefficient is
+/// **lagged**: taken from the densities at the start of the solve, one linear solve per
+/// sub-step as without wicking (the cost of a step stays that of the linear diffusion plus
+/// the per-face factors). Lagging errs by `O(h)` in time; Picard iterations would remove
+/// it at one more solve each, and on the Barenblatt test the lagged scheme is already
+/// within the test's 3 % at the simulator's steps (`tests/wicking.rs`). The system stays
+/// symmetric positive definite and conservative (`1ᵀK = 0` face by face, whatever the
+/// factors), so mass is exact and the negative-mass repair keeps every density ≥ 0.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Wicking {
+    /// `n ≥ 0`; 0 is a constant rate (wicking off: the linear diffusion, bit for bit).
+    pub exponent: f64,
+    /// `σ_w`, kg/m²: the liquid density at which the rate reaches the fabric's `D₀`.
+    pub density: f64,
+}
+
+impl Default for Wicking {
+    fn default() -> Self {
+        Self {
+            exponent: 0.0,
+            // the default fibres' saturation ([`super::InteractionRates`])
+            density: 0.1,
+        }
+    }
+}
+
+impl Wicking {
+    /// Whether the rate depends on the saturation at all.
+    pub fn is_on(&self) -> bool {
+        self.exponent > 0.0
+    }
+
+    /// Checks the exponent (finite, 0 to 8) and the density (finite, > 0).
+    pub fn validate(&self) -> Result<(), ParamError> {
+        check_range(
+            "wicking exponent",
+            self.exponent,
+            (0.0..=8.0).contains(&self.exponent),
+            "from 0 to 8",
+        )?;
+        check_range(
+            "wicking density",
+            self.density,
+            self.density > 0.0,
+            "finite and > 0",
+        )
+    }
+
+    /// The factor `g_T` of every face of `topology` from the liquid densities of its
+    /// vertices (module doc of [`Wicking`]).
+    pub fn face_factors(&self, topology: &Topology, liquid_density: &[f64]) -> Vec<f64> {
+        let theta: Vec<f64> = liquid_density
+            .iter()
+            .map(|&s| (s / self.density).clamp(0.0, 1.0).powf(self.exponent))
+            .collect();
+        topology
+            .faces()
+            .iter()
+            .map(|f| (theta[f[0] as usize] + theta[f[1] as usize] + theta[f[2] as usize]) / 3.0)
+            .collect()
+    }
+}
 
 /// How fast the stain diffuses, and in which directions.
 #[derive(Debug, Clone, PartialEq)]
@@ -106,19 +184,35 @@ pub struct WovenFaces {
 impl Conductivity {
     /// The stiffness `scale · K_S` on `pattern` for this geometry: `D` times the cotan
     /// stiffness, or the anisotropic stiffness with the weft recomputed from the UVs on
-    /// the deformed faces.
+    /// the deformed faces; with `face_scale`, face `f`'s rate (or tensor) times
+    /// `face_scale[f]` (the wicking factor of [`Wicking`]).
     pub fn stiffness(
         &self,
         topology: &Topology,
         geometry: &Geometry,
         pattern: &VertexPattern,
         scale: f64,
+        face_scale: Option<&[f64]>,
     ) -> Vec<f64> {
-        match self {
-            Conductivity::Isotropic(d) => cotan_stiffness(topology, geometry, pattern, scale * d),
-            Conductivity::Woven(w) => {
+        match (self, face_scale) {
+            (Conductivity::Isotropic(d), None) => {
+                cotan_stiffness(topology, geometry, pattern, scale * d)
+            }
+            (Conductivity::Isotropic(d), Some(g)) => {
+                assemble_face_weights(topology, pattern, |f| {
+                    geometry.face_cot[f].map(|c| -0.5 * scale * d * g[f] * c)
+                })
+            }
+            (Conductivity::Woven(w), g) => {
                 let (angle, _) = weft_angles(topology, geometry, &w.uv, &w.angle);
-                anisotropic_stiffness(topology, geometry, pattern, &angle, &w.tensor, scale)
+                match g {
+                    None => {
+                        anisotropic_stiffness(topology, geometry, pattern, &angle, &w.tensor, scale)
+                    }
+                    Some(g) => anisotropic_stiffness_scaled(
+                        topology, geometry, pattern, &angle, &w.tensor, scale, g,
+                    ),
+                }
             }
         }
     }
@@ -408,7 +502,7 @@ impl DiffusionStepper {
         let pattern = self.solver.pattern();
         let mut values = self
             .conductivity
-            .stiffness(&self.topology, &geometry, pattern, h);
+            .stiffness(&self.topology, &geometry, pattern, h, None);
         add_lumped_mass(&geometry, pattern, 1.0, &mut values);
         // one right-hand side per field: the masses carried by the vertices
         let n = self.topology.n_vertices();
@@ -461,6 +555,7 @@ pub(super) fn diffuse_densities(
     f: &mut Fields,
     geometry: &Geometry,
     h: f64,
+    wicking: Option<&[f64]>,
 ) -> Result<usize, Error> {
     let region = ops.region;
     let vertices = &region.vertices;
@@ -468,7 +563,7 @@ pub(super) fn diffuse_densities(
     let area = &geometry.vertex_area;
     let full = ops
         .conductivity
-        .stiffness(ops.topology, geometry, ops.pattern, h);
+        .stiffness(ops.topology, geometry, ops.pattern, h, wicking);
     let values = region.scalar_values(ops.pattern, &full, area, false);
     let mut color = f.color_free.as_ref().map(|c| split_rgb(c));
     let mut fields: Vec<&mut Vec<f64>> = vec![&mut f.free_solvent, &mut f.solute];

@@ -22,7 +22,7 @@ pub mod state;
 pub mod window;
 
 pub use detail::Detailed;
-pub use diffuse::{Conductivity, DiffusionStepper, WovenFaces};
+pub use diffuse::{Conductivity, DiffusionStepper, Wicking, WovenFaces};
 pub use forces::Forces;
 pub use interact::InteractionRates;
 pub use simulate::{Profile, Simulator, StainParams};

@@ -74,7 +74,9 @@ use glam::{DMat3, DVec2, DVec3};
 use rayon::prelude::*;
 
 use super::advect::{UpwindPlan, advect_velocity_in, dual_fluxes};
-use super::diffuse::{Conductivity, Ops, check_range, diffuse_densities, diffuse_velocity};
+use super::diffuse::{
+    Conductivity, Ops, Wicking, check_range, diffuse_densities, diffuse_velocity,
+};
 use super::extend::{extend_velocity, wet_vertices};
 use super::forces::{
     Forces, corotating_frames_with, frame_angular_velocity, frame_body_acceleration,
@@ -126,6 +128,8 @@ pub struct StainParams {
     pub friction: f64,
     /// Absorption, adsorption and evaporation rates (§4.5).
     pub interaction: InteractionRates,
+    /// How the fabric's diffusion rate grows with its saturation (off by default).
+    pub wicking: Wicking,
     /// Sub-steps per frame, at least: a frame whose vertex frames turn by more than
     /// [`MAX_TURN`] takes more on its own (module doc, "Fast rotation").
     pub substeps: u32,
@@ -143,6 +147,7 @@ impl Default for StainParams {
             viscosity: 1e-4,
             friction: 50.0,
             interaction: InteractionRates::default(),
+            wicking: Wicking::default(),
             substeps: 1,
             active_region: true,
         }
@@ -176,6 +181,7 @@ impl StainParams {
             self.substeps >= 1,
             "at least 1",
         )?;
+        self.wicking.validate()?;
         self.interaction.validate()
     }
 }
@@ -603,11 +609,23 @@ impl Simulator {
             conductivity: &w.cloth.conductivity,
             region: &w.region,
         };
+        // the wicking factor of every face, from the liquid before the solve (lagged)
+        let wicking = p.wicking.is_on().then(|| {
+            let f = &loc.fields;
+            let liquid: Vec<f64> = (0..n)
+                .map(|j| {
+                    let a = geometry.vertex_area[j];
+                    let m = f.free_solvent[j] + f.absorbed_solvent[j];
+                    if a > 0.0 { m / a } else { 0.0 }
+                })
+                .collect();
+            p.wicking.face_factors(topo, &liquid)
+        });
         let (fields, velocity) = (&mut loc.fields, &mut loc.velocity);
         let (densities, viscous) = match w.cg.as_mut() {
             None => (Ok(0), Ok(0)),
             Some((scalar_cg, vector_cg)) => rayon::join(
-                || diffuse_densities(&ops, scalar_cg, fields, &geometry, h),
+                || diffuse_densities(&ops, scalar_cg, fields, &geometry, h, wicking.as_deref()),
                 || {
                     if p.viscosity > 0.0 {
                         let scale = h * p.viscosity;
