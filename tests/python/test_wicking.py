@@ -41,3 +41,17 @@ def test_bad_wicking_is_refused_by_name(kw):
     faces, pos = grid(4)
     with pytest.raises(madder.ParameterError, match="wicking"):
         madder.Simulator(faces, pos, pos, **kw)
+
+
+def test_irregularity_changes_the_outline_not_the_mass():
+    r, even, area = spread(wicking_exponent=1.0)
+    _, uneven, _ = spread(wicking_exponent=1.0, irregularity=0.6, irregularity_length=0.02,
+                          irregularity_seed=4)
+    _, again, _ = spread(wicking_exponent=1.0, irregularity=0.6, irregularity_length=0.02,
+                         irregularity_seed=4)
+    assert area @ uneven == pytest.approx(area @ even, rel=1e-5)
+    np.testing.assert_array_equal(uneven, again)  # the seed fixes the fabric
+    assert np.abs(uneven - even).max() > 0.05 * even.max()
+    with pytest.raises(madder.ParameterError, match="irregularity"):
+        grid_faces, pos = grid(4)
+        madder.Simulator(grid_faces, pos, pos, irregularity=2.0)

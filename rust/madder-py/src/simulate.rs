@@ -20,7 +20,8 @@ use crate::threads::Pool;
 /// face_uv=None, face_angle=None, color=(0.45, 0.05, 0.1), gravity=(0, 0, -9.81),
 /// viscosity=..., friction=..., absorption=..., saturation=..., adsorption=...,
 /// capacity=..., evaporation=..., evaporation_boundary=1.2, wicking_exponent=0,
-/// wicking_density=0.1, substeps=1, use_gravity=True,
+/// wicking_density=0.1, irregularity=0, irregularity_length=0.003, irregularity_seed=0,
+/// substeps=1, use_gravity=True,
 /// use_rectilinear=True, use_coriolis=True, momentum_advection=True, detail=0,
 /// threads=None)`.
 ///
@@ -34,6 +35,9 @@ use crate::threads::Pool;
 /// `wicking_exponent` `n` makes the fabric wick faster where it is wetter: the densities
 /// diffuse at `D·θⁿ`, `θ` the liquid density over `wicking_density` (kg/m², capped at 1),
 /// which gives a spreading spill a sharp front (0, the default: a constant rate).
+/// `irregularity` (0–1) makes the fabric uneven: its diffusion and absorption rates vary
+/// at random over the rest surface, correlated over `irregularity_length` metres, the
+/// same for the same `irregularity_seed` (0, the default: a uniform fabric).
 /// Units are SI: densities in kg/m², rates in 1/s, evaporation in kg/(m²·s).
 /// `detail` (0–3) runs the simulation on the cloth's triangles each split into
 /// `4**detail` (the fine vertices placed on the cloth's triangles every frame): `step`,
@@ -121,7 +125,8 @@ impl Simulator {
         face_uv=None, face_angle=None, color=(0.45, 0.05, 0.1), gravity=(0.0, 0.0, -9.81),
         viscosity=None, friction=None, absorption=None, saturation=None, adsorption=None,
         capacity=None, evaporation=None, evaporation_boundary=None, wicking_exponent=None,
-        wicking_density=None, substeps=1,
+        wicking_density=None, irregularity=None, irregularity_length=None, irregularity_seed=0,
+        substeps=1,
         use_gravity=true, use_rectilinear=true, use_coriolis=true, momentum_advection=true,
         detail=0, threads=None))]
     #[allow(clippy::too_many_arguments)]
@@ -146,6 +151,9 @@ impl Simulator {
         evaporation_boundary: Option<f64>,
         wicking_exponent: Option<f64>,
         wicking_density: Option<f64>,
+        irregularity: Option<f64>,
+        irregularity_length: Option<f64>,
+        irregularity_seed: u64,
         substeps: u32,
         use_gravity: bool,
         use_rectilinear: bool,
@@ -222,6 +230,12 @@ impl Simulator {
         set(&mut params.friction, friction);
         set(&mut params.wicking.exponent, wicking_exponent);
         set(&mut params.wicking.density, wicking_density);
+        set(&mut params.irregularity.amplitude, irregularity);
+        set(
+            &mut params.irregularity.correlation_length,
+            irregularity_length,
+        );
+        params.irregularity.seed = irregularity_seed;
         let r = &mut params.interaction;
         set(&mut r.absorption, absorption);
         set(&mut r.saturation, saturation);

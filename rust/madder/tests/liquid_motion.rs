@@ -35,6 +35,7 @@ fn ideal(forces: Forces, momentum_advection: bool) -> StainParams {
         friction: 0.0,
         interaction: no_interaction(),
         wicking: Default::default(),
+        irregularity: Default::default(),
         substeps: 1,
         active_region: true,
     }

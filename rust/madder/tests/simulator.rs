@@ -42,6 +42,7 @@ fn ideal(forces: Forces) -> StainParams {
         friction: 0.0,
         interaction: no_interaction(),
         wicking: Default::default(),
+        irregularity: Default::default(),
         substeps: 1,
         active_region: true,
     }
@@ -660,6 +661,12 @@ fn full_params(momentum_advection: bool, substeps: u32) -> StainParams {
         wicking: madder::stain::Wicking {
             exponent: 2.0,
             density: 0.1,
+        },
+        // and an irregular fabric
+        irregularity: madder::stain::Irregularity {
+            amplitude: 0.4,
+            correlation_length: 0.05,
+            seed: 7,
         },
         substeps,
         active_region: true,

@@ -259,6 +259,20 @@ pub fn interact(
     h: f64,
     fields: &mut Fields,
 ) -> Result<f64, ParamError> {
+    interact_varied(rates, area, exposure, None, h, fields)
+}
+
+/// [`interact`] with the absorption rate of vertex `i` multiplied by
+/// `absorption_scale[i]` (an irregular fabric, [`super::irregular`]); `None` is
+/// [`interact`].
+pub fn interact_varied(
+    rates: &InteractionRates,
+    area: &[f64],
+    exposure: &[f64],
+    absorption_scale: Option<&[f64]>,
+    h: f64,
+    fields: &mut Fields,
+) -> Result<f64, ParamError> {
     if !(h.is_finite() && h > 0.0) {
         return Err(ParamError::OutOfRange {
             name: "time step",
@@ -270,8 +284,18 @@ pub fn interact(
     let n = area.len();
     check_inputs(n, area, exposure, fields)?;
 
+    if let Some(a) = absorption_scale {
+        if a.len() != n {
+            return Err(ParamError::Length {
+                name: "absorption scale",
+                expected: n,
+                got: a.len(),
+            });
+        }
+    }
     let coeffs = Coefficients {
         absorb: -(-rates.absorption * h).exp_m1(),
+        rate_h: rates.absorption * h,
         adsorb: -(-rates.adsorption * h).exp_m1(),
         saturation: rates.saturation,
         capacity: rates.capacity,
@@ -298,10 +322,12 @@ pub fn interact(
         let mut cf = color_free.as_mut().map(|v| v.chunks_mut(CHUNK));
         let mut ch = color_held.as_mut().map(|v| v.chunks_mut(CHUNK));
         let mut ev = evaporated.chunks_mut(CHUNK);
+        let mut scale = absorption_scale.map(|a| a.chunks(CHUNK));
         for (area, exposure) in area.chunks(CHUNK).zip(exposure.chunks(CHUNK)) {
             chunks.push(Chunk {
                 area,
                 exposure,
+                absorption_scale: scale.as_mut().map(|it| it.next().unwrap()),
                 f: f.next().unwrap(),
                 s: s.next().unwrap(),
                 p: p.next().unwrap(),
@@ -395,6 +421,8 @@ fn check_inputs(
 struct Coefficients {
     /// `1 − e^{−K_p h}`.
     absorb: f64,
+    /// `K_p h` (a vertex with its own absorption scale `s` takes `1 − e^{−s K_p h}`).
+    rate_h: f64,
     /// `1 − e^{−K_d h}`.
     adsorb: f64,
     /// `σ_sat`.
@@ -409,6 +437,7 @@ struct Coefficients {
 struct Chunk<'a> {
     area: &'a [f64],
     exposure: &'a [f64],
+    absorption_scale: Option<&'a [f64]>,
     f: &'a mut [f64],
     s: &'a mut [f64],
     p: &'a mut [f64],
@@ -432,7 +461,11 @@ impl Chunk<'_> {
                 ch: self.ch.as_ref().map_or([0.0; 3], |x| x[i]),
             };
             let area = self.area[i];
-            v.absorb(c.saturation * area, c.absorb);
+            let absorb = match self.absorption_scale {
+                None => c.absorb,
+                Some(scale) => -(-scale[i] * c.rate_h).exp_m1(),
+            };
+            v.absorb(c.saturation * area, absorb);
             v.adsorb(c.capacity * area, c.adsorb);
             self.evaporated[i] = v.evaporate(self.exposure[i] * c.evaporate * area);
             self.f[i] = v.f;

@@ -82,7 +82,8 @@ use super::forces::{
     Forces, corotating_frames_with, frame_angular_velocity, frame_body_acceleration,
     integrate_velocity, rest_frames, second_difference,
 };
-use super::interact::{InteractionRates, exposure, interact};
+use super::interact::{InteractionRates, exposure, interact_varied};
+use super::irregular::{Irregularity, face_means};
 use super::state::{Fields, Local, State, merge_rgb, split_rgb};
 use super::window::{Cloth, Window, pick};
 use crate::error::{Error, ParamError};
@@ -130,6 +131,8 @@ pub struct StainParams {
     pub interaction: InteractionRates,
     /// How the fabric's diffusion rate grows with its saturation (off by default).
     pub wicking: Wicking,
+    /// The fabric's random variations of diffusion and absorption (off by default).
+    pub irregularity: Irregularity,
     /// Sub-steps per frame, at least: a frame whose vertex frames turn by more than
     /// [`MAX_TURN`] takes more on its own (module doc, "Fast rotation").
     pub substeps: u32,
@@ -148,6 +151,7 @@ impl Default for StainParams {
             friction: 50.0,
             interaction: InteractionRates::default(),
             wicking: Wicking::default(),
+            irregularity: Irregularity::default(),
             substeps: 1,
             active_region: true,
         }
@@ -182,6 +186,7 @@ impl StainParams {
             "at least 1",
         )?;
         self.wicking.validate()?;
+        self.irregularity.validate()?;
         self.interaction.validate()
     }
 }
@@ -274,6 +279,10 @@ impl Simulator {
             loose: topology.loose_vertices(),
             cloth: Cloth {
                 boundary: topology.boundary_vertices(),
+                irregular: params
+                    .irregularity
+                    .is_on()
+                    .then(|| params.irregularity.multiplier(rest)),
                 rest: rest.to_vec(),
                 rest_frames,
                 conductivity,
@@ -609,7 +618,8 @@ impl Simulator {
             conductivity: &w.cloth.conductivity,
             region: &w.region,
         };
-        // the wicking factor of every face, from the liquid before the solve (lagged)
+        // the wicking factor of every face, from the liquid before the solve (lagged),
+        // times the irregular fabric's
         let wicking = p.wicking.is_on().then(|| {
             let f = &loc.fields;
             let liquid: Vec<f64> = (0..n)
@@ -621,11 +631,16 @@ impl Simulator {
                 .collect();
             p.wicking.face_factors(topo, &liquid)
         });
+        let irregular = w.cloth.irregular.as_ref();
+        let face_scale = match (wicking, irregular.map(|m| face_means(topo, m))) {
+            (Some(g), Some(r)) => Some(g.iter().zip(&r).map(|(g, r)| g * r).collect()),
+            (g, r) => g.or(r),
+        };
         let (fields, velocity) = (&mut loc.fields, &mut loc.velocity);
         let (densities, viscous) = match w.cg.as_mut() {
             None => (Ok(0), Ok(0)),
             Some((scalar_cg, vector_cg)) => rayon::join(
-                || diffuse_densities(&ops, scalar_cg, fields, &geometry, h, wicking.as_deref()),
+                || diffuse_densities(&ops, scalar_cg, fields, &geometry, h, face_scale.as_deref()),
                 || {
                     if p.viscosity > 0.0 {
                         let scale = h * p.viscosity;
@@ -657,10 +672,12 @@ impl Simulator {
             p.interaction.evaporation_boundary,
         );
         let mut part = loc.fields.gather(&w.whole);
-        loc.evaporated += interact(
+        let absorption_scale = irregular.map(|m| pick(&w.whole, m));
+        loc.evaporated += interact_varied(
             &p.interaction,
             &pick(&w.whole, &geometry.vertex_area),
             &pick(&w.whole, &exposed),
+            absorption_scale.as_deref(),
             h,
             &mut part,
         )?;
