@@ -21,9 +21,8 @@ use crate::threads::Pool;
 /// viscosity=..., friction=..., absorption=..., saturation=..., adsorption=...,
 /// capacity=..., evaporation=..., evaporation_boundary=1.2, wicking_exponent=0,
 /// wicking_density=0.1, irregularity=0, irregularity_length=0.003, irregularity_seed=0,
-/// substeps=1, use_gravity=True,
-/// use_rectilinear=True, use_coriolis=True, momentum_advection=True, detail=0,
-/// threads=None)`.
+/// carry_solute=False, substeps=1, use_gravity=True, use_rectilinear=True,
+/// use_coriolis=True, momentum_advection=True, detail=0, threads=None)`.
 ///
 /// `topology` is a `Topology` or an `(F, 3)` uint32 face array; `rest` and `positions`
 /// `(N, 3)` float32 or float64 world positions in metres (rest pose; first frame), one
@@ -38,6 +37,8 @@ use crate::threads::Pool;
 /// `irregularity` (0–1) makes the fabric uneven: its diffusion and absorption rates vary
 /// at random over the rest surface, correlated over `irregularity_length` metres, the
 /// same for the same `irregularity_seed` (0, the default: a uniform fabric).
+/// `carry_solute` moves the dissolved solute with the solvent's capillary flow (and the
+/// liquid in the fibres wicks too) instead of diffusing it at the solvent's rate.
 /// Units are SI: densities in kg/m², rates in 1/s, evaporation in kg/(m²·s).
 /// `detail` (0–3) runs the simulation on the cloth's triangles each split into
 /// `4**detail` (the fine vertices placed on the cloth's triangles every frame): `step`,
@@ -126,7 +127,7 @@ impl Simulator {
         viscosity=None, friction=None, absorption=None, saturation=None, adsorption=None,
         capacity=None, evaporation=None, evaporation_boundary=None, wicking_exponent=None,
         wicking_density=None, irregularity=None, irregularity_length=None, irregularity_seed=0,
-        substeps=1,
+        carry_solute=false, substeps=1,
         use_gravity=true, use_rectilinear=true, use_coriolis=true, momentum_advection=true,
         detail=0, threads=None))]
     #[allow(clippy::too_many_arguments)]
@@ -154,6 +155,7 @@ impl Simulator {
         irregularity: Option<f64>,
         irregularity_length: Option<f64>,
         irregularity_seed: u64,
+        carry_solute: bool,
         substeps: u32,
         use_gravity: bool,
         use_rectilinear: bool,
@@ -236,6 +238,7 @@ impl Simulator {
             irregularity_length,
         );
         params.irregularity.seed = irregularity_seed;
+        params.carry_solute = carry_solute;
         let r = &mut params.interaction;
         set(&mut r.absorption, absorption);
         set(&mut r.saturation, saturation);

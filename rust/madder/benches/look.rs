@@ -77,5 +77,8 @@ fn main() {
         },
         frames,
     );
-    println!("the irregular fabric costs {:.2}× the step without it", uneven / base);
+    println!(
+        "the irregular fabric costs {:.2}× the step without it",
+        uneven / base
+    );
 }

@@ -36,6 +36,7 @@ fn ideal(forces: Forces, momentum_advection: bool) -> StainParams {
         interaction: no_interaction(),
         wicking: Default::default(),
         irregularity: Default::default(),
+        carry_solute: false,
         substeps: 1,
         active_region: true,
     }

@@ -43,6 +43,7 @@ fn ideal(forces: Forces) -> StainParams {
         interaction: no_interaction(),
         wicking: Default::default(),
         irregularity: Default::default(),
+        carry_solute: false,
         substeps: 1,
         active_region: true,
     }
@@ -668,6 +669,8 @@ fn full_params(momentum_advection: bool, substeps: u32) -> StainParams {
             correlation_length: 0.05,
             seed: 7,
         },
+        // the solute carried by the solvent's flow
+        carry_solute: true,
         substeps,
         active_region: true,
     }

@@ -133,6 +133,9 @@ pub struct StainParams {
     pub wicking: Wicking,
     /// The fabric's random variations of diffusion and absorption (off by default).
     pub irregularity: Irregularity,
+    /// The dissolved solute moves with the solvent's capillary flow instead of diffusing
+    /// on its own ([`super::diffuse`], "Tide lines"); off by default.
+    pub carry_solute: bool,
     /// Sub-steps per frame, at least: a frame whose vertex frames turn by more than
     /// [`MAX_TURN`] takes more on its own (module doc, "Fast rotation").
     pub substeps: u32,
@@ -152,6 +155,7 @@ impl Default for StainParams {
             interaction: InteractionRates::default(),
             wicking: Wicking::default(),
             irregularity: Irregularity::default(),
+            carry_solute: false,
             substeps: 1,
             active_region: true,
         }
@@ -640,7 +644,17 @@ impl Simulator {
         let (densities, viscous) = match w.cg.as_mut() {
             None => (Ok(0), Ok(0)),
             Some((scalar_cg, vector_cg)) => rayon::join(
-                || diffuse_densities(&ops, scalar_cg, fields, &geometry, h, face_scale.as_deref()),
+                || {
+                    diffuse_densities(
+                        &ops,
+                        scalar_cg,
+                        fields,
+                        &geometry,
+                        h,
+                        face_scale.as_deref(),
+                        p.carry_solute,
+                    )
+                },
                 || {
                     if p.viscosity > 0.0 {
                         let scale = h * p.viscosity;
