@@ -127,17 +127,12 @@ class SequenceExport:
         self.exporter = textures.Exporter(
             madder, self.reader, refinement.faces(), refinement.face_uv(uv), references,
             tuple(obj.madder.stain_color), size, folder, name)
+        self.first, self.last = self.exporter.first, self.exporter.last
+        self.size = self.exporter.size
         self._frames = iter(self.exporter.frames())
         self.frame = None
         self.done = 0
-
-    @property
-    def first(self):
-        return self.exporter.first
-
-    @property
-    def last(self):
-        return self.exporter.last
+        self.overlapping = None
 
     @property
     def total(self):
@@ -154,14 +149,18 @@ class SequenceExport:
                               filename=getattr(e, "filename", None), **where) from e
         except ExportError as e:
             raise ExportError(f"'{self.obj.name}' at frame {frame}: {e}", filename=e.filename, **where) from e
+        except OSError as e:
+            raise ExportError(f"'{self.obj.name}' at frame {frame}: cannot write {e.filename}: {e.strerror or e}",
+                              filename=e.filename, **where) from e
         self.frame = frame
         self.done += 1
+        self.overlapping = self.exporter.overlapping
         return frame < self.last
 
     def warnings(self):
-        n = self.exporter.overlapping
+        n = self.overlapping
         if n:
-            return [f"its UV islands overlap ({n} texels at {self.exporter.size} px): where they do, the image "
+            return [f"its UV islands overlap ({n} texels at {self.size} px): where they do, the image "
                     "sequence shows one island's stain on both (give each face its own UV space)"]
         return []
 

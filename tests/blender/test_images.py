@@ -267,7 +267,7 @@ def test_renders_of_the_vertex_colours_and_of_the_images_agree(open_fixture, tmp
 
 
 def test_an_animation_render_shows_each_frames_image(open_fixture, tmp_path):
-    """The images of frames 2–30 are replaced by a code (fully stained or bare, per frame):
+    """The images of frames 4–30 are replaced by a code (fully stained or bare, per frame):
     each rendered frame must show its own file's code, frames before the bake the first
     frame's, and frames after it the last's."""
     scene = open_fixture("disk.blend")
@@ -279,7 +279,7 @@ def test_an_animation_render_shows_each_frames_image(open_fixture, tmp_path):
     s.output_images = True
     s.output_vertex_colors = False
     s.image_size = "512"
-    first, last = 1, 30
+    first, last = 3, 30  # scene frames start at 0: 1 and 2 come before the bake
     scene.frame_start, scene.frame_end = first, last
     assert bpy.ops.madder.bake() == {"FINISHED"}
     bpy.ops.madder.add_stain_shader()
