@@ -45,5 +45,5 @@ pub mod raster;
 
 pub use self::exr::{Compression, ExrImage, read_exr, write_exr, write_exr_with};
 pub use crate::error::TextureError;
-pub use pad::{DEFAULT_PADDING, pad};
-pub use raster::{MAX_SIZE, Raster, rasterize, rasterize_into};
+pub use pad::{DEFAULT_PADDING, pad, pad_to};
+pub use raster::{MAX_SIZE, Raster, rasterize, rasterize_into, rasterize_to};

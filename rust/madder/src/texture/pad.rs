@@ -32,8 +32,30 @@ pub const DEFAULT_PADDING: usize = 4;
 /// Grows every island of `raster` outward by `texels` texels (see the module doc).
 /// Returns the number of texels filled.
 pub fn pad(raster: &mut Raster, texels: usize) -> usize {
-    let size = raster.size;
-    let c = raster.channels;
+    pad_to(
+        &mut raster.pixels,
+        &mut raster.coverage,
+        raster.size,
+        raster.channels,
+        texels,
+    )
+}
+
+/// [`pad`] on caller-owned buffers laid out as [`Raster`]'s `pixels` and `coverage`
+/// (`size × size × channels` and `size × size`).
+///
+/// # Panics
+/// If the buffers do not have those lengths.
+pub fn pad_to(
+    pixels: &mut [f32],
+    coverage: &mut [u8],
+    size: usize,
+    channels: usize,
+    texels: usize,
+) -> usize {
+    let c = channels;
+    assert_eq!(pixels.len(), size * size * c, "pixels length");
+    assert_eq!(coverage.len(), size * size, "coverage length");
     let mut filled = 0;
     if size == 0 || c == 0 {
         return 0;
@@ -41,13 +63,11 @@ pub fn pad(raster: &mut Raster, texels: usize) -> usize {
     for _ in 0..texels {
         // rows holding at least one covered texel: a row with none in its neighbourhood
         // gains nothing this pass
-        let busy: Vec<bool> = raster
-            .coverage
+        let busy: Vec<bool> = coverage
             .par_chunks(size)
             .map(|row| row.iter().any(|&m| m != EMPTY))
             .collect();
-        let coverage = &raster.coverage;
-        let pixels = &raster.pixels;
+        let (cov, pix) = (&*coverage, &*pixels);
         // per row: the texels filled this pass and their values
         let new: Vec<(Vec<u32>, Vec<f32>)> = (0..size)
             .into_par_iter()
@@ -59,14 +79,14 @@ pub fn pad(raster: &mut Raster, texels: usize) -> usize {
                 if !busy[lo..=hi].iter().any(|&b| b) {
                     return (xs, vals);
                 }
-                let row = &coverage[y * size..(y + 1) * size];
+                let row = &cov[y * size..(y + 1) * size];
                 if !row.contains(&EMPTY) {
                     return (xs, vals);
                 }
                 // near[x]: some texel of rows lo..=hi in columns x-1..=x+1 is covered
                 let mut col = vec![false; size];
                 for yy in lo..=hi {
-                    let r = &coverage[yy * size..(yy + 1) * size];
+                    let r = &cov[yy * size..(yy + 1) * size];
                     for (n, &m) in col.iter_mut().zip(r) {
                         *n |= m != EMPTY;
                     }
@@ -84,9 +104,9 @@ pub fn pad(raster: &mut Raster, texels: usize) -> usize {
                     for yy in lo..=hi {
                         for xx in x.saturating_sub(1)..=(x + 1).min(size - 1) {
                             let j = yy * size + xx;
-                            if coverage[j] != EMPTY {
+                            if cov[j] != EMPTY {
                                 n += 1;
-                                for (s, &v) in sum.iter_mut().zip(&pixels[j * c..(j + 1) * c]) {
+                                for (s, &v) in sum.iter_mut().zip(&pix[j * c..(j + 1) * c]) {
                                     *s += f64::from(v);
                                 }
                             }
@@ -105,10 +125,9 @@ pub fn pad(raster: &mut Raster, texels: usize) -> usize {
             break;
         }
         filled += pass;
-        raster
-            .pixels
+        pixels
             .par_chunks_mut(size * c)
-            .zip(raster.coverage.par_chunks_mut(size))
+            .zip(coverage.par_chunks_mut(size))
             .zip(new.par_iter())
             .for_each(|((pixels, coverage), (xs, vals))| {
                 for (i, &x) in xs.iter().enumerate() {

@@ -23,10 +23,13 @@
 //! to exactly one of them as well (the standard argument, valid because the arithmetic is
 //! exact). Triangles of zero snapped area cover nothing.
 //!
-//! Edge functions of snapped corners within `±2^29` (`|u|, |v| ≲ 2^21 / size`, far beyond
-//! any real UV layout) are evaluated in `i64`; larger ones fall back to `i128`, with the
-//! corners clamped to `±2^50` first so that nothing overflows (such a corner is thousands
-//! of tiles off the image: its triangle still covers what it covers, deterministically).
+//! The snapped corners are integers held in `f64`. Within `±2^25` (`|u|, |v| ≤ 2^17 /
+//! size`: 64 at 2048 texels, 8 at 16384, beyond any real UV layout) every difference is
+//! below 2^26, every product below 2^52 and every edge function below 2^53, so `f64`
+//! evaluates them exactly, at full speed; a triangle with a corner farther out falls back
+//! to `i128`, its corners clamped to `±2^50` first so that nothing overflows (such a
+//! corner lies thousands of tiles off the image: the triangle still covers what it
+//! covers, deterministically).
 //!
 //! ## Values
 //! A covered texel gets the barycentric interpolation of its triangle's three vertex values
@@ -65,13 +68,13 @@ pub const PADDED: u8 = 3;
 pub const SUB_TEXEL: i64 = 256;
 
 /// Rows of one band, the unit of parallel work.
-pub const BAND_ROWS: usize = 16;
+pub const BAND_ROWS: usize = 32;
 
 /// Triangles per binning task.
 const BIN_CHUNK: usize = 16_384;
 
-/// Snapped corners within this bound use `i64` edge functions (products stay below 2^62).
-const FAST_LIMIT: i64 = 1 << 29;
+/// Snapped corners within this bound have edge functions exact in `f64` (below 2^53).
+const FAST_LIMIT: f64 = (1u64 << 25) as f64;
 
 /// Snapped corners are clamped to this bound, so that `i128` edge functions cannot overflow.
 const CLAMP: f64 = (1u64 << 50) as f64;
@@ -135,7 +138,7 @@ impl Raster {
 ///
 /// Errors: `size` out of `1..=`[`MAX_SIZE`], no channel, `uv` and `faces` of different
 /// lengths, `values` not a whole number of vertices, a face naming a vertex past the
-/// values, a non-finite UV (naming the face and corner).
+/// values, a non-finite UV (each naming the first face and corner at fault).
 pub fn rasterize(
     faces: &[[u32; 3]],
     uv: &[[[f64; 2]; 3]],
@@ -143,14 +146,23 @@ pub fn rasterize(
     channels: usize,
     size: usize,
 ) -> Result<Raster, TextureError> {
-    let mut raster = Raster {
-        size: 0,
-        channels: 0,
-        pixels: Vec::new(),
-        coverage: Vec::new(),
-        overlapping: 0,
-    };
-    rasterize_into(&mut raster, faces, uv, values, channels, size)?;
+    check_shape(faces, uv, values, channels, size)?;
+    let bands = bin(faces, uv, values.len() / channels, size)?;
+    // fresh zeroed memory: the bands need not clear it
+    let mut raster = Raster::empty(size, channels);
+    raster.overlapping = fill(
+        &mut raster.pixels,
+        &mut raster.coverage,
+        &bands,
+        &Context {
+            faces,
+            uv,
+            values,
+            channels,
+            size,
+        },
+        false,
+    );
     Ok(raster)
 }
 
@@ -164,50 +176,72 @@ pub fn rasterize_into(
     channels: usize,
     size: usize,
 ) -> Result<(), TextureError> {
-    check(faces, uv, values, channels, size)?;
-    let n_texels = size * size;
+    check_shape(faces, uv, values, channels, size)?;
+    let bands = bin(faces, uv, values.len() / channels, size)?;
     raster.size = size;
     raster.channels = channels;
-    raster.pixels.clear();
-    raster.pixels.resize(n_texels * channels, 0.0);
-    raster.coverage.clear();
-    raster.coverage.resize(n_texels, EMPTY);
-
-    let bands = bin(uv, size);
-    let band_len = BAND_ROWS * size;
-    let ctx = Context {
-        faces,
-        uv,
-        values,
-        channels,
-        size,
-    };
-    raster.overlapping = raster
-        .pixels
-        .par_chunks_mut(band_len * channels)
-        .zip(raster.coverage.par_chunks_mut(band_len))
-        .zip(bands.par_iter())
-        .enumerate()
-        .map(|(b, ((pixels, coverage), list))| {
-            let mut band = Band {
-                row0: b * BAND_ROWS,
-                rows: coverage.len() / size,
-                pixels,
-                coverage,
-                overlapping: 0,
-                scratch: vec![0.0; 3 * channels],
-            };
-            for &t in list {
-                band.triangle(&ctx, t as usize);
-            }
-            band.overlapping
-        })
-        .sum();
+    raster.pixels.resize(size * size * channels, 0.0);
+    raster.coverage.resize(size * size, EMPTY);
+    raster.overlapping = fill(
+        &mut raster.pixels,
+        &mut raster.coverage,
+        &bands,
+        &Context {
+            faces,
+            uv,
+            values,
+            channels,
+            size,
+        },
+        true,
+    );
     Ok(())
 }
 
-/// The input checks, in a fixed order; the first failing face is reported.
-fn check(
+/// [`rasterize`] into caller-owned buffers: `pixels` of `size × size × channels` values and
+/// `coverage` of `size × size` (every texel is overwritten). Returns the overlapping texel
+/// count. On error the buffers are left unchanged.
+#[allow(clippy::too_many_arguments)]
+pub fn rasterize_to(
+    pixels: &mut [f32],
+    coverage: &mut [u8],
+    faces: &[[u32; 3]],
+    uv: &[[[f64; 2]; 3]],
+    values: &[f32],
+    channels: usize,
+    size: usize,
+) -> Result<usize, TextureError> {
+    check_shape(faces, uv, values, channels, size)?;
+    for (name, expected, got) in [
+        ("pixels", size * size * channels, pixels.len()),
+        ("coverage", size * size, coverage.len()),
+    ] {
+        if got != expected {
+            return Err(TextureError::Length {
+                name,
+                expected,
+                got,
+            });
+        }
+    }
+    let bands = bin(faces, uv, values.len() / channels, size)?;
+    Ok(fill(
+        pixels,
+        coverage,
+        &bands,
+        &Context {
+            faces,
+            uv,
+            values,
+            channels,
+            size,
+        },
+        true,
+    ))
+}
+
+/// The checks that need no pass over the faces.
+fn check_shape(
     faces: &[[u32; 3]],
     uv: &[[[f64; 2]; 3]],
     values: &[f32],
@@ -237,79 +271,113 @@ fn check(
             channels,
         });
     }
-    let n_vertices = values.len() / channels;
-    let bad = |t: usize| {
-        faces[t].iter().any(|&v| v as usize >= n_vertices)
-            || uv[t].iter().flatten().any(|x| !x.is_finite())
-    };
-    if let Some(face) = (0..faces.len()).into_par_iter().find_first(|&t| bad(t)) {
-        if let Some(&vertex) = faces[face].iter().find(|&&v| v as usize >= n_vertices) {
-            return Err(TextureError::VertexOutOfRange {
-                face,
-                vertex,
-                n_vertices,
-            });
-        }
-        let corner = (0..3)
-            .find(|&k| !uv[face][k].iter().all(|x| x.is_finite()))
-            .expect("a bad face has a bad vertex or corner");
-        let [u, v] = uv[face][corner];
-        return Err(TextureError::NonFiniteUv {
-            face,
-            corner,
-            u,
-            v,
-        });
-    }
     Ok(())
 }
 
-/// A UV corner on the snapped grid (see the module doc).
-fn snap(uv: [f64; 2], size: usize) -> [i64; 2] {
-    let scale = (SUB_TEXEL as usize * size) as f64;
-    uv.map(|x| (x * scale).round().clamp(-CLAMP, CLAMP) as i64)
+/// The error of face `t`, if it names a vertex past `n_vertices` or has a non-finite UV.
+fn face_error(
+    t: usize,
+    face: &[u32; 3],
+    uv: &[[f64; 2]; 3],
+    n_vertices: usize,
+) -> Option<TextureError> {
+    if let Some(&vertex) = face.iter().find(|&&v| v as usize >= n_vertices) {
+        return Some(TextureError::VertexOutOfRange {
+            face: t,
+            vertex,
+            n_vertices,
+        });
+    }
+    let corner = (0..3).find(|&k| !(uv[k][0].is_finite() && uv[k][1].is_finite()))?;
+    let [u, v] = uv[corner];
+    Some(TextureError::NonFiniteUv {
+        face: t,
+        corner,
+        u,
+        v,
+    })
 }
 
-/// The snapped corners of triangle `t`, and the rows `lo..=hi` whose centres its bounding
-/// box meets, clipped to the image; `None` when it meets no texel centre of the image.
-fn extent(uv: &[[f64; 2]; 3], size: usize) -> Option<([[i64; 2]; 3], [usize; 4])> {
-    let p = uv.map(|c| snap(c, size));
-    let range = |k: usize| {
-        let lo = p.iter().map(|c| c[k]).min().expect("three corners");
-        let hi = p.iter().map(|c| c[k]).max().expect("three corners");
-        // centres at 256·i + 128: the first at or above lo, the last at or below hi
-        let first = (lo - SUB_TEXEL / 2).div_euclid(SUB_TEXEL)
-            + i64::from((lo - SUB_TEXEL / 2).rem_euclid(SUB_TEXEL) != 0);
-        let last = (hi - SUB_TEXEL / 2).div_euclid(SUB_TEXEL);
-        let first = first.max(0);
-        let last = last.min(size as i64 - 1);
-        (first <= last).then_some((first as usize, last as usize))
-    };
-    let (x0, x1) = range(0)?;
-    let (y0, y1) = range(1)?;
-    Some((p, [x0, x1, y0, y1]))
+/// `x` rounded to the nearest integer (ties to even), clamped to `±CLAMP`, as an `f64`:
+/// adding and removing 1.5·2⁵² leaves the integer part in the default rounding mode
+/// (inline, where `f64::round` is a library call on baseline x86-64).
+#[inline]
+fn round_clamped(x: f64) -> f64 {
+    const MAGIC: f64 = 6_755_399_441_055_744.0; // 1.5 · 2^52
+    (x.max(-CLAMP).min(CLAMP) + MAGIC) - MAGIC
 }
 
-/// For each band, the triangles that may cover one of its texels, in index order.
-fn bin(uv: &[[[f64; 2]; 3]], size: usize) -> Vec<Vec<u32>> {
+/// The texel rows (or columns) whose centres `256·i + 128` lie in the snapped range
+/// `[lo, hi]`, clipped to `0..size`: `(first, last)`.
+#[inline]
+fn centres(lo: f64, hi: f64, size: usize) -> Option<(usize, usize)> {
+    let half = (SUB_TEXEL / 2) as f64;
+    // lo, hi are integers within ±2^50: exact as i64
+    let lo = (lo - half) as i64;
+    let hi = (hi - half) as i64;
+    // first centre at or above lo: ceil(lo / 256); last at or below hi: floor(hi / 256)
+    let first = (lo + SUB_TEXEL - 1).div_euclid(SUB_TEXEL).max(0);
+    let last = hi.div_euclid(SUB_TEXEL).min(size as i64 - 1);
+    (first <= last).then_some((first as usize, last as usize))
+}
+
+/// The rows `y0..=y1` whose centres the triangle's bounding box meets, clipped to the image.
+#[inline]
+fn rows(uv: &[[f64; 2]; 3], scale: f64, size: usize) -> Option<(usize, usize)> {
+    let v = [
+        round_clamped(uv[0][1] * scale),
+        round_clamped(uv[1][1] * scale),
+        round_clamped(uv[2][1] * scale),
+    ];
+    centres(v[0].min(v[1]).min(v[2]), v[0].max(v[1]).max(v[2]), size)
+}
+
+/// The snapped corners of a triangle (integers in `f64`), and the texel columns `x0..=x1`
+/// whose centres its bounding box meets, clipped to the image; `None` when it meets none.
+#[inline]
+fn snapped(uv: &[[f64; 2]; 3], scale: f64, size: usize) -> Option<([[f64; 2]; 3], [usize; 2])> {
+    let p = uv.map(|c| [round_clamped(c[0] * scale), round_clamped(c[1] * scale)]);
+    let (x0, x1) = centres(
+        p[0][0].min(p[1][0]).min(p[2][0]),
+        p[0][0].max(p[1][0]).max(p[2][0]),
+        size,
+    )?;
+    Some((p, [x0, x1]))
+}
+
+/// For each band, the triangles that may cover one of its texels, in index order; checks
+/// the faces on the way (the first bad face is reported).
+fn bin(
+    faces: &[[u32; 3]],
+    uv: &[[[f64; 2]; 3]],
+    n_vertices: usize,
+    size: usize,
+) -> Result<Vec<Vec<u32>>, TextureError> {
     let n_bands = size.div_ceil(BAND_ROWS);
-    let chunks: Vec<Vec<Vec<u32>>> = uv
+    let scale = (SUB_TEXEL as usize * size) as f64;
+    let chunks: Vec<Result<Vec<Vec<u32>>, TextureError>> = uv
         .par_chunks(BIN_CHUNK)
+        .zip(faces.par_chunks(BIN_CHUNK))
         .enumerate()
-        .map(|(c, tris)| {
+        .map(|(c, (tris, fs))| {
             let mut lists = vec![Vec::new(); n_bands];
-            for (i, tri) in tris.iter().enumerate() {
-                if let Some((_, [_, _, y0, y1])) = extent(tri, size) {
-                    let t = (c * BIN_CHUNK + i) as u32;
+            for (i, (tri, f)) in tris.iter().zip(fs).enumerate() {
+                let t = c * BIN_CHUNK + i;
+                let finite = tri.iter().flatten().all(|x| x.is_finite());
+                if !finite || f.iter().any(|&v| v as usize >= n_vertices) {
+                    return Err(face_error(t, f, tri, n_vertices).expect("a bad face"));
+                }
+                if let Some((y0, y1)) = rows(tri, scale, size) {
                     for list in &mut lists[y0 / BAND_ROWS..=y1 / BAND_ROWS] {
-                        list.push(t);
+                        list.push(t as u32);
                     }
                 }
             }
-            lists
+            Ok(lists)
         })
         .collect();
-    (0..n_bands)
+    let chunks = chunks.into_iter().collect::<Result<Vec<_>, _>>()?;
+    Ok((0..n_bands)
         .into_par_iter()
         .map(|b| {
             let mut list = Vec::with_capacity(chunks.iter().map(|c| c[b].len()).sum());
@@ -318,7 +386,7 @@ fn bin(uv: &[[[f64; 2]; 3]], size: usize) -> Vec<Vec<u32>> {
             }
             list
         })
-        .collect()
+        .collect())
 }
 
 /// The read-only input shared by the band tasks.
@@ -330,6 +398,46 @@ struct Context<'a> {
     size: usize,
 }
 
+/// Rasterizes every band (clearing it first if `clear`); returns the overlapping count.
+fn fill(
+    pixels: &mut [f32],
+    coverage: &mut [u8],
+    bands: &[Vec<u32>],
+    ctx: &Context<'_>,
+    clear: bool,
+) -> usize {
+    let (size, c) = (ctx.size, ctx.channels);
+    let band_len = BAND_ROWS * size;
+    pixels
+        .par_chunks_mut(band_len * c)
+        .zip(coverage.par_chunks_mut(band_len))
+        .zip(bands.par_iter())
+        .enumerate()
+        .map(|(b, ((pixels, coverage), list))| {
+            if clear {
+                pixels.fill(0.0);
+                coverage.fill(EMPTY);
+            }
+            let mut band = Band {
+                row0: b * BAND_ROWS,
+                rows: coverage.len() / size,
+                pixels,
+                coverage,
+                overlapping: 0,
+                affine: vec![[0.0; 4]; c],
+            };
+            match c {
+                1 => band.triangles::<1>(ctx, list),
+                2 => band.triangles::<2>(ctx, list),
+                3 => band.triangles::<3>(ctx, list),
+                4 => band.triangles::<4>(ctx, list),
+                _ => band.triangles::<0>(ctx, list),
+            }
+            band.overlapping
+        })
+        .sum()
+}
+
 /// One band of rows being rasterized by one task.
 struct Band<'a> {
     row0: usize,
@@ -337,167 +445,201 @@ struct Band<'a> {
     pixels: &'a mut [f32],
     coverage: &'a mut [u8],
     overlapping: usize,
-    /// per channel: value at corner a, then its change towards b and towards c
-    scratch: Vec<f64>,
+    /// per channel, the value as an affine function of the texel centre (relative to
+    /// corner a, in texels): `[value at a, ∂/∂x, ∂/∂y, value at the row's x = 0]`
+    affine: Vec<[f64; 4]>,
 }
 
-/// The integer type of the edge functions: `i64` on the fast path, `i128` otherwise.
-trait EdgeInt:
+/// The arithmetic of the edge functions: `f64` on the fast path (exact, see the module
+/// doc), `i128` otherwise. Inputs are the snapped corners, integers held in `f64`.
+trait Edge:
     Copy
-    + Ord
-    + From<i64>
+    + PartialOrd
     + std::ops::Add<Output = Self>
     + std::ops::Sub<Output = Self>
     + std::ops::Mul<Output = Self>
 {
-}
-impl EdgeInt for i64 {}
-impl EdgeInt for i128 {}
-
-/// The three edge functions of a counter-clockwise triangle, stepped texel by texel.
-struct Edges<T> {
-    /// value at the current texel centre, plus 1 on an owning edge (so `inside ⇔ all > 0`)
-    e: [T; 3],
-    /// change per texel to the right
-    dx: [T; 3],
-    /// change per row up
-    dy: [T; 3],
+    const ZERO: Self;
+    const ONE: Self;
+    /// An integer-valued `f64` within ±2^50, exactly.
+    fn of(x: f64) -> Self;
 }
 
-impl<T: EdgeInt> Edges<T> {
-    /// Edge functions of the counter-clockwise corners `p` at the centre `s`.
-    fn new(p: [[i64; 2]; 3], s: [i64; 2]) -> Self {
-        let w = T::from(SUB_TEXEL);
-        let zero = T::from(0);
-        let one = T::from(1);
-        let mut e = [zero; 3];
-        let mut dx = [zero; 3];
-        let mut dy = [zero; 3];
-        for k in 0..3 {
-            let (a, b) = (p[k], p[(k + 1) % 3]);
-            let ex = T::from(b[0]) - T::from(a[0]);
-            let ey = T::from(b[1]) - T::from(a[1]);
-            let owns = ey < zero || (ey == zero && ex > zero);
-            e[k] = ex * (T::from(s[1]) - T::from(a[1])) - ey * (T::from(s[0]) - T::from(a[0]))
-                + if owns { one } else { zero };
-            dx[k] = zero - ey * w;
-            dy[k] = ex * w;
-        }
-        Self { e, dx, dy }
+impl Edge for f64 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+    #[inline]
+    fn of(x: f64) -> Self {
+        x
     }
+}
+
+impl Edge for i128 {
+    const ZERO: Self = 0;
+    const ONE: Self = 1;
+    #[inline]
+    fn of(x: f64) -> Self {
+        x as i64 as i128
+    }
+}
+
+/// Twice the signed area of the snapped triangle (positive when counter-clockwise).
+#[inline]
+fn area2<T: Edge>(p: &[[f64; 2]; 3]) -> T {
+    let d = |i: usize, k: usize| T::of(p[i][k]) - T::of(p[0][k]);
+    d(1, 0) * d(2, 1) - d(1, 1) * d(2, 0)
+}
+
+/// The three edge functions of a counter-clockwise triangle at the centre `s`, plus 1 on
+/// an owning edge (so that a centre is inside when all three are `> 0`: the functions are
+/// integers), and their changes per texel to the right and per row up.
+#[inline]
+fn edges<T: Edge>(p: &[[f64; 2]; 3], s: [f64; 2]) -> ([T; 3], [T; 3], [T; 3]) {
+    let w = T::of(SUB_TEXEL as f64);
+    let mut e = [T::ZERO; 3];
+    let mut dx = [T::ZERO; 3];
+    let mut dy = [T::ZERO; 3];
+    for k in 0..3 {
+        let (a, b) = (p[k], p[(k + 1) % 3]);
+        let ex = T::of(b[0]) - T::of(a[0]);
+        let ey = T::of(b[1]) - T::of(a[1]);
+        let owns = ey < T::ZERO || (ey == T::ZERO && ex > T::ZERO);
+        e[k] = ex * (T::of(s[1]) - T::of(a[1])) - ey * (T::of(s[0]) - T::of(a[0]))
+            + if owns { T::ONE } else { T::ZERO };
+        dx[k] = T::ZERO - ey * w;
+        dy[k] = ex * w;
+    }
+    (e, dx, dy)
 }
 
 impl Band<'_> {
-    /// Rasterizes triangle `t` into the rows of this band.
-    fn triangle(&mut self, ctx: &Context<'_>, t: usize) {
-        let Some((mut p, [x0, x1, y0, y1])) = extent(&ctx.uv[t], ctx.size) else {
-            return;
-        };
-        let y0 = y0.max(self.row0);
-        let y1 = y1.min(self.row0 + self.rows - 1);
-        if y0 > y1 {
-            return;
-        }
-        let mut corner = [0usize, 1, 2];
-        let area = (i128::from(p[1][0]) - i128::from(p[0][0]))
-            * (i128::from(p[2][1]) - i128::from(p[0][1]))
-            - (i128::from(p[1][1]) - i128::from(p[0][1]))
-                * (i128::from(p[2][0]) - i128::from(p[0][0]));
-        if area == 0 {
-            return;
-        }
-        if area < 0 {
-            p.swap(1, 2);
-            corner.swap(1, 2);
-        }
-        self.setup_values(ctx, t, corner);
-        let fast = p.iter().flatten().all(|c| c.abs() <= FAST_LIMIT);
-        if fast {
-            self.scan::<i64>(ctx, t, corner, p, [x0, x1, y0, y1]);
-        } else {
-            self.scan::<i128>(ctx, t, corner, p, [x0, x1, y0, y1]);
+    /// Rasterizes the listed triangles in order, for `C` channels (0: any number).
+    fn triangles<const C: usize>(&mut self, ctx: &Context<'_>, list: &[u32]) {
+        let scale = (SUB_TEXEL as usize * ctx.size) as f64;
+        let (band0, band1) = (self.row0, self.row0 + self.rows - 1);
+        for &t in list {
+            let t = t as usize;
+            let uv = &ctx.uv[t];
+            let Some((mut p, [x0, x1])) = snapped(uv, scale, ctx.size) else {
+                continue;
+            };
+            let (y0, y1) = centres(
+                p[0][1].min(p[1][1]).min(p[2][1]),
+                p[0][1].max(p[1][1]).max(p[2][1]),
+                ctx.size,
+            )
+            .expect("a binned triangle meets a row");
+            let (y0, y1) = (y0.max(band0), y1.min(band1));
+            if y0 > y1 {
+                continue;
+            }
+            let fast = p.iter().flatten().all(|c| c.abs() <= FAST_LIMIT);
+            let area = if fast {
+                area2::<f64>(&p)
+            } else {
+                area2::<i128>(&p).signum() as f64
+            };
+            if area == 0.0 {
+                continue;
+            }
+            let mut corner = [0usize, 1, 2];
+            if area < 0.0 {
+                p.swap(1, 2);
+                corner.swap(1, 2);
+            }
+            self.setup_values::<C>(ctx, t, corner);
+            let w = SUB_TEXEL as f64;
+            let s = [x0 as f64 * w + w / 2.0, y0 as f64 * w + w / 2.0];
+            let box_ = [x0, x1, y0, y1];
+            if fast {
+                let (e, dx, dy) = edges::<f64>(&p, s);
+                self.scan::<f64, C>(ctx, e, dx, dy, box_);
+            } else {
+                let (e, dx, dy) = edges::<i128>(&p, s);
+                self.scan::<i128, C>(ctx, e, dx, dy, box_);
+            }
         }
     }
 
-    /// Fills `scratch` with, per channel, the value at corner `a` and its changes to `b`, `c`.
-    fn setup_values(&mut self, ctx: &Context<'_>, t: usize, corner: [usize; 3]) {
-        let c = ctx.channels;
-        let vert = corner.map(|k| ctx.faces[t][k] as usize * c);
-        for k in 0..c {
-            let fa = f64::from(ctx.values[vert[0] + k]);
-            self.scratch[3 * k] = fa;
-            self.scratch[3 * k + 1] = f64::from(ctx.values[vert[1] + k]) - fa;
-            self.scratch[3 * k + 2] = f64::from(ctx.values[vert[2] + k]) - fa;
-        }
-    }
-
-    fn scan<T: EdgeInt>(
-        &mut self,
-        ctx: &Context<'_>,
-        t: usize,
-        corner: [usize; 3],
-        p: [[i64; 2]; 3],
-        [x0, x1, y0, y1]: [usize; 4],
-    ) {
-        let size = ctx.size;
-        let c = ctx.channels;
-        let half = SUB_TEXEL / 2;
-        let start = [
-            x0 as i64 * SUB_TEXEL + half,
-            y0 as i64 * SUB_TEXEL + half,
-        ];
-        let Edges { e, dx, dy } = Edges::<T>::new(p, start);
-        let zero = T::from(0);
-
-        // barycentric coordinates of b and c as affine functions of the texel index, in
-        // f64 from the unsnapped UVs (texel units, centre of texel (x, y) at (x+½, y+½))
-        let s = size as f64;
+    /// Writes, per channel, the triangle's field as an affine function of the position in
+    /// texels relative to the image origin, from the unsnapped UVs: with `q` the corners
+    /// in texels, `λ_b`, `λ_c` are affine in the position, and the value is
+    /// `f_a + λ_b (f_b − f_a) + λ_c (f_c − f_a)`.
+    #[inline]
+    fn setup_values<const C: usize>(&mut self, ctx: &Context<'_>, t: usize, corner: [usize; 3]) {
+        let c = if C == 0 { ctx.channels } else { C };
+        let s = ctx.size as f64;
         let q = corner.map(|k| ctx.uv[t][k].map(|x| x * s));
         let (bx, by) = (q[1][0] - q[0][0], q[1][1] - q[0][1]);
         let (cx, cy) = (q[2][0] - q[0][0], q[2][1] - q[0][1]);
         let det = bx * cy - by * cx;
-        // λb = ((s - a) × (c - a)) / det, λc = ((b - a) × (s - a)) / det
-        let (lb_x, lb_y) = (cy / det, -cx / det);
-        let (lc_x, lc_y) = (-by / det, bx / det);
-        let degenerate = det == 0.0 || !det.is_finite();
+        // λ_b = ((s − a) × (c − a)) / det, λ_c = ((b − a) × (s − a)) / det; a triangle that
+        // is flat in f64 but not once snapped (sub-1/256-texel slivers) takes the mean
+        let (lbx, lby, lcx, lcy) = if det != 0.0 && det.is_finite() {
+            let inv = 1.0 / det;
+            (cy * inv, -cx * inv, -by * inv, bx * inv)
+        } else {
+            (0.0, 0.0, 0.0, 0.0)
+        };
+        let flat = !(det != 0.0 && det.is_finite());
+        let v = ctx.faces[t];
+        let vert = corner.map(|k| v[k] as usize * c);
+        for (k, a) in self.affine[..c].iter_mut().enumerate() {
+            let fa = f64::from(ctx.values[vert[0] + k]);
+            let db = f64::from(ctx.values[vert[1] + k]) - fa;
+            let dc = f64::from(ctx.values[vert[2] + k]) - fa;
+            let gx = db * lbx + dc * lcx;
+            let gy = db * lby + dc * lcy;
+            // value(x, y) = fa + gx (x − ax) + gy (y − ay), texel centre at (x + ½, y + ½)
+            let base = if flat {
+                fa + (db + dc) / 3.0
+            } else {
+                fa + gx * (0.5 - q[0][0]) + gy * (0.5 - q[0][1])
+            };
+            *a = [base, gx, gy, 0.0];
+        }
+    }
 
+    #[inline]
+    fn scan<T: Edge, const C: usize>(
+        &mut self,
+        ctx: &Context<'_>,
+        e: [T; 3],
+        dx: [T; 3],
+        dy: [T; 3],
+        [x0, x1, y0, y1]: [usize; 4],
+    ) {
+        let size = ctx.size;
+        let c = if C == 0 { ctx.channels } else { C };
+        let zero = T::ZERO;
+        let affine = &mut self.affine[..c];
         let mut row_e = e;
         for y in y0..=y1 {
-            let mut e = row_e;
-            let py = y as f64 + 0.5 - q[0][1];
+            for a in affine.iter_mut() {
+                a[3] = a[0] + a[2] * y as f64;
+            }
             let row = (y - self.row0) * size;
+            let mut e = row_e;
             for x in x0..=x1 {
-                if e[0] > zero && e[1] > zero && e[2] > zero {
+                // one branch, not three (the outcome is hard to predict on small triangles)
+                if (e[0] > zero) & (e[1] > zero) & (e[2] > zero) {
                     let i = row + x;
-                    match self.coverage[i] {
-                        EMPTY => {
-                            self.coverage[i] = INSIDE;
-                            let px = x as f64 + 0.5 - q[0][0];
-                            let (lb, lc) = if degenerate {
-                                (1.0 / 3.0, 1.0 / 3.0)
-                            } else {
-                                (lb_x * px + lb_y * py, lc_x * px + lc_y * py)
-                            };
-                            let out = &mut self.pixels[i * c..(i + 1) * c];
-                            for (k, o) in out.iter_mut().enumerate() {
-                                let v = &self.scratch[3 * k..3 * k + 3];
-                                *o = (v[0] + lb * v[1] + lc * v[2]) as f32;
-                            }
+                    let m = &mut self.coverage[i];
+                    if *m == EMPTY {
+                        *m = INSIDE;
+                        let xf = x as f64;
+                        let out = &mut self.pixels[i * c..i * c + c];
+                        for (o, a) in out.iter_mut().zip(affine.iter()) {
+                            *o = (a[3] + a[1] * xf) as f32;
                         }
-                        INSIDE => {
-                            self.coverage[i] = OVERLAP;
-                            self.overlapping += 1;
-                        }
-                        _ => {}
+                    } else if *m == INSIDE {
+                        *m = OVERLAP;
+                        self.overlapping += 1;
                     }
                 }
-                for k in 0..3 {
-                    e[k] = e[k] + dx[k];
-                }
+                e = [e[0] + dx[0], e[1] + dx[1], e[2] + dx[2]];
             }
-            for k in 0..3 {
-                row_e[k] = row_e[k] + dy[k];
-            }
+            row_e = [row_e[0] + dy[0], row_e[1] + dy[1], row_e[2] + dy[2]];
         }
     }
 }
