@@ -206,7 +206,10 @@ fn main() {
         .and_then(|s| s.parse::<usize>().ok())
     {
         let mut r = Raster::empty(size, CHANNELS);
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap();
         pool.install(|| {
             for _ in 0..n {
                 texture::rasterize_into(&mut r, &fine.faces, &fine.uv, &fine.stain, CHANNELS, size)

@@ -141,19 +141,16 @@ pub fn write_exr_with(
     let planes: Vec<Vec<f16>> = (0..c)
         .map(|k| {
             let mut plane = vec![f16::ZERO; width * height];
-            plane
-                .par_chunks_mut(width)
-                .enumerate()
-                .for_each_init(
-                    || vec![0.0f32; width],
-                    |row, (r, out)| {
-                        let src = &pixels[(height - 1 - r) * width * c..][..width * c];
-                        for (v, texel) in row.iter_mut().zip(src.chunks_exact(c)) {
-                            *v = texel[k];
-                        }
-                        out.convert_from_f32_slice(row);
-                    },
-                );
+            plane.par_chunks_mut(width).enumerate().for_each_init(
+                || vec![0.0f32; width],
+                |row, (r, out)| {
+                    let src = &pixels[(height - 1 - r) * width * c..][..width * c];
+                    for (v, texel) in row.iter_mut().zip(src.chunks_exact(c)) {
+                        *v = texel[k];
+                    }
+                    out.convert_from_f32_slice(row);
+                },
+            );
             plane
         })
         .collect();

@@ -91,9 +91,8 @@ pub fn pad_to(
                         *n |= m != EMPTY;
                     }
                 }
-                let near = |x: usize| {
-                    col[x] || (x > 0 && col[x - 1]) || (x + 1 < size && col[x + 1])
-                };
+                let near =
+                    |x: usize| col[x] || (x > 0 && col[x - 1]) || (x + 1 < size && col[x + 1]);
                 let mut sum = vec![0.0f64; c];
                 for x in 0..size {
                     if row[x] != EMPTY || !near(x) {
