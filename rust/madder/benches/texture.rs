@@ -200,6 +200,20 @@ fn main() {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     println!("texture: one {size}² RGBA frame, {cores} cores");
     let fine = load("fine", 560);
+    // MADDER_BENCH_PROFILE_EXR=n: only n EXR writes of the fine load's stain (for perf)
+    if let Some(n) = std::env::var("MADDER_BENCH_PROFILE_EXR")
+        .ok()
+        .and_then(|s| s.parse::<usize>().ok())
+    {
+        let mut r = texture::rasterize(&fine.faces, &fine.uv, &fine.stain, CHANNELS, size).unwrap();
+        texture::pad(&mut r, texture::DEFAULT_PADDING);
+        let path = std::env::temp_dir().join(format!("madder-bench-{}.exr", std::process::id()));
+        for _ in 0..n {
+            texture::write_exr(&path, &r.pixels, size, size, &["R", "G", "B", "A"]).unwrap();
+        }
+        let _ = std::fs::remove_file(&path);
+        return;
+    }
     // MADDER_BENCH_PROFILE=n: only n rasterizations of the fine load, one thread (for perf)
     if let Some(n) = std::env::var("MADDER_BENCH_PROFILE")
         .ok()

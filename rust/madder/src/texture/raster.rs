@@ -298,13 +298,19 @@ fn face_error(
     })
 }
 
+/// `x` (within ±2^51) rounded to the nearest integer, ties to even.
+#[inline]
+fn round_near(x: f64) -> f64 {
+    const MAGIC: f64 = 6_755_399_441_055_744.0; // 1.5 · 2^52
+    (x + MAGIC) - MAGIC
+}
+
 /// `x` rounded to the nearest integer (ties to even), clamped to `±CLAMP`, as an `f64`:
 /// adding and removing 1.5·2⁵² leaves the integer part in the default rounding mode
 /// (inline, where `f64::round` is a library call on baseline x86-64).
 #[inline]
 fn round_clamped(x: f64) -> f64 {
-    const MAGIC: f64 = 6_755_399_441_055_744.0; // 1.5 · 2^52
-    (x.max(-CLAMP).min(CLAMP) + MAGIC) - MAGIC
+    round_near(x.max(-CLAMP).min(CLAMP))
 }
 
 /// The texel rows (or columns) whose centres `256·i + 128` lie in the snapped range
@@ -330,19 +336,6 @@ fn rows(uv: &[[f64; 2]; 3], scale: f64, size: usize) -> Option<(usize, usize)> {
         round_clamped(uv[2][1] * scale),
     ];
     centres(v[0].min(v[1]).min(v[2]), v[0].max(v[1]).max(v[2]), size)
-}
-
-/// The snapped corners of a triangle (integers in `f64`), and the texel columns `x0..=x1`
-/// whose centres its bounding box meets, clipped to the image; `None` when it meets none.
-#[inline]
-fn snapped(uv: &[[f64; 2]; 3], scale: f64, size: usize) -> Option<([[f64; 2]; 3], [usize; 2])> {
-    let p = uv.map(|c| [round_clamped(c[0] * scale), round_clamped(c[1] * scale)]);
-    let (x0, x1) = centres(
-        p[0][0].min(p[1][0]).min(p[2][0]),
-        p[0][0].max(p[1][0]).max(p[2][0]),
-        size,
-    )?;
-    Some((p, [x0, x1]))
 }
 
 /// For each band, the triangles that may cover one of its texels, in index order; checks
@@ -424,7 +417,10 @@ fn fill(
                 pixels,
                 coverage,
                 overlapping: 0,
-                affine: vec![[0.0; 4]; c],
+                base: vec![0.0; c],
+                gx: vec![0.0; c],
+                gy: vec![0.0; c],
+                rowv: vec![0.0; c],
             };
             match c {
                 1 => band.triangles::<1>(ctx, list),
@@ -445,9 +441,12 @@ struct Band<'a> {
     pixels: &'a mut [f32],
     coverage: &'a mut [u8],
     overlapping: usize,
-    /// per channel, the value as an affine function of the texel centre (relative to
-    /// corner a, in texels): `[value at a, ∂/∂x, ∂/∂y, value at the row's x = 0]`
-    affine: Vec<[f64; 4]>,
+    /// per channel, the value at the centre of texel `(x, y)` is
+    /// `base + gx · x + gy · y`; `rowv = base + gy · y` for the row being scanned
+    base: Vec<f64>,
+    gx: Vec<f64>,
+    gy: Vec<f64>,
+    rowv: Vec<f64>,
 }
 
 /// The arithmetic of the edge functions: `f64` on the fast path (exact, see the module
@@ -493,7 +492,7 @@ fn area2<T: Edge>(p: &[[f64; 2]; 3]) -> T {
 /// The three edge functions of a counter-clockwise triangle at the centre `s`, plus 1 on
 /// an owning edge (so that a centre is inside when all three are `> 0`: the functions are
 /// integers), and their changes per texel to the right and per row up.
-#[inline]
+#[inline(always)]
 fn edges<T: Edge>(p: &[[f64; 2]; 3], s: [f64; 2]) -> ([T; 3], [T; 3], [T; 3]) {
     let w = T::of(SUB_TEXEL as f64);
     let mut e = [T::ZERO; 3];
@@ -520,20 +519,33 @@ impl Band<'_> {
         for &t in list {
             let t = t as usize;
             let uv = &ctx.uv[t];
-            let Some((mut p, [x0, x1])) = snapped(uv, scale, ctx.size) else {
+            let su = [uv[0][0] * scale, uv[1][0] * scale, uv[2][0] * scale];
+            let sv = [uv[0][1] * scale, uv[1][1] * scale, uv[2][1] * scale];
+            // within ±2^25 the rounding needs no clamp, and the edge functions fit f64
+            let fast = su.iter().chain(&sv).all(|x| x.abs() <= FAST_LIMIT);
+            let mut p = if fast {
+                std::array::from_fn(|k| [round_near(su[k]), round_near(sv[k])])
+            } else {
+                std::array::from_fn(|k| [round_clamped(su[k]), round_clamped(sv[k])])
+            };
+            let Some((x0, x1)) = centres(
+                p[0][0].min(p[1][0]).min(p[2][0]),
+                p[0][0].max(p[1][0]).max(p[2][0]),
+                ctx.size,
+            ) else {
                 continue;
             };
-            let (y0, y1) = centres(
+            let Some((y0, y1)) = centres(
                 p[0][1].min(p[1][1]).min(p[2][1]),
                 p[0][1].max(p[1][1]).max(p[2][1]),
                 ctx.size,
-            )
-            .expect("a binned triangle meets a row");
+            ) else {
+                continue;
+            };
             let (y0, y1) = (y0.max(band0), y1.min(band1));
             if y0 > y1 {
                 continue;
             }
-            let fast = p.iter().flatten().all(|c| c.abs() <= FAST_LIMIT);
             let area = if fast {
                 area2::<f64>(&p)
             } else {
@@ -547,7 +559,9 @@ impl Band<'_> {
                 p.swap(1, 2);
                 corner.swap(1, 2);
             }
-            self.setup_values::<C>(ctx, t, corner);
+            // the corners in texels, unsnapped (su, sv are in 1/256 texel)
+            let q = corner.map(|k| [su[k] / SUB_TEXEL as f64, sv[k] / SUB_TEXEL as f64]);
+            self.setup_values::<C>(ctx, t, corner, q);
             let w = SUB_TEXEL as f64;
             let s = [x0 as f64 * w + w / 2.0, y0 as f64 * w + w / 2.0];
             let box_ = [x0, x1, y0, y1];
@@ -566,37 +580,43 @@ impl Band<'_> {
     /// in texels, `λ_b`, `λ_c` are affine in the position, and the value is
     /// `f_a + λ_b (f_b − f_a) + λ_c (f_c − f_a)`.
     #[inline]
-    fn setup_values<const C: usize>(&mut self, ctx: &Context<'_>, t: usize, corner: [usize; 3]) {
+    fn setup_values<const C: usize>(
+        &mut self,
+        ctx: &Context<'_>,
+        t: usize,
+        corner: [usize; 3],
+        q: [[f64; 2]; 3],
+    ) {
         let c = if C == 0 { ctx.channels } else { C };
-        let s = ctx.size as f64;
-        let q = corner.map(|k| ctx.uv[t][k].map(|x| x * s));
         let (bx, by) = (q[1][0] - q[0][0], q[1][1] - q[0][1]);
         let (cx, cy) = (q[2][0] - q[0][0], q[2][1] - q[0][1]);
         let det = bx * cy - by * cx;
         // λ_b = ((s − a) × (c − a)) / det, λ_c = ((b − a) × (s − a)) / det; a triangle that
         // is flat in f64 but not once snapped (sub-1/256-texel slivers) takes the mean
-        let (lbx, lby, lcx, lcy) = if det != 0.0 && det.is_finite() {
+        let flat = !(det != 0.0 && det.is_finite());
+        let (lbx, lby, lcx, lcy) = if flat {
+            (0.0, 0.0, 0.0, 0.0)
+        } else {
             let inv = 1.0 / det;
             (cy * inv, -cx * inv, -by * inv, bx * inv)
-        } else {
-            (0.0, 0.0, 0.0, 0.0)
         };
-        let flat = !(det != 0.0 && det.is_finite());
         let v = ctx.faces[t];
-        let vert = corner.map(|k| v[k] as usize * c);
-        for (k, a) in self.affine[..c].iter_mut().enumerate() {
-            let fa = f64::from(ctx.values[vert[0] + k]);
-            let db = f64::from(ctx.values[vert[1] + k]) - fa;
-            let dc = f64::from(ctx.values[vert[2] + k]) - fa;
-            let gx = db * lbx + dc * lcx;
-            let gy = db * lby + dc * lcy;
-            // value(x, y) = fa + gx (x − ax) + gy (y − ay), texel centre at (x + ½, y + ½)
-            let base = if flat {
-                fa + (db + dc) / 3.0
+        let [fa, fb, fc] = corner.map(|k| &ctx.values[v[k] as usize * c..][..c]);
+        let (base, gx, gy) = (&mut self.base[..c], &mut self.gx[..c], &mut self.gy[..c]);
+        for k in 0..c {
+            let a = f64::from(fa[k]);
+            let db = f64::from(fb[k]) - a;
+            let dc = f64::from(fc[k]) - a;
+            let x = db * lbx + dc * lcx;
+            let y = db * lby + dc * lcy;
+            // value = f_a + gx (x + ½ − a_x) + gy (y + ½ − a_y) at the centre of texel (x, y)
+            base[k] = if flat {
+                a + (db + dc) / 3.0
             } else {
-                fa + gx * (0.5 - q[0][0]) + gy * (0.5 - q[0][1])
+                a + x * (0.5 - q[0][0]) + y * (0.5 - q[0][1])
             };
-            *a = [base, gx, gy, 0.0];
+            gx[k] = x;
+            gy[k] = y;
         }
     }
 
@@ -612,34 +632,58 @@ impl Band<'_> {
         let size = ctx.size;
         let c = if C == 0 { ctx.channels } else { C };
         let zero = T::ZERO;
-        let affine = &mut self.affine[..c];
+        // the band's buffers as locals: the loop below then keeps them in registers
+        let Band {
+            row0,
+            pixels,
+            coverage,
+            overlapping,
+            base,
+            gx,
+            gy,
+            rowv,
+            ..
+        } = self;
+        let (base, gx, gy, rowv) = (&base[..c], &gx[..c], &gy[..c], &mut rowv[..c]);
+        let mut over = 0;
         let mut row_e = e;
+        let n = x1 + 1 - x0;
         for y in y0..=y1 {
-            for a in affine.iter_mut() {
-                a[3] = a[0] + a[2] * y as f64;
+            let yf = y as f64;
+            for k in 0..c {
+                rowv[k] = base[k] + gy[k] * yf;
             }
-            let row = (y - self.row0) * size;
-            let mut e = row_e;
-            for x in x0..=x1 {
+            let row = (y - *row0) * size + x0;
+            let cov = &mut coverage[row..row + n];
+            let pix = &mut pixels[row * c..(row + n) * c];
+            let [mut e0, mut e1, mut e2] = row_e;
+            let mut xf = x0 as f64;
+            let mut entered = false;
+            for (m, out) in cov.iter_mut().zip(pix.chunks_exact_mut(c)) {
                 // one branch, not three (the outcome is hard to predict on small triangles)
-                if (e[0] > zero) & (e[1] > zero) & (e[2] > zero) {
-                    let i = row + x;
-                    let m = &mut self.coverage[i];
+                let inside = (e0 > zero) & (e1 > zero) & (e2 > zero);
+                if inside {
+                    entered = true;
                     if *m == EMPTY {
                         *m = INSIDE;
-                        let xf = x as f64;
-                        let out = &mut self.pixels[i * c..i * c + c];
-                        for (o, a) in out.iter_mut().zip(affine.iter()) {
-                            *o = (a[3] + a[1] * xf) as f32;
+                        for k in 0..c {
+                            out[k] = (rowv[k] + gx[k] * xf) as f32;
                         }
                     } else if *m == INSIDE {
                         *m = OVERLAP;
-                        self.overlapping += 1;
+                        over += 1;
                     }
+                } else if entered {
+                    // the covered texels of a row are contiguous: the triangle is convex
+                    break;
                 }
-                e = [e[0] + dx[0], e[1] + dx[1], e[2] + dx[2]];
+                e0 = e0 + dx[0];
+                e1 = e1 + dx[1];
+                e2 = e2 + dx[2];
+                xf += 1.0;
             }
             row_e = [row_e[0] + dy[0], row_e[1] + dy[1], row_e[2] + dy[2]];
         }
+        *overlapping += over;
     }
 }
