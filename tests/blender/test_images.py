@@ -77,7 +77,8 @@ def test_a_detail_bake_writes_the_fine_cache_and_an_image_pair_per_frame(open_fi
         refined.read_stain(f, tuple(s.bake_references), tuple(s.stain_color), *buf)
         coverage = buf[0][3::4]
         assert stain[..., 3].max() == pytest.approx(coverage.max(), rel=0.02)
-        assert stain[..., 3].min() >= 0.0 and wet[..., 0].max() == pytest.approx(buf[1].max(), rel=0.02)
+        # (interpolation rounds: −3e-7 where every vertex of a triangle is 0)
+        assert stain[..., 3].min() > -1e-6 and wet[..., 0].max() == pytest.approx(buf[1].max(), rel=0.02)
         np.testing.assert_allclose(stain[..., :3], stain[..., 3:] * np.array(s.stain_color), atol=2e-3)
     # the vertex colours still play, from the cloth-resolution cache
     scene.frame_set(6)
@@ -112,6 +113,23 @@ def test_no_uv_map_is_refused_before_anything_is_written(open_fixture):
         bpy.ops.madder.bake()
     assert "'Flag' has no UV map" in str(e.value) and "Image Sequence" in str(e.value)
     assert not os.path.exists(folder) and flag.madder.cache_file == ""
+
+
+def test_overlapping_uv_islands_bake_with_a_warning_naming_the_object(open_fixture, capsys):
+    scene = open_fixture("flag.blend")
+    scene.frame_start, scene.frame_end = 1, 2
+    flag = make_active(bpy.data.objects["Flag"])
+    flag.madder.source_group = "stain_source"
+    flag.madder.output_images = True
+    flag.madder.image_size = "512"
+    layer = flag.data.uv_layers.active
+    uv = np.empty(2 * len(layer.data), dtype=np.float32)
+    layer.data.foreach_get("uv", uv)
+    layer.data.foreach_set("uv", (uv * 2.0) % 1.0001)  # four copies of the layout, stacked
+    capsys.readouterr()
+    assert bpy.ops.madder.bake() == {"FINISHED"}
+    out = capsys.readouterr().out
+    assert "'Flag': its UV islands overlap" in out, out
 
 
 def test_a_failure_mid_sequence_keeps_the_previous_sequence_and_caches(open_fixture, monkeypatch):
@@ -241,11 +259,15 @@ def render_still(scene, path):
     return read_render(path)
 
 
-def stain_measures(stained, bare, threshold=0.03):
-    """Area (pixels) and centroid (x, y) of where the render differs from the bare cloth."""
-    mask = np.abs(stained - bare).max(axis=2) > threshold
-    ys, xs = np.nonzero(mask)
-    return mask.sum(), np.array([xs.mean(), ys.mean()])
+def stain_measures(stained, bare):
+    """The stain in a render, against the bare cloth's: its area (pixels where the
+    difference exceeds half its peak) and its centroid (x, y), weighted by the difference.
+    The vertex colours of a Detail bake are the fine stain restricted to the cloth's
+    vertices (exact in mass), so they spread its faint rim over one cloth cell: a fixed
+    low threshold would measure that rim, not the stain."""
+    d = np.abs(stained - bare).max(axis=2)
+    ys, xs = np.mgrid[: d.shape[0], : d.shape[1]]
+    return int((d > 0.5 * d.max()).sum()), np.array([(xs * d).sum(), (ys * d).sum()]) / d.sum()
 
 
 def test_renders_of_the_vertex_colours_and_of_the_images_agree(open_fixture, tmp_path):
@@ -257,17 +279,21 @@ def test_renders_of_the_vertex_colours_and_of_the_images_agree(open_fixture, tmp
     images = render_still(scene, str(tmp_path / "images.exr"))
     flag.madder.output_images = False  # the same material, fed by the attributes
     colours = render_still(scene, str(tmp_path / "colours.exr"))
-    group.mute = True  # Base Color and Roughness pass through: the bare cloth
+    nt = flag.active_material.node_tree
+    for name in ("Stain", "Coverage", "Wetness", "Deposit"):  # unfed, they are 0: the bare cloth
+        for link in group.inputs[name].links:
+            nt.links.remove(link)
     bare = render_still(scene, str(tmp_path / "bare.exr"))
     area_c, centre_c = stain_measures(colours, bare)
     area_i, centre_i = stain_measures(images, bare)
+    print(f"stain: vertex colours {area_c} px at {centre_c}, images {area_i} px at {centre_i}")
     assert area_c > 100, area_c  # a stain a render can measure
-    assert abs(area_i - area_c) < 0.05 * area_c, (area_i, area_c)
-    assert np.abs(centre_i - centre_c).max() < 0.02 * 160, (centre_i, centre_c)
+    assert abs(area_i - area_c) < 0.04 * area_c, (area_i, area_c)
+    assert np.abs(centre_i - centre_c).max() < 1.0, (centre_i, centre_c)  # pixels, of 160 × 96
 
 
 def test_an_animation_render_shows_each_frames_image(open_fixture, tmp_path):
-    """The images of frames 4–30 are replaced by a code (fully stained or bare, per frame):
+    """The images of frames 4–100 are replaced by a code (fully stained or bare, per frame):
     each rendered frame must show its own file's code, frames before the bake the first
     frame's, and frames after it the last's."""
     scene = open_fixture("disk.blend")
@@ -279,7 +305,7 @@ def test_an_animation_render_shows_each_frames_image(open_fixture, tmp_path):
     s.output_images = True
     s.output_vertex_colors = False
     s.image_size = "512"
-    first, last = 3, 30  # scene frames start at 0: 1 and 2 come before the bake
+    first, last = 3, 100  # scene frames start at 0: 1 and 2 come before the bake
     scene.frame_start, scene.frame_end = first, last
     assert bpy.ops.madder.bake() == {"FINISHED"}
     bpy.ops.madder.add_stain_shader()
