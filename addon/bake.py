@@ -254,7 +254,7 @@ class BakeJob:
     def status(self):
         """What the job is doing, for the progress line."""
         if self.export is not None:
-            return f"writing the images of frame {self.export.frame}"
+            return f"writing the images ({self.export.done} of {self.export.total} frames done)"
         return f"baking frame {self.frame}"
 
     def step(self):

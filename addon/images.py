@@ -129,8 +129,9 @@ class SequenceExport:
             tuple(obj.madder.stain_color), size, folder, name)
         self.first, self.last = self.exporter.first, self.exporter.last
         self.size = self.exporter.size
-        self._frames = iter(self.exporter.frames())
-        self.frame = None
+        # one image per step: a 4096² image takes about a second to write
+        self._work = iter([(f, kind) for f in self.exporter.frames() for kind in KINDS])
+        self.frame = None  # the last frame whose images are all written
         self.done = 0
         self.overlapping = None
 
@@ -139,11 +140,11 @@ class SequenceExport:
         return self.last - self.first + 1
 
     def step(self):
-        """Writes the next frame's images; returns False once the last is written."""
-        frame = next(self._frames)
+        """Writes the next image; returns False once the last is written."""
+        frame, kind = next(self._work)
         where = dict(object=self.obj.name, frame=frame)
         try:
-            self.exporter.export(frame)
+            self.exporter.export(frame, (kind,))
         except self.madder.MadderError as e:
             raise ExportError(f"'{self.obj.name}' at frame {frame}: {e}",
                               filename=getattr(e, "filename", None), **where) from e
@@ -152,10 +153,11 @@ class SequenceExport:
         except OSError as e:
             raise ExportError(f"'{self.obj.name}' at frame {frame}: cannot write {e.filename}: {e.strerror or e}",
                               filename=e.filename, **where) from e
-        self.frame = frame
-        self.done += 1
         self.overlapping = self.exporter.overlapping
-        return frame < self.last
+        if kind == KINDS[-1]:
+            self.frame = frame
+            self.done += 1
+        return not (frame == self.last and kind == KINDS[-1])
 
     def warnings(self):
         n = self.overlapping

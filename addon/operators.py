@@ -187,8 +187,7 @@ class MADDER_OT_export_textures(bpy.types.Operator):
             return self._stop(context, {"CANCELLED"})
         context.window_manager.progress_update(int(100 * job.done / job.total))
         context.workspace.status_text_set(
-            f"Madder: '{job.obj.name}': writing the images of frame {job.frame} ({job.done}/{job.total}) "
-            "— Esc to cancel")
+            f"Madder: '{job.obj.name}': writing the images ({job.done}/{job.total} frames) — Esc to cancel")
         return {"RUNNING_MODAL"}
 
     def _stop(self, context, result):

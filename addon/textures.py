@@ -12,7 +12,8 @@ every path derived from the cache's (so Save As and Relocate Cache carry them al
     <folder>/<stem>_images/<stem>_stain.####.exr
                                            RGBA: the solute colour × coverage, coverage
     <folder>/<stem>_images/<stem>_wet.####.exr
-                                           R: wetness, G: deposit (B: 0)
+                                           R: wetness, G: deposit (Blender reads the
+                                           missing B as 0, A as 1)
 
 `####` is the scene frame (4 digits, more when needed). The values are exactly the
 playback attributes (`CacheReader.read_stain`, core `io::attributes`), rasterized over
@@ -42,7 +43,7 @@ KINDS = ("stain", "wet")
 EXT = ".exr"
 DIGITS = 4
 STAIN_CHANNELS = ("R", "G", "B", "A")
-WET_CHANNELS = ("R", "G", "B")
+WET_CHANNELS = ("R", "G")
 
 
 # -- names
@@ -231,6 +232,7 @@ class Exporter:
         self._deposit = np.zeros(n, dtype=np.float32)
         self._wet_values = np.zeros((n, len(WET_CHANNELS)), dtype=np.float32)
         self.overlapping = None
+        self._read = None  # the frame whose values the buffers hold
 
     @property
     def first(self):
@@ -244,21 +246,26 @@ class Exporter:
         return range(self.first, self.last + 1)
 
     def values(self, frame):
-        """Frame `frame`'s per-vertex image values: (RGBA (N, 4), wet (N, 3): wetness,
-        deposit, 0), exactly the playback attributes."""
+        """Frame `frame`'s per-vertex image values: (RGBA (N, 4), wet (N, 2): wetness and
+        deposit), exactly the playback attributes."""
         self.reader.read_stain(frame, self.references, self.color, self._rgba, self._wet, self._deposit)
         self._wet_values[:, 0] = self._wet
         self._wet_values[:, 1] = self._deposit
+        self._read = frame
         return self._rgba.reshape(-1, 4), self._wet_values
 
-    def export(self, frame):
-        """Writes scene `frame`'s two images (and, for the first frame, the file before it
-        as well: see the module doc). Returns the paths written."""
-        rgba, wet = self.values(frame)
+    def export(self, frame, kinds=KINDS):
+        """Writes scene `frame`'s images of `kinds` (both by default; one at a time keeps a
+        modal operator's steps short at 4096 px), and, for the first frame, the file before
+        it as well (see the module doc). Returns the paths written."""
+        if self._read != frame:
+            self.values(frame)
         written = []
-        for kind, values, channels in (("stain", rgba, STAIN_CHANNELS), ("wet", wet, WET_CHANNELS)):
+        for kind in kinds:
+            values, channels = ((self._rgba.reshape(-1, 4), STAIN_CHANNELS) if kind == "stain"
+                                else (self._wet_values, WET_CHANNELS))
             image, overlapping = self.madder.rasterize(self.faces, self.uv, values, self.size, self.padding)
-            if self.overlapping is None or kind == "stain" and frame == self.first:
+            if self.overlapping is None:  # the same on every frame: the UV layout's
                 self.overlapping = int(overlapping)
             path = frame_file(self.folder, self.name, kind, frame)
             self.madder.write_exr(path, image, channels)

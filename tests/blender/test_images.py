@@ -316,7 +316,7 @@ def test_an_animation_render_shows_each_frames_image(open_fixture, tmp_path):
     full[...] = (0.3, 0.02, 0.07, 1.0)
     for f, stained in code.items():
         madder.write_exr(image_file(disk, "stain", f), full if stained else np.zeros_like(full))
-        madder.write_exr(image_file(disk, "wet", f), np.zeros((512, 512, 3), np.float32), ("R", "G", "B"))
+        madder.write_exr(image_file(disk, "wet", f), np.zeros((512, 512, 2), np.float32), ("R", "G"))
     setup_render(scene, (24, 24), samples=1)
     scene.render.image_settings.file_format = "PNG"
     scene.render.filepath = str(tmp_path / "f####")
