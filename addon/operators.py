@@ -108,7 +108,10 @@ class MADDER_OT_bake(bpy.types.Operator):
         handlers.apply_frame(obj, context.scene.frame_current)
         for w in warnings:
             self.report({"WARNING"}, f"Madder: '{obj.name}': {w}")
-        self.report({"INFO"}, f"Madder: baked '{obj.name}' to {path}")
+        also = ""
+        if obj.madder.image_baked:
+            also = f", its images to {images.paths(obj, path)[1]}"
+        self.report({"INFO"}, f"Madder: baked '{obj.name}' to {path}{also}")
 
 
 class MADDER_OT_free_bake(bpy.types.Operator):
