@@ -13,6 +13,7 @@ mod mesh;
 mod point_cache;
 mod simulate;
 mod stain;
+mod texture;
 mod threads;
 mod weave;
 
@@ -30,5 +31,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<io::CacheReader>()?;
     weave::register(m)?;
     point_cache::register(m)?;
+    texture::register(m)?;
     Ok(())
 }

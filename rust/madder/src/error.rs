@@ -275,6 +275,55 @@ pub enum WeaveError {
     Solve(#[from] SolveError),
 }
 
+/// Bad input to the UV texture rasterizer, or an image file that could not be written or
+/// read (module [`crate::texture`]). Faces and corners are counted from 0 in input order;
+/// a file error names the file the caller asked for (the temporary file beside it is an
+/// implementation detail).
+#[derive(Debug, thiserror::Error)]
+pub enum TextureError {
+    #[error("{name} {size} is out of range (1..={max} texels)")]
+    Size {
+        /// `"size"`, `"width"` or `"height"`
+        name: &'static str,
+        size: usize,
+        max: usize,
+    },
+    #[error("a texture needs at least one channel")]
+    NoChannels,
+    #[error("{name} has {got} entries, expected {expected}")]
+    Length {
+        name: &'static str,
+        expected: usize,
+        got: usize,
+    },
+    #[error("values has {got} entries, not a whole number of vertices of {channels} channels")]
+    ValuesLength { got: usize, channels: usize },
+    #[error(
+        "face {face} references vertex {vertex}, but the values cover only {n_vertices} vertices"
+    )]
+    VertexOutOfRange {
+        face: usize,
+        vertex: u32,
+        n_vertices: usize,
+    },
+    #[error("face {face}, corner {corner} has a non-finite UV ({u}, {v})")]
+    NonFiniteUv {
+        face: usize,
+        corner: usize,
+        u: f64,
+        v: f64,
+    },
+    #[error("image channel name {name:?}: {reason}")]
+    ChannelName { name: String, reason: &'static str },
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{path}: {reason}")]
+    Exr { path: PathBuf, reason: String },
+}
+
 /// Any core error. The binding crate maps each variant to a typed Python exception.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
@@ -290,6 +339,8 @@ pub enum Error {
     Weave(#[from] WeaveError),
     #[error(transparent)]
     PointCache(#[from] PointCacheError),
+    #[error(transparent)]
+    Texture(#[from] TextureError),
 }
 
 pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -12,6 +12,8 @@
 //!   diffusion tensor per fabric (§2.2.2, eqs. 2.3–2.4).
 //! - [`io`]: the Madder cache file, and PC2/MDD point caches (the Mesh Cache modifier's
 //!   formats) read and written directly, so exported cloth bakes without a scene.
+//! - [`texture`]: per-vertex fields rasterized into UV space, padded past the UV islands,
+//!   and written as OpenEXR images.
 //!
 //! Conventions: `f64` inside solves, `f32` for bulk arrays at the boundary, `u32` indices;
 //! every loop that runs in parallel writes disjoint outputs, so results are bit-identical
@@ -23,6 +25,7 @@ pub mod mesh;
 pub mod ops;
 pub mod rng;
 pub mod stain;
+pub mod texture;
 pub mod weave;
 
 pub use error::{CacheError, Error, MeshError, ParamError, Result, SolveError, WeaveError};

@@ -19,7 +19,10 @@ from ._core import (
     fabric_tensor,
     fabric_tile,
     homogenize,
+    rasterize,
+    read_exr,
     weft_directions,
+    write_exr,
     write_mdd,
     write_pc2,
 )
@@ -62,7 +65,10 @@ __all__ = [
     "fabric_tensor",
     "fabric_tile",
     "homogenize",
+    "rasterize",
+    "read_exr",
     "weft_directions",
+    "write_exr",
     "write_mdd",
     "write_pc2",
 ]

@@ -1,0 +1,289 @@
+//! OpenEXR images: a rasterized field written as a half-float EXR file (and read back).
+//!
+//! ## Why OpenEXR half, with the `exr` crate
+//! Stain densities are linear quantities that span orders of magnitude (a faint halo next
+//! to a saturated centre); 16-bit floats keep 11 significant bits at every magnitude from
+//! 6·10⁻⁵ to 65504, where an 8- or 16-bit integer PNG would have to choose a range. Blender
+//! reads EXR natively (as linear data, no colour transform), in image sequences too. The
+//! `exr` crate is pure Rust without `unsafe`, and is the EXR implementation of the `image`
+//! crate family.
+//!
+//! ## Layout
+//! One layer, scan-line blocks, in increasing line order; one half-float channel per
+//! entry of `channels`, named as given (EXR stores channels sorted by name; readers find
+//! them by name: `R`, `G`, `B`, `A` are colour and alpha to Blender). The in-memory image
+//! is row-major with row 0 at the **bottom** (as Blender's `Image.pixels` and
+//! [`Raster`](super::Raster)); EXR scan lines go top to bottom, so rows are flipped on
+//! write and on read. Values round to the nearest half (ties to even); beyond ±65504 they
+//! become ±∞, and NaN stays NaN.
+//!
+//! ## Compression
+//! [`Compression::Rle`] by default. Bake output is mostly empty (the stain covers a small
+//! part of the UV layout), and run-length encoding collapses the empty runs at memory
+//! speed; the ZIP variants compress dense pictures better but cost several times the
+//! time of the rest of the frame, and PIZ (a wavelet and Huffman coder) more still. The
+//! figures behind the choice (2048² RGBA, 2 cores) are in `benches/texture.rs`'s output
+//! and in ARCHITECTURE.md.
+//!
+//! ## Safety
+//! The file is written to a temporary file in the target's folder, synced, and renamed
+//! over the target: a failure (unwritable folder, full disk) never leaves a partial file
+//! under the final name, and a previous image there stays whole. The temporary file is
+//! removed on failure. Errors name the target path.
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use exr::prelude as x;
+use half::f16;
+use half::slice::HalfFloatSliceExt;
+use rayon::prelude::*;
+
+use super::raster::MAX_SIZE;
+use crate::error::TextureError;
+
+/// How the scan lines of an EXR file are compressed (all lossless).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Compression {
+    /// Raw half floats: the largest file, the least work.
+    None,
+    /// Run-length encoding of the bytes (after the predictor EXR applies): cheap, and
+    /// very effective on empty regions. The default.
+    Rle,
+    /// zlib (deflate) of each scan line.
+    Zip1,
+    /// zlib of blocks of 16 scan lines.
+    Zip16,
+    /// Wavelet transform and Huffman coding of blocks of 32 scan lines.
+    Piz,
+}
+
+impl Compression {
+    /// All of them, for benchmarks and tests.
+    pub const ALL: [Compression; 5] = [
+        Compression::None,
+        Compression::Rle,
+        Compression::Zip1,
+        Compression::Zip16,
+        Compression::Piz,
+    ];
+
+    fn to_exr(self) -> x::Compression {
+        match self {
+            Compression::None => x::Compression::Uncompressed,
+            Compression::Rle => x::Compression::RLE,
+            Compression::Zip1 => x::Compression::ZIP1,
+            Compression::Zip16 => x::Compression::ZIP16,
+            Compression::Piz => x::Compression::PIZ,
+        }
+    }
+}
+
+/// The compression [`write_exr`] uses (see the module doc for why).
+pub const DEFAULT_COMPRESSION: Compression = Compression::Rle;
+
+/// An image read from an EXR file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExrImage {
+    pub width: usize,
+    pub height: usize,
+    /// Channel names, in the order of `pixels`' values: `R`, `G`, `B`, `A` first (those
+    /// present), then the others by name (the file's order).
+    pub channels: Vec<String>,
+    /// `height × width × channels` values, row-major, row 0 at the bottom.
+    pub pixels: Vec<f32>,
+}
+
+/// Writes `pixels` (`height × width × channels.len()` values, row-major, row 0 at the
+/// bottom) as a half-float OpenEXR file at `path`, with [`DEFAULT_COMPRESSION`].
+pub fn write_exr(
+    path: impl AsRef<Path>,
+    pixels: &[f32],
+    width: usize,
+    height: usize,
+    channels: &[&str],
+) -> Result<(), TextureError> {
+    write_exr_with(path, pixels, width, height, channels, DEFAULT_COMPRESSION)
+}
+
+/// [`write_exr`] with the given compression.
+pub fn write_exr_with(
+    path: impl AsRef<Path>,
+    pixels: &[f32],
+    width: usize,
+    height: usize,
+    channels: &[&str],
+    compression: Compression,
+) -> Result<(), TextureError> {
+    let path = path.as_ref();
+    for (name, n) in [("width", width), ("height", height)] {
+        if n == 0 || n > MAX_SIZE {
+            return Err(TextureError::Size {
+                name,
+                size: n,
+                max: MAX_SIZE,
+            });
+        }
+    }
+    check_names(channels)?;
+    let c = channels.len();
+    if pixels.len() != width * height * c {
+        return Err(TextureError::Length {
+            name: "image",
+            expected: width * height * c,
+            got: pixels.len(),
+        });
+    }
+
+    // one planar half-float buffer per channel, scan lines top to bottom
+    let planes: Vec<Vec<f16>> = (0..c)
+        .map(|k| {
+            let mut plane = vec![f16::ZERO; width * height];
+            plane.par_chunks_mut(width).enumerate().for_each_init(
+                || vec![0.0f32; width],
+                |row, (r, out)| {
+                    let src = &pixels[(height - 1 - r) * width * c..][..width * c];
+                    for (v, texel) in row.iter_mut().zip(src.chunks_exact(c)) {
+                        *v = texel[k];
+                    }
+                    out.convert_from_f32_slice(row);
+                },
+            );
+            plane
+        })
+        .collect();
+    let list = channels
+        .iter()
+        .zip(planes)
+        .map(|(name, plane)| x::AnyChannel::new(*name, x::FlatSamples::F16(plane)))
+        .collect();
+    let layer = x::Layer::new(
+        (width, height),
+        x::LayerAttributes::default(),
+        x::Encoding {
+            compression: compression.to_exr(),
+            blocks: x::Blocks::ScanLines,
+            line_order: x::LineOrder::Increasing,
+        },
+        x::AnyChannels::sort(list),
+    );
+    let image = x::Image::from_layer(layer);
+
+    let tmp = temporary(path);
+    let io = |source| TextureError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let result = (|| {
+        let mut out = BufWriter::with_capacity(1 << 20, File::create(&tmp).map_err(io)?);
+        x::WritableImage::write(&image)
+            .to_buffered(&mut out)
+            .map_err(|e| exr_error(path, e))?;
+        out.flush().map_err(io)?;
+        let file = out.into_inner().map_err(|e| io(e.into_error()))?;
+        file.sync_all().map_err(io)?;
+        drop(file);
+        std::fs::rename(&tmp, path).map_err(io)
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// Reads the first layer of an EXR file at its full resolution, every channel as `f32`.
+pub fn read_exr(path: impl AsRef<Path>) -> Result<ExrImage, TextureError> {
+    let path = path.as_ref();
+    // open it ourselves first: a missing or unreadable file is an I/O error naming the path
+    File::open(path).map_err(|source| TextureError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let image = x::read_first_flat_layer_from_file(path).map_err(|e| exr_error(path, e))?;
+    let layer = image.layer_data;
+    let (width, height) = (layer.size.width(), layer.size.height());
+    let mut list: Vec<&x::AnyChannel<x::FlatSamples>> = layer.channel_data.list.iter().collect();
+    let rank = |name: &str| {
+        ["R", "G", "B", "A"]
+            .iter()
+            .position(|&n| n == name)
+            .unwrap_or(4)
+    };
+    list.sort_by_key(|ch| rank(&ch.name.to_string()));
+    let c = list.len();
+    let mut pixels = vec![0.0f32; width * height * c];
+    for (k, ch) in list.iter().enumerate() {
+        let plane: Vec<f32> = match &ch.sample_data {
+            x::FlatSamples::F16(v) => {
+                let mut out = vec![0.0f32; v.len()];
+                v.convert_to_f32_slice(&mut out);
+                out
+            }
+            x::FlatSamples::F32(v) => v.clone(),
+            x::FlatSamples::U32(v) => v.iter().map(|&u| u as f32).collect(),
+        };
+        for r in 0..height {
+            let src = &plane[r * width..(r + 1) * width];
+            let row = height - 1 - r;
+            for (xx, &v) in src.iter().enumerate() {
+                pixels[(row * width + xx) * c + k] = v;
+            }
+        }
+    }
+    Ok(ExrImage {
+        width,
+        height,
+        channels: list.iter().map(|ch| ch.name.to_string()).collect(),
+        pixels,
+    })
+}
+
+fn check_names(channels: &[&str]) -> Result<(), TextureError> {
+    if channels.is_empty() {
+        return Err(TextureError::NoChannels);
+    }
+    for (i, name) in channels.iter().enumerate() {
+        let bad = |reason| TextureError::ChannelName {
+            name: name.to_string(),
+            reason,
+        };
+        if name.is_empty() {
+            return Err(bad("a channel name cannot be empty"));
+        }
+        // EXR names are NUL-terminated byte strings of at most 255 bytes
+        if name.len() > 255 || name.contains('\0') || !name.is_ascii() {
+            return Err(bad("must be 1 to 255 ASCII characters without NUL"));
+        }
+        if channels[..i].contains(name) {
+            return Err(bad("appears twice"));
+        }
+    }
+    Ok(())
+}
+
+fn exr_error(path: &Path, e: x::Error) -> TextureError {
+    match e {
+        x::Error::Io(source) => TextureError::Io {
+            path: path.to_path_buf(),
+            source,
+        },
+        other => TextureError::Exr {
+            path: path.to_path_buf(),
+            reason: other.to_string(),
+        },
+    }
+}
+
+/// A temporary name beside `path`, unique in this process.
+fn temporary(path: &Path) -> PathBuf {
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let mut name = path.file_name().unwrap_or_default().to_os_string();
+    name.push(format!(
+        ".tmp{}-{}",
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::Relaxed)
+    ));
+    path.with_file_name(name)
+}
