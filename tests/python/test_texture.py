@@ -47,6 +47,14 @@ def test_shapes_and_the_layout_of_blender_pixels():
     image1, _ = madder.rasterize(faces, uv[faces], values[:, 1].copy(), 16)
     assert image1.shape == (16, 16)
     np.testing.assert_allclose(image1, linear(centres(16))[..., 1], rtol=0, atol=2e-6)
+    # into a reused buffer: the same image, the same array back; a wrong one is refused
+    out = np.full((32, 32, 3), 7.0, np.float32)
+    again, n = madder.rasterize(faces, uv[faces], values, 32, out=out)
+    assert again is out and n == 0 and np.array_equal(out, image)
+    with pytest.raises(madder.ParameterError, match="shape"):
+        madder.rasterize(faces, uv[faces], values, 32, out=np.zeros((32, 32, 4), np.float32))
+    with pytest.raises(madder.ParameterError, match="C-contiguous"):
+        madder.rasterize(faces, uv[faces], values, 32, out=np.zeros((32, 64, 3), np.float32)[:, ::2])
     # float64 and float32 UVs, any thread count: the same bits
     a, _ = madder.rasterize(faces, uv[faces], values, 50, threads=1)
     b, _ = madder.rasterize(faces, uv[faces].astype(np.float32), values, 50, threads=2)

@@ -582,8 +582,8 @@ fn overlapping_islands_are_counted_and_the_first_triangle_wins() {
     fuv.extend_from_within(..);
     let mut faces = m.faces.clone();
     faces.extend(m.faces.iter().map(|f| [f[0], f[2], f[1]]));
-    for t in n..2 * n {
-        fuv[t].swap(1, 2);
+    for t in &mut fuv[n..] {
+        t.swap(1, 2);
     }
     let r = rasterize(&faces, &fuv, &vec![1.0; m.uv.len()], 1, 64).unwrap();
     assert_eq!(r.overlapping, 64 * 64);

@@ -310,7 +310,7 @@ fn round_near(x: f64) -> f64 {
 /// (inline, where `f64::round` is a library call on baseline x86-64).
 #[inline]
 fn round_clamped(x: f64) -> f64 {
-    round_near(x.max(-CLAMP).min(CLAMP))
+    round_near(x.clamp(-CLAMP, CLAMP))
 }
 
 /// The texel rows (or columns) whose centres `256·i + 128` lie in the snapped range
