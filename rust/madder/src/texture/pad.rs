@@ -106,8 +106,7 @@ pub fn pad_to(
                     }
                     let mut sum = vec![0.0f64; c];
                     for x in 0..size {
-                        let near =
-                            col[x] || (x > 0 && col[x - 1]) || (x + 1 < size && col[x + 1]);
+                        let near = col[x] || (x > 0 && col[x - 1]) || (x + 1 < size && col[x + 1]);
                         if row[x] == EMPTY && near && mean(x, y, &mut sum).is_some() {
                             xs.push(x as u32);
                             vals.extend(sum.iter().map(|&s| s as f32));
