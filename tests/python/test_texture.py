@@ -139,6 +139,10 @@ def test_bad_input_raises_typed_errors_naming_what_is_wrong(tmp_path):
     assert e.value.face is not None and e.value.vertex >= 4 and e.value.n_vertices == 4
     assert isinstance(e.value, ValueError)
 
+    with pytest.raises(madder.ParameterError) as e:
+        madder.rasterize(faces, fuv, np.zeros((len(uv), 65), np.float32), 8)
+    assert (e.value.name, e.value.value, e.value.max) == ("channels", 65, 64)
+
     image = np.zeros((4, 4, 3), np.float32)
     with pytest.raises(madder.ParameterError, match="3 channels"):
         madder.write_exr(tmp_path / "x.exr", image)

@@ -846,7 +846,15 @@ fn bad_input_is_the_typed_error_naming_the_element() {
     }
     assert!(matches!(
         rasterize(&f, &tri, &v, 0, 8),
-        Err(TextureError::NoChannels)
+        Err(TextureError::Channels {
+            channels: 0,
+            max: 64
+        })
+    ));
+    // a huge channel count is refused before anything is allocated
+    assert!(matches!(
+        rasterize(&[], &[], &[], 1 << 40, 16384),
+        Err(TextureError::Channels { max: 64, .. })
     ));
     assert!(matches!(
         rasterize(&f, &[], &v, 1, 8),
@@ -948,7 +956,10 @@ fn bad_input_is_the_typed_error_naming_the_element() {
     ));
     assert!(matches!(
         write_exr(&p, &img, 3, 4, &[]),
-        Err(TextureError::NoChannels)
+        Err(TextureError::Channels {
+            channels: 0,
+            max: 64
+        })
     ));
     assert!(matches!(
         write_exr(&p, &img, 2, 3, &["R", "R"]),

@@ -59,7 +59,7 @@ use half::f16;
 use half::slice::HalfFloatSliceExt;
 use rayon::prelude::*;
 
-use super::raster::MAX_SIZE;
+use super::raster::{MAX_CHANNELS, MAX_SIZE};
 use crate::error::TextureError;
 
 /// How the scan lines of an EXR file are compressed (all lossless).
@@ -437,8 +437,11 @@ pub fn read_exr(path: impl AsRef<Path>) -> Result<ExrImage, TextureError> {
 }
 
 fn check_names(channels: &[&str]) -> Result<(), TextureError> {
-    if channels.is_empty() {
-        return Err(TextureError::NoChannels);
+    if channels.is_empty() || channels.len() > MAX_CHANNELS {
+        return Err(TextureError::Channels {
+            channels: channels.len(),
+            max: MAX_CHANNELS,
+        });
     }
     for (i, name) in channels.iter().enumerate() {
         let bad = |reason| TextureError::ChannelName {
