@@ -47,6 +47,14 @@ def test_shapes_and_the_layout_of_blender_pixels():
     image1, _ = madder.rasterize(faces, uv[faces], values[:, 1].copy(), 16)
     assert image1.shape == (16, 16)
     np.testing.assert_allclose(image1, linear(centres(16))[..., 1], rtol=0, atol=2e-6)
+    # into a reused buffer: the same image, the same array back; a wrong one is refused
+    out = np.full((32, 32, 3), 7.0, np.float32)
+    again, n = madder.rasterize(faces, uv[faces], values, 32, out=out)
+    assert again is out and n == 0 and np.array_equal(out, image)
+    with pytest.raises(madder.ParameterError, match="shape"):
+        madder.rasterize(faces, uv[faces], values, 32, out=np.zeros((32, 32, 4), np.float32))
+    with pytest.raises(madder.ParameterError, match="C-contiguous"):
+        madder.rasterize(faces, uv[faces], values, 32, out=np.zeros((32, 64, 3), np.float32)[:, ::2])
     # float64 and float32 UVs, any thread count: the same bits
     a, _ = madder.rasterize(faces, uv[faces], values, 50, threads=1)
     b, _ = madder.rasterize(faces, uv[faces].astype(np.float32), values, 50, threads=2)
@@ -130,6 +138,10 @@ def test_bad_input_raises_typed_errors_naming_what_is_wrong(tmp_path):
         madder.rasterize(faces, fuv, values[:4], 8)
     assert e.value.face is not None and e.value.vertex >= 4 and e.value.n_vertices == 4
     assert isinstance(e.value, ValueError)
+
+    with pytest.raises(madder.ParameterError) as e:
+        madder.rasterize(faces, fuv, np.zeros((len(uv), 65), np.float32), 8)
+    assert (e.value.name, e.value.value, e.value.max) == ("channels", 65, 64)
 
     image = np.zeros((4, 4, 3), np.float32)
     with pytest.raises(madder.ParameterError, match="3 channels"):

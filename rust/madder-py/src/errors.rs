@@ -305,7 +305,12 @@ fn build(py: Python<'_>, e: &madder::Error) -> PyResult<PyErr> {
                 py.get_type::<ParameterError>(),
                 f.set("name", name).set("value", size).set("max", max),
             ),
-            T::NoChannels => (py.get_type::<ParameterError>(), f.set("name", "channels")),
+            T::Channels { channels, max } => (
+                py.get_type::<ParameterError>(),
+                f.set("name", "channels")
+                    .set("value", channels)
+                    .set("max", max),
+            ),
             T::Length {
                 name,
                 expected,

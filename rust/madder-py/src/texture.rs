@@ -92,12 +92,15 @@ fn size_arg(name: &str, size: i64) -> PyResult<usize> {
 /// covered neighbours), and the rest is 0. `overlapping_texels` counts texel centres
 /// inside two or more triangles (overlapping UV islands): worth a warning. The GIL is
 /// released; `threads` caps the worker threads (the result does not depend on it).
+/// `out`, a C-contiguous float32 array of the image's shape, is filled and returned
+/// instead of a new array: a sequence of frames then reuses one buffer (a fresh 2048²
+/// RGBA image is 64 MB of new memory per frame).
 ///
 /// Raises `ParameterError` for a size out of 1..=16384 or mismatched lengths, `MeshError`
 /// naming the face (and corner) for a vertex index past the values or a non-finite UV.
 #[pyfunction]
-#[pyo3(signature = (faces, uv, values, size, padding=4, *, threads=None))]
-#[allow(clippy::type_complexity)]
+#[pyo3(signature = (faces, uv, values, size, padding=4, *, out=None, threads=None))]
+#[allow(clippy::type_complexity, clippy::too_many_arguments)]
 pub fn rasterize<'py>(
     py: Python<'py>,
     faces: PyReadonlyArray2<'py, u32>,
@@ -105,6 +108,7 @@ pub fn rasterize<'py>(
     values: PyReadonlyArrayDyn<'py, f32>,
     size: i64,
     padding: i64,
+    out: Option<Bound<'py, PyArrayDyn<f32>>>,
     threads: Option<usize>,
 ) -> PyResult<(Bound<'py, PyArrayDyn<f32>>, usize)> {
     let size = size_arg("size", size)?;
@@ -127,6 +131,41 @@ pub fn rasterize<'py>(
     let channels = if one { 1 } else { values.shape()[1] };
     let values = floats("values", &values, &[1, 2])?;
     let pool = Pool::new(threads)?;
+    let shape: Vec<usize> = if one {
+        vec![size, size]
+    } else {
+        vec![size, size, channels]
+    };
+    if let Some(out) = out {
+        if out.shape() != shape.as_slice() {
+            return Err(ParameterError::new_err(format!(
+                "out must have shape {shape:?}, got {:?}",
+                out.shape()
+            )));
+        }
+        let overlapping = {
+            let mut guard = out.try_readwrite()?;
+            let pixels = guard.as_slice_mut().map_err(|_| {
+                ParameterError::new_err("out must be a C-contiguous, writeable float32 array")
+            })?;
+            let mut coverage = vec![0u8; size * size];
+            pool.run(py, || {
+                let n = core::rasterize_to(
+                    pixels,
+                    &mut coverage,
+                    &faces,
+                    &uv,
+                    &values,
+                    channels,
+                    size,
+                )?;
+                core::pad_to(pixels, &mut coverage, size, channels, padding);
+                Ok::<_, madder::error::TextureError>(n)
+            })
+            .map_err(to_py)?
+        };
+        return Ok((out, overlapping));
+    }
     let raster = pool
         .run(py, || {
             let mut r = core::rasterize(&faces, &uv, &values, channels, size)?;
@@ -134,11 +173,6 @@ pub fn rasterize<'py>(
             Ok::<_, madder::error::TextureError>(r)
         })
         .map_err(to_py)?;
-    let shape: Vec<usize> = if one {
-        vec![size, size]
-    } else {
-        vec![size, size, channels]
-    };
     let image = PyArray1::from_vec(py, raster.pixels).reshape(shape)?;
     Ok((image, raster.overlapping))
 }

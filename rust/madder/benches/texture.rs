@@ -10,8 +10,12 @@
 //! each), so that padding has seams and borders to grow. The field is RGBA: a stain (a
 //! Gaussian spot over about a tenth of the cloth, zero elsewhere: a typical bake frame,
 //! mostly empty) and, for the EXR only, a dense field too (every texel non-zero, the worst
-//! case for compression). Prints figures (best and median of several runs); asserts
-//! nothing about time. `MADDER_BENCH_SIZE=1024` changes the size.
+//! case for compression). Prints figures (best and median of several runs, and the CPU
+//! time of the process per run: on a machine shared with other work the wall time grows
+//! much more than the CPU time); asserts nothing about time. `MADDER_BENCH_SIZE=1024`
+//! changes the size; `MADDER_BENCH_PROFILE=n` (with `MADDER_BENCH_THREADS=t`) only
+//! rasterizes the fine load n times, `MADDER_BENCH_PROFILE_EXR=n` only writes its EXR n
+//! times, for a profiler.
 
 use std::time::Instant;
 
@@ -214,14 +218,19 @@ fn main() {
         let _ = std::fs::remove_file(&path);
         return;
     }
-    // MADDER_BENCH_PROFILE=n: only n rasterizations of the fine load, one thread (for perf)
+    // MADDER_BENCH_PROFILE=n: only n rasterizations of the fine load, on one thread or
+    // MADDER_BENCH_THREADS (for perf)
     if let Some(n) = std::env::var("MADDER_BENCH_PROFILE")
         .ok()
         .and_then(|s| s.parse::<usize>().ok())
     {
         let mut r = Raster::empty(size, CHANNELS);
+        let threads = std::env::var("MADDER_BENCH_THREADS")
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(1);
         let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(1)
+            .num_threads(threads)
             .build()
             .unwrap();
         pool.install(|| {

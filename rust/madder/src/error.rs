@@ -288,8 +288,8 @@ pub enum TextureError {
         size: usize,
         max: usize,
     },
-    #[error("a texture needs at least one channel")]
-    NoChannels,
+    #[error("a texture needs 1..={max} channels, got {channels}")]
+    Channels { channels: usize, max: usize },
     #[error("{name} has {got} entries, expected {expected}")]
     Length {
         name: &'static str,

@@ -582,8 +582,8 @@ fn overlapping_islands_are_counted_and_the_first_triangle_wins() {
     fuv.extend_from_within(..);
     let mut faces = m.faces.clone();
     faces.extend(m.faces.iter().map(|f| [f[0], f[2], f[1]]));
-    for t in n..2 * n {
-        fuv[t].swap(1, 2);
+    for t in &mut fuv[n..] {
+        t.swap(1, 2);
     }
     let r = rasterize(&faces, &fuv, &vec![1.0; m.uv.len()], 1, 64).unwrap();
     assert_eq!(r.overlapping, 64 * 64);
@@ -688,6 +688,40 @@ fn exr_round_trip_is_the_half_rounded_image() {
         assert_eq!(back.channels, ["R", "G", "B", "A"]);
         let got: Vec<u32> = back.pixels.iter().map(|x| x.to_bits()).collect();
         assert_eq!(got, expect, "{c:?}");
+    }
+    // mostly empty, with runs of every length around the encoder's limits (127, 128 and
+    // 16-byte steps) and noise: RLE must shrink it, and decode to the same bits
+    let (w2, h2) = (300, 40);
+    let mut sparse = vec![0.0f32; w2 * h2 * 4];
+    for y in 0..h2 {
+        let run = [
+            1, 2, 3, 15, 16, 17, 31, 32, 33, 126, 127, 128, 129, 200, 255, 256,
+        ][y % 16];
+        for x in 0..run.min(w2) {
+            for k in 0..4 {
+                sparse[(y * w2 + x) * 4 + k] = 0.25 * (k + 1) as f32;
+            }
+        }
+        if y % 5 == 0 {
+            for x in 100..140 {
+                sparse[(y * w2 + x) * 4 + y % 4] = r.unit() as f32;
+            }
+        }
+    }
+    for c in Compression::ALL {
+        let path = dir.join(format!("sparse-{c:?}.exr"));
+        write_exr_with(&path, &sparse, w2, h2, &["R", "G", "B", "A"], c).unwrap();
+        let back = read_exr(&path).unwrap();
+        let same = back
+            .pixels
+            .iter()
+            .zip(&sparse)
+            .all(|(a, b)| a.to_bits() == half_round(*b).to_bits());
+        assert!(same, "{c:?}");
+        let bytes = std::fs::metadata(&path).unwrap().len() as usize;
+        if c != Compression::None {
+            assert!(bytes < w2 * h2 * 8 / 5, "{c:?}: {bytes} bytes");
+        }
     }
     // rows: the file's first scan line is the image's top row (row h − 1), read directly
     let path = dir.join("img-Rle.exr");
@@ -812,7 +846,15 @@ fn bad_input_is_the_typed_error_naming_the_element() {
     }
     assert!(matches!(
         rasterize(&f, &tri, &v, 0, 8),
-        Err(TextureError::NoChannels)
+        Err(TextureError::Channels {
+            channels: 0,
+            max: 64
+        })
+    ));
+    // a huge channel count is refused before anything is allocated
+    assert!(matches!(
+        rasterize(&[], &[], &[], 1 << 40, 16384),
+        Err(TextureError::Channels { max: 64, .. })
     ));
     assert!(matches!(
         rasterize(&f, &[], &v, 1, 8),
@@ -914,7 +956,10 @@ fn bad_input_is_the_typed_error_naming_the_element() {
     ));
     assert!(matches!(
         write_exr(&p, &img, 3, 4, &[]),
-        Err(TextureError::NoChannels)
+        Err(TextureError::Channels {
+            channels: 0,
+            max: 64
+        })
     ));
     assert!(matches!(
         write_exr(&p, &img, 2, 3, &["R", "R"]),

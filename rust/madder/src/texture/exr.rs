@@ -20,16 +20,34 @@
 //! ## Compression
 //! [`Compression::Rle`] by default. Bake output is mostly empty (the stain covers a small
 //! part of the UV layout), and run-length encoding collapses the empty runs at memory
-//! speed; the ZIP variants compress dense pictures better but cost several times the
-//! time of the rest of the frame, and PIZ (a wavelet and Huffman coder) more still. The
-//! figures behind the choice (2048² RGBA, 2 cores) are in `benches/texture.rs`'s output
-//! and in ARCHITECTURE.md.
+//! speed, where ZIP and PIZ work through every byte. One 2048² RGBA frame on 2 cores
+//! (`benches/texture.rs`, a stain covering a tenth of the cloth, and a dense field):
+//!
+//! | compression | stain: ms, MB | dense: ms, MB |
+//! |---|---|---|
+//! | none | 42, 33.6 | 26, 33.6 |
+//! | **RLE** | **23**, 4.2 | **39**, 10.8 |
+//! | ZIP1 | 136, 1.8 | 206, 3.2 |
+//! | ZIP16 | 116, 1.4 | 171, 2.6 |
+//! | PIZ | 97, 2.8 | 123, 7.3 |
+//!
+//! Only RLE meets the 50 ms budget of a frame at a reasonable size (no compression is as
+//! fast but writes 33 MB a frame, 8 GB for a 250-frame bake). RLE and uncompressed scan
+//! lines are encoded here ([`Compression::Rle`]'s encoder skips equal bytes 16 at a time;
+//! the `exr` crate's own took ~70 ms a frame, ten instructions per byte), in parallel, one
+//! block per scan line, and handed to the `exr` crate's block writer, which makes the
+//! header and the offset table; ZIP and PIZ go through the `exr` crate's encoders. Every
+//! file is read back by the `exr` crate in the tests (and by Blender in
+//! `tests/blender/test_texture.py`).
 //!
 //! ## Safety
-//! The file is written to a temporary file in the target's folder, synced, and renamed
-//! over the target: a failure (unwritable folder, full disk) never leaves a partial file
-//! under the final name, and a previous image there stays whole. The temporary file is
-//! removed on failure. Errors name the target path.
+//! The file is written to a temporary file in the target's folder and renamed over the
+//! target: a failure (unwritable folder, full disk) never leaves a partial file under the
+//! final name, and a previous image there stays whole. The temporary file is removed on
+//! failure. Errors name the target path. The file is not synced before the rename (one
+//! image per frame: a sync each would wait on the disk hundreds of times per bake), so
+//! this guards against failed writes, not against a power cut, which can lose the newest
+//! images (the bake's cache, synced, can re-export them).
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -41,7 +59,7 @@ use half::f16;
 use half::slice::HalfFloatSliceExt;
 use rayon::prelude::*;
 
-use super::raster::MAX_SIZE;
+use super::raster::{MAX_CHANNELS, MAX_SIZE};
 use crate::error::TextureError;
 
 /// How the scan lines of an EXR file are compressed (all lossless).
@@ -137,7 +155,48 @@ pub fn write_exr_with(
         });
     }
 
-    // one planar half-float buffer per channel, scan lines top to bottom
+    let tmp = temporary(path);
+    let io = |source| TextureError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let result = (|| {
+        let mut out = BufWriter::with_capacity(1 << 20, File::create(&tmp).map_err(io)?);
+        match compression {
+            Compression::None | Compression::Rle => {
+                write_scan_lines(&mut out, pixels, width, height, channels, compression)
+            }
+            _ => write_with_exr(&mut out, pixels, width, height, channels, compression),
+        }
+        .map_err(|e| exr_error(path, e))?;
+        out.flush().map_err(io)?;
+        drop(out.into_inner().map_err(|e| io(e.into_error()))?);
+        std::fs::rename(&tmp, path).map_err(io)
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// The channels' order in the file: by name, as EXR requires.
+fn sorted(channels: &[&str]) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..channels.len()).collect();
+    order.sort_by_key(|&k| channels[k].as_bytes());
+    order
+}
+
+/// Writes the file through the `exr` crate's own encoders (ZIP, PIZ): planar half-float
+/// channels, scan lines top to bottom.
+fn write_with_exr(
+    out: &mut BufWriter<File>,
+    pixels: &[f32],
+    width: usize,
+    height: usize,
+    channels: &[&str],
+    compression: Compression,
+) -> exr::error::UnitResult {
+    let c = channels.len();
     let planes: Vec<Vec<f16>> = (0..c)
         .map(|k| {
             let mut plane = vec![f16::ZERO; width * height];
@@ -169,28 +228,165 @@ pub fn write_exr_with(
         },
         x::AnyChannels::sort(list),
     );
-    let image = x::Image::from_layer(layer);
+    x::WritableImage::write(&x::Image::from_layer(layer)).to_buffered(out)
+}
 
-    let tmp = temporary(path);
-    let io = |source| TextureError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let result = (|| {
-        let mut out = BufWriter::with_capacity(1 << 20, File::create(&tmp).map_err(io)?);
-        x::WritableImage::write(&image)
-            .to_buffered(&mut out)
-            .map_err(|e| exr_error(path, e))?;
-        out.flush().map_err(io)?;
-        let file = out.into_inner().map_err(|e| io(e.into_error()))?;
-        file.sync_all().map_err(io)?;
-        drop(file);
-        std::fs::rename(&tmp, path).map_err(io)
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
+/// Writes the file with one scan line per block, uncompressed or RLE-compressed here (see
+/// [`rle_line`]), the lines encoded in parallel and written in order by the `exr` crate's
+/// block writer (which makes the header and the offset table).
+fn write_scan_lines(
+    out: &mut BufWriter<File>,
+    pixels: &[f32],
+    width: usize,
+    height: usize,
+    channels: &[&str],
+    compression: Compression,
+) -> exr::error::UnitResult {
+    use exr::block::chunk::{Chunk, CompressedBlock, CompressedScanLineBlock};
+    use exr::meta::attribute::{ChannelDescription, SampleType};
+    use exr::meta::header::Header;
+
+    let c = channels.len();
+    let order = sorted(channels);
+    let descriptions = order
+        .iter()
+        .map(|&k| ChannelDescription::named(channels[k], SampleType::F16))
+        .collect();
+    let mut header = Header::new(x::Text::from(""), (width, height), descriptions).with_encoding(
+        compression.to_exr(),
+        exr::meta::BlockDescription::ScanLines,
+        x::LineOrder::Increasing,
+    );
+    header.own_attributes = x::LayerAttributes::default();
+    // one block per scan line for both: file line i is image row height − 1 − i
+    let lines: Vec<Vec<u8>> = (0..height)
+        .into_par_iter()
+        .map_init(
+            || vec![f16::ZERO; width * c],
+            |half, i| {
+                let src = &pixels[(height - 1 - i) * width * c..][..width * c];
+                half.convert_from_f32_slice(src);
+                encode_line(half, width, c, &order, compression)
+            },
+        )
+        .collect();
+    exr::block::write(out, x::SmallVec::from_elem(header, 1), true, |_, writer| {
+        for (i, bytes) in lines.into_iter().enumerate() {
+            let block = CompressedScanLineBlock {
+                y_coordinate: i as i32,
+                compressed_pixels_le: bytes,
+            };
+            exr::block::writer::ChunksWriter::write_chunk(
+                writer,
+                i,
+                Chunk {
+                    layer_index: 0,
+                    compressed_block: CompressedBlock::ScanLine(block),
+                },
+            )?;
+        }
+        Ok(())
+    })
+}
+
+/// The stored bytes of one scan line: for each channel in file order, the line's half
+/// floats, little-endian; RLE-compressed when that is smaller (as the format requires:
+/// a reader takes a block of the raw size as uncompressed).
+fn encode_line(
+    half: &[f16],
+    width: usize,
+    c: usize,
+    order: &[usize],
+    compression: Compression,
+) -> Vec<u8> {
+    let n = width * c;
+    // the line's low bytes then its high bytes, samples in file order (channel by channel)
+    let mut split = vec![0u8; 2 * n];
+    let (lo, hi) = split.split_at_mut(n);
+    for (m, &k) in order.iter().enumerate() {
+        let (lo, hi) = (&mut lo[m * width..][..width], &mut hi[m * width..][..width]);
+        for ((l, h), texel) in lo.iter_mut().zip(hi.iter_mut()).zip(half.chunks_exact(c)) {
+            let [a, b] = texel[k].to_bits().to_le_bytes();
+            *l = a;
+            *h = b;
+        }
     }
-    result
+    if compression == Compression::Rle {
+        if let Some(packed) = rle_line(&split) {
+            return packed;
+        }
+    }
+    let (lo, hi) = split.split_at(n);
+    let mut raw = vec![0u8; 2 * n];
+    for ((pair, &l), &h) in raw.chunks_exact_mut(2).zip(lo).zip(hi) {
+        pair[0] = l;
+        pair[1] = h;
+    }
+    raw
+}
+
+/// OpenEXR's RLE compression of a block's bytes, given already split (`split`: the
+/// even-indexed bytes, then the odd-indexed ones), or `None` when it would not be smaller
+/// than the raw bytes.
+///
+/// As OpenEXR does (`ImfRleCompressor.cpp`): the bytes are reordered, the even-indexed
+/// ones (here: every sample's low byte) first, then the odd-indexed ones (the high
+/// bytes); each byte is replaced by its difference to the previous one plus 128 (mod
+/// 256; the first stays); and the result is cut into runs: `k ∈ 0..=127` followed by one
+/// byte means `k + 1` copies of it (runs of 3 to 128 bytes are written so), `−k` followed
+/// by `k ≤ 127` bytes means those bytes as they are. An empty region (zeros) becomes runs
+/// of 128 (the difference of equal bytes), 2 bytes per 128. This encoder is ours because
+/// the `exr` crate's takes about ten instructions per byte, 30+ ms for a 2048² RGBA
+/// frame; this one skips equal bytes 16 at a time. Any run/literal split decodes to the
+/// same bytes: the tests read every file back through the `exr` crate's decoder.
+fn rle_line(split: &[u8]) -> Option<Vec<u8>> {
+    // the differences (independent per byte: vectorizes)
+    let mut d = vec![0u8; split.len()];
+    d[0] = split[0];
+    for ((out, &cur), &prev) in d[1..].iter_mut().zip(&split[1..]).zip(split) {
+        *out = cur.wrapping_sub(prev).wrapping_add(128);
+    }
+
+    let len = d.len();
+    let mut out = Vec::with_capacity(len / 8 + 16);
+    let mut literal_start = 0;
+    let flush = |out: &mut Vec<u8>, from: usize, to: usize| {
+        let mut k = from;
+        while k < to {
+            let m = (to - k).min(127);
+            out.push((-(m as i8)) as u8);
+            out.extend_from_slice(&d[k..k + m]);
+            k += m;
+        }
+    };
+    let mut i = 0;
+    while i < len {
+        let b = d[i];
+        let limit = (i + 128).min(len);
+        let mut j = i + 1;
+        // 16 bytes at a time, as one 128-bit comparison
+        let splat = u128::from_ne_bytes([b; 16]);
+        while j + 16 <= limit
+            && u128::from_ne_bytes(d[j..j + 16].try_into().expect("16 bytes")) == splat
+        {
+            j += 16;
+        }
+        while j < limit && d[j] == b {
+            j += 1;
+        }
+        if j - i >= 3 {
+            flush(&mut out, literal_start, i);
+            out.push((j - i - 1) as u8);
+            out.push(b);
+            literal_start = j;
+            if out.len() >= len {
+                return None;
+            }
+        }
+        i = j;
+    }
+    flush(&mut out, literal_start, len);
+    (out.len() < len).then_some(out)
 }
 
 /// Reads the first layer of an EXR file at its full resolution, every channel as `f32`.
@@ -241,8 +437,11 @@ pub fn read_exr(path: impl AsRef<Path>) -> Result<ExrImage, TextureError> {
 }
 
 fn check_names(channels: &[&str]) -> Result<(), TextureError> {
-    if channels.is_empty() {
-        return Err(TextureError::NoChannels);
+    if channels.is_empty() || channels.len() > MAX_CHANNELS {
+        return Err(TextureError::Channels {
+            channels: channels.len(),
+            max: MAX_CHANNELS,
+        });
     }
     for (i, name) in channels.iter().enumerate() {
         let bad = |reason| TextureError::ChannelName {

@@ -46,4 +46,4 @@ pub mod raster;
 pub use self::exr::{Compression, ExrImage, read_exr, write_exr, write_exr_with};
 pub use crate::error::TextureError;
 pub use pad::{DEFAULT_PADDING, pad, pad_to};
-pub use raster::{MAX_SIZE, Raster, rasterize, rasterize_into, rasterize_to};
+pub use raster::{MAX_CHANNELS, MAX_SIZE, Raster, rasterize, rasterize_into, rasterize_to};

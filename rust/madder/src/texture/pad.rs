@@ -20,7 +20,9 @@
 //!
 //! Deterministic: a pass computes every new value from the state before it, each row by
 //! one task, the neighbours summed in a fixed order in `f64`; then writes them. The same
-//! bits on any number of threads.
+//! bits on any number of threads. Cost: the first pass scans the image (a byte per texel,
+//! and the neighbours of the empty texels next to an island); each later pass visits only
+//! the empty neighbours of the texels the pass before filled: the islands' outlines.
 
 use rayon::prelude::*;
 
@@ -60,65 +62,88 @@ pub fn pad_to(
     if size == 0 || c == 0 {
         return 0;
     }
+    // per row: the texels filled by the previous pass (None before the first pass)
+    let mut last: Option<Vec<(Vec<u32>, Vec<f32>)>> = None;
     for _ in 0..texels {
-        // rows holding at least one covered texel: a row with none in its neighbourhood
-        // gains nothing this pass
-        let busy: Vec<bool> = coverage
-            .par_chunks(size)
-            .map(|row| row.iter().any(|&m| m != EMPTY))
-            .collect();
         let (cov, pix) = (&*coverage, &*pixels);
+        // the mean of the covered 8-neighbours of (x, y), if any
+        let mean = |x: usize, y: usize, sum: &mut [f64]| -> Option<()> {
+            let mut n = 0u32;
+            sum.iter_mut().for_each(|s| *s = 0.0);
+            for yy in y.saturating_sub(1)..=(y + 1).min(size - 1) {
+                for xx in x.saturating_sub(1)..=(x + 1).min(size - 1) {
+                    let j = yy * size + xx;
+                    if cov[j] != EMPTY {
+                        n += 1;
+                        for (s, &v) in sum.iter_mut().zip(&pix[j * c..(j + 1) * c]) {
+                            *s += f64::from(v);
+                        }
+                    }
+                }
+            }
+            (n > 0).then(|| sum.iter_mut().for_each(|s| *s /= f64::from(n)))
+        };
         // per row: the texels filled this pass and their values
-        let new: Vec<(Vec<u32>, Vec<f32>)> = (0..size)
-            .into_par_iter()
-            .map(|y| {
-                let mut xs = Vec::new();
-                let mut vals = Vec::new();
-                let lo = y.saturating_sub(1);
-                let hi = (y + 1).min(size - 1);
-                if !busy[lo..=hi].iter().any(|&b| b) {
-                    return (xs, vals);
-                }
-                let row = &cov[y * size..(y + 1) * size];
-                if !row.contains(&EMPTY) {
-                    return (xs, vals);
-                }
-                // near[x]: some texel of rows lo..=hi in columns x-1..=x+1 is covered
-                let mut col = vec![false; size];
-                for yy in lo..=hi {
-                    let r = &cov[yy * size..(yy + 1) * size];
-                    for (n, &m) in col.iter_mut().zip(r) {
-                        *n |= m != EMPTY;
+        let new: Vec<(Vec<u32>, Vec<f32>)> = match &last {
+            // first pass: every empty texel next to a covered one
+            None => (0..size)
+                .into_par_iter()
+                .map(|y| {
+                    let mut xs = Vec::new();
+                    let mut vals = Vec::new();
+                    let row = &cov[y * size..(y + 1) * size];
+                    if !row.contains(&EMPTY) {
+                        return (xs, vals);
                     }
-                }
-                let near =
-                    |x: usize| col[x] || (x > 0 && col[x - 1]) || (x + 1 < size && col[x + 1]);
-                let mut sum = vec![0.0f64; c];
-                for x in 0..size {
-                    if row[x] != EMPTY || !near(x) {
-                        continue;
-                    }
-                    let mut n = 0u32;
-                    sum.iter_mut().for_each(|s| *s = 0.0);
+                    let (lo, hi) = (y.saturating_sub(1), (y + 1).min(size - 1));
+                    // col[x]: some texel of rows lo..=hi in column x is covered
+                    let mut col = vec![false; size];
                     for yy in lo..=hi {
-                        for xx in x.saturating_sub(1)..=(x + 1).min(size - 1) {
-                            let j = yy * size + xx;
-                            if cov[j] != EMPTY {
-                                n += 1;
-                                for (s, &v) in sum.iter_mut().zip(&pix[j * c..(j + 1) * c]) {
-                                    *s += f64::from(v);
-                                }
+                        let r = &cov[yy * size..(yy + 1) * size];
+                        for (n, &m) in col.iter_mut().zip(r) {
+                            *n |= m != EMPTY;
+                        }
+                    }
+                    let mut sum = vec![0.0f64; c];
+                    for x in 0..size {
+                        let near = col[x] || (x > 0 && col[x - 1]) || (x + 1 < size && col[x + 1]);
+                        if row[x] == EMPTY && near && mean(x, y, &mut sum).is_some() {
+                            xs.push(x as u32);
+                            vals.extend(sum.iter().map(|&s| s as f32));
+                        }
+                    }
+                    (xs, vals)
+                })
+                .collect(),
+            // later passes: only the empty neighbours of the texels the last pass filled
+            Some(prev) => (0..size)
+                .into_par_iter()
+                .map(|y| {
+                    let mut cand: Vec<u32> = Vec::new();
+                    for (xs, _) in &prev[y.saturating_sub(1)..=(y + 1).min(size - 1)] {
+                        for &x in xs {
+                            let x = x as usize;
+                            for xx in x.saturating_sub(1)..=(x + 1).min(size - 1) {
+                                cand.push(xx as u32);
                             }
                         }
                     }
-                    if n > 0 {
-                        xs.push(x as u32);
-                        vals.extend(sum.iter().map(|s| (s / f64::from(n)) as f32));
+                    cand.sort_unstable();
+                    cand.dedup();
+                    let mut xs = Vec::new();
+                    let mut vals = Vec::new();
+                    let mut sum = vec![0.0f64; c];
+                    for x in cand {
+                        let xu = x as usize;
+                        if cov[y * size + xu] == EMPTY && mean(xu, y, &mut sum).is_some() {
+                            xs.push(x);
+                            vals.extend(sum.iter().map(|&s| s as f32));
+                        }
                     }
-                }
-                (xs, vals)
-            })
-            .collect();
+                    (xs, vals)
+                })
+                .collect(),
+        };
         let pass: usize = new.iter().map(|(xs, _)| xs.len()).sum();
         if pass == 0 {
             break;
@@ -135,6 +160,7 @@ pub fn pad_to(
                     pixels[x * c..(x + 1) * c].copy_from_slice(&vals[i * c..(i + 1) * c]);
                 }
             });
+        last = Some(new);
     }
     filled
 }

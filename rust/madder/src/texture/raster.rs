@@ -53,6 +53,9 @@ use crate::error::TextureError;
 /// The largest image side accepted: 16384 texels (a 16384² RGBA float image is 4 GiB).
 pub const MAX_SIZE: usize = 16384;
 
+/// The most channels a texture may have (an image holds `size² × channels` floats).
+pub const MAX_CHANNELS: usize = 64;
+
 /// Coverage mask value: no triangle covers the texel centre (and no padding reached it).
 pub const EMPTY: u8 = 0;
 /// Coverage mask value: exactly one triangle covers the texel centre.
@@ -136,7 +139,7 @@ impl Raster {
 /// the layout and the coverage mask. Runs on the current rayon pool; the result does not
 /// depend on its size.
 ///
-/// Errors: `size` out of `1..=`[`MAX_SIZE`], no channel, `uv` and `faces` of different
+/// Errors: `size` out of `1..=`[`MAX_SIZE`], channels out of `1..=`[`MAX_CHANNELS`], `uv` and `faces` of different
 /// lengths, `values` not a whole number of vertices, a face naming a vertex past the
 /// values, a non-finite UV (each naming the first face and corner at fault).
 pub fn rasterize(
@@ -255,8 +258,11 @@ fn check_shape(
             max: MAX_SIZE,
         });
     }
-    if channels == 0 {
-        return Err(TextureError::NoChannels);
+    if channels == 0 || channels > MAX_CHANNELS {
+        return Err(TextureError::Channels {
+            channels,
+            max: MAX_CHANNELS,
+        });
     }
     if uv.len() != faces.len() {
         return Err(TextureError::Length {
@@ -310,7 +316,7 @@ fn round_near(x: f64) -> f64 {
 /// (inline, where `f64::round` is a library call on baseline x86-64).
 #[inline]
 fn round_clamped(x: f64) -> f64 {
-    round_near(x.max(-CLAMP).min(CLAMP))
+    round_near(x.clamp(-CLAMP, CLAMP))
 }
 
 /// The texel rows (or columns) whose centres `256·i + 128` lie in the snapped range
