@@ -151,6 +151,22 @@ class MADDER_PT_stain_interactions(_StainSubPanel, bpy.types.Panel):
         col.prop(s, "evaporation_boundary")
 
 
+class MADDER_PT_stain_look(_StainSubPanel, bpy.types.Panel):
+    bl_label = "Look"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout, s = self.layout_of(context)
+        layout.prop(s, "wicking")
+        col = layout.column(align=True)
+        col.prop(s, "irregularity")
+        sub = col.column(align=True)
+        sub.active = s.irregularity > 0.0
+        sub.prop(s, "irregularity_length")
+        sub.prop(s, "irregularity_seed")
+        layout.prop(s, "carry_solute")
+
+
 class MADDER_PT_stain_cache(_StainSubPanel, bpy.types.Panel):
     bl_label = "Cache"
     bl_options = {"DEFAULT_CLOSED"}
@@ -247,6 +263,7 @@ classes = (
     MADDER_PT_stain_output,
     MADDER_PT_stain_forces,
     MADDER_PT_stain_interactions,
+    MADDER_PT_stain_look,
     MADDER_PT_stain_cache,
     MADDER_PT_source,
     MADDER_PT_fabric,

@@ -232,11 +232,51 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
     evaporation_boundary: FloatProperty(
         name="Rim Evaporation",
         description="How many times faster the rim of the wet area evaporates (≥ 1; 1.2 in the "
-        "seed). Higher values leave a darker ring of solute at the rim",
+        "seed): the rim dries first",
         default=1.2,
         min=1.0,
         soft_max=3.0,
         update=_mark_custom,
+    )
+    # -- The look of the stain (issue 13)
+    wicking: FloatProperty(
+        name="Wicking",
+        description="How much faster the fabric draws liquid in where it is wetter (the spreading "
+        "rate times saturation to this power): 0 spreads with a soft edge; 1–3 give a spill a "
+        "sharp front that slows as it thins",
+        default=0.0,
+        min=0.0,
+        max=8.0,
+        soft_max=4.0,
+    )
+    irregularity: FloatProperty(
+        name="Irregularity",
+        description="How uneven the fabric is (0–1): its spreading and soaking rates vary at random "
+        "over the cloth, so a stain's outline is ragged instead of round",
+        default=0.0,
+        min=0.0,
+        max=1.0,
+        subtype="FACTOR",
+    )
+    irregularity_length: FloatProperty(
+        name="Grain (mm)",
+        description="Size of the fabric's uneven patches, in millimetres (the distance over which "
+        "the rates vary together); below the Detail spacing it cannot be resolved",
+        default=3.0,
+        min=0.01,
+        soft_max=50.0,
+    )
+    irregularity_seed: IntProperty(
+        name="Seed",
+        description="Another seed gives another pattern of uneven patches",
+        default=0,
+        min=0,
+    )
+    carry_solute: BoolProperty(
+        name="Carry Solute",
+        description="The dissolved stain moves with the liquid's flow (and the liquid in the fibres "
+        "wicks too) instead of spreading on its own at the liquid's rate",
+        default=False,
     )
     substeps: IntProperty(
         name="Substeps",
