@@ -9,7 +9,7 @@ mod common;
 
 use std::time::Instant;
 
-use common::{grid, wave};
+use common::{grid, motion, wave};
 use faer::Par;
 use glam::DVec3;
 use madder::stain::{Conductivity, Detailed, StainParams};
@@ -55,9 +55,7 @@ fn bench(level: u32, wet_fraction: f64, frames: usize) {
         })
         .collect();
     sim.add_liquid(&pour, 0.05, None).unwrap();
-    let cloth: Vec<Vec<DVec3>> = (0..=frames + 1)
-        .map(|f| wave(&rest, f as f64 * dt))
-        .collect();
+    let cloth = motion(&rest, frames, dt);
     let t = Instant::now();
     let mut read = 0.0;
     for f in 1..=frames {

@@ -6,9 +6,8 @@ mod common;
 
 use std::time::Instant;
 
-use common::{grid, wave};
+use common::{grid, motion, pour, wave};
 use faer::Par;
-use glam::DVec3;
 use madder::stain::{Conductivity, Irregularity, Simulator, StainParams, Wicking};
 
 fn ms_per_frame(name: &str, params: StainParams, frames: usize) -> f64 {
@@ -24,14 +23,8 @@ fn ms_per_frame(name: &str, params: StainParams, frames: usize) -> f64 {
         Par::Seq,
     )
     .unwrap();
-    let pour: Vec<f64> = rest
-        .iter()
-        .map(|p| 2.0 * (-(p.distance_squared(DVec3::new(1.0, 0.0, 0.8))) / 0.02).exp())
-        .collect();
-    sim.add_liquid(&pour, 0.05, None).unwrap();
-    let cloth: Vec<Vec<DVec3>> = (0..=frames + 1)
-        .map(|f| wave(&rest, f as f64 * dt))
-        .collect();
+    sim.add_liquid(&pour(&rest), 0.05, None).unwrap();
+    let cloth = motion(&rest, frames, dt);
     let t = Instant::now();
     for f in 1..=frames {
         sim.step(&cloth[f], dt, Some(&cloth[f + 1])).unwrap();

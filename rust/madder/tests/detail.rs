@@ -161,6 +161,12 @@ fn woven(topo: &Topology, pos: &[DVec3]) -> Conductivity {
     })
 }
 
+/// The pour of these tests: a Gaussian blob high on the hanging sheet (in its x–z plane).
+fn blob(rest: &[DVec3]) -> Vec<f64> {
+    let flat: Vec<DVec3> = rest.iter().map(|p| DVec3::new(p.x, p.z, 0.0)).collect();
+    gaussian(&flat, glam::DVec2::new(0.0, 0.2), 0.01, 0.5)
+}
+
 /// Runs `frames` frames of the hanging sheet at `level`, a blob poured at frame 0.
 fn run(level: u32, frames: usize) -> Detailed {
     let (topo, rest, at) = hanging(12);
@@ -176,15 +182,7 @@ fn run(level: u32, frames: usize) -> Detailed {
         Par::Seq,
     )
     .unwrap();
-    let blob = gaussian(
-        &rest
-            .iter()
-            .map(|p| DVec3::new(p.x, p.z, 0.0))
-            .collect::<Vec<_>>(),
-        glam::DVec2::new(0.0, 0.2),
-        0.01,
-        0.5,
-    );
+    let blob = blob(&rest);
     sim.add_liquid(&blob, 0.05, None).unwrap();
     let dt = 1.0 / 25.0;
     for k in 1..=frames {
@@ -208,15 +206,7 @@ fn level_zero_is_the_cloth_simulator_bit_for_bit() {
         Par::Seq,
     )
     .unwrap();
-    let blob = gaussian(
-        &rest
-            .iter()
-            .map(|p| DVec3::new(p.x, p.z, 0.0))
-            .collect::<Vec<_>>(),
-        glam::DVec2::new(0.0, 0.2),
-        0.01,
-        0.5,
-    );
+    let blob = blob(&rest);
     plain.add_liquid(&blob, 0.05, None).unwrap();
     let dt = 1.0 / 25.0;
     for k in 1..=10 {
@@ -238,15 +228,7 @@ fn totals_are_exact_across_levels() {
     let (topo, rest, at) = hanging(12);
     let p0 = at(0.0);
     let area = vertex_areas(&topo, &p0);
-    let blob = gaussian(
-        &rest
-            .iter()
-            .map(|p| DVec3::new(p.x, p.z, 0.0))
-            .collect::<Vec<_>>(),
-        glam::DVec2::new(0.0, 0.2),
-        0.01,
-        0.5,
-    );
+    let blob = blob(&rest);
     let poured: f64 = blob.iter().zip(&area).map(|(s, a)| s * a).sum();
     for level in 1..=2 {
         let mut sim = Detailed::new(

@@ -13,6 +13,7 @@
 //! target.
 
 use faer::Par;
+use glam::DVec3;
 use madder::stain::{Conductivity, Forces, InteractionRates, Simulator, StainParams};
 
 mod common;
@@ -30,17 +31,18 @@ fn coffee() -> InteractionRates {
     }
 }
 
-/// Dries a blob of coffee; returns the radial profile of the dry stain's solute density
-/// (bins of 2 mm) and the solute defect.
-fn dry(carry: bool) -> (Vec<f64>, f64) {
-    let (topo, pos) = disk(50, 0.1);
+/// A still, flat disk of cloth (radius 0.1 m, `rings` rings) with no body forces, the
+/// solute carried by the flow or not, and 1 kg/m² of coffee-strength liquid poured within
+/// 3 cm of its centre. Returns the simulator and the positions.
+fn spill(rings: usize, interaction: InteractionRates, carry: bool) -> (Simulator, Vec<DVec3>) {
+    let (topo, pos) = disk(rings, 0.1);
     let params = StainParams {
         forces: Forces {
             gravity: false,
             rectilinear: false,
             coriolis: false,
         },
-        interaction: coffee(),
+        interaction,
         carry_solute: carry,
         ..Default::default()
     };
@@ -59,6 +61,13 @@ fn dry(carry: bool) -> (Vec<f64>, f64) {
         .map(|p| if p.length() < 0.03 { 1.0 } else { 0.0 })
         .collect();
     sim.add_liquid(&start, 0.012, None).unwrap();
+    (sim, pos)
+}
+
+/// Dries a blob of coffee; returns the radial profile of the dry stain's solute density
+/// (bins of 2 mm) and the solute defect.
+fn dry(carry: bool) -> (Vec<f64>, f64) {
+    let (mut sim, pos) = spill(50, coffee(), carry);
     let solute0 = sim.totals().solute;
     let mut steps = 0;
     while sim.totals().solvent > 1e-9 && steps < 20000 {
@@ -135,32 +144,7 @@ fn a_drying_coffee_blob_leaves_a_ring() {
 fn a_uniform_solution_stays_uniform_as_it_spreads() {
     // carried by the solvent's own flux, a solution of one concentration keeps it
     // everywhere the solvent goes (the flow moves solution, not solute against solvent)
-    let (topo, pos) = disk(40, 0.1);
-    let params = StainParams {
-        forces: Forces {
-            gravity: false,
-            rectilinear: false,
-            coriolis: false,
-        },
-        interaction: common::no_interaction(),
-        carry_solute: true,
-        ..Default::default()
-    };
-    let mut sim = Simulator::new(
-        topo,
-        &pos,
-        &pos,
-        Conductivity::Isotropic(2e-4),
-        params,
-        [0.25, 0.13, 0.05],
-        Par::Seq,
-    )
-    .unwrap();
-    let start: Vec<f64> = pos
-        .iter()
-        .map(|p| if p.length() < 0.03 { 1.0 } else { 0.0 })
-        .collect();
-    sim.add_liquid(&start, 0.012, None).unwrap();
+    let (mut sim, pos) = spill(40, common::no_interaction(), true);
     for _ in 0..50 {
         sim.step(&pos, 0.5, None).unwrap();
     }

@@ -25,7 +25,7 @@ use glam::DVec3;
 
 use super::diffuse::{Conductivity, WovenFaces};
 use super::simulate::{Profile, Simulator, StainParams};
-use super::sources::check_each_nonnegative;
+use super::sources::{check_each_nonnegative, check_length};
 use super::state::{Fields, Totals};
 use crate::error::{Error, ParamError};
 use crate::mesh::Topology;
@@ -142,16 +142,7 @@ impl Detailed {
     }
 
     fn check_len(&self, name: &'static str, got: usize) -> Result<(), ParamError> {
-        let expected = self.topology().n_vertices();
-        if got == expected {
-            Ok(())
-        } else {
-            Err(ParamError::Length {
-                name,
-                expected,
-                got,
-            })
-        }
+        check_length(name, self.topology().n_vertices(), got)
     }
 
     /// [`Simulator::step`] to the cloth's `positions` (and `after`).

@@ -169,11 +169,7 @@ impl Wicking {
             .iter()
             .map(|&s| (s / self.density).clamp(0.0, 1.0).powf(self.exponent))
             .collect();
-        topology
-            .faces()
-            .iter()
-            .map(|f| (theta[f[0] as usize] + theta[f[1] as usize] + theta[f[2] as usize]) / 3.0)
-            .collect()
+        super::irregular::face_means(topology, &theta)
     }
 }
 
