@@ -46,7 +46,7 @@ else
 BPY_RERUN  := --reruns 1 --only-rerun 'returncode=-11'
 endif
 
-RUST_SRC   := Cargo.toml Cargo.lock pyproject.toml $(shell find rust -name '*.rs' -o -name 'Cargo.toml' -o -name '*.py')
+RUST_SRC   := Cargo.toml Cargo.lock pyproject.toml $(shell find rust -name '*.rs' -o -name 'Cargo.toml' -o -name '*.py' -o -name '*.pyi' -o -name py.typed)
 ADDON_SRC  := $(wildcard addon/*.py addon/farm/*.js) addon/blender_manifest.toml
 
 .PHONY: all venv wheel addon lint rust-tools test test-rust test-python test-blender test-farm demo bench fixtures clean

@@ -2,7 +2,7 @@
 
 The parts that use bpy are imported when the add-on registers (or when one is asked for,
 e.g. `madder.addon.cli`), not on import: the package's bpy-free modules (`presets`,
-`placement`, `motion`, `pour`, `schedule`, `errors`) can then be imported, and tested,
+`placement`, `motion`, `pour`, `schedule`, `textures`, `errors`) can then be imported, and tested,
 without Blender."""
 
 import importlib

@@ -14,8 +14,8 @@ import os
 import bpy
 import numpy as np
 
-from . import bridge, fabrics, handlers, motion, placement, pour, presets, schedule
-from .errors import BakeError, FabricSettingsError
+from . import bridge, fabrics, handlers, images, motion, placement, pour, presets, schedule, shading, textures
+from .errors import BakeError, ExportError, FabricSettingsError
 from .placement import check_transform as _check_transform, placed
 
 CACHE_EXT = ".madder"
@@ -154,7 +154,16 @@ class BakeJob:
     initial wetness of the Spill Group (weight × Amount of the object's liquid) and
     starts its splash. Every later frame steps the simulator to the frame's positions,
     then lets each source pour what it brought during that frame (and splash, the first
-    time it pours). Each frame's densities go to the cache (`FIELDS`, kg/m²)."""
+    time it pours). Each frame's densities go to the cache (`FIELDS`, kg/m²).
+
+    The simulator runs at the object's Detail (`madder.Simulator(detail=…)`); the cache
+    holds its values at the cloth's vertices either way. With Image Sequence on, each
+    frame's values on the refined cloth also go to the fine cache (the same fields,
+    `sim.n_fine_vertices` values each), written into the staging folder of the images
+    (`textures.Staging`); once the last frame is simulated, `step()` goes on a frame at
+    a time writing the images from it (`images.SequenceExport`), and `finish()` puts the
+    cache, then the fine cache and the image folder in place. So `total` counts every
+    frame twice then."""
 
     def __init__(self, scene, obj, frames=None):
         self.madder = core()
@@ -162,11 +171,6 @@ class BakeJob:
         check_object(obj, self.sources)
         self.scene, self.obj = scene, obj
         self.path = cache_path(obj)
-        try:
-            os.makedirs(os.path.dirname(self.path), exist_ok=True)
-        except OSError as e:
-            raise BakeError(f"'{obj.name}': cannot create the cache folder {os.path.dirname(self.path)}: {e}",
-                            object=obj.name, filename=os.path.dirname(self.path)) from e
         self.first, self.last = frames or (scene.frame_start, scene.frame_end)
         if self.last < self.first:
             raise BakeError(f"'{obj.name}': the frame range {self.first}-{self.last} is empty", object=obj.name)
@@ -177,6 +181,13 @@ class BakeJob:
         if len(faces) == 0:
             raise BakeError(f"'{obj.name}' has no faces", object=obj.name)
         settings = obj.madder
+        self.detail = settings.detail
+        self.images = self._check_images(settings)  # before anything is written
+        try:
+            os.makedirs(os.path.dirname(self.path), exist_ok=True)
+        except OSError as e:
+            raise BakeError(f"'{obj.name}': cannot create the cache folder {os.path.dirname(self.path)}: {e}",
+                            object=obj.name, filename=os.path.dirname(self.path)) from e
         self.wet0 = bridge.vertex_group_weights(obj, settings.source_group) if settings.source_group else None
         # with sources, colours can differ: track them (three more fields)
         self.fields = FIELDS + (COLOR_FIELDS if self.sources else [])
@@ -201,22 +212,60 @@ class BakeJob:
         self.frame = None  # last frame baked
         self.frame_before = scene.frame_current
         self.writer = self.sim = None
+        self.fine_writer = self.staging = self.export = None
         self.splashed = set()  # sources whose splash is done
         # (positions, contacts) per frame, evaluated once each, one frame early
         self._walk = schedule.Lookahead(self._visit)
         self._evaluating = self.first  # the frame being read, for error messages
         self._suspended = False
 
+    def _check_images(self, settings):
+        """With Image Sequence on: `(size, corner UVs, UV map name)`, after checking what
+        the images need (a UV map, frames they can be numbered by, a size); else None."""
+        obj = self.obj
+        if not settings.output_images:
+            if not settings.output_vertex_colors:
+                raise BakeError(f"'{obj.name}': no output: tick Vertex Colors and/or Image Sequence",
+                                object=obj.name)
+            return None
+        uv = bridge.corner_uvs(obj.data)
+        if uv is None:
+            raise BakeError(f"'{obj.name}' has no UV map: its Image Sequence needs one to lay out the images "
+                            "(add a UV map, or untick Image Sequence)", object=obj.name)
+        why = textures.frames_problem(self.first, self.last)
+        if why is not None:
+            raise BakeError(f"'{obj.name}': {why}", object=obj.name)
+        try:
+            size = textures.check_size(settings.image_size)
+        except ExportError as e:
+            raise BakeError(f"'{obj.name}': {e}", object=obj.name) from e
+        return size, uv, obj.data.uv_layers.active.name
+
     @property
-    def total(self):
+    def frames(self):
         return self.last - self.first + 1
 
     @property
+    def total(self):
+        return self.frames * (2 if self.images else 1)
+
+    @property
     def done(self):
-        return 0 if self.frame is None else self.frame - self.first + 1
+        simulated = 0 if self.frame is None else self.frame - self.first + 1
+        return simulated + (self.export.done if self.export is not None else 0)
+
+    @property
+    def status(self):
+        """What the job is doing, for the progress line."""
+        if self.export is not None:
+            return f"writing the images ({self.export.done} of {self.export.total} frames done)"
+        return f"baking frame {self.frame}"
 
     def step(self):
-        """Bakes the next frame; returns False once the last frame is in."""
+        """Bakes the next frame (or, with Image Sequence, writes the next frame's images
+        once every frame is simulated); returns False once everything is written."""
+        if self.export is not None:
+            return self._step_images()
         madder, obj = self.madder, self.obj
         try:
             if self.frame is None:
@@ -228,9 +277,11 @@ class BakeJob:
                 pos = self._positions(frame)
                 self.sim = madder.Simulator(self.topology, self._rest(), pos,
                                             **simulator_settings(self.scene, obj, self.unit),
-                                            **self.conductivity)
+                                            **self.conductivity, detail=self.detail)
                 self._spill(pos)
-                self.writer = madder.CacheWriter(self.path, self.n_vertices, self.fields, self.first, self.total)
+                self.writer = madder.CacheWriter(self.path, self.n_vertices, self.fields, self.first, self.frames)
+                if self.images:
+                    self._begin_images()
             else:
                 frame = self.frame + 1
                 self._evaluating = frame
@@ -243,24 +294,64 @@ class BakeJob:
                 self.sim.step(pos, self.dt, after=after)
                 self._pour(contacts)
             self.writer.push_frame(self._outputs())
+            if self.fine_writer is not None:
+                self.fine_writer.push_frame(self._outputs(fine=True))
             self.frame = frame
+            if self.images and frame == self.last:
+                self._start_export()
         except madder.MadderError as e:
             self.cancel()
             raise BakeError(f"'{obj.name}' at frame {self._evaluating}: {e}",
-                            object=obj.name, frame=self._evaluating, vertex=getattr(e, "vertex", None)) from e
+                            object=obj.name, frame=self._evaluating, vertex=getattr(e, "vertex", None),
+                            filename=getattr(e, "filename", None)) from e
+        except ExportError as e:
+            self.cancel()
+            raise BakeError(str(e), object=obj.name, frame=e.frame, filename=e.filename) from e
         except BaseException:
             self.cancel()
             raise
-        return self.frame < self.last
+        return self.images is not None or self.frame < self.last
 
-    def _outputs(self):
+    def _outputs(self, fine=False):
         """This frame's cache fields: total solute, liquid and deposit densities (kg/m²),
-        and the solute's colour when sources may mix colours."""
+        and the solute's colour when sources may mix colours; at the refined cloth's
+        vertices with `fine`."""
         sim = self.sim
-        out = [np.ascontiguousarray(sim.stain()[:, 3]), sim.wetness(), sim.deposit()]
+        out = [np.ascontiguousarray(sim.stain(fine=fine)[:, 3]), sim.wetness(fine=fine), sim.deposit(fine=fine)]
         if self.sources:
-            out += list(np.ascontiguousarray(sim.solute_color().T))
+            out += list(np.ascontiguousarray(sim.solute_color(fine=fine).T))
         return out
+
+    # -- the image sequence
+
+    def _begin_images(self):
+        """The staging folder of the images, and the fine cache in it."""
+        fine, folder, _ = images.paths(self.obj, self.path)
+        self.staging = textures.Staging(folder)
+        self.staging.begin()
+        self.fine_staged = os.path.join(self.staging.path, os.path.basename(fine))
+        self.fine_writer = self.madder.CacheWriter(self.fine_staged, self.sim.n_fine_vertices, self.fields,
+                                                   self.first, self.frames)
+
+    def _start_export(self):
+        """Every frame is simulated: the fine cache is complete (in the staging folder);
+        the images are written from it, a frame per `step()`."""
+        self.fine_writer.finish()
+        self.fine_writer = None
+        size, uv, _ = self.images
+        self.export = images.SequenceExport(self.madder, self.obj, self.fine_staged, self.topology, self.detail,
+                                            uv, self.references, size, self.staging.path,
+                                            textures.stem(self.path))
+
+    def _step_images(self):
+        try:
+            return self.export.step()
+        except ExportError as e:
+            self.cancel()
+            raise BakeError(str(e), object=self.obj.name, frame=e.frame, filename=e.filename) from e
+        except BaseException:
+            self.cancel()
+            raise
 
     def _spill(self, pos):
         """The initial wetness: the Spill Group's weights × Amount of the object's liquid,
@@ -344,17 +435,53 @@ class BakeJob:
         return rest
 
     def finish(self):
-        """Replaces the previous cache with the new one; returns its path."""
+        """Replaces the previous cache with the new one (and, with Image Sequence, the
+        fine cache and the image folder: in that order, the cache first since its sync
+        is what can fail; the others are renames in the same folder); returns the
+        cache's path. Without Image Sequence, an earlier bake's fine cache and images
+        are deleted (they no longer match the cache)."""
+        obj = self.obj
+        if self.images is not None and self.export is not None:
+            self.warnings += self.export.warnings()
+            self.export.close()
         try:
             self.writer.finish()
+            self.writer = None
+            fine, _, _ = images.paths(obj, self.path)
+            if self.images is not None:
+                try:
+                    os.replace(self.fine_staged, fine)
+                except OSError as e:
+                    raise ExportError(f"'{obj.name}': cannot move the fine cache to {fine}: {e.strerror or e}",
+                                      object=obj.name, filename=fine) from e
+                self.staging.commit()
+                self.staging = None
         except self.madder.MadderError as e:
             self.cancel()
-            raise BakeError(f"'{self.obj.name}': {e}", object=self.obj.name) from e
-        self.writer = None
+            raise BakeError(f"'{obj.name}': {e}", object=obj.name) from e
+        except (ExportError, OSError) as e:
+            self.cancel()
+            raise BakeError(f"'{obj.name}': {e}" if isinstance(e, OSError) else str(e), object=obj.name,
+                            filename=getattr(e, "filename", None)) from e
         self._close()
-        self.obj.madder.cache_file = stored_path(self.path)
-        self.obj.madder.bake_references = self.references
-        self.obj.madder.bake_topology = handlers.topology_fingerprint(self.obj.data)
+        handlers.forget(self.path)
+        handlers.forget(fine)
+        s = obj.madder
+        s.cache_file = stored_path(self.path)
+        s.bake_references = self.references
+        s.bake_topology = handlers.topology_fingerprint(obj.data)
+        s.bake_detail = self.detail
+        if self.images is not None:
+            size, _, uv_map = self.images
+            images.record(obj, self.first, self.last, size, uv_map)
+        else:
+            images.forget(obj)
+            try:
+                textures.remove_outputs(self.path)
+            except OSError as e:
+                self.warnings.append(f"could not remove the image sequence of an earlier bake: {e}")
+        shading.sync_object(obj)
+        images.reload(obj)
         # Playback writes mesh attributes from frame_change_pre; during a render from the
         # UI, Blender evaluates the scene in a render thread, and "Lock Interface" is what
         # keeps the two from touching the same data at once (background renders are safe
@@ -363,10 +490,19 @@ class BakeJob:
         return self.path
 
     def cancel(self):
-        """Discards the new cache (the previous one stays) and restores the frame."""
+        """Discards the new cache, fine cache and images (the previous ones stay) and
+        restores the frame."""
         if self.writer is not None:
             self.writer.abort()
             self.writer = None
+        if self.fine_writer is not None:
+            self.fine_writer.abort()
+            self.fine_writer = None
+        if self.export is not None:
+            self.export.close()
+        if self.staging is not None:
+            self.staging.discard()
+            self.staging = None
         self._close()
 
     def _close(self):
@@ -428,18 +564,34 @@ def _topology(madder, obj, faces, n_vertices, face_polygon, n_polygons):
 
 
 def free(obj):
-    """Deletes `obj`'s cache file and its stain attributes. Returns the path removed (or None)."""
+    """Deletes `obj`'s cache file, its fine cache and image sequences, and its stain
+    attributes; its materials' stain shader goes back to the (now absent, so harmless)
+    attributes. Returns the paths removed."""
     settings = obj.madder
     path = bpy.path.abspath(settings.cache_file) if settings.cache_file else None
-    if path and os.path.exists(path):
-        os.remove(path)
+    removed = []
+    if path:
+        try:
+            if os.path.exists(path):
+                os.remove(path)
+                removed.append(path)
+            removed += textures.remove_outputs(path)
+        except OSError as e:
+            raise BakeError(f"'{obj.name}': cannot remove {e.filename}: {e.strerror or e}", object=obj.name,
+                            filename=e.filename) from e
+        handlers.forget(path)
     settings.cache_file = ""
     settings.bake_references = (0.0, 0.0, 0.0)
     settings.bake_topology = ""
+    settings.bake_detail = 0
+    images.forget(obj)
+    if obj.type == "MESH":
+        shading.sync_object(obj)
+        images.remove_images(obj)
     if obj.type == "MESH":
         for name in bridge.ATTRIBUTES:
             attr = obj.data.attributes.get(name)
             if attr is not None:
                 obj.data.attributes.remove(attr)
         obj.data.update()
-    return path
+    return removed

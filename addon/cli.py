@@ -15,7 +15,7 @@ import time
 
 import bpy
 
-from . import bake, frames
+from . import bake, frames, textures
 
 _handle = None
 
@@ -88,7 +88,8 @@ def main(argv):
         obj.madder.enabled = True
         for w in warnings:
             _say(f"warning: '{obj.name}': {w}")
-        _say(f"baked '{obj.name}' in {time.perf_counter() - t0:.2f} s -> {path}")
+        also = f" and {textures.image_folder(path)}" if obj.madder.image_baked else ""
+        _say(f"baked '{obj.name}' in {time.perf_counter() - t0:.2f} s -> {path}{also}")
     if not args.no_save:
         bpy.ops.wm.save_mainfile()
         _say(f"saved {bpy.data.filepath}")

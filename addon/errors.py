@@ -27,3 +27,8 @@ class FabricSettingsError(AddonError):
 
 class RelocateError(AddonError):
     """A file picked by Relocate Cache is not this object's cache (`object`, `filename`)."""
+
+
+class ExportError(AddonError):
+    """An image sequence cannot be written (`filename`: the file or folder; `object` once
+    known)."""

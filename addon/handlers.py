@@ -32,7 +32,7 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
-from . import bridge, frames, playback, presets
+from . import bridge, frames, images, playback, presets
 from .errors import RelocateError
 
 _readers = {}  # absolute path -> (mtime_ns, size, CacheReader)
@@ -91,7 +91,7 @@ def _counts(mesh):
     return f"{len(mesh.vertices)}:{len(mesh.edges)}:{len(mesh.polygons)}:{len(mesh.loops)}:"
 
 
-def _same_topology(mesh, recorded):
+def same_topology(mesh, recorded):
     """Whether `mesh`'s faces match the fingerprint `recorded`. The counts are compared
     every frame; the CRC again only when the mesh's corner layer moved (Edit Mode rebuilds
     it), the counts changed, the depsgraph reported a geometry edit of the mesh, or a
@@ -123,8 +123,15 @@ def cache_path(obj):
 
 def problem(obj, frame):
     """Why `obj` cannot show its baked stain at `frame`, as a message naming the path that
-    was looked at, or None when it can (or has no bake). Reads no frame data."""
-    return _check(obj, frame)[0]
+    was looked at, or None when it can (or has no bake). Reads no frame data. With an
+    image sequence in use, a missing image of the frame is a problem too."""
+    return _check(obj, frame)[0] or images.frame_problem(obj, frame)
+
+
+def wants_attributes(obj):
+    """Whether playback writes `obj`'s stain attributes: Vertex Colors is on, or the
+    shader cannot read images instead (none baked): never a stale stain on screen."""
+    return obj.madder.output_vertex_colors or not images.uses_images(obj)
 
 
 def _check(obj, frame):
@@ -145,7 +152,7 @@ def _check(obj, frame):
     why = playback.mismatch(path, reader, len(obj.data.vertices))
     if why is not None:
         return why, None, None
-    if settings.bake_topology and not _same_topology(obj.data, settings.bake_topology):
+    if settings.bake_topology and not same_topology(obj.data, settings.bake_topology):
         return f"Stale cache: the mesh's faces changed since the bake ({path}): bake again", None, None
     why, at = playback.frame_to_read(path, reader, frame, _corrupt.get(_file_key(path, reader), {}))
     return why, (reader if why is None else None), at
@@ -166,7 +173,7 @@ def _probe(obj, frame):
     why, reader, at = _check(obj, frame)
     if why is None and reader is not None:
         why = _read(obj, reader, at, (1.0, 1.0, 1.0), (1.0, 1.0, 1.0), bridge.stain_buffers(reader.n_vertices))
-    return why
+    return why or images.frame_problem(obj, frame)
 
 
 def _read(obj, reader, at, refs, color, buffers):
@@ -188,12 +195,16 @@ def _file_key(path, reader):
 
 
 def apply_frame(obj, frame):
-    """Writes `obj`'s baked stain at `frame` (clamped to the baked range) into its mesh.
-    Returns None when it did (or there is no bake, or the mesh is in Edit Mode), else the
-    problem, after clearing the stain attributes (no stale stain is ever left shown)."""
+    """Writes `obj`'s baked stain at `frame` (clamped to the baked range) into its mesh
+    (unless it shows images only: `wants_attributes`). Returns None when it did (or there
+    is no bake, or the mesh is in Edit Mode), else the problem: the cache's, after
+    clearing the stain attributes (no stale stain is ever left shown), or a missing image
+    of the frame's sequence."""
     if not obj.madder.cache_file or obj.mode == "EDIT":
         return None
     why, reader, at = _check(obj, frame)
+    if why is None and not wants_attributes(obj):  # the shader reads the images
+        return images.frame_problem(obj, frame)
     if why is None:
         settings = obj.madder
         refs = tuple(settings.bake_references)
@@ -205,7 +216,7 @@ def apply_frame(obj, frame):
         bridge.clear_stain(obj.data)
         return why
     bridge.write_stain(obj.data, *buffers)
-    return None
+    return images.frame_problem(obj, frame)
 
 
 def _stained(scene):
@@ -404,5 +415,10 @@ def relocate(obj, path):
         raise RelocateError(f"{path} has no '{missing[0]}' field: not a Madder stain cache", **where)
     forget(path)
     obj.madder.cache_file = bake.stored_path(path)
+    if images.uses_images(obj):  # the images beside the cache: point the shader's at them
+        from . import shading
+
+        shading.sync_object(obj)
+        images.reload(obj)
     frame = bpy.context.scene.frame_current
     return apply_frame(obj, frame)

@@ -7,8 +7,8 @@ bake) and blocking when executed from a script or in background mode."""
 import bpy
 from bpy.props import BoolProperty, StringProperty
 
-from . import bake, handlers
-from .errors import RelocateError
+from . import bake, handlers, images
+from .errors import ExportError, RelocateError
 
 
 def _targets(context, all_objects):
@@ -89,7 +89,7 @@ class MADDER_OT_bake(bpy.types.Operator):
             pct = 100 * (finished + job.done / job.total) / self._total
             context.window_manager.progress_update(int(pct))
             context.workspace.status_text_set(
-                f"Madder: baking '{job.obj.name}' frame {job.frame} ({job.done}/{job.total}) — Esc to cancel"
+                f"Madder: '{job.obj.name}': {job.status} ({job.done}/{job.total}) — Esc to cancel"
             )
         return {"RUNNING_MODAL"}
 
@@ -108,11 +108,14 @@ class MADDER_OT_bake(bpy.types.Operator):
         handlers.apply_frame(obj, context.scene.frame_current)
         for w in warnings:
             self.report({"WARNING"}, f"Madder: '{obj.name}': {w}")
-        self.report({"INFO"}, f"Madder: baked '{obj.name}' to {path}")
+        also = ""
+        if obj.madder.image_baked:
+            also = f", its images to {images.paths(obj, path)[1]}"
+        self.report({"INFO"}, f"Madder: baked '{obj.name}' to {path}{also}")
 
 
 class MADDER_OT_free_bake(bpy.types.Operator):
-    """Delete the baked stain of the active object"""
+    """Delete the baked stain of the active object: its cache, fine cache and image sequences"""
 
     bl_idname = "madder.free_bake"
     bl_label = "Free Bake"
@@ -123,9 +126,86 @@ class MADDER_OT_free_bake(bpy.types.Operator):
         return context.object is not None and bool(context.object.madder.cache_file)
 
     def execute(self, context):
-        path = bake.free(context.object)
-        self.report({"INFO"}, f"Madder: removed {path}" if path else "Madder: nothing to remove")
+        try:
+            removed = bake.free(context.object)
+        except bake.BakeError as e:
+            self.report({"ERROR"}, f"Madder: {e}")
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"Madder: removed {', '.join(removed)}" if removed else "Madder: nothing to remove")
         return {"FINISHED"}
+
+
+class MADDER_OT_export_textures(bpy.types.Operator):
+    bl_idname = "madder.export_textures"
+    bl_label = "Re-export Textures"
+    bl_description = (
+        "Write the active object's image sequence again from its fine cache, at the current Size, "
+        "without baking (Esc cancels and keeps the previous images)"
+    )
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.object
+        return obj is not None and obj.type == "MESH" and bool(obj.madder.cache_file) and obj.madder.output_images
+
+    def execute(self, context):
+        try:
+            job = images.ReexportJob(context.scene, context.object)
+            while job.step():
+                pass
+            self._done(job, job.finish())
+        except ExportError as e:
+            self.report({"ERROR"}, f"Madder: {e}")
+            return {"CANCELLED"}
+        return {"FINISHED"}
+
+    def invoke(self, context, event):
+        if context.window_manager is None or not context.window:
+            return self.execute(context)
+        try:
+            self._job = images.ReexportJob(context.scene, context.object)
+        except ExportError as e:
+            self.report({"ERROR"}, f"Madder: {e}")
+            return {"CANCELLED"}
+        wm = context.window_manager
+        wm.progress_begin(0, 100)
+        self._timer = wm.event_timer_add(0.0, window=context.window)
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        if event.type == "ESC":
+            self._job.cancel()
+            self.report({"WARNING"}, f"Madder: re-export of '{self._job.obj.name}' cancelled; the previous "
+                        "images are kept")
+            return self._stop(context, {"CANCELLED"})
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        job = self._job
+        try:
+            if not job.step():
+                self._done(job, job.finish())
+                return self._stop(context, {"FINISHED"})
+        except ExportError as e:
+            self.report({"ERROR"}, f"Madder: {e}")
+            return self._stop(context, {"CANCELLED"})
+        context.window_manager.progress_update(int(100 * job.done / job.total))
+        context.workspace.status_text_set(
+            f"Madder: '{job.obj.name}': writing the images ({job.done}/{job.total} frames) — Esc to cancel")
+        return {"RUNNING_MODAL"}
+
+    def _stop(self, context, result):
+        wm = context.window_manager
+        wm.event_timer_remove(self._timer)
+        wm.progress_end()
+        context.workspace.status_text_set(None)
+        return result
+
+    def _done(self, job, folder):
+        for w in job.warnings:
+            self.report({"WARNING"}, f"Madder: '{job.obj.name}': {w}")
+        self.report({"INFO"}, f"Madder: wrote the images of '{job.obj.name}' at {job.size} px to {folder}")
 
 
 class MADDER_OT_relocate_cache(bpy.types.Operator):
@@ -169,7 +249,7 @@ class MADDER_OT_relocate_cache(bpy.types.Operator):
         return {"FINISHED"}
 
 
-classes = (MADDER_OT_bake, MADDER_OT_free_bake, MADDER_OT_relocate_cache)
+classes = (MADDER_OT_bake, MADDER_OT_free_bake, MADDER_OT_export_textures, MADDER_OT_relocate_cache)
 
 
 def register():

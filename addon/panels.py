@@ -4,7 +4,7 @@ import textwrap
 
 import bpy
 
-from . import fabrics, handlers
+from . import fabrics, handlers, images
 
 
 class _PhysicsPanel:
@@ -87,6 +87,35 @@ class MADDER_PT_stain_liquid(_StainSubPanel, bpy.types.Panel):
         col.prop(s, "splash_seed", text="Seed")
 
 
+class MADDER_PT_stain_output(_StainSubPanel, bpy.types.Panel):
+    bl_label = "Output"
+
+    def draw(self, context):
+        layout, s = self.layout_of(context)
+        obj = context.object
+        layout.prop(s, "detail")
+        col = layout.column(heading="Output", align=True)
+        col.prop(s, "output_vertex_colors")
+        col.prop(s, "output_images")
+        col = layout.column()
+        col.active = s.output_images
+        col.prop(s, "image_size")
+        if not s.output_images:
+            return
+        if obj.data.uv_layers.active is None:
+            col.label(text="Needs a UV map", icon="ERROR")
+        if not s.cache_file:
+            return
+        if images.uses_images(obj):
+            first, last = s.image_frames
+            col.label(text=f"Images: {s.image_baked_size} px, frames {first}–{last}", icon="IMAGE_DATA")
+            if s.image_baked_size != int(s.image_size):
+                col.label(text="Size changed: Re-export Textures to apply it", icon="INFO")
+        else:
+            col.label(text="Bake to write the image sequence", icon="INFO")
+        col.operator("madder.export_textures", icon="TEXTURE")
+
+
 class MADDER_PT_stain_forces(_StainSubPanel, bpy.types.Panel):
     bl_label = "Forces"
     bl_options = {"DEFAULT_CLOSED"}
@@ -120,6 +149,22 @@ class MADDER_PT_stain_interactions(_StainSubPanel, bpy.types.Panel):
         col = layout.column(align=True)
         col.prop(s, "evaporation")
         col.prop(s, "evaporation_boundary")
+
+
+class MADDER_PT_stain_look(_StainSubPanel, bpy.types.Panel):
+    bl_label = "Look"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout, s = self.layout_of(context)
+        layout.prop(s, "wicking")
+        col = layout.column(align=True)
+        col.prop(s, "irregularity")
+        sub = col.column(align=True)
+        sub.active = s.irregularity > 0.0
+        sub.prop(s, "irregularity_length")
+        sub.prop(s, "irregularity_seed")
+        layout.prop(s, "carry_solute")
 
 
 class MADDER_PT_stain_cache(_StainSubPanel, bpy.types.Panel):
@@ -215,8 +260,10 @@ class MADDER_PT_fabric(bpy.types.Panel):
 classes = (
     MADDER_PT_stain,
     MADDER_PT_stain_liquid,
+    MADDER_PT_stain_output,
     MADDER_PT_stain_forces,
     MADDER_PT_stain_interactions,
+    MADDER_PT_stain_look,
     MADDER_PT_stain_cache,
     MADDER_PT_source,
     MADDER_PT_fabric,

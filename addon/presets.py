@@ -103,6 +103,14 @@ def simulator_keywords(s, gravity, scene_gravity, unit):
         evaporation=s.evaporation,
         evaporation_boundary=s.evaporation_boundary,
         substeps=s.substeps,
+        # the look (issue 13): wicking saturates at the fibres' saturation; the grain is set
+        # in millimetres of the cloth's rest surface
+        wicking_exponent=s.wicking,
+        wicking_density=max(s.saturation, 1e-6),
+        irregularity=s.irregularity,
+        irregularity_length=s.irregularity_length * 1e-3,
+        irregularity_seed=s.irregularity_seed,
+        carry_solute=bool(s.carry_solute),
         use_gravity=bool(s.use_gravity and scene_gravity),
         use_rectilinear=s.use_rectilinear,
         use_coriolis=s.use_coriolis,

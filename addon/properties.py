@@ -12,11 +12,12 @@ from bpy.props import (
     FloatProperty,
     FloatVectorProperty,
     IntProperty,
+    IntVectorProperty,
     PointerProperty,
     StringProperty,
 )
 
-from . import presets
+from . import presets, textures
 
 # Blender 4.5+ warns when a path property holds a "//" path unless it says it supports them.
 _BLEND_RELATIVE = {"options": {"PATH_SUPPORTS_BLEND_RELATIVE"}} if bpy.app.version >= (4, 5, 0) else {}
@@ -55,6 +56,15 @@ def _mark_custom(self, context):
     """A preset's value was edited by hand: the liquid is no longer the preset."""
     if not _applying and self.liquid != "CUSTOM":
         self.liquid = "CUSTOM"
+
+
+def _output_update(self, context):
+    """Switching the output re-wires the stain shader of the object's materials."""
+    from . import shading  # needs the properties registered first
+
+    obj = self.id_data
+    if isinstance(obj, bpy.types.Object) and obj.type == "MESH":
+        shading.sync_object(obj)
 
 
 def _rate(name, description, default, soft_max, precision=3, step=1.0, preset=False, **kw):
@@ -222,11 +232,51 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
     evaporation_boundary: FloatProperty(
         name="Rim Evaporation",
         description="How many times faster the rim of the wet area evaporates (≥ 1; 1.2 in the "
-        "seed). Higher values leave a darker ring of solute at the rim",
+        "seed): the rim dries first",
         default=1.2,
         min=1.0,
         soft_max=3.0,
         update=_mark_custom,
+    )
+    # -- The look of the stain (issue 13)
+    wicking: FloatProperty(
+        name="Wicking",
+        description="How much faster the fabric draws liquid in where it is wetter (the spreading "
+        "rate times saturation to this power): 0 spreads with a soft edge; 1–3 give a spill a "
+        "sharp front that slows as it thins",
+        default=0.0,
+        min=0.0,
+        max=8.0,
+        soft_max=4.0,
+    )
+    irregularity: FloatProperty(
+        name="Irregularity",
+        description="How uneven the fabric is (0–1): its spreading and soaking rates vary at random "
+        "over the cloth, so a stain's outline is ragged instead of round",
+        default=0.0,
+        min=0.0,
+        max=1.0,
+        subtype="FACTOR",
+    )
+    irregularity_length: FloatProperty(
+        name="Grain (mm)",
+        description="Size of the fabric's uneven patches, in millimetres (the distance over which "
+        "the rates vary together); below the Detail spacing it cannot be resolved",
+        default=3.0,
+        min=0.01,
+        soft_max=50.0,
+    )
+    irregularity_seed: IntProperty(
+        name="Seed",
+        description="Another seed gives another pattern of uneven patches",
+        default=0,
+        min=0,
+    )
+    carry_solute: BoolProperty(
+        name="Carry Solute",
+        description="The dissolved stain moves with the liquid's flow (and the liquid in the fibres "
+        "wicks too) instead of spreading on its own at the liquid's rate",
+        default=False,
     )
     substeps: IntProperty(
         name="Substeps",
@@ -235,6 +285,71 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         default=1,
         min=1,
         soft_max=8,
+    )
+
+    # -- Output: the simulation's resolution and what playback and renders read
+    detail: IntProperty(
+        name="Detail",
+        description="Simulate on a finer mesh than the cloth's: each of its triangles split into "
+        "4^Detail (0: the cloth's own vertices). The stain's edges get sharper; the image sequence "
+        "shows it, the vertex colors keep the cloth's resolution. Each level costs about 4× the time "
+        "where the cloth is wet",
+        default=0,
+        min=0,
+        max=3,
+    )
+    output_vertex_colors: BoolProperty(
+        name="Vertex Colors",
+        description="Playback writes the stain into the mesh's color attributes every frame "
+        "(madder_stain, madder_wetness, madder_deposit), at the cloth's vertices",
+        default=True,
+        update=_output_update,
+    )
+    output_images: BoolProperty(
+        name="Image Sequence",
+        description="The bake also writes the stain as OpenEXR image sequences in UV space, at the "
+        "Detail mesh's resolution, next to the cache; the stain shader reads them through the "
+        "active UV map. Needs a UV map",
+        default=False,
+        update=_output_update,
+    )
+    image_size: EnumProperty(
+        name="Size",
+        description="Width and height of the images, in pixels (Re-export Textures writes them "
+        "again at another size without a bake)",
+        items=[(str(n), f"{n} px", f"{n} × {n} pixels") for n in textures.SIZES],
+        default=str(textures.DEFAULT_SIZE),
+    )
+    image_baked: BoolProperty(
+        name="Images Baked",
+        description="The bake (or Re-export Textures) wrote the image sequence beside the cache",
+        default=False,
+        options={"HIDDEN"},
+    )
+    image_frames: IntVectorProperty(
+        name="Image Frames",
+        description="First and last frame of the image sequence, recorded by the bake",
+        size=2,
+        default=(0, 0),
+        options={"HIDDEN"},
+    )
+    image_baked_size: IntProperty(
+        name="Image Size Baked",
+        description="Size of the images written, in pixels",
+        default=0,
+        options={"HIDDEN"},
+    )
+    image_uv_map: StringProperty(
+        name="Image UV Map",
+        description="The UV map the images were laid out on (the stain shader reads them through it)",
+        default="",
+        options={"HIDDEN"},
+    )
+    bake_detail: IntProperty(
+        name="Bake Detail",
+        description="The Detail level of the bake (the fine cache's mesh)",
+        default=0,
+        options={"HIDDEN"},
     )
 
     # -- Cache

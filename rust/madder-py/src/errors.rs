@@ -2,11 +2,12 @@
 //!
 //! ```text
 //! MadderError
-//! ├── MeshError       (also a ValueError)  bad topology or positions; names face/vertex
+//! ├── MeshError       (also a ValueError)  bad topology, positions or UVs; names face/vertex
 //! ├── ParameterError  (also a ValueError)  out-of-range parameters; names the parameter
 //! ├── FabricError     (also a ValueError)  a weave or cell tensor is invalid; names the cell
 //! ├── SolveError                           a linear solve failed
-//! └── CacheError      (also an OSError)    cache or PC2/MDD file missing, truncated or corrupt
+//! └── CacheError      (also an OSError)    cache, PC2/MDD or image file missing, truncated,
+//!                                          corrupt or not writable
 //!     (+ FileNotFoundError, PermissionError, IsADirectoryError, NotADirectoryError
 //!        for the I/O failures of those kinds)
 //! ```
@@ -93,7 +94,9 @@ pub fn to_py(e: impl Into<madder::Error>) -> PyErr {
 }
 
 fn build(py: Python<'_>, e: &madder::Error) -> PyResult<PyErr> {
-    use madder::error::{CacheError as C, Error, MeshError as M, ParamError as P, WeaveError as W};
+    use madder::error::{
+        CacheError as C, Error, MeshError as M, ParamError as P, TextureError as T, WeaveError as W,
+    };
     use madder::io::point_cache::PointCacheError as Pc;
     let f = Fields::new(py);
     let (class, f) = match e {
@@ -117,6 +120,14 @@ fn build(py: Python<'_>, e: &madder::Error) -> PyResult<PyErr> {
                 M::PolygonMapLength { expected, got } => {
                     f.set("expected", expected).set("got", got)
                 }
+                M::DetailTooLarge {
+                    level,
+                    vertices,
+                    max,
+                } => f
+                    .set("level", level)
+                    .set("vertices", vertices)
+                    .set("max", max),
             },
         ),
         Error::Param(p) => (
@@ -275,6 +286,59 @@ fn build(py: Python<'_>, e: &madder::Error) -> PyResult<PyErr> {
                 W::Solve(s) => solve_fields(f, s),
             },
         ),
+        Error::Texture(t) => match t {
+            T::VertexOutOfRange {
+                face,
+                vertex,
+                n_vertices,
+            } => (
+                py.get_type::<MeshError>(),
+                f.set("face", face)
+                    .set("vertex", vertex)
+                    .set("n_vertices", n_vertices),
+            ),
+            T::NonFiniteUv { face, corner, u, v } => (
+                py.get_type::<MeshError>(),
+                f.set("face", face).set("corner", corner).set("uv", (u, v)),
+            ),
+            T::Size { name, size, max } => (
+                py.get_type::<ParameterError>(),
+                f.set("name", name).set("value", size).set("max", max),
+            ),
+            T::Channels { channels, max } => (
+                py.get_type::<ParameterError>(),
+                f.set("name", "channels")
+                    .set("value", channels)
+                    .set("max", max),
+            ),
+            T::Length {
+                name,
+                expected,
+                got,
+            } => (
+                py.get_type::<ParameterError>(),
+                f.set("name", name)
+                    .set("expected", expected)
+                    .set("got", got),
+            ),
+            T::ValuesLength { got, channels } => (
+                py.get_type::<ParameterError>(),
+                f.set("name", "values")
+                    .set("got", got)
+                    .set("channels", channels),
+            ),
+            T::ChannelName { name, reason } => (
+                py.get_type::<ParameterError>(),
+                f.set("name", "channels")
+                    .set("channel", name)
+                    .set("reason", reason),
+            ),
+            T::Io { path, source } => (py.get_type::<CacheError>(), f.io(path, source)),
+            T::Exr { path, reason } => (
+                py.get_type::<CacheError>(),
+                f.path(path).set("reason", reason),
+            ),
+        },
     };
     if let Some(err) = f.err {
         return Err(err);

@@ -13,6 +13,7 @@ mod mesh;
 mod point_cache;
 mod simulate;
 mod stain;
+mod texture;
 mod threads;
 mod weave;
 
@@ -26,6 +27,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("DEGENERATE_UV_REL", madder::ops::DEGENERATE_UV_REL)?;
     errors::register(m)?;
     m.add_class::<mesh::Topology>()?;
+    m.add_class::<mesh::Refinement>()?;
     m.add_function(wrap_pyfunction!(mesh::weft_directions, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::distances_within, m)?)?;
     m.add_class::<stain::DiffusionStepper>()?;
@@ -34,5 +36,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<io::CacheReader>()?;
     weave::register(m)?;
     point_cache::register(m)?;
+    texture::register(m)?;
     Ok(())
 }

@@ -210,3 +210,86 @@ pub fn distances_within<'py>(
         d.into_iter().map(|x| x as f32).collect(),
     ))
 }
+
+/// The cloth refined for stain Detail (core `mesh::refine`): every triangle of `topology`
+/// split into `4**level` on a regular lattice, the fine vertices numbered as the
+/// simulator's `fine=True` read-outs (the cloth's vertices first, with their own indices).
+/// `Refinement(topology, level)`; refused with the figure beyond 20 M fine vertices.
+#[pyclass(module = "madder", frozen)]
+pub struct Refinement {
+    inner: madder::mesh::Refinement,
+}
+
+#[pymethods]
+impl Refinement {
+    #[new]
+    fn new(py: Python<'_>, topology: &Topology, level: u32) -> PyResult<Self> {
+        let t = &topology.inner;
+        let inner = py
+            .detach(|| madder::mesh::Refinement::new(t, level))
+            .map_err(to_py)?;
+        Ok(Self { inner })
+    }
+
+    /// The Detail level.
+    #[getter]
+    fn level(&self) -> u32 {
+        self.inner.level()
+    }
+    /// Vertices of the refined mesh.
+    #[getter]
+    fn n_vertices(&self) -> usize {
+        self.inner.fine().n_vertices()
+    }
+    /// Triangles of the refined mesh: `4**level` per cloth triangle, those of cloth
+    /// triangle `f` at rows `f·4**level …`.
+    #[getter]
+    fn n_faces(&self) -> usize {
+        self.inner.fine().n_faces()
+    }
+
+    /// The refined triangles, `(T, 3)` uint32 fine-vertex indices.
+    fn faces<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<u32>> {
+        let f = self.inner.fine().faces();
+        PyArray1::from_vec(py, f.iter().flatten().copied().collect())
+            .reshape([f.len(), 3])
+            .expect("3T values reshape to (T, 3)")
+    }
+
+    /// The refined triangles' corner UVs, `(T, 3, 2)` float32, from the cloth triangles'
+    /// corner UVs `face_uv` `(F, 3, 2)` float32 (the same barycentric combination that
+    /// places the fine vertices).
+    fn face_uv<'py>(
+        &self,
+        py: Python<'py>,
+        face_uv: numpy::PyReadonlyArray3<'py, f32>,
+    ) -> PyResult<Bound<'py, numpy::PyArray3<f32>>> {
+        let n = self.inner.fine().n_faces() / self.inner.faces_per_face();
+        let uv = face_uv.as_array();
+        if uv.shape() != [n, 3, 2] {
+            return Err(ParameterError::new_err(format!(
+                "face_uv must have shape ({n}, 3, 2), got {:?}",
+                uv.shape()
+            )));
+        }
+        let coarse: Vec<[[f64; 2]; 3]> = (0..n)
+            .map(|f| std::array::from_fn(|k| [uv[[f, k, 0]] as f64, uv[[f, k, 1]] as f64]))
+            .collect();
+        let fine = py.detach(|| self.inner.face_uv(&coarse));
+        let t = fine.len();
+        let flat: Vec<f32> = fine
+            .into_iter()
+            .flat_map(|c| c.into_iter().flat_map(|p| p.map(|x| x as f32)))
+            .collect();
+        PyArray1::from_vec(py, flat).reshape([t, 3, 2])
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Refinement(level={}, n_vertices={}, n_faces={})",
+            self.level(),
+            self.n_vertices(),
+            self.n_faces()
+        )
+    }
+}

@@ -19,8 +19,10 @@ use crate::threads::Pool;
 /// `Simulator(topology, rest, positions, *, diffusion=None, face_tensors=None,
 /// face_uv=None, face_angle=None, color=DEFAULT_SOLUTE_COLOR, gravity=(0, 0, -9.81),
 /// viscosity=..., friction=..., absorption=..., saturation=..., adsorption=...,
-/// capacity=..., evaporation=..., evaporation_boundary=1.2, substeps=1, use_gravity=True,
-/// use_rectilinear=True, use_coriolis=True, momentum_advection=True, threads=None)`.
+/// capacity=..., evaporation=..., evaporation_boundary=1.2, wicking_exponent=0,
+/// wicking_density=0.1, irregularity=0, irregularity_length=0.003, irregularity_seed=0,
+/// carry_solute=False, substeps=1, use_gravity=True, use_rectilinear=True,
+/// use_coriolis=True, momentum_advection=True, detail=0, threads=None)`.
 ///
 /// `topology` is a `Topology` or an `(F, 3)` uint32 face array; `rest` and `positions`
 /// `(N, 3)` float32 or float64 world positions in metres (rest pose; first frame), one
@@ -30,11 +32,23 @@ use crate::threads::Pool;
 /// the other two); the default is isotropic, `DEFAULT_DIFFUSION` m²/s (2e-4: wicking in
 /// cotton, whose front advances about a centimetre in the first second: `D ≈ L²/2t`).
 /// `DEFAULT_SOLUTE_COLOR` is (0.45, 0.05, 0.1), a dark red.
+/// `wicking_exponent` `n` makes the fabric wick faster where it is wetter: the densities
+/// diffuse at `D·θⁿ`, `θ` the liquid density over `wicking_density` (kg/m², capped at 1),
+/// which gives a spreading spill a sharp front (0, the default: a constant rate).
+/// `irregularity` (0–1) makes the fabric uneven: its diffusion and absorption rates vary
+/// at random over the rest surface, correlated over `irregularity_length` metres, the
+/// same for the same `irregularity_seed` (0, the default: a uniform fabric).
+/// `carry_solute` moves the dissolved solute with the solvent's capillary flow (and the
+/// liquid in the fibres wicks too) instead of diffusing it at the solvent's rate.
 /// Units are SI: densities in kg/m², rates in 1/s, evaporation in kg/(m²·s).
+/// `detail` (0–3) runs the simulation on the cloth's triangles each split into
+/// `4**detail` (the fine vertices placed on the cloth's triangles every frame): `step`,
+/// `add_liquid`, `splash` and every read-out still take and give one value per cloth
+/// vertex (mass-exact transfers); `fine=True` read-outs give the refined cloth's.
 /// `threads` caps the worker threads; results do not depend on it.
 #[pyclass(module = "madder")]
 pub struct Simulator {
-    inner: madder::stain::Simulator,
+    inner: madder::stain::Detailed,
     pool: Pool,
 }
 
@@ -42,7 +56,7 @@ impl Simulator {
     fn run<T: Send>(
         &mut self,
         py: Python<'_>,
-        f: impl FnOnce(&mut madder::stain::Simulator) -> T + Send,
+        f: impl FnOnce(&mut madder::stain::Detailed) -> T + Send,
     ) -> T {
         let Self { inner, pool } = self;
         pool.run(py, || f(inner))
@@ -118,9 +132,11 @@ impl Simulator {
     #[pyo3(signature = (topology, rest, positions, *, diffusion=None, face_tensors=None,
         face_uv=None, face_angle=None, color=DEFAULT_COLOR, gravity=(0.0, 0.0, -9.81),
         viscosity=None, friction=None, absorption=None, saturation=None, adsorption=None,
-        capacity=None, evaporation=None, evaporation_boundary=None, substeps=1,
+        capacity=None, evaporation=None, evaporation_boundary=None, wicking_exponent=None,
+        wicking_density=None, irregularity=None, irregularity_length=None, irregularity_seed=0,
+        carry_solute=false, substeps=1,
         use_gravity=true, use_rectilinear=true, use_coriolis=true, momentum_advection=true,
-        threads=None))]
+        detail=0, threads=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -141,11 +157,18 @@ impl Simulator {
         capacity: Option<f64>,
         evaporation: Option<f64>,
         evaporation_boundary: Option<f64>,
+        wicking_exponent: Option<f64>,
+        wicking_density: Option<f64>,
+        irregularity: Option<f64>,
+        irregularity_length: Option<f64>,
+        irregularity_seed: u64,
+        carry_solute: bool,
         substeps: u32,
         use_gravity: bool,
         use_rectilinear: bool,
         use_coriolis: bool,
         momentum_advection: bool,
+        detail: u32,
         threads: Option<usize>,
     ) -> PyResult<Self> {
         let rest = positions_arg("rest", rest)?;
@@ -214,6 +237,15 @@ impl Simulator {
         };
         set(&mut params.viscosity, viscosity);
         set(&mut params.friction, friction);
+        set(&mut params.wicking.exponent, wicking_exponent);
+        set(&mut params.wicking.density, wicking_density);
+        set(&mut params.irregularity.amplitude, irregularity);
+        set(
+            &mut params.irregularity.correlation_length,
+            irregularity_length,
+        );
+        params.irregularity.seed = irregularity_seed;
+        params.carry_solute = carry_solute;
         let r = &mut params.interaction;
         set(&mut r.absorption, absorption);
         set(&mut r.saturation, saturation);
@@ -224,13 +256,14 @@ impl Simulator {
         let pool = Pool::new(threads)?;
         let solute_color = [color.0, color.1, color.2];
         let inner = pool.run(py, || {
-            madder::stain::Simulator::new(
+            madder::stain::Detailed::new(
                 topo,
                 &rest,
                 &pos,
                 conductivity,
                 params,
                 solute_color,
+                detail,
                 faer::Par::Seq,
             )
         });
@@ -288,16 +321,28 @@ impl Simulator {
         self.inner.splash(c, speed, seed, &w).map_err(to_py)
     }
 
-    /// Liquid (free + absorbed solvent) per unit area, kg/m², `(N,)` float32.
-    fn wetness<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f32>> {
-        out1(py, &self.inner.wetness())
+    /// Liquid (free + absorbed solvent) per unit area, kg/m², `(N,)` float32; with
+    /// `fine=True`, per vertex of the refined cloth (`n_fine_vertices`; the cloth's own
+    /// at detail 0).
+    #[pyo3(signature = (*, fine=false))]
+    fn wetness<'py>(&self, py: Python<'py>, fine: bool) -> Bound<'py, PyArray1<f32>> {
+        if fine {
+            out1(py, &self.inner.fine().wetness())
+        } else {
+            out1(py, &self.inner.wetness())
+        }
     }
 
     /// The stain for shading, `(N, 4)` float32: RGB = solute colour × total solute
-    /// density (kg/m²), A = total solute density.
-    fn stain<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f32>>> {
-        let s = self.inner.solute_density();
-        let c = self.inner.solute_color();
+    /// density (kg/m²), A = total solute density; `fine=True` as for `wetness`.
+    #[pyo3(signature = (*, fine=false))]
+    fn stain<'py>(&self, py: Python<'py>, fine: bool) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        let (s, c) = if fine {
+            let f = self.inner.fine();
+            (f.solute_density(), f.solute_color())
+        } else {
+            (self.inner.solute_density(), self.inner.solute_color())
+        };
         out2(
             py,
             s.iter()
@@ -306,20 +351,52 @@ impl Simulator {
         )
     }
 
-    /// Adsorbed solute per unit area (the permanent deposit), kg/m², `(N,)` float32.
-    fn deposit<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f32>> {
-        out1(py, &self.inner.deposit())
+    /// Adsorbed solute per unit area (the permanent deposit), kg/m², `(N,)` float32;
+    /// `fine=True` as for `wetness`.
+    #[pyo3(signature = (*, fine=false))]
+    fn deposit<'py>(&self, py: Python<'py>, fine: bool) -> Bound<'py, PyArray1<f32>> {
+        if fine {
+            out1(py, &self.inner.fine().deposit())
+        } else {
+            out1(py, &self.inner.deposit())
+        }
     }
 
-    /// Solute colour at every vertex (mass-weighted mix), `(N, 3)` float32.
-    fn solute_color<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f32>>> {
-        out2(py, self.inner.solute_color().into_iter())
+    /// Solute colour at every vertex (mass-weighted mix), `(N, 3)` float32; `fine=True`
+    /// as for `wetness`.
+    #[pyo3(signature = (*, fine=false))]
+    fn solute_color<'py>(
+        &self,
+        py: Python<'py>,
+        fine: bool,
+    ) -> PyResult<Bound<'py, PyArray2<f32>>> {
+        if fine {
+            out2(py, self.inner.fine().solute_color().into_iter())
+        } else {
+            out2(py, self.inner.solute_color().into_iter())
+        }
+    }
+
+    /// The Detail level: the cloth's triangles are each split into `4**detail` for the
+    /// simulation (0: the cloth's own vertices).
+    #[getter]
+    fn detail(&self) -> u32 {
+        self.inner.level()
+    }
+
+    /// Vertices of the refined cloth the simulation runs on (the cloth's at detail 0):
+    /// the length of the `fine=True` read-outs, numbered as `Refinement(topology,
+    /// detail)` numbers them.
+    #[getter]
+    fn n_fine_vertices(&self) -> usize {
+        self.inner.fine().topology().n_vertices()
     }
 
     /// Densities (kg/m², float64) of every field: a dict with `free_solvent`, `solute`,
     /// `absorbed_solvent`, `absorbed_solute`, `adsorbed`.
     fn densities<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let f = self.inner.fields();
+        let f = f.as_ref();
         let d = PyDict::new(py);
         for (name, m) in [
             ("free_solvent", &f.free_solvent),

@@ -8,9 +8,8 @@ mod common;
 
 use std::time::Instant;
 
-use common::{grid, wave};
+use common::{grid, motion, pour, wave};
 use faer::Par;
-use glam::DVec3;
 use madder::stain::{Conductivity, Simulator, StainParams};
 
 fn bench(nx: usize, ny: usize, frames: usize) {
@@ -33,15 +32,8 @@ fn bench(nx: usize, ny: usize, frames: usize) {
     )
     .unwrap();
     let setup = t.elapsed().as_secs_f64() * 1e3;
-    let pour: Vec<f64> = rest
-        .iter()
-        .map(|p| 2.0 * (-(p.distance_squared(DVec3::new(1.0, 0.0, 0.8))) / 0.02).exp())
-        .collect();
-    sim.add_liquid(&pour, 0.05, None).unwrap();
-    // the cloth's frames first: only the stain's step is timed
-    let cloth: Vec<Vec<DVec3>> = (0..=frames + 1)
-        .map(|f| wave(&rest, f as f64 * dt))
-        .collect();
+    sim.add_liquid(&pour(&rest), 0.05, None).unwrap();
+    let cloth = motion(&rest, frames, dt);
     let t = Instant::now();
     for f in 1..=frames {
         sim.step(&cloth[f], dt, Some(&cloth[f + 1])).unwrap();

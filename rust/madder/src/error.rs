@@ -51,6 +51,19 @@ pub enum MeshError {
         /// How many there were.
         got: usize,
     },
+    /// A Detail level whose refined surface would have too many vertices.
+    #[error(
+        "Detail level {level} would refine the cloth to {vertices} vertices, more than the \
+         {max} Madder allows: choose a lower Detail level"
+    )]
+    DetailTooLarge {
+        /// The Detail level asked for.
+        level: u32,
+        /// How many vertices the refined surface would have.
+        vertices: usize,
+        /// The most Madder allows (`mesh::refine::MAX_FINE_VERTICES`).
+        max: usize,
+    },
 }
 
 /// Parameters out of their valid range.
@@ -357,6 +370,98 @@ pub enum WeaveError {
     Solve(#[from] SolveError),
 }
 
+/// Bad input to the UV texture rasterizer, or an image file that could not be written or
+/// read (module [`crate::texture`]). Faces and corners are counted from 0 in input order;
+/// a file error names the file the caller asked for (the temporary file beside it is an
+/// implementation detail).
+#[derive(Debug, thiserror::Error)]
+pub enum TextureError {
+    /// An image size outside `1..=max` texels.
+    #[error("{name} {size} is out of range (1..={max} texels)")]
+    Size {
+        /// `"size"`, `"width"` or `"height"`
+        name: &'static str,
+        /// The size asked for.
+        size: usize,
+        /// The largest size allowed.
+        max: usize,
+    },
+    /// A channel count outside `1..=max`.
+    #[error("a texture needs 1..={max} channels, got {channels}")]
+    Channels {
+        /// The channel count asked for.
+        channels: usize,
+        /// The most allowed.
+        max: usize,
+    },
+    /// An input array of the wrong length.
+    #[error("{name} has {got} entries, expected {expected}")]
+    Length {
+        /// The array.
+        name: &'static str,
+        /// How many entries were expected.
+        expected: usize,
+        /// How many there were.
+        got: usize,
+    },
+    /// A value array that is not a whole number of vertices.
+    #[error("values has {got} entries, not a whole number of vertices of {channels} channels")]
+    ValuesLength {
+        /// How many values there were.
+        got: usize,
+        /// Channels per vertex.
+        channels: usize,
+    },
+    /// A face that names a vertex past the end of the values.
+    #[error(
+        "face {face} references vertex {vertex}, but the values cover only {n_vertices} vertices"
+    )]
+    VertexOutOfRange {
+        /// The face.
+        face: usize,
+        /// The vertex it names.
+        vertex: u32,
+        /// How many vertices the values cover.
+        n_vertices: usize,
+    },
+    /// A UV coordinate that is NaN or infinite.
+    #[error("face {face}, corner {corner} has a non-finite UV ({u}, {v})")]
+    NonFiniteUv {
+        /// The face.
+        face: usize,
+        /// Its corner (0, 1 or 2).
+        corner: usize,
+        /// The U coordinate.
+        u: f64,
+        /// The V coordinate.
+        v: f64,
+    },
+    /// An image channel name OpenEXR cannot hold.
+    #[error("image channel name {name:?}: {reason}")]
+    ChannelName {
+        /// The name.
+        name: String,
+        /// What is wrong with it.
+        reason: &'static str,
+    },
+    /// The image file could not be written or read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file the caller asked for.
+        path: PathBuf,
+        /// The operating system's error.
+        source: std::io::Error,
+    },
+    /// A file that is not an OpenEXR image Madder can read.
+    #[error("{path}: {reason}")]
+    Exr {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with it.
+        reason: String,
+    },
+}
+
 /// Any core error. The binding crate maps each variant to a typed Python exception.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
@@ -378,6 +483,9 @@ pub enum Error {
     /// A PC2 or MDD file that cannot be read or written.
     #[error(transparent)]
     PointCache(#[from] PointCacheError),
+    /// A texture that cannot be rasterized, written or read.
+    #[error(transparent)]
+    Texture(#[from] TextureError),
 }
 
 #[cfg(test)]

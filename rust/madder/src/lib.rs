@@ -29,9 +29,12 @@
 //! | §4.3.4 | anisotropic stiffness of a woven face, weft from the UVs | [`ops::weft_directions`], [`stain::Conductivity`] (`ops/aniso.rs`) |
 //! | §4.4 | comoving–corotating frames by Kabsch, fictitious forces | [`mesh::kabsch`], [`stain::Forces`] (`stain/forces.rs`) |
 //! | §4.5, eqs. 4.7–4.10 | absorption, adsorption, evaporation | [`stain::InteractionRates`] (`stain/interact.rs`) |
+//! | §4.5, Fig. 4.6 | the look: saturation-dependent wicking (porous-medium law), solute carried by the solvent's flux, an irregular fabric | [`stain::Wicking`] (`stain/diffuse.rs`), `carry_solute` in [`stain::StainParams`], [`stain::Irregularity`] (`stain/irregular.rs`) |
 //!
 //! Beyond the seed, for the same chapter: the velocity extended over the dry cloth
-//! ([`stain::extend`]) and the distance from a brush to the cloth ([`mesh::proximity`]).
+//! ([`stain::extend`]), the distance from a brush to the cloth ([`mesh::proximity`]), and
+//! Detail: the simulation on the cloth's triangles split into 4^L
+//! ([`mesh::Refinement`], [`stain::Detailed`]).
 //!
 //! ## Chapter 5: Lagrangian coherent structures — not built yet
 //!
@@ -39,6 +42,8 @@
 //! - [`io`]: the Madder cache file and the playback attributes read from it; PC2/MDD point
 //!   caches (the Mesh Cache modifier's formats), so exported cloth bakes without a scene.
 //! - [`error`]: one enum per kind of failure, each variant naming the element that failed.
+//! - [`texture`]: per-vertex fields rasterized into UV space, padded past the UV islands,
+//!   and written and read as OpenEXR images.
 //! - [`rng`]: a seeded generator for splashes and randomized tests.
 //!
 //! Conventions: `f64` inside solves, `f32` for bulk arrays at the boundary, `u32` indices;
@@ -59,7 +64,8 @@ pub mod mesh;
 pub mod ops;
 pub mod rng;
 pub mod stain;
+pub mod texture;
 pub mod weave;
 
-pub use error::{CacheError, Error, MeshError, ParamError, SolveError, WeaveError};
+pub use error::{CacheError, Error, MeshError, ParamError, SolveError, TextureError, WeaveError};
 pub use io::point_cache::PointCacheError;

@@ -34,6 +34,9 @@ fn ideal(forces: Forces, momentum_advection: bool) -> StainParams {
         viscosity: 0.0,
         friction: 0.0,
         interaction: no_interaction(),
+        wicking: Default::default(),
+        irregularity: Default::default(),
+        carry_solute: false,
         substeps: 1,
         active_region: true,
     }

@@ -41,6 +41,9 @@ fn ideal(forces: Forces) -> StainParams {
         viscosity: 0.0,
         friction: 0.0,
         interaction: no_interaction(),
+        wicking: Default::default(),
+        irregularity: Default::default(),
+        carry_solute: false,
         substeps: 1,
         active_region: true,
     }
@@ -638,7 +641,7 @@ fn waving(n: usize) -> (Topology, Vec<DVec3>, impl Fn(f64) -> Vec<DVec3>) {
     (topo, rest, at)
 }
 
-/// Everything on: all forces, woven (anisotropic) diffusion, viscosity, friction, all
+/// Everything on: all forces, woven (anisotropic) diffusion with wicking, viscosity, friction, all
 /// interactions, a splash and a second pour of another colour.
 fn full_params(momentum_advection: bool, substeps: u32) -> StainParams {
     StainParams {
@@ -655,6 +658,19 @@ fn full_params(momentum_advection: bool, substeps: u32) -> StainParams {
             evaporation: 2e-3,
             evaporation_boundary: 1.2,
         },
+        // wicking too (issue 13): a saturation-dependent rate on the woven faces
+        wicking: madder::stain::Wicking {
+            exponent: 2.0,
+            density: 0.1,
+        },
+        // and an irregular fabric
+        irregularity: madder::stain::Irregularity {
+            amplitude: 0.4,
+            correlation_length: 0.05,
+            seed: 7,
+        },
+        // the solute carried by the solvent's flow
+        carry_solute: true,
         substeps,
         active_region: true,
     }

@@ -35,7 +35,8 @@ class SolveError(_Located, MadderError):
 
 
 class CacheError(_Located, MadderError, OSError):
-    """A cache file is missing, truncated or corrupt: `filename` and `frame` say where."""
+    """A cache, point-cache or image file is missing, truncated, corrupt or cannot be
+    written: `filename` (and `frame`) say where."""
 
     def __str__(self):
         # the core's message, which names the file already (OSError's own form would be

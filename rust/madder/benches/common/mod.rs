@@ -31,3 +31,20 @@ pub fn wave(rest: &[DVec3], t: f64) -> Vec<DVec3> {
         .map(|p| DVec3::new(p.x, 0.15 * p.x * (4.0 * p.x - 6.0 * t).sin(), p.z))
         .collect()
 }
+
+/// The benchmarks' pour: a Gaussian splash of 2 kg/m² at the peak, up on the flag.
+#[allow(dead_code)] // not every bench pours it
+pub fn pour(rest: &[DVec3]) -> Vec<f64> {
+    rest.iter()
+        .map(|p| 2.0 * (-(p.distance_squared(DVec3::new(1.0, 0.0, 0.8))) / 0.02).exp())
+        .collect()
+}
+
+/// The cloth at frames `0 ..= frames + 1` of `dt` (computed before timing: only the
+/// stain's step is timed).
+#[allow(dead_code)]
+pub fn motion(rest: &[DVec3], frames: usize, dt: f64) -> Vec<Vec<DVec3>> {
+    (0..=frames + 1)
+        .map(|f| wave(rest, f as f64 * dt))
+        .collect()
+}

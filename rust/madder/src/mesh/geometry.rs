@@ -176,6 +176,24 @@ pub(crate) fn vertex_area<P: Copy + Into<DVec3>>(
         .sum()
 }
 
+/// The lumped areas `A_v = Σ_{T∋v} A_T / 3` of every vertex (unmollified, as
+/// [`vertex_area`]), summed face by face in face order.
+pub fn vertex_areas<P: Copy + Into<DVec3>>(topology: &Topology, positions: &[P]) -> Vec<f64> {
+    let mut area = vec![0.0; topology.n_vertices()];
+    for f in topology.faces() {
+        let p = f.map(|v| positions[v as usize].into());
+        let a = heron([
+            p[1].distance(p[2]),
+            p[2].distance(p[0]),
+            p[0].distance(p[1]),
+        ]) / 3.0;
+        for &v in f {
+            area[v as usize] += a;
+        }
+    }
+    area
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -14,7 +14,7 @@ use crate::error::MeshError;
 
 /// How many faces share an edge.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum EdgeKind {
+pub enum EdgeKind {
     /// Exactly one incident face.
     Boundary,
     /// Exactly two incident faces.
@@ -160,7 +160,8 @@ impl Topology {
         &self.face_polygon
     }
 
-    pub(crate) fn edge_kind(&self, e: usize) -> EdgeKind {
+    /// How many faces share edge `e`: boundary, interior or non-manifold.
+    pub fn edge_kind(&self, e: usize) -> EdgeKind {
         match self.edge_face_count[e] {
             1 => EdgeKind::Boundary,
             2 => EdgeKind::Interior,

@@ -119,8 +119,8 @@ pub fn weft_directions(
         .collect()
 }
 
-/// Values of the anisotropic stiffness on `pattern`, scaled by `scale`: face `f` has tensor
-/// `tensor[f]` in the basis of its weft at angle `weft_angle[f]` (see [`weft_angles`]).
+/// The anisotropic stiffness `scale · K_S` of the module doc on `pattern`, each face's
+/// tensor in the basis of its weft at `weft_angle[f]` (from [`weft_angles`]).
 pub fn anisotropic_stiffness(
     topology: &Topology,
     geometry: &Geometry,
@@ -130,22 +130,57 @@ pub fn anisotropic_stiffness(
     scale: f64,
 ) -> Vec<f64> {
     assemble_face_weights(topology, pattern, |f| {
-        let area = geometry.face_area[f];
-        let x = layout(face_lengths(topology, geometry, f), area);
-        let (s, c) = weft_angle[f].sin_cos();
-        let [s11, s12, s22] = tensor[f];
-        // gradient of corner i's hat function, in (weft, warp) coordinates
-        let g = |i: usize| {
-            let d = x[(i + 2) % 3] - x[(i + 1) % 3];
-            let grad = DVec2::new(-d.y, d.x) / (2.0 * area);
-            DVec2::new(c * grad.x + s * grad.y, -s * grad.x + c * grad.y)
-        };
-        let gs = [g(0), g(1), g(2)];
-        // weight of the edge opposite corner k, between corners k+1 and k+2
-        std::array::from_fn(|k| {
-            let (a, b) = (gs[(k + 1) % 3], gs[(k + 2) % 3]);
-            scale * area * (a.x * (s11 * b.x + s12 * b.y) + a.y * (s12 * b.x + s22 * b.y))
-        })
+        face_weights(topology, geometry, weft_angle[f], tensor[f], f, scale)
+    })
+}
+
+/// [`anisotropic_stiffness`] with face `f`'s tensor also scaled by `face_scale[f]` (a
+/// diffusion rate that varies over the cloth: the wicking of a wet fabric).
+pub fn anisotropic_stiffness_scaled(
+    topology: &Topology,
+    geometry: &Geometry,
+    pattern: &VertexPattern,
+    weft_angle: &[f64],
+    tensor: &[Tensor2],
+    scale: f64,
+    face_scale: &[f64],
+) -> Vec<f64> {
+    assemble_face_weights(topology, pattern, |f| {
+        face_weights(
+            topology,
+            geometry,
+            weft_angle[f],
+            tensor[f],
+            f,
+            scale * face_scale[f],
+        )
+    })
+}
+
+/// `scale · A_T g_aᵀ S g_b` for the edge opposite each corner of face `f` (module doc).
+fn face_weights(
+    topology: &Topology,
+    geometry: &Geometry,
+    weft_angle: f64,
+    tensor: Tensor2,
+    f: usize,
+    scale: f64,
+) -> [f64; 3] {
+    let area = geometry.face_area[f];
+    let x = layout(face_lengths(topology, geometry, f), area);
+    let (s, c) = weft_angle.sin_cos();
+    let [s11, s12, s22] = tensor;
+    // gradient of corner i's hat function, in (weft, warp) coordinates
+    let g = |i: usize| {
+        let d = x[(i + 2) % 3] - x[(i + 1) % 3];
+        let grad = DVec2::new(-d.y, d.x) / (2.0 * area);
+        DVec2::new(c * grad.x + s * grad.y, -s * grad.x + c * grad.y)
+    };
+    let gs = [g(0), g(1), g(2)];
+    // weight of the edge opposite corner k, between corners k+1 and k+2
+    std::array::from_fn(|k| {
+        let (a, b) = (gs[(k + 1) % 3], gs[(k + 2) % 3]);
+        scale * area * (a.x * (s11 * b.x + s12 * b.y) + a.y * (s12 * b.x + s22 * b.y))
     })
 }
 

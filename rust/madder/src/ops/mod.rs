@@ -19,7 +19,10 @@ pub(crate) mod pattern;
 pub(crate) mod restrict;
 pub(crate) mod solve;
 
-pub use aniso::{DEGENERATE_UV_REL, anisotropic_stiffness, weft_angles, weft_directions};
+pub use aniso::{
+    DEGENERATE_UV_REL, anisotropic_stiffness, anisotropic_stiffness_scaled, weft_angles,
+    weft_directions,
+};
 pub use bochner::{
     BochnerPattern, BochnerSystem, add_lumped_mass_blocks, bochner_stiffness, diffuse_tangent_field,
 };

@@ -53,6 +53,22 @@
 //! So every density stays `≥ 0` and every total is kept. Advection is non-negative and
 //! conservative by construction ([`super::advect`]); so are the interactions.
 //!
+//! ## Tide lines: the solute carried by the solvent (issue 13 §2)
+//! By default the dissolved solute diffuses with the solvent's own operator. Its flux is
+//! then `−K∇s = c(−K∇f) − f K∇c`: the solvent's flux carrying the concentration `c = s/f`,
+//! plus a diffusion of the concentration itself at the solvent's rate, far faster than
+//! any molecular diffusion (~1e-9 m²/s against the fabric's ~1e-4). With `carry_solute`
+//! the solute moves with the solvent's flux only: the free solvent and the solvent in
+//! the fibres are both solved (the fibres' liquid wicks too: in a fabric the absorbed
+//! liquid is what moves by capillarity), and the dissolved and absorbed solute follow
+//! their fluxes by an implicit upwind sweep ([`carry_with_solvent`]) that keeps a uniform
+//! solution uniform to rounding. The molecular diffusion is left out: the upwind
+//! transport's own numerical diffusion is larger. Where evaporation draws the solvent
+//! toward the stain's rim, the solute goes with it: the coffee-ring mechanism. On its own
+//! it does not make a visible ring here (`tests/tide_lines.rs`): the spill keeps
+//! spreading, so its edge is not pinned, and eq. 4.8's faster evaporation covers only the
+//! outermost ring of vertices.
+//!
 //! For the velocity's Bochner Laplacian the edge weights are clamped at zero: with
 //! negative (non-Delaunay) weights `K_∇` can be indefinite ([`crate::ops::bochner`]),
 //! and the velocity diffusion is a viscosity, whose job is smoothing; clamping makes it
@@ -67,9 +83,10 @@ use super::state::{Fields, merge_rgb, split_rgb};
 use crate::error::{Error, ParamError};
 use crate::mesh::geometry::check_positions;
 use crate::mesh::{Geometry, RingAdjacency, Topology, Transport};
+use crate::ops::cotan::assemble_face_weights;
 use crate::ops::{
     PrefactoredSpd, Restriction, VertexPattern, WarmCg, add_lumped_mass, anisotropic_stiffness,
-    cotan_stiffness, weft_angles,
+    anisotropic_stiffness_scaled, cotan_stiffness, weft_angles,
 };
 use crate::weave::Tensor2;
 
@@ -88,6 +105,79 @@ pub(crate) const VELOCITY_TOLERANCE: f64 = 1e-8;
 /// simulator's default rate): wicking in cotton, whose front advances about a centimetre
 /// in the first second (`D ≈ L²/2t`).
 pub const DEFAULT_DIFFUSION: f64 = 2e-4;
+
+/// Wicking (issue 13): a fabric draws liquid in faster where it is wetter, so the rate of
+/// the density diffusion grows with the saturation `θ`,
+///
+/// ```text
+/// D(θ) = D₀ θⁿ,    θ = min(σ_liquid / σ_w, 1),
+/// ```
+///
+/// a porous-medium (Richards-type) law: `σ̇ = ∇·(D₀ θⁿ ∇σ)` has a front of finite speed
+/// where the liquid meets dry cloth, instead of the Gaussian tail of linear diffusion.
+/// `σ_liquid` is the free plus absorbed solvent density, `σ_w` [`Wicking::density`] (θ
+/// stops at 1: a puddle above it spreads at `D₀`, and runs by the flow).
+///
+/// Discretized per face: face `T` diffuses at `D₀ g_T` with `g_T` the mean of `θ_iⁿ` over
+/// its corners (the P1 stiffness with a piecewise-constant coefficient), so a face with
+/// one wet corner conducts and the front moves into the next ring. The coefficient is
+/// **lagged**: taken from the densities at the start of the solve, one linear solve per
+/// sub-step as without wicking (the cost of a step stays that of the linear diffusion plus
+/// the per-face factors). Lagging errs by `O(h)` in time; Picard iterations would remove
+/// it at one more solve each, and on the Barenblatt test the lagged scheme is already
+/// within the test's 3 % at the simulator's steps (`tests/wicking.rs`). The system stays
+/// symmetric positive definite and conservative (`1ᵀK = 0` face by face, whatever the
+/// factors), so mass is exact and the negative-mass repair keeps every density ≥ 0.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Wicking {
+    /// `n ≥ 0`; 0 is a constant rate (wicking off: the linear diffusion, bit for bit).
+    pub exponent: f64,
+    /// `σ_w`, kg/m²: the liquid density at which the rate reaches the fabric's `D₀`.
+    pub density: f64,
+}
+
+impl Default for Wicking {
+    fn default() -> Self {
+        Self {
+            exponent: 0.0,
+            // the default fibres' saturation ([`super::InteractionRates`])
+            density: 0.1,
+        }
+    }
+}
+
+impl Wicking {
+    /// Whether the rate depends on the saturation at all.
+    pub fn is_on(&self) -> bool {
+        self.exponent > 0.0
+    }
+
+    /// Checks the exponent (finite, 0 to 8) and the density (finite, > 0).
+    pub fn validate(&self) -> Result<(), ParamError> {
+        check_range(
+            "wicking exponent",
+            self.exponent,
+            (0.0..=8.0).contains(&self.exponent),
+            "from 0 to 8",
+        )?;
+        check_range(
+            "wicking density",
+            self.density,
+            self.density > 0.0,
+            "finite and > 0",
+        )
+    }
+
+    /// The factor `g_T` of every face of `topology` from the liquid densities of its
+    /// vertices (module doc of [`Wicking`]).
+    pub fn face_factors(&self, topology: &Topology, liquid_density: &[f64]) -> Vec<f64> {
+        let theta: Vec<f64> = liquid_density
+            .iter()
+            .map(|&s| (s / self.density).clamp(0.0, 1.0).powf(self.exponent))
+            .collect();
+        super::irregular::face_means(topology, &theta)
+    }
+}
 
 /// How fast the stain diffuses, and in which directions.
 #[derive(Debug, Clone, PartialEq)]
@@ -119,19 +209,35 @@ pub struct WovenFaces {
 impl Conductivity {
     /// The stiffness `scale · K_S` on `pattern` for this geometry: `D` times the cotan
     /// stiffness, or the anisotropic stiffness with the weft recomputed from the UVs on
-    /// the deformed faces.
+    /// the deformed faces; with `face_scale`, face `f`'s rate (or tensor) times
+    /// `face_scale[f]` (the wicking factor of [`Wicking`]).
     pub(crate) fn stiffness(
         &self,
         topology: &Topology,
         geometry: &Geometry,
         pattern: &VertexPattern,
         scale: f64,
+        face_scale: Option<&[f64]>,
     ) -> Vec<f64> {
-        match self {
-            Conductivity::Isotropic(d) => cotan_stiffness(topology, geometry, pattern, scale * d),
-            Conductivity::Woven(w) => {
+        match (self, face_scale) {
+            (Conductivity::Isotropic(d), None) => {
+                cotan_stiffness(topology, geometry, pattern, scale * d)
+            }
+            (Conductivity::Isotropic(d), Some(g)) => {
+                assemble_face_weights(topology, pattern, |f| {
+                    geometry.face_cot[f].map(|c| -0.5 * scale * d * g[f] * c)
+                })
+            }
+            (Conductivity::Woven(w), g) => {
                 let (angle, _) = weft_angles(topology, geometry, &w.uv, &w.angle);
-                anisotropic_stiffness(topology, geometry, pattern, &angle, &w.tensor, scale)
+                match g {
+                    None => {
+                        anisotropic_stiffness(topology, geometry, pattern, &angle, &w.tensor, scale)
+                    }
+                    Some(g) => anisotropic_stiffness_scaled(
+                        topology, geometry, pattern, &angle, &w.tensor, scale, g,
+                    ),
+                }
             }
         }
     }
@@ -417,7 +523,7 @@ impl DiffusionStepper {
         let pattern = self.solver.pattern();
         let mut values = self
             .conductivity
-            .stiffness(&self.topology, &geometry, pattern, h);
+            .stiffness(&self.topology, &geometry, pattern, h, None);
         add_lumped_mass(&geometry, pattern, 1.0, &mut values);
         // one right-hand side per field: the masses carried by the vertices
         let n = self.topology.n_vertices();
@@ -470,6 +576,8 @@ pub(super) fn diffuse_densities(
     f: &mut Fields,
     geometry: &Geometry,
     h: f64,
+    wicking: Option<&[f64]>,
+    carry: bool,
 ) -> Result<usize, Error> {
     let region = ops.region;
     let vertices = &region.vertices;
@@ -477,12 +585,21 @@ pub(super) fn diffuse_densities(
     let area = &geometry.vertex_area;
     let full = ops
         .conductivity
-        .stiffness(ops.topology, geometry, ops.pattern, h);
+        .stiffness(ops.topology, geometry, ops.pattern, h, wicking);
     let values = region.scalar_values(ops.pattern, &full, area, false);
+    // with the solute carried (issue 13 §2) the two solvents, free and in the fibres,
+    // are solved, and the solute moves with their fluxes; otherwise the free solvent, the
+    // dissolved solute and its colour diffuse alike
+    let before = carry.then(|| (f.free_solvent.clone(), f.absorbed_solvent.clone()));
     let mut color = f.color_free.as_ref().map(|c| split_rgb(c));
-    let mut fields: Vec<&mut Vec<f64>> = vec![&mut f.free_solvent, &mut f.solute];
-    if let Some(c) = color.as_mut() {
-        fields.extend(c.iter_mut());
+    let mut fields: Vec<&mut Vec<f64>> = vec![&mut f.free_solvent];
+    if carry {
+        fields.push(&mut f.absorbed_solvent);
+    } else {
+        fields.push(&mut f.solute);
+        if let Some(c) = color.as_mut() {
+            fields.extend(c.iter_mut());
+        }
     }
     let rhs: Vec<f64> = fields
         .iter()
@@ -513,10 +630,209 @@ pub(super) fn diffuse_densities(
             vertices.iter().for_each(|&v| m[v as usize] *= scale);
         }
     }
+    if let Some((free, held)) = &before {
+        // the dissolved solute and its colour with the free solvent
+        let mut moves: Vec<(&mut Vec<f64>, Vec<f64>)> = vec![(&mut f.solute, Vec::new())];
+        if let Some(c) = color.as_mut() {
+            moves.extend(c.iter_mut().map(|c| (c, Vec::new())));
+        }
+        for (target, movable) in moves.iter_mut() {
+            *movable = target.to_vec();
+        }
+        carry_with_solvent(
+            ops,
+            &full,
+            &sigma[..nv],
+            (free, &f.free_solvent),
+            &mut moves,
+        );
+        // the absorbed solute with the solvent in the fibres; the held colour pool
+        // (absorbed + adsorbed) gives up the absorbed solute's share
+        let held_color = f.color_held.as_ref().map(|c| split_rgb(c));
+        let (sp, sa) = (&f.absorbed_solute, &f.adsorbed);
+        let mut held_moves: Vec<(Vec<f64>, Vec<f64>)> = vec![(sp.clone(), sp.clone())];
+        if let Some(hc) = &held_color {
+            for c in hc {
+                let movable = (0..c.len())
+                    .map(|v| {
+                        let pool = sp[v] + sa[v];
+                        if pool > 0.0 {
+                            c[v] * (sp[v].max(0.0) / pool)
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect();
+                held_moves.push((c.clone(), movable));
+            }
+        }
+        let mut refs: Vec<(&mut Vec<f64>, Vec<f64>)> = held_moves
+            .iter_mut()
+            .map(|(t, m)| (t, std::mem::take(m)))
+            .collect();
+        carry_with_solvent(
+            ops,
+            &full,
+            &sigma[nv..2 * nv],
+            (held, &f.absorbed_solvent),
+            &mut refs,
+        );
+        drop(refs);
+        let mut held_moves = held_moves.into_iter();
+        f.absorbed_solute = held_moves.next().expect("the absorbed solute").0;
+        if let Some(ch) = f.color_held.as_mut() {
+            let c: Vec<Vec<f64>> = held_moves.map(|(t, _)| t).collect();
+            merge_rgb(&[c[0].clone(), c[1].clone(), c[2].clone()], ch);
+        }
+    }
     if let (Some(c), Some(cf)) = (color, f.color_free.as_mut()) {
         merge_rgb(&c, cf);
     }
     Ok(cg.last_iterations)
+}
+
+/// Most Gauss–Seidel sweeps of the carried solute's concentrations ([`carry_with_solvent`]).
+const MAX_CARRY_SWEEPS: usize = 50;
+
+/// Moves the solute (and its colour) with the solvent's diffusive fluxes of the solve
+/// just made (issue 13 §2, "Tide lines" in the module doc). Across every edge `a–b` of
+/// the region the solvent moved `F_ab = −h K_ab (σ'_a − σ'_b)` (kg, `a → b`), and the
+/// solute goes with it at the concentration `c = s/f` of the vertex it leaves, **at the
+/// end of the step** (implicit upwind, as the solvent's own step is implicit):
+///
+/// ```text
+/// c'_a (f_a + in_a − out_a) = s_a − c'_a out_a + Σ_{b → a} F_ba c'_b,
+/// ```
+///
+/// `f_a` the solvent before, `in_a`, `out_a` its in- and outflow. Diffusive fluxes run
+/// down the solved density, so in order of decreasing `σ'` every inflow comes from a
+/// vertex already solved: one sweep solves the system exactly. (A flux uphill, from a
+/// negative cotan weight on an obtuse mesh, is taken explicitly at the old
+/// concentration, limited to the solvent the vertex held.) Every transfer is between two
+/// vertices, so the total is exact; the weights are non-negative, so no mass goes
+/// negative; and `c' = c` solves it when `c` is uniform: a solution of one strength keeps
+/// it wherever the solvent takes it, however sharp the solvent's front and however
+/// long the step. (With the concentration of the start of the step instead, a vertex
+/// the front crosses within the step passes on more solvent than it held and its
+/// concentration came out 3× wrong.)
+///
+/// `before` and `after` are the solvent before the solve and now (window numbering; the
+/// solute ends at `c'` times the solvent now), `sigma` its solved densities (region
+/// order); each move is a mass field and the part of it that moves
+/// (the field itself, or the moving solute's share of a colour pool).
+fn carry_with_solvent(
+    ops: &Ops<'_>,
+    stiffness: &[f64],
+    sigma: &[f64],
+    (before, after): (&[f64], &[f64]),
+    moves: &mut [(&mut Vec<f64>, Vec<f64>)],
+) {
+    let region = ops.region;
+    let n = before.len();
+    let mut density = vec![0.0; n];
+    for (j, &v) in region.vertices.iter().enumerate() {
+        density[v as usize] = sigma[j];
+    }
+    // the sweep order: decreasing solved density (ties by vertex), and each vertex's rank
+    let mut order: Vec<u32> = region.vertices.clone();
+    order.sort_by(|&a, &b| {
+        density[b as usize]
+            .total_cmp(&density[a as usize])
+            .then(a.cmp(&b))
+    });
+    let mut rank = vec![u32::MAX; n];
+    for (k, &v) in order.iter().enumerate() {
+        rank[v as usize] = k as u32;
+    }
+    let slot = ops.pattern.edge_slot();
+    // (upwind, downwind, solvent moved) for every edge inside the region
+    let flows: Vec<(usize, usize, f64)> = ops
+        .topology
+        .edges()
+        .iter()
+        .enumerate()
+        .filter(|(_, e)| region.mask[e[0] as usize] && region.mask[e[1] as usize])
+        .filter_map(|(e, &[a, b])| {
+            let (a, b) = (a as usize, b as usize);
+            let flow = -stiffness[slot[e] as usize] * (density[a] - density[b]);
+            match flow.partial_cmp(&0.0) {
+                Some(std::cmp::Ordering::Greater) => Some((a, b, flow)),
+                Some(std::cmp::Ordering::Less) => Some((b, a, -flow)),
+                _ => None,
+            }
+        })
+        .collect();
+    let mut inflow = vec![0.0; n];
+    let mut incoming: Vec<Vec<(u32, f64)>> = vec![Vec::new(); n];
+    let mut uphill = false;
+    for &(from, to, amount) in &flows {
+        inflow[to] += amount;
+        incoming[to].push((from as u32, amount));
+        uphill |= rank[from] > rank[to];
+    }
+    for (target, movable) in moves.iter_mut() {
+        // what cannot move stays: a vertex without solvent holds its solute in place
+        let mut mobile: Vec<f64> = (0..n)
+            .map(|v| {
+                if before[v] > 0.0 {
+                    movable[v].max(0.0)
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        for &v in &order {
+            target[v as usize] -= mobile[v as usize];
+        }
+        // c'_a = (s_a + Σ_in F_ba c'_b) / (f_a + in_a): one sweep down the density when
+        // every flux runs downhill, Gauss–Seidel sweeps in that order otherwise
+        let mut conc = vec![0.0; n];
+        for sweep in 0..MAX_CARRY_SWEEPS {
+            let mut change: f64 = 0.0;
+            let mut size: f64 = 0.0;
+            for &v in &order {
+                let v = v as usize;
+                let gathered: f64 = incoming[v].iter().map(|&(b, f)| f * conc[b as usize]).sum();
+                let held = before[v] + inflow[v];
+                let c = if held > 0.0 {
+                    (mobile[v] + gathered) / held
+                } else {
+                    0.0
+                };
+                change = change.max((c - conc[v]).abs());
+                size = size.max(c);
+                conc[v] = c;
+            }
+            if !uphill || (sweep > 0 && change <= 1e-13 * size) {
+                break;
+            }
+        }
+        // the solute in the solvent as it is now (after the negative-mass repair and the
+        // restoration of its total), then the total restored: exact for a uniform
+        // solution, and the rounding of the sweep otherwise
+        let moving: f64 = order
+            .iter()
+            .map(|&v| {
+                let v = v as usize;
+                if before[v] > 0.0 {
+                    movable[v].max(0.0)
+                } else {
+                    0.0
+                }
+            })
+            .sum();
+        let mut total = 0.0;
+        for &v in &order {
+            let v = v as usize;
+            mobile[v] = conc[v] * after[v].max(0.0);
+            total += mobile[v];
+        }
+        let scale = if total > 0.0 { moving / total } else { 0.0 };
+        for &v in &order {
+            let v = v as usize;
+            target[v] += mobile[v] * scale;
+        }
+    }
 }
 
 /// Eq. 4.6 on the active vertices with clamped (non-negative) edge weights,

@@ -242,7 +242,8 @@ pub(crate) fn exposure(
 /// Vertices per parallel work item (a fixed split: the result does not depend on it).
 const CHUNK: usize = 1024;
 
-/// One interaction step `h` (s) on every vertex: absorption, then adsorption, then
+/// One interaction step `h` (s) on every vertex (the simulator calls
+/// [`interact_varied`]; this uniform form is what the tests below check): absorption, then adsorption, then
 /// evaporation (module doc). `area` holds the lumped vertex areas `A_i` (m²) of the
 /// current geometry and `exposure` the per-vertex evaporation coefficient from
 /// [`exposure()`] (which takes `rates.evaporation_boundary`; `interact` itself does not read
@@ -251,10 +252,25 @@ const CHUNK: usize = 1024;
 /// Errors: `h` not finite and `> 0` (`"time step"`), invalid `rates`, a length that differs
 /// from `area.len()` (a missing colour pool when the other is present counts as length 0),
 /// a non-finite value, a negative area or exposure. On error nothing is modified.
+#[cfg(test)]
 pub(crate) fn interact(
     rates: &InteractionRates,
     area: &[f64],
     exposure: &[f64],
+    h: f64,
+    fields: &mut Fields,
+) -> Result<f64, ParamError> {
+    interact_varied(rates, area, exposure, None, h, fields)
+}
+
+/// The interaction step with the absorption rate of vertex `i` multiplied by
+/// `absorption_scale[i]` (an irregular fabric, [`super::irregular`]); `None` is the
+/// uniform fabric (the tests' `interact`).
+pub(crate) fn interact_varied(
+    rates: &InteractionRates,
+    area: &[f64],
+    exposure: &[f64],
+    absorption_scale: Option<&[f64]>,
     h: f64,
     fields: &mut Fields,
 ) -> Result<f64, ParamError> {
@@ -269,8 +285,18 @@ pub(crate) fn interact(
     let n = area.len();
     check_inputs(n, area, exposure, fields)?;
 
+    if let Some(a) = absorption_scale {
+        if a.len() != n {
+            return Err(ParamError::Length {
+                name: "absorption scale",
+                expected: n,
+                got: a.len(),
+            });
+        }
+    }
     let coeffs = Coefficients {
         absorb: -(-rates.absorption * h).exp_m1(),
+        rate_h: rates.absorption * h,
         adsorb: -(-rates.adsorption * h).exp_m1(),
         saturation: rates.saturation,
         capacity: rates.capacity,
@@ -297,10 +323,12 @@ pub(crate) fn interact(
         let mut cf = color_free.as_mut().map(|v| v.chunks_mut(CHUNK));
         let mut ch = color_held.as_mut().map(|v| v.chunks_mut(CHUNK));
         let mut ev = evaporated.chunks_mut(CHUNK);
+        let mut scale = absorption_scale.map(|a| a.chunks(CHUNK));
         for (area, exposure) in area.chunks(CHUNK).zip(exposure.chunks(CHUNK)) {
             chunks.push(Chunk {
                 area,
                 exposure,
+                absorption_scale: scale.as_mut().map(|it| it.next().unwrap()),
                 f: f.next().unwrap(),
                 s: s.next().unwrap(),
                 p: p.next().unwrap(),
@@ -394,6 +422,8 @@ fn check_inputs(
 struct Coefficients {
     /// `1 − e^{−K_p h}`.
     absorb: f64,
+    /// `K_p h` (a vertex with its own absorption scale `s` takes `1 − e^{−s K_p h}`).
+    rate_h: f64,
     /// `1 − e^{−K_d h}`.
     adsorb: f64,
     /// `σ_sat`.
@@ -408,6 +438,7 @@ struct Coefficients {
 struct Chunk<'a> {
     area: &'a [f64],
     exposure: &'a [f64],
+    absorption_scale: Option<&'a [f64]>,
     f: &'a mut [f64],
     s: &'a mut [f64],
     p: &'a mut [f64],
@@ -431,7 +462,11 @@ impl Chunk<'_> {
                 ch: self.ch.as_ref().map_or([0.0; 3], |x| x[i]),
             };
             let area = self.area[i];
-            v.absorb(c.saturation * area, c.absorb);
+            let absorb = match self.absorption_scale {
+                None => c.absorb,
+                Some(scale) => -(-scale[i] * c.rate_h).exp_m1(),
+            };
+            v.absorb(c.saturation * area, absorb);
             v.adsorb(c.capacity * area, c.adsorb);
             self.evaporated[i] = v.evaporate(self.exposure[i] * c.evaporate * area);
             self.f[i] = v.f;

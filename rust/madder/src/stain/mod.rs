@@ -11,17 +11,21 @@
 //!   fabric experiments).
 
 pub mod advect;
+pub(crate) mod detail;
 pub(crate) mod diffuse;
 pub mod extend;
 pub(crate) mod forces;
 pub(crate) mod interact;
+pub(crate) mod irregular;
 pub(crate) mod simulate;
 pub(crate) mod sources;
 pub(crate) mod state;
 pub(crate) mod window;
 
-pub use diffuse::{Conductivity, DEFAULT_DIFFUSION, DiffusionStepper, WovenFaces};
+pub use detail::Detailed;
+pub use diffuse::{Conductivity, DEFAULT_DIFFUSION, DiffusionStepper, Wicking, WovenFaces};
 pub use forces::Forces;
 pub use interact::InteractionRates;
+pub use irregular::Irregularity;
 pub use simulate::{DEFAULT_SOLUTE_COLOR, Profile, Simulator, StainParams};
 pub use state::{Fields, Totals};

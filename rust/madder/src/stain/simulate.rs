@@ -74,13 +74,16 @@ use glam::{DMat3, DVec2, DVec3};
 use rayon::prelude::*;
 
 use super::advect::{UpwindPlan, advect_velocity_in, dual_fluxes};
-use super::diffuse::{Conductivity, Ops, check_range, diffuse_densities, diffuse_velocity};
+use super::diffuse::{
+    Conductivity, Ops, Wicking, check_range, diffuse_densities, diffuse_velocity,
+};
 use super::extend::{extend_velocity, wet_vertices};
 use super::forces::{
     Forces, corotating_frames_with, frame_angular_velocity, frame_body_acceleration,
     integrate_velocity, rest_frames, second_difference,
 };
-use super::interact::{InteractionRates, exposure, interact};
+use super::interact::{InteractionRates, exposure, interact_varied};
+use super::irregular::{Irregularity, face_means};
 use super::state::{Fields, Local, State, merge_rgb, split_rgb};
 use super::window::{Cloth, Window, pick};
 use crate::error::{Error, ParamError};
@@ -122,6 +125,13 @@ pub struct StainParams {
     pub friction: f64,
     /// Absorption, adsorption and evaporation rates (§4.5).
     pub interaction: InteractionRates,
+    /// How the fabric's diffusion rate grows with its saturation (off by default).
+    pub wicking: Wicking,
+    /// The fabric's random variations of diffusion and absorption (off by default).
+    pub irregularity: Irregularity,
+    /// The dissolved solute moves with the solvent's capillary flow instead of diffusing
+    /// on its own ([`super::diffuse`], "Tide lines"); off by default.
+    pub carry_solute: bool,
     /// Sub-steps per frame, at least: a frame whose vertex frames turn by more than
     /// [`MAX_TURN`] takes more on its own (module doc, "Fast rotation").
     pub substeps: u32,
@@ -139,6 +149,9 @@ impl Default for StainParams {
             viscosity: 1e-4,
             friction: 50.0,
             interaction: InteractionRates::default(),
+            wicking: Wicking::default(),
+            irregularity: Irregularity::default(),
+            carry_solute: false,
             substeps: 1,
             active_region: true,
         }
@@ -147,7 +160,7 @@ impl Default for StainParams {
 
 impl StainParams {
     /// Checks every parameter, naming the first one out of range.
-    pub(crate) fn validate(&self) -> Result<(), ParamError> {
+    pub fn validate(&self) -> Result<(), ParamError> {
         if let Some(k) = (0..3).find(|&k| !self.gravity[k].is_finite()) {
             return Err(ParamError::NonFinite {
                 name: "gravity",
@@ -172,6 +185,8 @@ impl StainParams {
             self.substeps >= 1,
             "at least 1",
         )?;
+        self.wicking.validate()?;
+        self.irregularity.validate()?;
         self.interaction.validate()
     }
 }
@@ -265,6 +280,10 @@ impl Simulator {
             loose: topology.loose_vertices(),
             cloth: Cloth {
                 boundary: topology.boundary_vertices(),
+                irregular: params
+                    .irregularity
+                    .is_on()
+                    .then(|| params.irregularity.multiplier(rest)),
                 rest: rest.to_vec(),
                 rest_frames,
                 conductivity,
@@ -598,11 +617,39 @@ impl Simulator {
             conductivity: &w.cloth.conductivity,
             region: &w.region,
         };
+        // the wicking factor of every face, from the liquid before the solve (lagged),
+        // times the irregular fabric's
+        let wicking = p.wicking.is_on().then(|| {
+            let f = &loc.fields;
+            let liquid: Vec<f64> = (0..n)
+                .map(|j| {
+                    let a = geometry.vertex_area[j];
+                    let m = f.free_solvent[j] + f.absorbed_solvent[j];
+                    if a > 0.0 { m / a } else { 0.0 }
+                })
+                .collect();
+            p.wicking.face_factors(topo, &liquid)
+        });
+        let irregular = w.cloth.irregular.as_ref();
+        let face_scale = match (wicking, irregular.map(|m| face_means(topo, m))) {
+            (Some(g), Some(r)) => Some(g.iter().zip(&r).map(|(g, r)| g * r).collect()),
+            (g, r) => g.or(r),
+        };
         let (fields, velocity) = (&mut loc.fields, &mut loc.velocity);
         let (densities, viscous) = match w.cg.as_mut() {
             None => (Ok(0), Ok(0)),
             Some((scalar_cg, vector_cg)) => rayon::join(
-                || diffuse_densities(&ops, scalar_cg, fields, &geometry, h),
+                || {
+                    diffuse_densities(
+                        &ops,
+                        scalar_cg,
+                        fields,
+                        &geometry,
+                        h,
+                        face_scale.as_deref(),
+                        p.carry_solute,
+                    )
+                },
                 || {
                     if p.viscosity > 0.0 {
                         let scale = h * p.viscosity;
@@ -634,10 +681,12 @@ impl Simulator {
             p.interaction.evaporation_boundary,
         );
         let mut part = loc.fields.gather(&w.whole);
-        loc.evaporated += interact(
+        let absorption_scale = irregular.map(|m| pick(&w.whole, m));
+        loc.evaporated += interact_varied(
             &p.interaction,
             &pick(&w.whole, &geometry.vertex_area),
             &pick(&w.whole, &exposed),
+            absorption_scale.as_deref(),
             h,
             &mut part,
         )?;

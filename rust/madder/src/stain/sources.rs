@@ -17,8 +17,25 @@ use super::simulate::Simulator;
 use crate::error::ParamError;
 use crate::rng::SplitMix64;
 
+/// `got` values where one per vertex, `expected`, are needed, else the error naming both.
+pub(super) fn check_length(
+    name: &'static str,
+    expected: usize,
+    got: usize,
+) -> Result<(), ParamError> {
+    if got == expected {
+        Ok(())
+    } else {
+        Err(ParamError::Length {
+            name,
+            expected,
+            got,
+        })
+    }
+}
+
 /// Every value finite and `≥ 0`, else the error names the first vertex that is not.
-fn check_each_nonnegative(name: &'static str, values: &[f64]) -> Result<(), ParamError> {
+pub(super) fn check_each_nonnegative(name: &'static str, values: &[f64]) -> Result<(), ParamError> {
     match values.iter().position(|x| !(x.is_finite() && *x >= 0.0)) {
         None => Ok(()),
         Some(index) => Err(ParamError::OutOfRangeAt {
@@ -56,16 +73,7 @@ impl Simulator {
     }
 
     pub(super) fn check_len(&self, name: &'static str, got: usize) -> Result<(), ParamError> {
-        let expected = self.cloth.topology.n_vertices();
-        if got == expected {
-            Ok(())
-        } else {
-            Err(ParamError::Length {
-                name,
-                expected,
-                got,
-            })
-        }
+        check_length(name, self.cloth.topology.n_vertices(), got)
     }
 
     /// Pours liquid: `solvent[i]` kg/m² of solvent at vertex `i`, carrying

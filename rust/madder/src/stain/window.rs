@@ -107,6 +107,8 @@ pub(super) struct Cloth {
     pub(super) conductivity: Conductivity,
     /// The cloth's border, per vertex.
     pub(super) boundary: Vec<bool>,
+    /// The irregular fabric's multiplier per vertex ([`super::irregular`]), if any.
+    pub(super) irregular: Option<Vec<f64>>,
 }
 
 /// The part of the cloth a frame works on (module doc): the *active* vertices
@@ -183,6 +185,7 @@ impl Window {
             },
             conductivity: cloth.conductivity.faces(&faces),
             boundary: pick(&vertices, &cloth.boundary),
+            irregular: cloth.irregular.as_ref().map(|m| pick(&vertices, m)),
             topology,
             rings,
             adjacency,

@@ -1,0 +1,270 @@
+"""Image-sequence output, the bpy side: the object's sequence as Blender images, and the
+job that writes a sequence from a fine cache a frame at a time (inside a bake, or as
+Re-export Textures). Paths, numbering, staging and the export loop are bpy-free, in
+`textures`; the shader nodes that read the images are in `shading`."""
+
+import os
+
+import bpy
+
+from . import bridge, handlers, presets, textures
+from .errors import ExportError
+
+KINDS = textures.KINDS
+
+
+def uses_images(obj):
+    """Whether `obj`'s stain shader reads images: it wants them (Image Sequence) and a
+    bake or re-export wrote them."""
+    s = obj.madder
+    return bool(s.output_images and s.image_baked and s.cache_file)
+
+
+def paths(obj, cache=None):
+    """(fine cache, image folder, file prefix) of `obj`, derived from its cache path
+    (`cache`, default the one it plays)."""
+    cache = cache or handlers.cache_path(obj)
+    return textures.fine_cache_path(cache), textures.image_folder(cache), textures.stem(cache)
+
+
+def frame_problem(obj, frame):
+    """The missing image of scene `frame` (clamped to the baked range, as shown), as a
+    message naming it, or None."""
+    if not uses_images(obj):
+        return None
+    first, last = obj.madder.image_frames
+    _, folder, name = paths(obj)
+    missing = textures.missing_file(folder, name, min(max(frame, first), last))
+    if missing is None:
+        return None
+    return f"Image sequence incomplete: {missing} is missing: Re-export Textures or bake again"
+
+
+def _image_name(obj, kind):
+    return f"Madder {obj.name} {kind}"
+
+
+def sequence_image(obj, kind):
+    """The Blender image of `obj`'s `kind` ("stain" or "wet") sequence, made or updated:
+    an image sequence on the first frame's file, non-colour (the values are data, the
+    same as the attributes), alpha channel-packed (RGB and A are read as stored: the
+    stain is premultiplied already)."""
+    s = obj.madder
+    _, folder, name = paths(obj)
+    path = textures.frame_file(folder, name, kind, s.image_frames[0])
+    stored = _stored_path(path)
+    img = bpy.data.images.get(_image_name(obj, kind))
+    if img is None:
+        if os.path.isfile(path):
+            img = bpy.data.images.load(path, check_existing=False)
+            img.name = _image_name(obj, kind)
+        else:  # not there (yet): the image shows it is missing, as any image would
+            img = bpy.data.images.new(_image_name(obj, kind), 1, 1, float_buffer=True)
+    img.source = "SEQUENCE"
+    if img.filepath != stored:
+        img.filepath = stored
+    img.colorspace_settings.name = "Non-Color"
+    img.alpha_mode = "CHANNEL_PACKED"
+    return img
+
+
+def set_image_user(image_user, obj):
+    """Scene frame f shows file f over the baked range, the first file before it and the
+    last after it (`textures.image_user`), refreshed on every frame change."""
+    first, last = obj.madder.image_frames
+    for key, value in textures.image_user(first, last).items():
+        setattr(image_user, key, value)
+    image_user.use_cyclic = False
+    image_user.use_auto_refresh = True
+
+
+def reload(obj):
+    """Makes Blender read `obj`'s sequences again (after a bake or re-export replaced them)."""
+    for kind in KINDS:
+        img = bpy.data.images.get(_image_name(obj, kind))
+        if img is not None:
+            img.reload()
+
+
+def remove_images(obj):
+    """Removes `obj`'s sequence images that nothing uses any more."""
+    for kind in KINDS:
+        img = bpy.data.images.get(_image_name(obj, kind))
+        if img is not None and img.users == 0:
+            bpy.data.images.remove(img)
+
+
+def _stored_path(path):
+    if bpy.data.filepath:
+        try:
+            return bpy.path.relpath(path)
+        except ValueError:  # another drive
+            return path
+    return path
+
+
+class SequenceExport:
+    """Writes `obj`'s image sequence from the fine cache at `fine_path` into
+    `folder`, one frame per `step()` (`textures.Exporter`).
+
+    `topology` and `level`: the cloth's `madder.Topology` and the Detail level the fine
+    cache was baked at (its refinement numbers the fine cache's vertices); `uv`: the
+    cloth triangles' corner UVs (F, 3, 2); `references`: the bake's. Errors are
+    `ExportError`s naming the object, the frame and the file."""
+
+    def __init__(self, madder, obj, fine_path, topology, level, uv, references, size, folder, name):
+        self.madder, self.obj = madder, obj
+        try:
+            self.reader = madder.CacheReader(fine_path)
+            refinement = madder.Refinement(topology, level)
+        except madder.MadderError as e:
+            raise ExportError(f"'{obj.name}': {e}", object=obj.name, filename=fine_path) from e
+        if refinement.n_vertices != self.reader.n_vertices:
+            raise ExportError(
+                f"'{obj.name}': the fine cache {fine_path} holds {self.reader.n_vertices} vertices, the cloth "
+                f"refined at Detail {level} has {refinement.n_vertices}: bake again",
+                object=obj.name, filename=fine_path)
+        self.exporter = textures.Exporter(
+            madder, self.reader, refinement.faces(), refinement.face_uv(uv), references,
+            tuple(obj.madder.stain_color), size, folder, name)
+        self.first, self.last = self.exporter.first, self.exporter.last
+        self.size = self.exporter.size
+        # one image per step: a 4096² image takes about a second to write
+        self._work = iter([(f, kind) for f in self.exporter.frames() for kind in KINDS])
+        self.frame = None  # the last frame whose images are all written
+        self.done = 0
+        self.overlapping = None
+
+    @property
+    def total(self):
+        return self.last - self.first + 1
+
+    def step(self):
+        """Writes the next image; returns False once the last is written."""
+        frame, kind = next(self._work)
+        where = dict(object=self.obj.name, frame=frame)
+        try:
+            self.exporter.export(frame, (kind,))
+        except self.madder.MadderError as e:
+            raise ExportError(f"'{self.obj.name}' at frame {frame}: {e}",
+                              filename=getattr(e, "filename", None), **where) from e
+        except ExportError as e:
+            raise ExportError(f"'{self.obj.name}' at frame {frame}: {e}", filename=e.filename, **where) from e
+        except OSError as e:
+            raise ExportError(f"'{self.obj.name}' at frame {frame}: cannot write {e.filename}: {e.strerror or e}",
+                              filename=e.filename, **where) from e
+        self.overlapping = self.exporter.overlapping
+        if kind == KINDS[-1]:
+            self.frame = frame
+            self.done += 1
+        return not (frame == self.last and kind == KINDS[-1])
+
+    def warnings(self):
+        n = self.overlapping
+        if n:
+            return [f"its UV islands overlap ({n} texels at {self.size} px): where they do, the image "
+                    "sequence shows one island's stain on both (give each face its own UV space)"]
+        return []
+
+    def close(self):
+        self.reader = self.exporter = None
+
+
+def record(obj, first, last, size, uv_map):
+    """What the shader needs to read the sequence, recorded on the object."""
+    s = obj.madder
+    s.image_baked = True
+    s.image_frames = (first, last)
+    s.image_baked_size = size
+    s.image_uv_map = uv_map
+
+
+def forget(obj):
+    s = obj.madder
+    s.image_baked = False
+    s.image_frames = (0, 0)
+    s.image_baked_size = 0
+    s.image_uv_map = ""
+
+
+class ReexportJob:
+    """Re-export Textures: `obj`'s image sequence rewritten from its fine cache at the
+    current Size, a frame per `step()`, without a bake. Checks first (nothing written
+    on error); `finish()` swaps the new sequence in, `cancel()` (or an error) keeps the
+    previous one."""
+
+    def __init__(self, scene, obj):
+        from . import bake  # bake imports this module
+
+        self.madder = bake.core()
+        self.obj = obj
+        s = obj.madder
+        where = dict(object=obj.name)
+        if obj.type != "MESH" or not s.cache_file:
+            raise ExportError(f"'{obj.name}' has no bake: bake it with Image Sequence on", **where)
+        fine, folder, name = paths(obj)
+        if not os.path.isfile(fine):
+            raise ExportError(f"'{obj.name}': its fine cache {fine} is missing: bake with Image Sequence on",
+                              filename=fine, **where)
+        if s.bake_topology and not handlers.same_topology(obj.data, s.bake_topology):
+            raise ExportError(f"'{obj.name}': the mesh's faces changed since the bake: bake again", **where)
+        size = textures.check_size(s.image_size)
+        faces, face_polygon, n_polygons = bridge.topology_arrays(obj.data)
+        uv = bridge.corner_uvs(obj.data)
+        if uv is None:
+            raise ExportError(f"'{obj.name}' has no UV map: the image sequence needs one", **where)
+        self.uv_map = obj.data.uv_layers.active.name
+        try:
+            topology = self.madder.Topology(faces, len(obj.data.vertices), face_polygon, n_polygons)
+        except self.madder.MadderError as e:
+            raise ExportError(f"'{obj.name}': {e}", **where) from e
+        refs = tuple(s.bake_references)
+        if not any(refs):
+            refs = presets.references(s)
+        self.staging = textures.Staging(folder)
+        self.export = SequenceExport(self.madder, obj, fine, topology, s.bake_detail, uv, refs, size,
+                                     self.staging.path, name)
+        self.size = size
+        self.warnings = []
+        self._begun = False
+
+    @property
+    def done(self):
+        return self.export.done
+
+    @property
+    def total(self):
+        return self.export.total
+
+    @property
+    def frame(self):
+        return self.export.frame
+
+    def step(self):
+        try:
+            if not self._begun:
+                self.staging.begin()
+                self._begun = True
+            return self.export.step()
+        except BaseException:
+            self.cancel()
+            raise
+
+    def finish(self):
+        try:
+            self.warnings += self.export.warnings()
+            self.export.close()
+            folder = self.staging.commit()
+        except BaseException:
+            self.cancel()
+            raise
+        record(self.obj, self.export.first, self.export.last, self.size, self.uv_map)
+        from . import shading
+
+        shading.sync_object(self.obj)
+        reload(self.obj)
+        return folder
+
+    def cancel(self):
+        self.export.close()
+        self.staging.discard()

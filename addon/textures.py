@@ -1,0 +1,291 @@
+"""Image-sequence output, bpy-free (tested without Blender in tests/python): where the
+files go, how they are numbered, how Blender's image user must be set to show them, the
+export loop from a fine cache, and the staging folder that keeps the previous sequence
+until a new one is complete.
+
+Layout, next to the cache `<folder>/<stem>.madder` (`<stem>`: the object's clean name),
+every path derived from the cache's (so Save As and Relocate Cache carry them along):
+
+    <folder>/<stem>.fine.madder            the refined cloth's fields (the Detail mesh),
+                                           same field names as the cache; the source of
+                                           the images (re-exported from it at any size)
+    <folder>/<stem>_images/<stem>_stain.####.exr
+                                           RGBA: the solute colour × coverage, coverage
+    <folder>/<stem>_images/<stem>_wet.####.exr
+                                           R: wetness, G: deposit (Blender reads the
+                                           missing B as 0, A as 1)
+
+`####` is the scene frame (4 digits, more when needed). The values are exactly the
+playback attributes (`CacheReader.read_stain`, core `io::attributes`), rasterized over
+the refined cloth's UV triangles (`madder.rasterize`: barycentric at texel centres,
+islands padded), so the shader reads the same [0, 1] numbers from either.
+
+One more file, number `first − 1`, repeats the first frame: Blender's image user shows
+file `frame_offset` (here `first − 1`) at every scene frame before `frame_start` (it
+clamps to 0 images into the sequence, not to 1), where the attributes show the first
+frame. Without it those frames would render the "missing image" magenta.
+
+Each sequence (and the fine cache of a bake) is written into `<stem>_images.partial/`
+and swapped in whole by `Staging.commit`: a bake or re-export that fails or is cancelled
+leaves the previous sequence as it was."""
+
+import os
+import shutil
+
+import numpy as np
+
+from .errors import ExportError
+
+SIZES = (512, 1024, 2048, 4096)
+DEFAULT_SIZE = 1024
+PADDING = 4  # texels each UV island grows by (bilinear filtering and mip-maps read inside)
+KINDS = ("stain", "wet")
+EXT = ".exr"
+DIGITS = 4
+STAIN_CHANNELS = ("R", "G", "B", "A")
+WET_CHANNELS = ("R", "G")
+
+
+# -- names
+
+
+def stem(cache_path):
+    """The cache's file name without its extension (the object's clean name)."""
+    return os.path.splitext(os.path.basename(cache_path))[0]
+
+
+def fine_cache_path(cache_path):
+    """The fine cache beside `cache_path`: `<stem>.fine<ext>`."""
+    base, ext = os.path.splitext(cache_path)
+    return f"{base}.fine{ext}"
+
+
+def image_folder(cache_path):
+    """The folder of the image sequences beside `cache_path`: `<stem>_images`."""
+    return os.path.splitext(cache_path)[0] + "_images"
+
+
+def file_name(name, kind, frame):
+    """`<name>_<kind>.<frame>.exr`, the frame zero-padded to 4 digits (Blender finds the
+    sequence's number as the last run of digits; it keeps the padding for other frames)."""
+    if frame < 0:
+        raise ValueError(f"image sequence frames are never negative (got {frame})")
+    return f"{name}_{kind}.{frame:0{DIGITS}d}{EXT}"
+
+
+def frame_file(folder, name, kind, frame):
+    return os.path.join(folder, file_name(name, kind, frame))
+
+
+def pattern(folder, name, kind):
+    """The sequence as a user reads it: `…/<name>_<kind>.####.exr`."""
+    return os.path.join(folder, f"{name}_{kind}.{'#' * DIGITS}{EXT}")
+
+
+# -- checks
+
+
+def check_size(size):
+    """`size` as an int when it is one of `SIZES`; else ExportError."""
+    try:
+        value = int(size)
+    except (TypeError, ValueError):
+        value = None
+    if value not in SIZES:
+        raise ExportError(f"image size {size!r} is not one of {', '.join(map(str, SIZES))} px")
+    return value
+
+
+def frames_problem(first, last):
+    """Why frames `first`…`last` cannot be numbered as an image sequence, or None:
+    Blender reads no sign in a sequence's file numbers."""
+    if first < 0:
+        return (f"the frame range {first}–{last} starts before frame 0: image sequences are "
+                "numbered by frame and Blender reads no negative numbers (start at frame 0 or later, "
+                "or untick Image Sequence)")
+    return None
+
+
+def image_user(first, last):
+    """Blender's image user settings that show file number f at scene frame f for
+    `first` ≤ f ≤ `last`, the first file before and the last after. Blender shows file
+    `clamp(f − frame_start + 1, 0, frame_duration) + frame_offset`."""
+    return {"frame_start": first, "frame_offset": first - 1, "frame_duration": last - first + 1}
+
+
+def shown_file_number(frame, frame_start, frame_offset, frame_duration):
+    """The file number Blender's image user shows at scene `frame` (not cyclic): a model
+    of Blender's `BKE_image_user_frame_get`, for tests of `image_user`."""
+    return min(max(frame - frame_start + 1, 0), frame_duration) + frame_offset
+
+
+def missing_file(folder, name, frame):
+    """The first file of scene `frame`'s images that does not exist, or None."""
+    for kind in KINDS:
+        path = frame_file(folder, name, kind, frame)
+        if not os.path.isfile(path):
+            return path
+    return None
+
+
+# -- staging: a whole folder written aside, then swapped in
+
+
+class Staging:
+    """A folder `final` that is replaced only when its new contents are complete.
+
+    `begin()` makes an empty `<final>.partial` (removing one left by an interrupted run);
+    files go there (`path`); `commit()` moves the old `final` aside (`<final>.old`), the
+    new one in, and deletes the old; `discard()` deletes the partial folder. A process
+    killed between the two renames of `commit` leaves `<final>.old` and no `final`:
+    the next `begin()` (or `recover`) puts it back."""
+
+    def __init__(self, final):
+        self.final = os.path.normpath(final)
+        self.path = self.final + ".partial"
+        self.old = self.final + ".old"
+
+    def recover(self):
+        if not os.path.isdir(self.final) and os.path.isdir(self.old):
+            os.rename(self.old, self.final)
+
+    def begin(self):
+        try:
+            self.recover()
+            _remove(self.path)
+            os.makedirs(self.path)
+        except OSError as e:
+            raise ExportError(f"cannot create the image folder {self.path}: {_reason(e)}",
+                              filename=self.path) from e
+        return self.path
+
+    def commit(self):
+        try:
+            _remove(self.old)
+            if os.path.lexists(self.final):
+                os.rename(self.final, self.old)
+            os.rename(self.path, self.final)
+        except OSError as e:
+            raise ExportError(f"cannot move the new images into {self.final}: {_reason(e)}",
+                              filename=self.final) from e
+        shutil.rmtree(self.old, ignore_errors=True)
+        return self.final
+
+    def discard(self):
+        shutil.rmtree(self.path, ignore_errors=True)
+
+
+def remove_outputs(cache_path):
+    """Deletes the fine cache and the image folder beside `cache_path` (and leftovers of
+    an interrupted run). Returns the paths removed."""
+    removed = []
+    fine, folder = fine_cache_path(cache_path), image_folder(cache_path)
+    if os.path.isfile(fine):
+        os.remove(fine)
+        removed.append(fine)
+    for path in (folder, folder + ".partial", folder + ".old"):
+        if os.path.lexists(path):
+            _remove(path)
+            removed.append(path)
+    return removed
+
+
+def _remove(path):
+    if os.path.isdir(path) and not os.path.islink(path):
+        shutil.rmtree(path)
+    elif os.path.lexists(path):
+        os.remove(path)
+
+
+def _reason(e):
+    return e.strerror or str(e)
+
+
+# -- the export loop
+
+
+class Exporter:
+    """Writes the images of a fine cache's frames, one frame per `export(frame)`.
+
+    - `madder`: the native module (`rasterize`, `write_exr`, `MadderError`);
+    - `reader`: an open `madder.CacheReader` of the fine cache;
+    - `faces` (T, 3) uint32 and `uv` (T, 3, 2) float32: the refined cloth's triangles and
+      their corner UVs (`madder.Refinement.faces()`, `.face_uv(...)`);
+    - `references`, `color`: as `CacheReader.read_stain` takes them (the bake's);
+    - `size` (one of `SIZES`), `folder` (where the files go) and `name` (their prefix).
+
+    `overlapping` holds the texels covered by more than one UV triangle (overlapping
+    islands), as `madder.rasterize` counts them on the first frame exported."""
+
+    def __init__(self, madder, reader, faces, uv, references, color, size, folder, name, padding=PADDING):
+        self.madder, self.reader = madder, reader
+        self.faces = np.ascontiguousarray(faces, dtype=np.uint32)
+        self.uv = np.ascontiguousarray(uv, dtype=np.float32)
+        if self.faces.ndim != 2 or self.faces.shape[1] != 3 or self.uv.shape != (len(self.faces), 3, 2):
+            raise ValueError(f"faces {self.faces.shape} and uv {self.uv.shape} must be (T, 3) and (T, 3, 2)")
+        self.references, self.color = tuple(references), tuple(color)
+        self.size, self.padding = check_size(size), padding
+        self.folder, self.name = folder, name
+        n = reader.n_vertices
+        self._rgba = np.zeros(4 * n, dtype=np.float32)
+        self._wet = np.zeros(n, dtype=np.float32)
+        self._deposit = np.zeros(n, dtype=np.float32)
+        self._wet_values = np.zeros((n, len(WET_CHANNELS)), dtype=np.float32)
+        self.overlapping = None
+        self._read = None  # the frame whose values the buffers hold
+
+    @property
+    def first(self):
+        return self.reader.first_frame
+
+    @property
+    def last(self):
+        return self.reader.last_frame
+
+    def frames(self):
+        return range(self.first, self.last + 1)
+
+    def values(self, frame):
+        """Frame `frame`'s per-vertex image values: (RGBA (N, 4), wet (N, 2): wetness and
+        deposit), exactly the playback attributes."""
+        self.reader.read_stain(frame, self.references, self.color, self._rgba, self._wet, self._deposit)
+        self._wet_values[:, 0] = self._wet
+        self._wet_values[:, 1] = self._deposit
+        self._read = frame
+        return self._rgba.reshape(-1, 4), self._wet_values
+
+    def export(self, frame, kinds=KINDS):
+        """Writes scene `frame`'s images of `kinds` (both by default; one at a time keeps a
+        modal operator's steps short at 4096 px), and, for the first frame, the file before
+        it as well (see the module doc). Returns the paths written."""
+        if self._read != frame:
+            self.values(frame)
+        written = []
+        for kind in kinds:
+            values, channels = ((self._rgba.reshape(-1, 4), STAIN_CHANNELS) if kind == "stain"
+                                else (self._wet_values, WET_CHANNELS))
+            image, overlapping = self.madder.rasterize(self.faces, self.uv, values, self.size, self.padding)
+            if self.overlapping is None:  # the same on every frame: the UV layout's
+                self.overlapping = int(overlapping)
+            path = frame_file(self.folder, self.name, kind, frame)
+            self.madder.write_exr(path, image, channels)
+            del image
+            written.append(path)
+            if frame == self.first and frame >= 1:
+                lead = frame_file(self.folder, self.name, kind, frame - 1)
+                try:
+                    _link_or_copy(path, lead)
+                except OSError as e:
+                    raise ExportError(f"cannot write {lead}: {_reason(e)}", filename=lead, frame=frame) from e
+                written.append(lead)
+        return written
+
+
+def _link_or_copy(src, dst):
+    """`dst` as a second name of `src` (a hard link, or a copy where links are refused)."""
+    if os.path.lexists(dst):
+        os.remove(dst)
+    try:
+        os.link(src, dst)
+    except OSError:
+        shutil.copyfile(src, dst)

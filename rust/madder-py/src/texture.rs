@@ -1,0 +1,229 @@
+//! `rasterize`, `write_exr`, `read_exr`: per-vertex fields as UV textures and half-float
+//! OpenEXR images (core module `texture`).
+
+use std::path::PathBuf;
+
+use numpy::{
+    PyArray1, PyArrayDyn, PyArrayMethods, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArrayDyn,
+    PyUntypedArrayMethods,
+};
+use pyo3::prelude::*;
+
+use crate::errors::{ParameterError, to_py};
+use crate::threads::Pool;
+use madder::texture as core;
+
+/// The `(T, 3, 2)` UVs, float32 or float64, as owned `f64` triples.
+fn uv_arg(a: &Bound<'_, PyAny>) -> PyResult<Vec<[[f64; 2]; 3]>> {
+    fn rows<T: numpy::Element + Copy + Into<f64>>(
+        a: &PyReadonlyArray3<'_, T>,
+    ) -> PyResult<Vec<[[f64; 2]; 3]>> {
+        let shape = a.shape();
+        if shape[1] != 3 || shape[2] != 2 {
+            return Err(ParameterError::new_err(format!(
+                "uv must have shape (T, 3, 2), got {shape:?}"
+            )));
+        }
+        let a = a.as_array();
+        Ok(a.outer_iter()
+            .map(|t| std::array::from_fn(|k| [t[[k, 0]].into(), t[[k, 1]].into()]))
+            .collect())
+    }
+    if let Ok(a) = a.extract::<PyReadonlyArray3<'_, f32>>() {
+        return rows(&a);
+    }
+    if let Ok(a) = a.extract::<PyReadonlyArray3<'_, f64>>() {
+        return rows(&a);
+    }
+    Err(ParameterError::new_err(format!(
+        "uv must be a (T, 3, 2) float32 or float64 array, got {}",
+        describe(a)?
+    )))
+}
+
+/// What an argument is, for an error message.
+fn describe(a: &Bound<'_, PyAny>) -> PyResult<String> {
+    Ok(match (a.getattr("dtype"), a.getattr("shape")) {
+        (Ok(dtype), Ok(shape)) => format!("a {dtype} array of shape {shape}"),
+        _ => format!("a {}", a.get_type().name()?),
+    })
+}
+
+/// A float32 array of 1 to 3 dimensions, copied (C order) into owned data, with its shape.
+fn floats(name: &str, a: &PyReadonlyArrayDyn<'_, f32>, ndim: &[usize]) -> PyResult<Vec<f32>> {
+    if !ndim.contains(&a.ndim()) {
+        return Err(ParameterError::new_err(format!(
+            "{name} must have {} dimensions, got shape {:?}",
+            ndim.iter()
+                .map(|d| d.to_string())
+                .collect::<Vec<_>>()
+                .join(" or "),
+            a.shape()
+        )));
+    }
+    Ok(match a.as_slice() {
+        Ok(s) => s.to_vec(),
+        Err(_) => a.as_array().iter().copied().collect(),
+    })
+}
+
+fn size_arg(name: &str, size: i64) -> PyResult<usize> {
+    match usize::try_from(size) {
+        Ok(s) => Ok(s),
+        Err(_) => Err(ParameterError::new_err(format!(
+            "{name} {size} is out of range (1..={} texels)",
+            core::MAX_SIZE
+        ))),
+    }
+}
+
+/// Rasterizes a per-vertex field into a `size × size` UV texture and pads its UV islands.
+///
+/// `rasterize(faces, uv, values, size, padding=4, *, threads=None)
+/// -> (image, overlapping_texels)`
+///
+/// `faces` `(T, 3)` uint32: the vertices whose values triangle `t` interpolates; `uv`
+/// `(T, 3, 2)` float32 or float64: its corners' UVs (one triple per triangle, so a vertex
+/// on a UV seam has a UV on each side); `values` `(N, C)` float32 (or `(N,)`, one
+/// channel). The image is `(size, size, C)` float32 (`(size, size)` for 1-D values),
+/// row 0 at the bottom (`v ∈ [0, 1/size)`), as Blender's `Image.pixels`: each texel whose
+/// centre lies in a triangle holds the barycentric interpolation of its vertex values
+/// there, each island is then grown by `padding` texels (each new texel the mean of its
+/// covered neighbours), and the rest is 0. `overlapping_texels` counts texel centres
+/// inside two or more triangles (overlapping UV islands): worth a warning. The GIL is
+/// released; `threads` caps the worker threads (the result does not depend on it).
+/// `out`, a C-contiguous float32 array of the image's shape, is filled and returned
+/// instead of a new array: a sequence of frames then reuses one buffer (a fresh 2048²
+/// RGBA image is 64 MB of new memory per frame).
+///
+/// Raises `ParameterError` for a size out of 1..=16384 or mismatched lengths, `MeshError`
+/// naming the face (and corner) for a vertex index past the values or a non-finite UV.
+#[pyfunction]
+#[pyo3(signature = (faces, uv, values, size, padding=4, *, out=None, threads=None))]
+#[allow(clippy::type_complexity, clippy::too_many_arguments)]
+pub fn rasterize<'py>(
+    py: Python<'py>,
+    faces: PyReadonlyArray2<'py, u32>,
+    uv: &Bound<'py, PyAny>,
+    values: PyReadonlyArrayDyn<'py, f32>,
+    size: i64,
+    padding: i64,
+    out: Option<Bound<'py, PyArrayDyn<f32>>>,
+    threads: Option<usize>,
+) -> PyResult<(Bound<'py, PyArrayDyn<f32>>, usize)> {
+    let size = size_arg("size", size)?;
+    let padding = usize::try_from(padding)
+        .map_err(|_| ParameterError::new_err(format!("padding must be ≥ 0, got {padding}")))?;
+    if faces.shape()[1] != 3 {
+        return Err(ParameterError::new_err(format!(
+            "faces must have shape (T, 3), got {:?}",
+            faces.shape()
+        )));
+    }
+    let faces: Vec<[u32; 3]> = faces
+        .as_array()
+        .rows()
+        .into_iter()
+        .map(|r| [r[0], r[1], r[2]])
+        .collect();
+    let uv = uv_arg(uv)?;
+    let one = values.ndim() == 1;
+    let channels = if one { 1 } else { values.shape()[1] };
+    let values = floats("values", &values, &[1, 2])?;
+    let pool = Pool::new(threads)?;
+    let shape: Vec<usize> = if one {
+        vec![size, size]
+    } else {
+        vec![size, size, channels]
+    };
+    if let Some(out) = out {
+        if out.shape() != shape.as_slice() {
+            return Err(ParameterError::new_err(format!(
+                "out must have shape {shape:?}, got {:?}",
+                out.shape()
+            )));
+        }
+        let overlapping = {
+            let mut guard = out.try_readwrite()?;
+            let pixels = guard.as_slice_mut().map_err(|_| {
+                ParameterError::new_err("out must be a C-contiguous, writeable float32 array")
+            })?;
+            let mut coverage = vec![0u8; size * size];
+            pool.run(py, || {
+                let n = core::rasterize_to(
+                    pixels,
+                    &mut coverage,
+                    &faces,
+                    &uv,
+                    &values,
+                    channels,
+                    size,
+                )?;
+                core::pad_to(pixels, &mut coverage, size, channels, padding);
+                Ok::<_, madder::error::TextureError>(n)
+            })
+            .map_err(to_py)?
+        };
+        return Ok((out, overlapping));
+    }
+    let raster = pool
+        .run(py, || {
+            let mut r = core::rasterize(&faces, &uv, &values, channels, size)?;
+            core::pad(&mut r, padding);
+            Ok::<_, madder::error::TextureError>(r)
+        })
+        .map_err(to_py)?;
+    let image = PyArray1::from_vec(py, raster.pixels).reshape(shape)?;
+    Ok((image, raster.overlapping))
+}
+
+/// Writes an image as a half-float OpenEXR file, atomically.
+///
+/// `write_exr(path, image, channels=("R", "G", "B", "A"))`: `image` `(H, W, C)` float32
+/// (or `(H, W)` with one channel name), row 0 at the bottom as `rasterize` returns it
+/// (EXR stores the top row first: rows are flipped in the file); `channels` one name per
+/// channel. RLE-compressed. The file is written beside `path` and renamed over it, so a
+/// failure never leaves a partial file there (and keeps a previous one). Raises
+/// `ParameterError` for mismatched channels or bad names, a `CacheError` naming the file
+/// (the built-in kind for an I/O failure: `FileNotFoundError`, `PermissionError`...).
+#[pyfunction]
+#[pyo3(signature = (path, image, channels=vec!["R".to_string(), "G".to_string(), "B".to_string(), "A".to_string()]))]
+pub fn write_exr(
+    py: Python<'_>,
+    path: PathBuf,
+    image: PyReadonlyArrayDyn<'_, f32>,
+    channels: Vec<String>,
+) -> PyResult<()> {
+    let shape = image.shape().to_vec();
+    let c = if shape.len() == 3 { shape[2] } else { 1 };
+    let pixels = floats("image", &image, &[2, 3])?;
+    if c != channels.len() {
+        return Err(ParameterError::new_err(format!(
+            "image has {c} channels (shape {shape:?}), but {} channel names were given: {channels:?}",
+            channels.len()
+        )));
+    }
+    let (height, width) = (shape[0], shape[1]);
+    py.detach(|| {
+        let names: Vec<&str> = channels.iter().map(String::as_str).collect();
+        core::write_exr(&path, &pixels, width, height, &names)
+    })
+    .map_err(to_py)
+}
+
+/// Reads an OpenEXR image (its first layer) as an `(H, W, C)` float32 array, row 0 at the
+/// bottom (as `write_exr` takes it), channels in the order R, G, B, A (those present) then
+/// the others by name. Raises a `CacheError` naming the file.
+#[pyfunction]
+pub fn read_exr<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let image = py.detach(|| core::read_exr(&path)).map_err(to_py)?;
+    let shape = vec![image.height, image.width, image.channels.len()];
+    PyArray1::from_vec(py, image.pixels).reshape(shape)
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(rasterize, m)?)?;
+    m.add_function(wrap_pyfunction!(write_exr, m)?)?;
+    m.add_function(wrap_pyfunction!(read_exr, m)?)?;
+    Ok(())
+}

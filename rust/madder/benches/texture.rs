@@ -1,0 +1,258 @@
+//! `make bench`: one 2048² frame of UV texture output (module `madder::texture`):
+//! rasterize, pad (4 texels) and write the EXR, for two triangle loads built synthetically:
+//!
+//! - *fine*: a 20k-vertex cloth (a 140 × 140 grid of the unit square, 141² = 19,881
+//!   vertices) refined 16× (Detail 2), i.e. a 560 × 560 grid, 627,200 small triangles of
+//!   about 6.7 texels each;
+//! - *coarse*: the 140 × 140 grid itself, 39,200 large triangles (about 107 texels).
+//!
+//! The grid is laid out in UV as two islands (left and right halves, a margin around
+//! each), so that padding has seams and borders to grow. The field is RGBA: a stain (a
+//! Gaussian spot over about a tenth of the cloth, zero elsewhere: a typical bake frame,
+//! mostly empty) and, for the EXR only, a dense field too (every texel non-zero, the worst
+//! case for compression). Prints figures (best and median of several runs, and the CPU
+//! time of the process per run: on a machine shared with other work the wall time grows
+//! much more than the CPU time); asserts nothing about time. `MADDER_BENCH_SIZE=1024`
+//! changes the size; `MADDER_BENCH_PROFILE=n` (with `MADDER_BENCH_THREADS=t`) only
+//! rasterizes the fine load n times, `MADDER_BENCH_PROFILE_EXR=n` only writes its EXR n
+//! times, for a profiler.
+
+use std::time::Instant;
+
+use madder::texture::{self, Compression, Raster};
+
+const CHANNELS: usize = 4;
+
+/// A grid of `n × n` quads of the unit square (two triangles each), in UV as two islands.
+struct Load {
+    name: &'static str,
+    faces: Vec<[u32; 3]>,
+    uv: Vec<[[f64; 2]; 3]>,
+    stain: Vec<f32>,
+    dense: Vec<f32>,
+}
+
+fn load(name: &'static str, n: usize) -> Load {
+    let idx = |i: usize, j: usize| (i * (n + 1) + j) as u32;
+    let pos = |v: u32| {
+        let (i, j) = (v as usize / (n + 1), v as usize % (n + 1));
+        [j as f64 / n as f64, i as f64 / n as f64]
+    };
+    let mut faces = Vec::with_capacity(2 * n * n);
+    for i in 0..n {
+        for j in 0..n {
+            let (a, b, c, d) = (idx(i, j), idx(i, j + 1), idx(i + 1, j + 1), idx(i + 1, j));
+            faces.extend([[a, b, c], [a, c, d]]);
+        }
+    }
+    // left half → [0.02, 0.48] × [0.02, 0.98], right half → [0.52, 0.98] × [0.02, 0.98]
+    let uv = faces
+        .iter()
+        .map(|f| {
+            let p = f.map(pos);
+            let right = p.iter().map(|q| q[0]).sum::<f64>() / 3.0 > 0.5;
+            p.map(|[x, y]| {
+                let u = if right {
+                    0.52 + (x - 0.5) * 0.92
+                } else {
+                    0.02 + x * 0.92
+                };
+                [u, 0.02 + y * 0.96]
+            })
+        })
+        .collect();
+    let nv = (n + 1) * (n + 1);
+    let mut stain = Vec::with_capacity(nv * CHANNELS);
+    let mut dense = Vec::with_capacity(nv * CHANNELS);
+    for v in 0..nv as u32 {
+        let [x, y] = pos(v);
+        let r2 = (x - 0.35).powi(2) + (y - 0.6).powi(2);
+        let s = (-r2 / 0.01).exp();
+        let s = if s < 1e-3 { 0.0 } else { s as f32 };
+        stain.extend([0.45 * s, 0.05 * s, 0.1 * s, s]);
+        let d = (0.5 + 0.5 * (17.0 * x).sin() * (13.0 * y).cos()) as f32;
+        dense.extend([d, 1.0 - d, 0.5 * d, 1.0]);
+    }
+    Load {
+        name,
+        faces,
+        uv,
+        stain,
+        dense,
+    }
+}
+
+/// CPU time of the whole process so far (user + system), in ms, from /proc/self/stat
+/// (clock ticks of 10 ms: meaningful over several runs). `None` off Linux.
+fn cpu_ms() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // the fields after the command name (which is in parentheses and may hold spaces)
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split(' ').collect();
+    let ticks: f64 = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
+    Some(ticks * 10.0)
+}
+
+/// Timings of `runs` calls of `f`: best and median wall time, and the mean CPU time of
+/// the process per call (all threads; on a machine shared with other work the wall time
+/// grows, the CPU time much less), in ms.
+struct Timing {
+    best: f64,
+    median: f64,
+    cpu: Option<f64>,
+}
+
+impl std::fmt::Display for Timing {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{:6.1} ms (median {:6.1}", self.best, self.median)?;
+        match self.cpu {
+            Some(c) => write!(f, ", cpu {c:6.1})"),
+            None => write!(f, ")"),
+        }
+    }
+}
+
+fn time<T>(runs: usize, mut f: impl FnMut() -> T) -> (Timing, T) {
+    let mut times = Vec::with_capacity(runs);
+    let mut out = None;
+    let cpu0 = cpu_ms();
+    for _ in 0..runs {
+        let t = Instant::now();
+        out = Some(f());
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    let cpu = cpu_ms().zip(cpu0).map(|(b, a)| (b - a) / runs as f64);
+    times.sort_by(f64::total_cmp);
+    let timing = Timing {
+        best: times[0],
+        median: times[runs / 2],
+        cpu,
+    };
+    (timing, out.expect("runs ≥ 1"))
+}
+
+fn bench(l: &Load, size: usize, threads: usize) {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    pool.install(|| {
+        let (fresh, r) = time(9, || {
+            texture::rasterize(&l.faces, &l.uv, &l.stain, CHANNELS, size).unwrap()
+        });
+        let mut reuse = Raster::empty(size, CHANNELS);
+        let (reused, _) = time(9, || {
+            texture::rasterize_into(&mut reuse, &l.faces, &l.uv, &l.stain, CHANNELS, size)
+                .unwrap();
+        });
+        // pad's own time: the copies it works on are made beforehand
+        let mut copies: Vec<Raster> = (0..9).map(|_| r.clone()).collect();
+        let mut it = copies.iter_mut();
+        let (padding, n) = time(9, || {
+            texture::pad(it.next().unwrap(), texture::DEFAULT_PADDING)
+        });
+        println!(
+            "  {:>6}, {threads} thread(s): rasterize {fresh}, into a reused raster {reused}; pad 4 {padding}",
+            l.name,
+        );
+        if threads == 1 {
+            println!(
+                "          {} texels inside, {} padded, {} overlapping",
+                r.inside_count(),
+                n,
+                r.overlapping
+            );
+        }
+    });
+}
+
+fn bench_exr(l: &Load, size: usize) {
+    let dir = std::env::temp_dir().join(format!("madder-bench-texture-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for (what, values) in [("stain", &l.stain), ("dense", &l.dense)] {
+        let mut r = texture::rasterize(&l.faces, &l.uv, values, CHANNELS, size).unwrap();
+        texture::pad(&mut r, texture::DEFAULT_PADDING);
+        for c in Compression::ALL {
+            let path = dir.join(format!("{what}-{c:?}.exr"));
+            let (write, _) = time(5, || {
+                texture::write_exr_with(&path, &r.pixels, size, size, &["R", "G", "B", "A"], c)
+                    .unwrap();
+            });
+            let bytes = std::fs::metadata(&path).unwrap().len();
+            let (read, _) = time(3, || texture::read_exr(&path).unwrap());
+            println!(
+                "  write_exr {what:>5} {:<5} {write}, {:6.2} MB; read {:6.1} ms{}",
+                format!("{c:?}"),
+                bytes as f64 / 1e6,
+                read.best,
+                if c == texture::exr::DEFAULT_COMPRESSION {
+                    "  <- default"
+                } else {
+                    ""
+                }
+            );
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+fn main() {
+    let size: usize = std::env::var("MADDER_BENCH_SIZE")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(2048);
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    println!("texture: one {size}² RGBA frame, {cores} cores");
+    let fine = load("fine", 560);
+    // MADDER_BENCH_PROFILE_EXR=n: only n EXR writes of the fine load's stain (for perf)
+    if let Some(n) = std::env::var("MADDER_BENCH_PROFILE_EXR")
+        .ok()
+        .and_then(|s| s.parse::<usize>().ok())
+    {
+        let mut r = texture::rasterize(&fine.faces, &fine.uv, &fine.stain, CHANNELS, size).unwrap();
+        texture::pad(&mut r, texture::DEFAULT_PADDING);
+        let path = std::env::temp_dir().join(format!("madder-bench-{}.exr", std::process::id()));
+        for _ in 0..n {
+            texture::write_exr(&path, &r.pixels, size, size, &["R", "G", "B", "A"]).unwrap();
+        }
+        let _ = std::fs::remove_file(&path);
+        return;
+    }
+    // MADDER_BENCH_PROFILE=n: only n rasterizations of the fine load, on one thread or
+    // MADDER_BENCH_THREADS (for perf)
+    if let Some(n) = std::env::var("MADDER_BENCH_PROFILE")
+        .ok()
+        .and_then(|s| s.parse::<usize>().ok())
+    {
+        let mut r = Raster::empty(size, CHANNELS);
+        let threads = std::env::var("MADDER_BENCH_THREADS")
+            .ok()
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(1);
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            for _ in 0..n {
+                texture::rasterize_into(&mut r, &fine.faces, &fine.uv, &fine.stain, CHANNELS, size)
+                    .unwrap();
+            }
+        });
+        return;
+    }
+    let coarse = load("coarse", 140);
+    for l in [&fine, &coarse] {
+        println!(
+            "{}: {} triangles, {} vertices",
+            l.name,
+            l.faces.len(),
+            l.stain.len() / CHANNELS
+        );
+        for threads in [1, cores] {
+            bench(l, size, threads);
+        }
+    }
+    println!("EXR (fine load, padded; {cores} cores):");
+    bench_exr(&fine, size);
+}

@@ -1,0 +1,251 @@
+"""The image-sequence output's bpy-free logic (`madder.addon.textures`): names, frame
+numbering, Blender's image-user mapping, the staging folder's swap, and the export loop
+over a real fine cache."""
+
+import os
+
+import numpy as np
+import pytest
+
+import madder
+from madder.addon import errors, textures
+
+# -- names and numbering
+
+
+def test_outputs_sit_beside_the_cache_and_are_numbered_by_frame(tmp_path):
+    cache = str(tmp_path / "madder_cache" / "Flag.madder")
+    assert textures.fine_cache_path(cache) == str(tmp_path / "madder_cache" / "Flag.fine.madder")
+    assert textures.image_folder(cache) == str(tmp_path / "madder_cache" / "Flag_images")
+    assert textures.stem(cache) == "Flag"
+    folder = textures.image_folder(cache)
+    assert textures.frame_file(folder, "Flag", "stain", 7) == os.path.join(folder, "Flag_stain.0007.exr")
+    assert textures.frame_file(folder, "Flag", "wet", 0) == os.path.join(folder, "Flag_wet.0000.exr")
+    assert textures.file_name("Flag", "wet", 12345) == "Flag_wet.12345.exr"  # more digits when needed
+    assert textures.pattern(folder, "Flag", "stain") == os.path.join(folder, "Flag_stain.####.exr")
+    with pytest.raises(ValueError):
+        textures.file_name("Flag", "stain", -1)
+
+
+def test_negative_frames_cannot_be_numbered_and_sizes_are_the_listed_ones():
+    assert textures.frames_problem(0, 10) is None and textures.frames_problem(1, 1) is None
+    why = textures.frames_problem(-5, 10)
+    assert "-5" in why and "frame 0" in why
+    assert [textures.check_size(s) for s in ("512", 1024, "2048", 4096)] == [512, 1024, 2048, 4096]
+    for bad in (256, "8192", "big", None, 1000):
+        with pytest.raises(errors.ExportError, match="512, 1024, 2048, 4096"):
+            textures.check_size(bad)
+
+
+@pytest.mark.parametrize("first, last", [(1, 48), (0, 5), (10, 10), (101, 200)])
+def test_the_image_user_shows_file_f_at_frame_f_and_clamps_to_the_written_files(first, last):
+    user = textures.image_user(first, last)
+    shown = {f: textures.shown_file_number(f, **user) for f in range(first - 5, last + 6)}
+    for f in range(first, last + 1):
+        assert shown[f] == f
+    # before the range Blender shows file `frame_offset` = first − 1 (the lead copy of the
+    # first frame the exporter writes, when first ≥ 1), after it the last file
+    assert all(shown[f] == first - 1 for f in range(first - 5, first))
+    assert all(shown[f] == last for f in range(last + 1, last + 6))
+
+
+def test_the_model_of_blenders_image_user_matches_a_measured_case():
+    # measured with bpy 5.0.1 (Cycles, files 3–7, frame_start 3, offset 2, duration 5):
+    # frames 0–2 asked for file 2, frames 3–7 files 3–7, frames 8–10 file 7
+    shown = [textures.shown_file_number(f, 3, 2, 5) for f in range(11)]
+    assert shown == [2, 2, 2, 3, 4, 5, 6, 7, 7, 7, 7]
+
+
+# -- staging
+
+
+def write(path, text):
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    with open(path, "w") as f:
+        f.write(text)
+
+
+def read(path):
+    with open(path) as f:
+        return f.read()
+
+
+def test_staging_swaps_the_whole_folder_in_only_on_commit(tmp_path):
+    final = str(tmp_path / "Flag_images")
+    write(os.path.join(final, "Flag_stain.0001.exr"), "old 1")
+    write(os.path.join(final, "Flag_stain.0002.exr"), "old 2")
+    staging = textures.Staging(final)
+    path = staging.begin()
+    assert path == final + ".partial" and os.listdir(path) == []
+    write(os.path.join(path, "Flag_stain.0001.exr"), "new 1")
+    # until the commit the previous sequence is whole
+    assert read(os.path.join(final, "Flag_stain.0001.exr")) == "old 1"
+    assert staging.commit() == final
+    assert sorted(os.listdir(final)) == ["Flag_stain.0001.exr"]  # no stale frame of the old one
+    assert read(os.path.join(final, "Flag_stain.0001.exr")) == "new 1"
+    assert sorted(os.listdir(tmp_path)) == ["Flag_images"]
+
+
+def test_a_discarded_or_interrupted_staging_keeps_the_previous_folder(tmp_path):
+    final = str(tmp_path / "Flag_images")
+    write(os.path.join(final, "a.exr"), "old")
+    staging = textures.Staging(final)
+    write(os.path.join(staging.begin(), "a.exr"), "half")
+    staging.discard()
+    assert read(os.path.join(final, "a.exr")) == "old" and sorted(os.listdir(tmp_path)) == ["Flag_images"]
+    # a run killed mid-write leaves its partial folder: the next one starts afresh
+    write(os.path.join(final + ".partial", "b.exr"), "junk")
+    assert os.listdir(textures.Staging(final).begin()) == []
+    # a run killed between the two renames of a commit: the old folder comes back
+    os.rename(final, final + ".old")
+    textures.Staging(final).begin()
+    assert read(os.path.join(final, "a.exr")) == "old"
+
+
+def test_staging_errors_name_the_folder(tmp_path):
+    blocker = tmp_path / "blocker"
+    blocker.write_text("a file, not a folder")
+    staging = textures.Staging(str(blocker / "Flag_images"))
+    with pytest.raises(errors.ExportError) as e:
+        staging.begin()
+    assert str(blocker / "Flag_images.partial") in str(e.value) and e.value.filename == staging.path
+
+
+def test_remove_outputs_deletes_the_fine_cache_and_every_image_folder(tmp_path):
+    cache = str(tmp_path / "Flag.madder")
+    write(cache, "cache")
+    write(textures.fine_cache_path(cache), "fine")
+    folder = textures.image_folder(cache)
+    for f in (folder, folder + ".partial", folder + ".old"):
+        write(os.path.join(f, "x.exr"), "x")
+    removed = textures.remove_outputs(cache)
+    assert sorted(removed) == sorted([textures.fine_cache_path(cache), folder, folder + ".partial", folder + ".old"])
+    assert os.listdir(tmp_path) == ["Flag.madder"]
+    assert textures.remove_outputs(cache) == []
+
+
+# -- the export loop
+
+
+def fine_cache(path, first=1, n_frames=3):
+    """A fine cache over a unit square of two triangles (4 vertices), whose densities grow
+    with the frame."""
+    writer = madder.CacheWriter(str(path), 4, ["solute", "wetness", "deposit"], first, n_frames)
+    for k in range(n_frames):
+        s = np.array([0.0, 1.0, 2.0, 3.0], dtype=np.float32) * 1e-3 * (k + 1)
+        writer.push_frame([s, np.full(4, 0.05 * (k + 1), np.float32), np.full(4, 1e-4 * k, np.float32)])
+    writer.finish()
+    return madder.CacheReader(str(path))
+
+
+class FakeCore:
+    """Records what the exporter rasterizes and writes (files hold the frame's values)."""
+
+    def __init__(self):
+        self.calls = []
+
+    def rasterize(self, faces, uv, values, size, padding=4):
+        self.calls.append(("rasterize", values.shape, size, padding))
+        return np.broadcast_to(values.mean(axis=0), (size, size, values.shape[1])).copy(), 3
+
+    def write_exr(self, path, image, channels):
+        self.calls.append(("write", os.path.basename(path), image.shape, tuple(channels)))
+        np.save(path + ".npy", image[0, 0])
+        os.rename(path + ".npy", path)
+
+
+FACES = np.array([[0, 1, 2], [0, 2, 3]], dtype=np.uint32)
+UV = np.array([[[0, 0], [1, 0], [1, 1]], [[0, 0], [1, 1], [0, 1]]], dtype=np.float32)
+
+
+def test_the_exporter_writes_the_playback_values_of_each_frame(tmp_path):
+    reader = fine_cache(tmp_path / "Flag.fine.madder", first=1)
+    core = FakeCore()
+    refs, color = (4e-3, 0.1, 2e-4), (0.5, 0.25, 1.0)
+    out = tmp_path / "images"
+    out.mkdir()
+    ex = textures.Exporter(core, reader, FACES, UV, refs, color, "512", str(out), "Flag")
+    assert list(ex.frames()) == [1, 2, 3]
+    rgba, wet = ex.values(2)
+    # exactly what playback writes into the attributes for that frame
+    want = [np.zeros(16, np.float32), np.zeros(4, np.float32), np.zeros(4, np.float32)]
+    madder.CacheReader(str(tmp_path / "Flag.fine.madder")).read_stain(2, refs, color, *want)
+    np.testing.assert_array_equal(rgba, want[0].reshape(4, 4))
+    np.testing.assert_array_equal(wet[:, 0], want[1])
+    np.testing.assert_array_equal(wet[:, 1], want[2])
+    for f in ex.frames():
+        ex.export(f)
+    assert ex.overlapping == 3
+    names = sorted(os.listdir(out))
+    # every frame's two images, plus the lead copies of the first frame as file 0
+    assert names == [f"Flag_{k}.{f:04d}.exr" for k in ("stain", "wet") for f in range(4)]
+    assert ("write", "Flag_stain.0001.exr", (512, 512, 4), ("R", "G", "B", "A")) in core.calls
+    assert ("write", "Flag_wet.0003.exr", (512, 512, 2), ("R", "G")) in core.calls
+    for kind in ("stain", "wet"):
+        lead, first = (np.load(out / f"Flag_{kind}.{f:04d}.exr", allow_pickle=False) for f in (0, 1))
+        np.testing.assert_array_equal(lead, first)
+        assert os.path.samefile(out / f"Flag_{kind}.0000.exr", out / f"Flag_{kind}.0001.exr")
+    last = np.load(out / "Flag_stain.0003.exr", allow_pickle=False)
+    np.testing.assert_allclose(last, madder_values(tmp_path / "Flag.fine.madder", 3, refs, color).mean(axis=0))
+
+
+def madder_values(path, frame, refs, color):
+    buf = [np.zeros(16, np.float32), np.zeros(4, np.float32), np.zeros(4, np.float32)]
+    madder.CacheReader(str(path)).read_stain(frame, refs, color, *buf)
+    return buf[0].reshape(4, 4)
+
+
+def test_a_sequence_from_frame_0_has_no_lead_file(tmp_path):
+    reader = fine_cache(tmp_path / "f.madder", first=0, n_frames=2)
+    out = tmp_path / "images"
+    out.mkdir()
+    ex = textures.Exporter(FakeCore(), reader, FACES, UV, (1, 1, 1), (1, 1, 1), 512, str(out), "Cloth")
+    for f in ex.frames():
+        ex.export(f)
+    assert sorted(os.listdir(out)) == [f"Cloth_{k}.{f:04d}.exr" for k in ("stain", "wet") for f in (0, 1)]
+
+
+def test_the_exporter_refuses_mismatched_arrays_and_sizes(tmp_path):
+    reader = fine_cache(tmp_path / "f.madder")
+    with pytest.raises(ValueError):
+        textures.Exporter(FakeCore(), reader, FACES, UV[:1], (1, 1, 1), (1, 1, 1), 512, str(tmp_path), "x")
+    with pytest.raises(errors.ExportError):
+        textures.Exporter(FakeCore(), reader, FACES, UV, (1, 1, 1), (1, 1, 1), 300, str(tmp_path), "x")
+
+
+def test_a_lead_file_that_cannot_be_written_is_an_export_error_naming_it(tmp_path):
+    reader = fine_cache(tmp_path / "f.madder")
+    out = tmp_path / "images"
+    out.mkdir()
+    (out / "Flag_stain.0000.exr").mkdir()  # a folder where the lead file goes
+    (out / "Flag_stain.0000.exr" / "x").write_text("x")
+    ex = textures.Exporter(FakeCore(), reader, FACES, UV, (1, 1, 1), (1, 1, 1), 512, str(out), "Flag")
+    with pytest.raises(errors.ExportError) as e:
+        ex.export(1)
+    assert e.value.filename == str(out / "Flag_stain.0000.exr") and e.value.filename in str(e.value)
+
+
+def test_real_images_hold_the_values_at_texel_centres(tmp_path):
+    """With the native rasterizer and EXR writer: a frame's stain image reads back (half
+    float) as the barycentric interpolation of the playback values."""
+    reader = fine_cache(tmp_path / "f.madder")
+    refs, color = (4e-3, 0.1, 2e-4), (0.5, 0.25, 1.0)
+    out = tmp_path / "images"
+    out.mkdir()
+    ex = textures.Exporter(madder, reader, FACES, UV, refs, color, 512, str(out), "Flag")
+    ex.export(3)
+    assert ex.overlapping == 0
+    image = madder.read_exr(str(out / "Flag_stain.0003.exr"))
+    assert image.shape == (512, 512, 4)
+    v = madder_values(tmp_path / "f.madder", 3, refs, color)
+    # texel (x, y) has its centre at ((x + ½)/512, (y + ½)/512), row 0 at the bottom; in
+    # the lower triangle (0, 1, 2) the barycentric weights are (1 − s, s − t, t)
+    for x, y in ((400, 100), (511, 0), (300, 299), (10, 5)):
+        s, t = (x + 0.5) / 512, (y + 0.5) / 512
+        want = (1 - s) * v[0] + (s - t) * v[1] + t * v[2]
+        np.testing.assert_allclose(image[y, x], want, rtol=1e-3, atol=1e-5)  # half float
+    wet = madder.read_exr(str(out / "Flag_wet.0003.exr"))
+    assert wet.shape == (512, 512, 2)
+    # wetness 0.15 kg/m² over the reference 0.1 reads as full; deposit 2e-4 / 2e-4 too
+    np.testing.assert_allclose(wet[..., 0], 1.0)
+    np.testing.assert_allclose(wet[..., 1], 1.0)
