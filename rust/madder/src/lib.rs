@@ -33,7 +33,12 @@
 //! Beyond the seed, for the same chapter: the velocity extended over the dry cloth
 //! ([`stain::extend`]) and the distance from a brush to the cloth ([`mesh::proximity`]).
 //!
-//! ## Chapter 5: Lagrangian coherent structures — not built yet
+//! ## Chapter 5: Lagrangian coherent structures — [`lcs`]
+//! | seed | what | where |
+//! |---|---|---|
+//! | §5.2, §5.5.1 | particles traced through a time-dependent tangent velocity on a (deforming) mesh, RK4 with edge crossings | [`lcs::flow_map`] (`lcs/trace.rs`) |
+//! | §5.2 | flow-map gradient, Cauchy–Green, FTLE `σ` | [`lcs::ftle()`] (`lcs/ftle.rs`) |
+//! | §5.4, §5.5.2–§5.5.5, eqs. 5.3–5.4 | ridges: threshold, smoothing, Hessian, zero crossings, marching triangles, joining, cleanup | [`lcs::ridges()`] (`lcs/ridges.rs`) |
 //!
 //! ## Around the science
 //! - [`io`]: the Madder cache file and the playback attributes read from it; PC2/MDD point
@@ -55,11 +60,12 @@
 
 pub mod error;
 pub mod io;
+pub mod lcs;
 pub mod mesh;
 pub mod ops;
 pub mod rng;
 pub mod stain;
 pub mod weave;
 
-pub use error::{CacheError, Error, MeshError, ParamError, SolveError, WeaveError};
+pub use error::{CacheError, Error, LcsError, MeshError, ParamError, SolveError, WeaveError};
 pub use io::point_cache::PointCacheError;
