@@ -20,6 +20,11 @@
 //! the gradient field (3-D tangent vectors, so neighbours' frames need no alignment),
 //! symmetrized, then smoothed like `S` (its six 3-D components, `hessian_smoothing`).
 //! `n_i` is the eigenvector of the smallest eigenvalue of `H_i`: transverse to the ridge.
+//! The candidate region keeps only the vertices where `S̃` is curved down across more than
+//! it is curved along, `λ_min + |λ_max| < 0` (the seed: "`λ_min` is typically less than
+//! 0" there): on the convex flanks of the smoothed band `n_min` turns along the ridge and
+//! `n·∇σ` changes sign at random, which drew spurious lines parallel to the ridge two cells
+//! away in the tests.
 //! An edge `ij` with both ends in the candidate region holds a ridge point when
 //!
 //! ```text
@@ -203,12 +208,15 @@ pub fn ridges(
                 DVec2::new(x.dot(h * x), y.dot(h * x)),
                 DVec2::new(x.dot(h * y), y.dot(h * y)),
             );
-            let (lmin, e) = min_eigen(h2);
-            (frames.to_world(v, e), lmin)
+            let (lmin, lmax, e) = min_eigen(h2);
+            (frames.to_world(v, e), lmin + lmax.abs())
         })
         .collect();
 
-    let candidate: Vec<bool> = s.iter().map(|&x| x > options.s0).collect();
+    // in the region, and S̃ curved down across more than it is curved along
+    let candidate: Vec<bool> = (0..n)
+        .map(|v| s[v] > options.s0 && normal[v].1 < 0.0)
+        .collect();
     let graph = march(
         topology,
         positions,
@@ -359,8 +367,9 @@ impl FieldOps<'_> {
     }
 }
 
-/// The smallest eigenvalue of a symmetric 2×2 matrix and a unit eigenvector.
-fn min_eigen(h: DMat2) -> (f64, DVec2) {
+/// The smallest and largest eigenvalues of a symmetric 2×2 matrix and a unit eigenvector
+/// of the smallest.
+fn min_eigen(h: DMat2) -> (f64, f64, DVec2) {
     let (a, b, c) = (h.x_axis.x, 0.5 * (h.y_axis.x + h.x_axis.y), h.y_axis.y);
     let r = (0.25 * (a - c) * (a - c) + b * b).sqrt();
     let lmin = 0.5 * (a + c) - r;
@@ -368,7 +377,7 @@ fn min_eigen(h: DMat2) -> (f64, DVec2) {
     let e1 = DVec2::new(b, lmin - a);
     let e2 = DVec2::new(lmin - c, b);
     let e = if e1.length_squared() >= e2.length_squared() { e1 } else { e2 };
-    (lmin, e.normalize_or(DVec2::X))
+    (lmin, lmin + 2.0 * r, e.normalize_or(DVec2::X))
 }
 
 /// A ridge graph before cleanup.

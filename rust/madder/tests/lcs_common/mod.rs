@@ -163,3 +163,17 @@ pub fn farther_than(a: &[DVec2], b: &[DVec2], r: f64) -> usize {
         .filter(|p| b.iter().all(|q| p.distance(*q) > r))
         .count()
 }
+
+/// Writes a field on a regular grid and ridge points for inspection (when `LCS_DUMP` names
+/// a directory): `nx ny x0 x1 y0 y1`, the values, then `P x y` per point.
+pub fn dump(name: &str, nx: usize, ny: usize, b: [f64; 4], field: &[f64], points: &[DVec2]) {
+    let Ok(dir) = std::env::var("LCS_DUMP") else { return };
+    let mut s = format!("{nx} {ny} {} {} {} {}\n", b[0], b[1], b[2], b[3]);
+    for v in field {
+        s += &format!("{v}\n");
+    }
+    for p in points {
+        s += &format!("P {} {}\n", p.x, p.y);
+    }
+    std::fs::write(format!("{dir}/{name}.txt"), s).unwrap();
+}
