@@ -196,7 +196,7 @@ fn isometric_bending_leaves_ftle_unchanged() {
 }
 
 /// A velocity that fails the way a buggy callable would: NaN at one point.
-struct NanAt(usize);
+struct NanAt(DVec3);
 
 impl Velocity for NanAt {
     fn eval(
@@ -206,10 +206,9 @@ impl Velocity for NanAt {
         points: &[DVec3],
         out: &mut [DVec3],
     ) -> Result<(), LcsError> {
-        for (i, o) in out.iter_mut().enumerate() {
-            *o = if i == self.0 { DVec3::NAN } else { DVec3::X * 0.01 };
+        for (o, x) in out.iter_mut().zip(points) {
+            *o = if *x == self.0 { DVec3::NAN } else { DVec3::X * 0.01 };
         }
-        let _ = points;
         Ok(())
     }
 }
@@ -223,7 +222,7 @@ fn bad_input_is_named() {
         ftle(&topo, &motion, &mut v, 0.0, 0.0, 10).unwrap_err(),
         LcsError::ZeroSpan { span: 0.0 }
     );
-    let err = ftle(&topo, &motion, &mut NanAt(7), 0.0, 1.0, 10).unwrap_err();
+    let err = ftle(&topo, &motion, &mut NanAt(p[7]), 0.0, 1.0, 10).unwrap_err();
     assert!(
         matches!(&err, LcsError::NonFiniteVelocity { at, time } if at.contains("vertex 7") && *time == 0.0),
         "{err}"

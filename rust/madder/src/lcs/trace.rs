@@ -41,10 +41,15 @@
 //! wedge that contains the direction.
 //!
 //! ## Integrator: classical RK4 in the chart, order 4
-//! With step `h = T / steps` the stages are evaluated at the ends of the walks
-//! `p + h/2 k_1`, `p + h/2 k_2`, `p + h k_3` from the particle `p`, each stage's velocity
-//! brought back into `p`'s chart, and the particle moves by the walk of
-//! `h (k_1 + 2k_2 + 2k_3 + k_4) / 6`. On a flat mesh with a velocity that is smooth across
+//! With step `h = T / steps` the stages are evaluated at `p + h/2 k_1`, `p + h/2 k_2`,
+//! `p + h k_3` from the particle `p`, each stage's velocity brought back into `p`'s chart,
+//! and the particle moves to `p + h (k_1 + 2k_2 + 2k_3 + k_4) / 6`. Each of these points is
+//! walked to from the previous one, not from `p` (`p + h/2 k_2` is `p + h/2 k_1` moved by
+//! `h/2 (k_2 − k_1)`, and so on): on a flat or developable mesh the unfolded strip is the
+//! plane and the points are the same, but a step crosses its edges once instead of four
+//! times (the walks are most of the cost). On a curved mesh the unfolding, hence the point
+//! reached, depends on the path by the holonomy of the vertices passed, a discretization
+//! error of the same order as the unfolding's. On a flat mesh with a velocity that is smooth across
 //! the triangles this is the classical fourth-order Runge–Kutta method, global error
 //! `O(h⁴)` (`tests/ftle.rs` measures the order on an analytic rotation). Per-vertex
 //! velocities ([`VertexVelocity`]) are linear in each triangle and continuous, but their
@@ -294,16 +299,26 @@ impl Velocity for VertexVelocity {
     }
 }
 
+/// What a walk reads of one face, in one cache line (a crossing touches one new face).
+#[derive(Debug, Clone, Copy)]
+#[repr(align(64))]
+struct FaceChart {
+    /// `(c_1.x, c_2.x, c_2.y)` (`c_0` at the origin, `c_1.y = 0`); all zero for a
+    /// degenerate face.
+    chart: [f64; 3],
+    /// The corners' vertices.
+    verts: [u32; 3],
+    /// The face across the edge opposite corner `k` (`u32::MAX` on a border or
+    /// non-manifold edge) ...
+    nbr: [u32; 3],
+    /// ... and that edge's local index in it.
+    nbr_edge: [u8; 3],
+}
+
 /// The triangles' charts at `t0` and their neighbours: what the walks need.
 #[derive(Debug, Clone)]
 pub struct Charts {
-    faces: Vec<[u32; 3]>,
-    /// `(c_1.x, c_2.x, c_2.y)` per face (`c_0` at the origin, `c_1.y = 0`); all zero for a
-    /// degenerate face.
-    chart: Vec<[f64; 3]>,
-    /// `neighbour[f][k]`: the face across the edge opposite corner `k`, and that edge's
-    /// local index in it (`u32::MAX` on a border or non-manifold edge).
-    neighbour: Vec<[(u32, u8); 3]>,
+    face: Vec<FaceChart>,
     /// A face at every vertex and the vertex's corner in it (`u32::MAX` for a loose vertex).
     vertex_face: Vec<(u32, u8)>,
 }
@@ -315,8 +330,8 @@ impl Charts {
     /// Charts of `topology` at `positions` (the shape at `t0`).
     pub fn new(topology: &Topology, positions: &[DVec3]) -> Result<Self, MeshError> {
         check_positions(topology, positions)?;
-        let faces = topology.faces().to_vec();
-        let chart = faces
+        let faces = topology.faces();
+        let chart: Vec<[f64; 3]> = faces
             .par_iter()
             .map(|tri| {
                 let [x0, x1, x2] = tri.map(|v| positions[v as usize]);
@@ -348,29 +363,39 @@ impl Charts {
                 vertex_face[v as usize] = (f as u32, c as u8);
             }
         }
-        Ok(Self {
-            faces,
-            chart,
-            neighbour,
-            vertex_face,
-        })
+        let face = (0..faces.len())
+            .map(|f| FaceChart {
+                chart: chart[f],
+                verts: faces[f],
+                nbr: neighbour[f].map(|n| n.0),
+                nbr_edge: neighbour[f].map(|n| n.1),
+            })
+            .collect();
+        Ok(Self { face, vertex_face })
     }
 
     /// The corners of face `f` in its chart.
     fn corners(&self, f: usize) -> [DVec2; 3] {
-        let [a, b, c] = self.chart[f];
+        let [a, b, c] = self.face[f].chart;
         [DVec2::ZERO, DVec2::new(a, 0.0), DVec2::new(b, c)]
     }
 
     /// Barycentric coordinates of chart point `p` in face `f` (`None` if degenerate).
     fn bary(&self, f: usize, p: DVec2) -> Option<DVec3> {
-        let [a, b, c] = self.chart[f];
+        let [a, b, c] = self.face[f].chart;
         if a == 0.0 {
             return None;
         }
         let b2 = p.y / c;
         let b1 = (p.x - b2 * b) / a;
         Some(DVec3::new(1.0 - b1 - b2, b1, b2))
+    }
+
+    /// [`Self::walk`] from a point `l` whose chart maps into the base chart by `rot`, with `d`
+    /// in the base chart; returns the end and its map into the base chart.
+    pub(crate) fn walk_on(&self, l: &Located, rot: DMat2, d: DVec2) -> (Located, DMat2) {
+        let (end, r) = self.walk(l, rot.transpose() * d);
+        (end, rot * r)
     }
 
     /// The particle that starts at vertex `v` (`None` for a loose vertex).
@@ -385,7 +410,7 @@ impl Charts {
 
     /// The world position of `l` at `at`.
     pub(crate) fn world(&self, motion: &Motion, at: Lerp, l: &Located) -> DVec3 {
-        let tri = self.faces[l.face as usize];
+        let tri = self.face[l.face as usize].verts;
         (0..3)
             .map(|c| l.bary[c] * motion.position(at, tri[c] as usize))
             .sum()
@@ -394,12 +419,12 @@ impl Charts {
     /// The velocity `w` at `l` (time `at`) in the chart of `l`'s face (module doc).
     fn chart_velocity(&self, motion: &Motion, at: Lerp, l: &Located, w: DVec3) -> DVec2 {
         let f = l.face as usize;
-        let tri = self.faces[f];
+        let tri = self.face[f].verts;
         let [x0, x1, x2] = tri.map(|v| motion.position(at, v as usize));
         let (e1, e2) = (x1 - x0, x2 - x0);
         let (g11, g12, g22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
         let det = g11 * g22 - g12 * g12;
-        if self.chart[f][0] == 0.0 || det <= 1e-24 * g11 * g22 {
+        if self.face[f].chart[0] == 0.0 || det <= 1e-24 * g11 * g22 {
             return DVec2::ZERO;
         }
         let (r1, r2) = (e1.dot(w), e2.dot(w));
@@ -438,16 +463,17 @@ impl Charts {
             let mut cross = s + tau * (bq - s);
             cross[k] = 0.0;
             let cross = clamp(cross);
-            let (g, l) = self.neighbour[face][k];
-            if g == NONE || self.chart[g as usize][0] == 0.0 {
+            let here = &self.face[face];
+            let (g, l) = (here.nbr[k], here.nbr_edge[k]);
+            if g == NONE || self.face[g as usize].chart[0] == 0.0 {
                 s = cross;
                 break;
             }
             let (g, l) = (g as usize, l as usize);
             // the shared edge's ends, in this face's corners and the neighbour's
-            let tri = self.faces[face];
+            let tri = here.verts;
             let (a, b) = (tri[(k + 1) % 3], tri[(k + 2) % 3]);
-            let tg = self.faces[g];
+            let tg = self.face[g].verts;
             let corner_in_g = |v: u32| (0..3).find(|&m| tg[m] == v).unwrap_or(0);
             let (ga, gb) = (corner_in_g(a), corner_in_g(b));
             let cf = self.corners(face);
@@ -495,6 +521,26 @@ fn clamp(b: DVec3) -> DVec3 {
     if sum > 0.0 { c / sum } else { DVec3::new(1.0, 0.0, 0.0) }
 }
 
+/// The particles are reordered by face every this many steps.
+const SORT_EVERY: usize = 4;
+
+/// Orders the particles by their face (then start vertex, so the order is unique), so that
+/// consecutive particles walk through the same faces: the walks are memory-bound, and the
+/// particles of a mixing flow scatter over the mesh. Each particle's result is computed on
+/// its own, so the order changes no value.
+fn sort_by_face(state: &mut Vec<Located>, live: &mut Vec<usize>) {
+    let mut order: Vec<(u32, usize, Located)> = state
+        .iter()
+        .zip(live.iter())
+        .map(|(l, &v)| (l.face, v, *l))
+        .collect();
+    order.par_sort_unstable_by_key(|&(f, v, _)| (f, v));
+    for (i, (_, v, l)) in order.into_iter().enumerate() {
+        live[i] = v;
+        state[i] = l;
+    }
+}
+
 /// Traces one particle from every vertex through `velocity` from `t0` over `span` in
 /// `steps` RK4 steps (module doc) and returns where each ends (`None` for a loose vertex).
 ///
@@ -511,7 +557,7 @@ pub fn flow_map(
 ) -> Result<Vec<Option<Located>>, LcsError> {
     let n = charts.vertex_face.len();
     let start: Vec<Option<Located>> = (0..n).map(|v| charts.at_vertex(v)).collect();
-    let live: Vec<usize> = (0..n).filter(|&v| start[v].is_some()).collect();
+    let mut live: Vec<usize> = (0..n).filter(|&v| start[v].is_some()).collect();
     let mut state: Vec<Located> = live.iter().filter_map(|&v| start[v]).collect();
     let m = state.len();
     let h = span / steps.max(1) as f64;
@@ -521,24 +567,33 @@ pub fn flow_map(
     let mut w = vec![DVec3::ZERO; m];
     let mut k: [Vec<DVec2>; 4] = std::array::from_fn(|_| vec![DVec2::ZERO; m]);
     for step in 0..steps.max(1) {
+        if step % SORT_EVERY == 0 {
+            sort_by_face(&mut state, &mut live);
+        }
         let t = t0 + step as f64 * h;
         for stage in 0..4 {
-            let (dt, coef) = match stage {
-                0 => (0.0, 0.0),
-                1 | 2 => (0.5 * h, 0.5 * h),
-                _ => (h, h),
+            let ts = match stage {
+                0 => t,
+                1 | 2 => t + 0.5 * h,
+                _ => t0 + (step + 1) as f64 * h,
             };
-            let ts = if stage == 3 { t0 + (step + 1) as f64 * h } else { t + dt };
             let at = motion.at(ts)?;
-            let prev = if stage == 0 { None } else { Some(&k[stage - 1]) };
+            let k_ref = &k;
             (&mut stage_at, &mut stage_rot, &mut points)
                 .into_par_iter()
                 .zip(&state)
                 .enumerate()
                 .for_each(|(i, ((l, r, x), p))| {
-                    (*l, *r) = match prev {
+                    // each stage point walked on from the previous one (module doc)
+                    let step_from_prev = match stage {
+                        0 => None,
+                        1 => Some(0.5 * h * k_ref[0][i]),
+                        2 => Some(0.5 * h * (k_ref[1][i] - k_ref[0][i])),
+                        _ => Some(h * k_ref[2][i] - 0.5 * h * k_ref[1][i]),
+                    };
+                    (*l, *r) = match step_from_prev {
                         None => (*p, DMat2::IDENTITY),
-                        Some(kp) => charts.walk(p, coef * kp[i]),
+                        Some(d) => charts.walk_on(l, *r, d),
                     };
                     *x = charts.world(motion, at, l);
                 });
@@ -562,10 +617,13 @@ pub fn flow_map(
                 });
         }
         let [k1, k2, k3, k4] = &k;
-        state.par_iter_mut().enumerate().for_each(|(i, p)| {
-            let d = h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-            *p = charts.walk(p, d).0;
-        });
+        (&mut state, &stage_at, &stage_rot)
+            .into_par_iter()
+            .enumerate()
+            .for_each(|(i, (p, l, r))| {
+                let d = h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+                *p = charts.walk_on(l, *r, d - h * k3[i]).0;
+            });
     }
     let mut out = vec![None; n];
     for (i, &v) in live.iter().enumerate() {

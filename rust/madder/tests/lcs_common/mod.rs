@@ -1,6 +1,8 @@
 //! Meshes, flows and references shared by `tests/ftle.rs` and `tests/ridges.rs`, written
-//! independently of `madder::lcs`: a planar RK4 integrator, central-difference FTLE on a
-//! regular grid, and a pixel ridge detector.
+//! independently of `madder::lcs`: flows (the gyres of §5.6, the Bickley jet), meshes of
+//! parametrized surfaces (plane, cylinder, torus), an RK4 integrator in the parameters,
+//! the classical grid FTLE (central differences, in the surface's metric), and a pixel
+//! ridge detector with its own cleanup.
 
 #![allow(dead_code)]
 
@@ -99,71 +101,6 @@ pub fn rk4(f: &impl Fn(f64, DVec2) -> DVec2, mut x: DVec2, t0: f64, span: f64, s
     x
 }
 
-/// Reference FTLE at the points of a regular `(nx+1) × (ny+1)` grid (row-major, like
-/// [`rect_grid`]): RK4 with `steps` steps, the gradient by central differences over
-/// auxiliary points at `± delta` (the classical grid method), `σ = ln √λ_max / |T|`.
-pub fn reference_ftle(
-    f: &(impl Fn(f64, DVec2) -> DVec2 + Sync),
-    points: &[DVec3],
-    t0: f64,
-    span: f64,
-    steps: usize,
-    delta: f64,
-) -> Vec<f64> {
-    use rayon::prelude::*;
-    points
-        .par_iter()
-        .map(|p| {
-            let x = p.truncate();
-            let m = |d: DVec2| rk4(f, x + d, t0, span, steps);
-            let gx = (m(DVec2::new(delta, 0.0)) - m(DVec2::new(-delta, 0.0))) / (2.0 * delta);
-            let gy = (m(DVec2::new(0.0, delta)) - m(DVec2::new(0.0, -delta))) / (2.0 * delta);
-            let (c11, c12, c22) = (gx.dot(gx), gx.dot(gy), gy.dot(gy));
-            let l = 0.5 * (c11 + c22 + ((c11 - c22).powi(2) + 4.0 * c12 * c12).sqrt());
-            l.ln() / (2.0 * span.abs())
-        })
-        .collect()
-}
-
-/// Ridge pixels of a field on a regular grid (row-major, `nx + 1` columns): vertices above
-/// `threshold` that are strict maxima across the grid in at least one of the four
-/// directions (x, y, both diagonals) — a detector independent of the mesh method.
-pub fn ridge_pixels(sigma: &[f64], nx: usize, ny: usize, threshold: f64) -> Vec<(usize, usize)> {
-    let at = |i: usize, j: usize| sigma[i * (nx + 1) + j];
-    let mut out = Vec::new();
-    for i in 1..ny {
-        for j in 1..nx {
-            let s = at(i, j);
-            if s <= threshold {
-                continue;
-            }
-            let dirs = [(0i64, 1i64), (1, 0), (1, 1), (1, -1)];
-            if dirs.iter().any(|&(di, dj)| {
-                let a = at((i as i64 + di) as usize, (j as i64 + dj) as usize);
-                let b = at((i as i64 - di) as usize, (j as i64 - dj) as usize);
-                s > a && s > b
-            }) {
-                out.push((i, j));
-            }
-        }
-    }
-    out
-}
-
-/// The largest distance from a point of `a` to the nearest point of `b` (brute force).
-pub fn directed_hausdorff(a: &[DVec2], b: &[DVec2]) -> f64 {
-    a.iter()
-        .map(|p| b.iter().map(|q| p.distance(*q)).fold(f64::INFINITY, f64::min))
-        .fold(0.0, f64::max)
-}
-
-/// Points of `a` farther than `r` from every point of `b`.
-pub fn farther_than(a: &[DVec2], b: &[DVec2], r: f64) -> usize {
-    a.iter()
-        .filter(|p| b.iter().all(|q| p.distance(*q) > r))
-        .count()
-}
-
 /// Writes a field on a regular grid and ridge points for inspection (when `LCS_DUMP` names
 /// a directory): `nx ny x0 x1 y0 y1`, the values, then `P x y` per point.
 pub fn dump(name: &str, nx: usize, ny: usize, b: [f64; 4], field: &[f64], points: &[DVec2]) {
@@ -176,4 +113,296 @@ pub fn dump(name: &str, nx: usize, ny: usize, b: [f64; 4], field: &[f64], points
         s += &format!("P {} {}\n", p.x, p.y);
     }
     std::fs::write(format!("{dir}/{name}.txt"), s).unwrap();
+}
+
+/// The reference's ridge pixels in connected groups (8-neighbourhood, the grid's row and
+/// column indices) of at least `min` pixels: the reference's own cleanup of short ridges.
+pub fn long_groups(pix: &[(usize, usize)], min: usize) -> Vec<(usize, usize)> {
+    let set: std::collections::HashMap<(usize, usize), usize> =
+        pix.iter().enumerate().map(|(k, &p)| (p, k)).collect();
+    let mut group = vec![usize::MAX; pix.len()];
+    let mut keep = Vec::new();
+    for s in 0..pix.len() {
+        if group[s] != usize::MAX {
+            continue;
+        }
+        group[s] = s;
+        let mut stack = vec![s];
+        let mut members = vec![s];
+        while let Some(k) = stack.pop() {
+            let (i, j) = pix[k];
+            for di in -1i64..=1 {
+                for dj in -1i64..=1 {
+                    let q = ((i as i64 + di) as usize, (j as i64 + dj) as usize);
+                    if let Some(&m) = set.get(&q) {
+                        if group[m] == usize::MAX {
+                            group[m] = s;
+                            stack.push(m);
+                            members.push(m);
+                        }
+                    }
+                }
+            }
+        }
+        if members.len() >= min {
+            keep.extend(members.into_iter().map(|m| pix[m]));
+        }
+    }
+    keep
+}
+
+/// The quad gyre: the double gyre's formula on `[0, 2] × [−1, 1]`.
+pub fn quad_gyre(t: f64, p: DVec2) -> DVec2 {
+    gyre(0.1, 0.25, 0.2 * PI, t, p)
+}
+
+/// The octuple gyre of §5.6: the quad gyre mirrored about `x = 2` onto `[0, 4] × [−1, 1]`,
+/// periodic in both directions (periods 4 and 2).
+pub fn octuple_gyre(t: f64, p: DVec2) -> DVec2 {
+    let x = p.x.rem_euclid(4.0);
+    let y = (p.y + 1.0).rem_euclid(2.0) - 1.0;
+    if x <= 2.0 {
+        quad_gyre(t, DVec2::new(x, y))
+    } else {
+        let w = quad_gyre(t, DVec2::new(4.0 - x, y));
+        DVec2::new(-w.x, w.y)
+    }
+}
+
+/// A parametrized surface: position and tangents at parameters `(x, y)`, and the inverse
+/// (parameters of a point on or near it).
+pub trait Surface: Sync {
+    fn at(&self, q: DVec2) -> (DVec3, DVec3, DVec3);
+    fn params(&self, p: DVec3) -> DVec2;
+}
+
+/// The torus `((R + r cos ψ) cos φ, (R + r cos ψ) sin φ, r sin ψ)`, `φ = 2πx/lx`,
+/// `ψ = 2π(y − y0)/ly`.
+pub struct Torus {
+    pub big: f64,
+    pub small: f64,
+    pub lx: f64,
+    pub ly: f64,
+    pub y0: f64,
+}
+
+impl Surface for Torus {
+    fn at(&self, q: DVec2) -> (DVec3, DVec3, DVec3) {
+        let (kx, ky) = (2.0 * PI / self.lx, 2.0 * PI / self.ly);
+        let (sf, cf) = (kx * q.x).sin_cos();
+        let (sp, cp) = (ky * (q.y - self.y0)).sin_cos();
+        let rho = self.big + self.small * cp;
+        (
+            DVec3::new(rho * cf, rho * sf, self.small * sp),
+            kx * DVec3::new(-rho * sf, rho * cf, 0.0),
+            ky * DVec3::new(-self.small * sp * cf, -self.small * sp * sf, self.small * cp),
+        )
+    }
+    fn params(&self, p: DVec3) -> DVec2 {
+        let phi = p.y.atan2(p.x).rem_euclid(2.0 * PI);
+        let rho = p.truncate().length();
+        let psi = p.z.atan2(rho - self.big).rem_euclid(2.0 * PI);
+        DVec2::new(phi * self.lx / (2.0 * PI), self.y0 + psi * self.ly / (2.0 * PI))
+    }
+}
+
+/// The cylinder `(R cos θ, y, R sin θ)`, `θ = 2πx/lx`: periodic in x, flat.
+pub struct Cylinder {
+    pub lx: f64,
+}
+
+impl Surface for Cylinder {
+    fn at(&self, q: DVec2) -> (DVec3, DVec3, DVec3) {
+        let r = self.lx / (2.0 * PI);
+        let (s, c) = (q.x / r).sin_cos();
+        (DVec3::new(r * c, q.y, r * s), DVec3::new(-s, 0.0, c), DVec3::Y)
+    }
+    fn params(&self, p: DVec3) -> DVec2 {
+        let r = self.lx / (2.0 * PI);
+        DVec2::new(p.z.atan2(p.x).rem_euclid(2.0 * PI) * r, p.y)
+    }
+}
+
+/// A mesh of `surface` over `nx × ny` cells of parameters `[x0, x0 + lx] × [y0, y0 + ly]`,
+/// each quad split along its `a–c` diagonal, periodic where `wrap` says (then the last
+/// column or row is the first): vertex `(i, j)` is `i cols + j`. Returns the topology, the
+/// positions, the parameters and `(cols, rows)`.
+pub fn surface_grid(
+    surface: &impl Surface,
+    (nx, ny): (usize, usize),
+    (x0, lx): (f64, f64),
+    (y0, ly): (f64, f64),
+    wrap: (bool, bool),
+) -> (Topology, Vec<DVec3>, Vec<DVec2>, (usize, usize)) {
+    let cols = if wrap.0 { nx } else { nx + 1 };
+    let rows = if wrap.1 { ny } else { ny + 1 };
+    let idx = |i: usize, j: usize| ((i % rows) * cols + j % cols) as u32;
+    let mut faces = Vec::new();
+    for i in 0..ny {
+        for j in 0..nx {
+            let (a, b, c, d) = (idx(i, j), idx(i, j + 1), idx(i + 1, j + 1), idx(i + 1, j));
+            faces.push([a, b, c]);
+            faces.push([a, c, d]);
+        }
+    }
+    let mut q = Vec::new();
+    for i in 0..rows {
+        for j in 0..cols {
+            q.push(DVec2::new(x0 + lx * j as f64 / nx as f64, y0 + ly * i as f64 / ny as f64));
+        }
+    }
+    let p = q.iter().map(|&q| surface.at(q).0).collect();
+    (Topology::from_triangles(q.len(), faces).unwrap(), p, q, (cols, rows))
+}
+
+/// Reference FTLE on a parametrized surface: RK4 in the parameters, central differences
+/// at `± delta`, and the Cauchy–Green eigenvalue in the surface's metric: the largest
+/// `λ` of `G₀⁻¹ ∇φᵀ G₁ ∇φ`, `G = DXᵀ DX` at the start and end points.
+pub fn reference_ftle_on(
+    surface: &impl Surface,
+    f: &(impl Fn(f64, DVec2) -> DVec2 + Sync),
+    params: &[DVec2],
+    t0: f64,
+    span: f64,
+    steps: usize,
+    delta: f64,
+) -> Vec<f64> {
+    use glam::DMat2;
+    use rayon::prelude::*;
+    let metric = |q: DVec2| {
+        let (_, a, b) = surface.at(q);
+        DMat2::from_cols(DVec2::new(a.dot(a), a.dot(b)), DVec2::new(a.dot(b), b.dot(b)))
+    };
+    params
+        .par_iter()
+        .map(|&x| {
+            let m = |d: DVec2| rk4(f, x + d, t0, span, steps);
+            let gx = (m(DVec2::new(delta, 0.0)) - m(DVec2::new(-delta, 0.0))) / (2.0 * delta);
+            let gy = (m(DVec2::new(0.0, delta)) - m(DVec2::new(0.0, -delta))) / (2.0 * delta);
+            let j = DMat2::from_cols(gx, gy);
+            let c = metric(x).inverse() * j.transpose() * metric(m(DVec2::ZERO)) * j;
+            let (tr, det) = (c.x_axis.x + c.y_axis.y, c.determinant());
+            let l = 0.5 * (tr + (tr * tr - 4.0 * det).max(0.0).sqrt());
+            l.ln() / (2.0 * span.abs())
+        })
+        .collect()
+}
+
+/// The plane `(x, y, 0)`.
+pub struct Plane;
+
+impl Surface for Plane {
+    fn at(&self, q: DVec2) -> (DVec3, DVec3, DVec3) {
+        (q.extend(0.0), DVec3::X, DVec3::Y)
+    }
+    fn params(&self, p: DVec3) -> DVec2 {
+        p.truncate()
+    }
+}
+
+/// Ridge pixels of a field on a `cols × rows` grid (row-major), periodic where `wrap` says:
+/// vertices above `threshold` that are strict maxima across the grid in at least one of the
+/// four directions (x, y, both diagonals) — a detector independent of the mesh method.
+/// Non-periodic borders are skipped.
+pub fn ridge_pixels(
+    sigma: &[f64],
+    (cols, rows): (usize, usize),
+    wrap: (bool, bool),
+    threshold: f64,
+) -> Vec<(usize, usize)> {
+    let at = |i: i64, j: i64| -> Option<f64> {
+        let ok_i = wrap.1 || (0..rows as i64).contains(&i);
+        let ok_j = wrap.0 || (0..cols as i64).contains(&j);
+        (ok_i && ok_j).then(|| {
+            sigma[i.rem_euclid(rows as i64) as usize * cols + j.rem_euclid(cols as i64) as usize]
+        })
+    };
+    let mut out = Vec::new();
+    for i in 0..rows as i64 {
+        for j in 0..cols as i64 {
+            let s = at(i, j).unwrap();
+            if s <= threshold {
+                continue;
+            }
+            let dirs = [(0i64, 1i64), (1, 0), (1, 1), (1, -1)];
+            let mut interior = true;
+            let mut peak = false;
+            for (di, dj) in dirs {
+                match (at(i + di, j + dj), at(i - di, j - dj)) {
+                    (Some(a), Some(b)) => peak |= s > a && s > b,
+                    _ => interior = false,
+                }
+            }
+            if interior && peak {
+                out.push((i as usize, j as usize));
+            }
+        }
+    }
+    out
+}
+
+/// Distance between parameter points, periodic with periods `period` (0: not periodic).
+pub fn param_distance(a: DVec2, b: DVec2, period: DVec2) -> f64 {
+    let wrap = |d: f64, l: f64| if l > 0.0 { d - l * (d / l).round() } else { d };
+    DVec2::new(wrap(a.x - b.x, period.x), wrap(a.y - b.y, period.y)).length()
+}
+
+/// The largest distance from a point of `a` to the nearest point of `b` (brute force).
+pub fn directed_hausdorff(a: &[DVec2], b: &[DVec2], period: DVec2) -> f64 {
+    use rayon::prelude::*;
+    a.par_iter()
+        .map(|p| b.iter().map(|q| param_distance(*p, *q, period)).fold(f64::INFINITY, f64::min))
+        .reduce(|| 0.0, f64::max)
+}
+
+/// The same FTLE as the mesh method defines it on a curved surface, from reference end
+/// points: RK4 in the parameters (`steps` steps), the end points mapped onto the surface,
+/// the flow map's gradient fitted by least squares over the grid's one-ring (the six
+/// neighbours `(0, ±1), (±1, 0), ±(1, 1)` of the `a–c` split) from the 3-D offsets of the
+/// end points, in an orthonormal tangent frame of the start point.
+pub fn reference_ftle_chords(
+    surface: &impl Surface,
+    f: &(impl Fn(f64, DVec2) -> DVec2 + Sync),
+    params: &[DVec2],
+    (cols, rows): (usize, usize),
+    wrap: (bool, bool),
+    (t0, span, steps): (f64, f64, usize),
+) -> Vec<f64> {
+    use glam::DMat2;
+    use rayon::prelude::*;
+    let end: Vec<DVec3> = params
+        .par_iter()
+        .map(|&q| surface.at(rk4(f, q, t0, span, steps)).0)
+        .collect();
+    let start: Vec<DVec3> = params.iter().map(|&q| surface.at(q).0).collect();
+    (0..params.len())
+        .into_par_iter()
+        .map(|k| {
+            let (i, j) = ((k / cols) as i64, (k % cols) as i64);
+            let (_, a, b) = surface.at(params[k]);
+            let x = a.normalize();
+            let n = a.cross(b).normalize();
+            let y = n.cross(x);
+            let (mut m, mut bx, mut by) = (DMat2::ZERO, DVec3::ZERO, DVec3::ZERO);
+            for (di, dj) in [(0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (-1, -1)] {
+                let (ii, jj) = (i + di, j + dj);
+                let ok = (wrap.1 || (0..rows as i64).contains(&ii)) && (wrap.0 || (0..cols as i64).contains(&jj));
+                if !ok {
+                    continue;
+                }
+                let kk = ii.rem_euclid(rows as i64) as usize * cols + jj.rem_euclid(cols as i64) as usize;
+                let e = start[kk] - start[k];
+                let d = DVec2::new(e.dot(x), e.dot(y));
+                m += DMat2::from_cols(d * d.x, d * d.y);
+                bx += (end[kk] - end[k]) * d.x;
+                by += (end[kk] - end[k]) * d.y;
+            }
+            let inv = m.inverse();
+            let gx = bx * inv.x_axis.x + by * inv.x_axis.y;
+            let gy = bx * inv.y_axis.x + by * inv.y_axis.y;
+            let (c11, c12, c22) = (gx.dot(gx), gx.dot(gy), gy.dot(gy));
+            let l = 0.5 * (c11 + c22 + ((c11 - c22).powi(2) + 4.0 * c12 * c12).sqrt());
+            l.ln() / (2.0 * span.abs())
+        })
+        .collect()
 }
