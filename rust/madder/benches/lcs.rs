@@ -28,10 +28,7 @@ fn double_gyre(t: f64, p: DVec2) -> DVec2 {
 fn case(label: &str, nx: usize, ny: usize, steps: usize) {
     let (topo, p) = common::grid(nx, ny);
     // the benches' grid is in the xz plane over [0, 2] × [0, 1.2]: use it as [0, 2] × [0, 1]
-    let p: Vec<DVec3> = p
-        .iter()
-        .map(|q| DVec3::new(q.x, q.z / 1.2, 0.0))
-        .collect();
+    let p: Vec<DVec3> = p.iter().map(|q| DVec3::new(q.x, q.z / 1.2, 0.0)).collect();
     let mut v = FnVelocity(|t, x: DVec3| double_gyre(t, x.truncate()).extend(0.0));
     let t = Instant::now();
     let s = ftle(&topo, &Motion::fixed(p.clone()), &mut v, 0.0, -10.0, steps).unwrap();

@@ -44,7 +44,14 @@ fn linear_saddle_has_ftle_lambda_in_the_interior() {
     let lambda = 0.8;
     let (topo, p) = rect_grid(40, 40, [-1.0, 1.0], [-1.0, 1.0]);
     for span in [1.0, -1.0] {
-        let s = planar_ftle(&topo, &p, |_, x| DVec2::new(lambda * x.x, -lambda * x.y), 0.0, span, 20);
+        let s = planar_ftle(
+            &topo,
+            &p,
+            |_, x| DVec2::new(lambda * x.x, -lambda * x.y),
+            0.0,
+            span,
+            20,
+        );
         // interior: the one-ring's particles stay inside the square ((|x| + dx) e^{0.8} < 1)
         let (err, n) = max_error(&p, &s, lambda, |x| x.x.abs().max(x.y.abs()) < 0.35);
         eprintln!("saddle T={span}: max |σ − λ| = {err:.2e} over {n} vertices");
@@ -67,9 +74,17 @@ fn steady_shear_matches_the_closed_form() {
     let gamma = 1.5;
     let (topo, p) = rect_grid(60, 20, [-3.0, 3.0], [-1.0, 1.0]);
     for span in [1.0, 2.0, -1.0] {
-        let s = planar_ftle(&topo, &p, |_, x| DVec2::new(gamma * x.y, 0.0), 0.0, span, 10);
+        let s = planar_ftle(
+            &topo,
+            &p,
+            |_, x| DVec2::new(gamma * x.y, 0.0),
+            0.0,
+            span,
+            10,
+        );
         let gt = gamma * span.abs();
-        let exact = (1.0 + gt * gt / 2.0 + gt * (1.0 + gt * gt / 4.0).sqrt()).ln() / (2.0 * span.abs());
+        let exact =
+            (1.0 + gt * gt / 2.0 + gt * (1.0 + gt * gt / 4.0).sqrt()).ln() / (2.0 * span.abs());
         // interior: the one-ring's particles stay inside (|x| + γ|T|(|y| + dy) < 3)
         let (err, n) = max_error(&p, &s, exact, |x| x.x.abs() < 1.0 && x.y.abs() < 0.5);
         eprintln!("shear T={span}: σ = {exact:.6}, max error {err:.2e} over {n} vertices");
@@ -109,7 +124,10 @@ fn rk4_with_edge_crossings_is_fourth_order() {
     let e: Vec<f64> = [3, 6, 12].iter().map(|&n| rotation_error(n)).collect();
     let order: Vec<f64> = e.windows(2).map(|w| (w[0] / w[1]).log2()).collect();
     eprintln!("rotation end-point errors {e:?}, measured orders {order:.2?}");
-    assert!(order.iter().all(|&o| o > 3.7 && o < 4.5), "orders {order:?}");
+    assert!(
+        order.iter().all(|&o| o > 3.7 && o < 4.5),
+        "orders {order:?}"
+    );
     assert!(e[2] < 1e-5);
 }
 
@@ -126,7 +144,8 @@ fn per_vertex_velocities_interpolate_in_space_and_time() {
             .collect()
     };
     let times = FrameTimes::new(vec![0.0, 1.0, 2.0]).unwrap();
-    let mut v = VertexVelocity::new(times, vec![frame(0.0), frame(1.0), frame(2.0)], &topo).unwrap();
+    let mut v =
+        VertexVelocity::new(times, vec![frame(0.0), frame(1.0), frame(2.0)], &topo).unwrap();
     let s = ftle(&topo, &Motion::fixed(p.clone()), &mut v, 0.0, 2.0, 40).unwrap();
     let exact = (0.5 * 2.0 + 0.25 * 4.0) / 2.0; // ∫0² (0.5 + 0.5t) dt / 2
     let (err, n) = max_error(&p, &s, exact, |x| x.x.abs().max(x.y.abs()) < 0.1);
@@ -154,10 +173,15 @@ fn bending_error(n: usize, k: usize) -> (f64, f64, f64) {
     let (topo, rest) = rect_grid(n, n / 2, [0.0, 2.0], [0.0, 1.0]);
     let u = |t: f64, x: &DVec3| lcs_common::gyre(0.1, 0.25, 0.2 * PI, t, x.truncate());
     let (t0, span) = (0.0, 2.5);
-    let times: Vec<f64> = (0..k).map(|i| t0 + span * i as f64 / (k - 1) as f64).collect();
+    let times: Vec<f64> = (0..k)
+        .map(|i| t0 + span * i as f64 / (k - 1) as f64)
+        .collect();
     let kappa = |t: f64| 1.5 * (t - t0) / span;
     let per_frame = |f: &dyn Fn(f64, &DVec3) -> DVec3| -> Vec<Vec<DVec3>> {
-        times.iter().map(|&t| rest.iter().map(|x| f(t, x)).collect()).collect()
+        times
+            .iter()
+            .map(|&t| rest.iter().map(|x| f(t, x)).collect())
+            .collect()
     };
     let frames = per_frame(&|t, x| bend(x.x, x.y, kappa(t)).0);
     let vel_rest = per_frame(&|t, x| u(t, x).extend(0.0));
@@ -168,12 +192,33 @@ fn bending_error(n: usize, k: usize) -> (f64, f64, f64) {
     let ft = FrameTimes::new(times.clone()).unwrap();
     let mut v_rest = VertexVelocity::new(ft.clone(), vel_rest, &topo).unwrap();
     let mut v_bent = VertexVelocity::new(ft.clone(), vel_bent, &topo).unwrap();
-    let flat = ftle(&topo, &Motion::fixed(rest.clone()), &mut v_rest, t0, span, 50).unwrap();
-    let bent = ftle(&topo, &Motion::frames(ft, frames).unwrap(), &mut v_bent, t0, span, 50).unwrap();
+    let flat = ftle(
+        &topo,
+        &Motion::fixed(rest.clone()),
+        &mut v_rest,
+        t0,
+        span,
+        50,
+    )
+    .unwrap();
+    let bent = ftle(
+        &topo,
+        &Motion::frames(ft, frames).unwrap(),
+        &mut v_bent,
+        t0,
+        span,
+        50,
+    )
+    .unwrap();
     let d: Vec<f64> = flat.iter().zip(&bent).map(|(a, b)| (a - b).abs()).collect();
     let mean = d.iter().sum::<f64>() / d.len() as f64;
     let interior = |x: &DVec3| x.x > 0.1 && x.x < 1.9 && x.y > 0.1 && x.y < 0.9;
-    let max_in = rest.iter().zip(&d).filter(|(x, _)| interior(x)).map(|(_, d)| *d).fold(0.0, f64::max);
+    let max_in = rest
+        .iter()
+        .zip(&d)
+        .filter(|(x, _)| interior(x))
+        .map(|(_, d)| *d)
+        .fold(0.0, f64::max);
     (mean, max_in, flat.iter().cloned().fold(0.0, f64::max))
 }
 
@@ -191,7 +236,10 @@ fn isometric_bending_leaves_ftle_unchanged() {
     );
     // the mean converges at second order; the maximum, at vertices whose trajectories pass
     // near a hyperbolic point (where σ is most sensitive to any perturbation), more slowly
-    assert!(mean_b < 0.35 * mean_a && max_b < 0.5 * max_a, "not converging");
+    assert!(
+        mean_b < 0.35 * mean_a && max_b < 0.5 * max_a,
+        "not converging"
+    );
     assert!(mean_b < 1e-3 * smax && max_b < 1.5e-2 * smax);
 }
 
@@ -207,7 +255,11 @@ impl Velocity for NanAt {
         out: &mut [DVec3],
     ) -> Result<(), LcsError> {
         for (o, x) in out.iter_mut().zip(points) {
-            *o = if *x == self.0 { DVec3::NAN } else { DVec3::X * 0.01 };
+            *o = if *x == self.0 {
+                DVec3::NAN
+            } else {
+                DVec3::X * 0.01
+            };
         }
         Ok(())
     }
@@ -230,24 +282,39 @@ fn bad_input_is_named() {
     let short = Motion::fixed(p[..10].to_vec());
     assert_eq!(
         ftle(&topo, &short, &mut v, 0.0, 1.0, 10).unwrap_err(),
-        LcsError::Mesh(MeshError::VertexCountMismatch { expected: 25, got: 10 })
+        LcsError::Mesh(MeshError::VertexCountMismatch {
+            expected: 25,
+            got: 10
+        })
     );
     // per-vertex velocities: wrong shape, NaN (vertex and frame named), time out of range
     let ft = FrameTimes::new(vec![0.0, 1.0]).unwrap();
     let err = VertexVelocity::new(ft.clone(), vec![vec![DVec3::X; 25]; 3], &topo).unwrap_err();
-    assert_eq!(err.to_string(), "velocity has shape (3, 25, 3), expected (2, 25, 3)");
+    assert_eq!(
+        err.to_string(),
+        "velocity has shape (3, 25, 3), expected (2, 25, 3)"
+    );
     let mut bad = vec![vec![DVec3::X; 25]; 2];
     bad[1][13].y = f64::NAN;
     let err = VertexVelocity::new(ft.clone(), bad, &topo).unwrap_err();
-    assert_eq!(err.to_string(), "velocity at vertex 13 at time 1 is not finite");
+    assert_eq!(
+        err.to_string(),
+        "velocity at vertex 13 at time 1 is not finite"
+    );
     let mut ok = VertexVelocity::new(ft, vec![vec![DVec3::X * 0.1; 25]; 2], &topo).unwrap();
     let err = ftle(&topo, &motion, &mut ok, 0.5, 1.0, 10).unwrap_err();
     assert!(matches!(err, LcsError::TimeOutOfRange { .. }), "{err}");
     assert_eq!(
         FrameTimes::new(vec![0.0, 1.0, 1.0]).unwrap_err(),
-        LcsError::FrameTimes { index: 2, value: 1.0 }
+        LcsError::FrameTimes {
+            index: 2,
+            value: 1.0
+        }
     );
-    assert_eq!(Topology::from_triangles(3, vec![]).unwrap_err(), MeshError::Empty);
+    assert_eq!(
+        Topology::from_triangles(3, vec![]).unwrap_err(),
+        MeshError::Empty
+    );
 }
 
 #[test]

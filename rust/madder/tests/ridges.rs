@@ -64,7 +64,10 @@ fn steady_double_gyre_ridge_is_the_separatrix() {
         .map(|q| &q.position)
         .filter(|q| q.y > 0.1 && q.y < 0.9 && q.x > 0.1 && q.x < 1.9)
         .collect();
-    let worst = interior.iter().map(|q| (q.x - 1.0).abs()).fold(0.0, f64::max);
+    let worst = interior
+        .iter()
+        .map(|q| (q.x - 1.0).abs())
+        .fold(0.0, f64::max);
     eprintln!(
         "steady gyre: {} points, {} edges, components {sizes:?}, interior points {}, max |x − 1| = {worst:.4} (dx {dx})",
         r.points.len(),
@@ -77,7 +80,10 @@ fn steady_double_gyre_ridge_is_the_separatrix() {
     // upper hyperbolic point)
     for band in 6..18 {
         let y = band as f64 * 0.05;
-        assert!(interior.iter().any(|q| q.y >= y && q.y < y + 0.05), "no ridge at y = {y}");
+        assert!(
+            interior.iter().any(|q| q.y >= y && q.y < y + 0.05),
+            "no ridge at y = {y}"
+        );
     }
     assert!(sizes.iter().all(|&k| k >= 20));
 }
@@ -135,7 +141,9 @@ fn against_reference(
     };
     let (lo, hi) = reference
         .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+            (a.min(x), b.max(x))
+        });
     let mut err: Vec<f64> = s
         .iter()
         .zip(&reference)
@@ -155,12 +163,32 @@ fn against_reference(
         .collect();
     let pix = ridge_pixels(&reference, shape, wrap, 0.75 * hi + 0.25 * lo);
     let to_params = |v: &[(usize, usize)]| -> Vec<DVec2> {
-        v.iter().map(|&(i, j)| q[i * shape.0 + j]).filter(|&q| region(q)).collect()
+        v.iter()
+            .map(|&(i, j)| q[i * shape.0 + j])
+            .filter(|&q| region(q))
+            .collect()
     };
     let (all, long) = (to_params(&pix), to_params(&long_groups(&pix, 20)));
-    dump(name, shape.0 - 1, shape.1 - 1, [x.0, x.0 + x.1, y.0, y.0 + y.1], &s, &ours);
-    dump(&format!("{name}_ref"), shape.0 - 1, shape.1 - 1, [x.0, x.0 + x.1, y.0, y.0 + y.1], &reference, &long);
-    let period = DVec2::new(if wrap.0 { x.1 } else { 0.0 }, if wrap.1 { y.1 } else { 0.0 });
+    dump(
+        name,
+        shape.0 - 1,
+        shape.1 - 1,
+        [x.0, x.0 + x.1, y.0, y.0 + y.1],
+        &s,
+        &ours,
+    );
+    dump(
+        &format!("{name}_ref"),
+        shape.0 - 1,
+        shape.1 - 1,
+        [x.0, x.0 + x.1, y.0, y.0 + y.1],
+        &reference,
+        &long,
+    );
+    let period = DVec2::new(
+        if wrap.0 { x.1 } else { 0.0 },
+        if wrap.1 { y.1 } else { 0.0 },
+    );
     let c = Comparison {
         mean,
         p95,
@@ -168,7 +196,10 @@ fn against_reference(
         covered: 1.0
             - long
                 .iter()
-                .filter(|p| ours.iter().all(|o| param_distance(**p, *o, period) > 2.0 * dx))
+                .filter(|p| {
+                    ours.iter()
+                        .all(|o| param_distance(**p, *o, period) > 2.0 * dx)
+                })
                 .count() as f64
                 / long.len().max(1) as f64,
         components: component_sizes(&r),
@@ -182,10 +213,19 @@ fn against_reference(
 /// 2.5 cells from the nearest pixel); most of the reference's long ridges found; no
 /// component under 20 edges.
 fn check(c: &Comparison, mean: f64, p95: f64, covered: f64, ours_to_ref: f64) {
-    assert!(c.mean < mean && c.p95 < p95, "FTLE off the reference: {c:?}");
-    assert!(c.ours_to_ref <= ours_to_ref, "ridges off the reference: {c:?}");
+    assert!(
+        c.mean < mean && c.p95 < p95,
+        "FTLE off the reference: {c:?}"
+    );
+    assert!(
+        c.ours_to_ref <= ours_to_ref,
+        "ridges off the reference: {c:?}"
+    );
     assert!(c.covered >= covered, "reference ridges missed: {c:?}");
-    assert!(!c.components.is_empty() && c.components.iter().all(|&k| k >= 20), "{c:?}");
+    assert!(
+        !c.components.is_empty() && c.components.iter().all(|&k| k >= 20),
+        "{c:?}"
+    );
 }
 
 #[test]

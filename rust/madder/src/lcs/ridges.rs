@@ -168,7 +168,9 @@ pub fn ridges(
     smoother.smooth(options.field_smoothing * ell2, &mut sigma, 1)?;
     let (lo, hi) = sigma
         .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+            (a.min(x), b.max(x))
+        });
     let sigma0 = options.threshold.unwrap_or(0.75 * hi + 0.25 * lo);
     let mut s: Vec<f64> = sigma
         .iter()
@@ -187,7 +189,9 @@ pub fn ridges(
     let hess = field_ops.hessian3(&grad_s);
     let mut comps = vec![0.0; 6 * n];
     for (v, h) in hess.iter().enumerate() {
-        let c = [h.x_axis.x, h.y_axis.y, h.z_axis.z, h.y_axis.x, h.z_axis.x, h.z_axis.y];
+        let c = [
+            h.x_axis.x, h.y_axis.y, h.z_axis.z, h.y_axis.x, h.z_axis.x, h.z_axis.y,
+        ];
         for (m, x) in c.into_iter().enumerate() {
             comps[m * n + v] = x;
         }
@@ -361,7 +365,9 @@ impl FieldOps<'_> {
                 let (x, y) = (f.x_axis, f.y_axis);
                 let hxy = 0.5 * (x.dot(dy) + y.dot(dx));
                 let outer = |u: DVec3, v: DVec3| DMat3::from_cols(u * v.x, u * v.y, u * v.z);
-                outer(x, x) * x.dot(dx) + (outer(x, y) + outer(y, x)) * hxy + outer(y, y) * y.dot(dy)
+                outer(x, x) * x.dot(dx)
+                    + (outer(x, y) + outer(y, x)) * hxy
+                    + outer(y, y) * y.dot(dy)
             })
             .collect()
     }
@@ -376,7 +382,11 @@ fn min_eigen(h: DMat2) -> (f64, f64, DVec2) {
     // (H − λ) e = 0: e ∝ (b, λ − a) or (λ − c, b), whichever is longer
     let e1 = DVec2::new(b, lmin - a);
     let e2 = DVec2::new(lmin - c, b);
-    let e = if e1.length_squared() >= e2.length_squared() { e1 } else { e2 };
+    let e = if e1.length_squared() >= e2.length_squared() {
+        e1
+    } else {
+        e2
+    };
     (lmin, lmin + 2.0 * r, e.normalize_or(DVec2::X))
 }
 
@@ -501,7 +511,9 @@ fn join_at_maxima(
     let maxima: Vec<usize> = (0..n)
         .filter(|&v| {
             let spokes = rings.spokes(v);
-            candidate[v] && !spokes.is_empty() && spokes.iter().all(|&j| sigma[j as usize] < sigma[v])
+            candidate[v]
+                && !spokes.is_empty()
+                && spokes.iter().all(|&j| sigma[j as usize] < sigma[v])
         })
         .collect();
     if maxima.is_empty() {

@@ -117,7 +117,11 @@ impl FrameTimes {
         let (first, last) = (ts[0], ts[ts.len() - 1]);
         let slack = 1e-9 * (last - first).abs().max(t.abs()).max(1.0);
         if !(t >= first - slack && t <= last + slack) {
-            return Err(LcsError::TimeOutOfRange { time: t, first, last });
+            return Err(LcsError::TimeOutOfRange {
+                time: t,
+                first,
+                last,
+            });
         }
         if ts.len() == 1 {
             return Ok((0, 0.0));
@@ -275,6 +279,13 @@ impl VertexVelocity {
             frames,
             faces: topology.faces().to_vec(),
         })
+    }
+}
+
+impl VertexVelocity {
+    /// The frames' times.
+    pub fn times(&self) -> &[f64] {
+        self.times.times()
     }
 }
 
@@ -449,7 +460,13 @@ impl Charts {
                 break;
             };
             if bq.min_element() >= -BARY_TOLERANCE {
-                return (Located { face: face as u32, bary: clamp(bq) }, rot);
+                return (
+                    Located {
+                        face: face as u32,
+                        bary: clamp(bq),
+                    },
+                    rot,
+                );
             }
             // exit edge: the first one the segment s → q crosses (never the entry edge)
             let exit = (0..3)
@@ -490,7 +507,13 @@ impl Charts {
             face = g;
             entry = l;
         }
-        (Located { face: face as u32, bary: clamp(s) }, rot)
+        (
+            Located {
+                face: face as u32,
+                bary: clamp(s),
+            },
+            rot,
+        )
     }
 }
 
@@ -518,7 +541,11 @@ fn unfold(pa: DVec2, pb: DVec2, far: DVec2, ga: DVec2, gb: DVec2, gf: DVec2) -> 
 fn clamp(b: DVec3) -> DVec3 {
     let c = b.max(DVec3::ZERO);
     let sum = c.element_sum();
-    if sum > 0.0 { c / sum } else { DVec3::new(1.0, 0.0, 0.0) }
+    if sum > 0.0 {
+        c / sum
+    } else {
+        DVec3::new(1.0, 0.0, 0.0)
+    }
 }
 
 /// The particles are reordered by face every this many steps.

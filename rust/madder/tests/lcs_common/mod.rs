@@ -88,7 +88,13 @@ pub fn bickley(t: f64, p: DVec2) -> DVec2 {
 }
 
 /// Classical RK4 in the plane with `steps` steps: the reference flow map.
-pub fn rk4(f: &impl Fn(f64, DVec2) -> DVec2, mut x: DVec2, t0: f64, span: f64, steps: usize) -> DVec2 {
+pub fn rk4(
+    f: &impl Fn(f64, DVec2) -> DVec2,
+    mut x: DVec2,
+    t0: f64,
+    span: f64,
+    steps: usize,
+) -> DVec2 {
     let h = span / steps as f64;
     for s in 0..steps {
         let t = t0 + s as f64 * h;
@@ -104,7 +110,9 @@ pub fn rk4(f: &impl Fn(f64, DVec2) -> DVec2, mut x: DVec2, t0: f64, span: f64, s
 /// Writes a field on a regular grid and ridge points for inspection (when `LCS_DUMP` names
 /// a directory): `nx ny x0 x1 y0 y1`, the values, then `P x y` per point.
 pub fn dump(name: &str, nx: usize, ny: usize, b: [f64; 4], field: &[f64], points: &[DVec2]) {
-    let Ok(dir) = std::env::var("LCS_DUMP") else { return };
+    let Ok(dir) = std::env::var("LCS_DUMP") else {
+        return;
+    };
     let mut s = format!("{nx} {ny} {} {} {} {}\n", b[0], b[1], b[2], b[3]);
     for v in field {
         s += &format!("{v}\n");
@@ -195,14 +203,21 @@ impl Surface for Torus {
         (
             DVec3::new(rho * cf, rho * sf, self.small * sp),
             kx * DVec3::new(-rho * sf, rho * cf, 0.0),
-            ky * DVec3::new(-self.small * sp * cf, -self.small * sp * sf, self.small * cp),
+            ky * DVec3::new(
+                -self.small * sp * cf,
+                -self.small * sp * sf,
+                self.small * cp,
+            ),
         )
     }
     fn params(&self, p: DVec3) -> DVec2 {
         let phi = p.y.atan2(p.x).rem_euclid(2.0 * PI);
         let rho = p.truncate().length();
         let psi = p.z.atan2(rho - self.big).rem_euclid(2.0 * PI);
-        DVec2::new(phi * self.lx / (2.0 * PI), self.y0 + psi * self.ly / (2.0 * PI))
+        DVec2::new(
+            phi * self.lx / (2.0 * PI),
+            self.y0 + psi * self.ly / (2.0 * PI),
+        )
     }
 }
 
@@ -215,7 +230,11 @@ impl Surface for Cylinder {
     fn at(&self, q: DVec2) -> (DVec3, DVec3, DVec3) {
         let r = self.lx / (2.0 * PI);
         let (s, c) = (q.x / r).sin_cos();
-        (DVec3::new(r * c, q.y, r * s), DVec3::new(-s, 0.0, c), DVec3::Y)
+        (
+            DVec3::new(r * c, q.y, r * s),
+            DVec3::new(-s, 0.0, c),
+            DVec3::Y,
+        )
     }
     fn params(&self, p: DVec3) -> DVec2 {
         let r = self.lx / (2.0 * PI);
@@ -248,11 +267,19 @@ pub fn surface_grid(
     let mut q = Vec::new();
     for i in 0..rows {
         for j in 0..cols {
-            q.push(DVec2::new(x0 + lx * j as f64 / nx as f64, y0 + ly * i as f64 / ny as f64));
+            q.push(DVec2::new(
+                x0 + lx * j as f64 / nx as f64,
+                y0 + ly * i as f64 / ny as f64,
+            ));
         }
     }
     let p = q.iter().map(|&q| surface.at(q).0).collect();
-    (Topology::from_triangles(q.len(), faces).unwrap(), p, q, (cols, rows))
+    (
+        Topology::from_triangles(q.len(), faces).unwrap(),
+        p,
+        q,
+        (cols, rows),
+    )
 }
 
 /// Reference FTLE on a parametrized surface: RK4 in the parameters, central differences
@@ -271,7 +298,10 @@ pub fn reference_ftle_on(
     use rayon::prelude::*;
     let metric = |q: DVec2| {
         let (_, a, b) = surface.at(q);
-        DMat2::from_cols(DVec2::new(a.dot(a), a.dot(b)), DVec2::new(a.dot(b), b.dot(b)))
+        DMat2::from_cols(
+            DVec2::new(a.dot(a), a.dot(b)),
+            DVec2::new(a.dot(b), b.dot(b)),
+        )
     };
     params
         .par_iter()
@@ -351,7 +381,11 @@ pub fn param_distance(a: DVec2, b: DVec2, period: DVec2) -> f64 {
 pub fn directed_hausdorff(a: &[DVec2], b: &[DVec2], period: DVec2) -> f64 {
     use rayon::prelude::*;
     a.par_iter()
-        .map(|p| b.iter().map(|q| param_distance(*p, *q, period)).fold(f64::INFINITY, f64::min))
+        .map(|p| {
+            b.iter()
+                .map(|q| param_distance(*p, *q, period))
+                .fold(f64::INFINITY, f64::min)
+        })
         .reduce(|| 0.0, f64::max)
 }
 
@@ -386,11 +420,13 @@ pub fn reference_ftle_chords(
             let (mut m, mut bx, mut by) = (DMat2::ZERO, DVec3::ZERO, DVec3::ZERO);
             for (di, dj) in [(0, 1), (0, -1), (1, 0), (-1, 0), (1, 1), (-1, -1)] {
                 let (ii, jj) = (i + di, j + dj);
-                let ok = (wrap.1 || (0..rows as i64).contains(&ii)) && (wrap.0 || (0..cols as i64).contains(&jj));
+                let ok = (wrap.1 || (0..rows as i64).contains(&ii))
+                    && (wrap.0 || (0..cols as i64).contains(&jj));
                 if !ok {
                     continue;
                 }
-                let kk = ii.rem_euclid(rows as i64) as usize * cols + jj.rem_euclid(cols as i64) as usize;
+                let kk = ii.rem_euclid(rows as i64) as usize * cols
+                    + jj.rem_euclid(cols as i64) as usize;
                 let e = start[kk] - start[k];
                 let d = DVec2::new(e.dot(x), e.dot(y));
                 m += DMat2::from_cols(d * d.x, d * d.y);
