@@ -15,9 +15,9 @@ import madder
 def grid(nx, ny, x=(0.0, 2.0), y=(0.0, 1.0)):
     """A regular grid, quads split along a–c, (F, 3) uint32 and (N, 3) float64."""
     j, i = np.meshgrid(np.arange(nx + 1), np.arange(ny + 1))
-    pos = np.stack(
-        [x[0] + (x[1] - x[0]) * j.ravel() / nx, y[0] + (y[1] - y[0]) * i.ravel() / ny, np.zeros(j.size)], axis=1
-    )
+    xs = x[0] + (x[1] - x[0]) * j.ravel() / nx
+    ys = y[0] + (y[1] - y[0]) * i.ravel() / ny
+    pos = np.stack([xs, ys, np.zeros(j.size)], axis=1)
     a = (np.arange(ny)[:, None] * (nx + 1) + np.arange(nx)[None, :]).ravel()
     b, c, d = a + 1, a + nx + 2, a + nx + 1
     faces = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)]).astype(np.uint32)
@@ -29,7 +29,8 @@ def gyre_xy(t, x, y, eps=0.25, amp=0.1, omega=0.2 * np.pi):
     b = 1.0 - 2.0 * a
     f = a * x * x + b * x
     df = 2.0 * a * x + b
-    return -np.pi * amp * np.sin(np.pi * f) * np.cos(np.pi * y), np.pi * amp * np.cos(np.pi * f) * np.sin(np.pi * y) * df
+    u = -np.pi * amp * np.sin(np.pi * f) * np.cos(np.pi * y)
+    return u, np.pi * amp * np.cos(np.pi * f) * np.sin(np.pi * y) * df
 
 
 def gyre(t, points):
@@ -185,15 +186,16 @@ def test_bad_input_is_named():
 
 
 def test_results_do_not_depend_on_the_thread_count():
+    here = os.path.dirname(__file__)
     code = (
-        "import numpy as np, madder, sys; sys.path.insert(0, %r); from test_lcs import grid, gyre; "
+        f"import madder, sys; sys.path.insert(0, {here!r}); from test_lcs import grid, gyre; "
         "f, p = grid(60, 30); s = madder.ftle(f, p, gyre, 0.0, -5.0, steps=25); "
         "r = madder.ridges(f, p, s); sys.stdout.write(s.tobytes().hex() + r['points'].tobytes().hex())"
-    ) % os.path.dirname(__file__)
-    out = [
-        subprocess.run(
-            [sys.executable, "-c", code], env={**os.environ, "RAYON_NUM_THREADS": str(n)}, capture_output=True, text=True, check=True
-        ).stdout
-        for n in (1, 2)
-    ]
+    )
+
+    def run(n):
+        env = {**os.environ, "RAYON_NUM_THREADS": str(n)}
+        return subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+
+    out = [run(1), run(2)]
     assert out[0] == out[1] and len(out[0]) > 1000

@@ -6,8 +6,8 @@ parameter names and defaults wherever pyo3 gives a signature. A binding change w
 change here fails that test. Arrays are numpy arrays; float32 at the boundary unless said.
 """
 
-from os import PathLike
 from collections.abc import Callable
+from os import PathLike
 from typing import Any, Final
 
 import numpy as np

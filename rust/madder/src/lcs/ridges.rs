@@ -420,7 +420,7 @@ fn march(
                 nj = -nj;
             }
             let (ai, aj) = (ni.dot(grad[i]), nj.dot(grad[j]));
-            if !(ai * aj < 0.0) {
+            if ai * aj >= 0.0 || ai.is_nan() || aj.is_nan() {
                 return None;
             }
             if remove_valleys {

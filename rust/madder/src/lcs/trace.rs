@@ -555,7 +555,7 @@ const SORT_EVERY: usize = 4;
 /// consecutive particles walk through the same faces: the walks are memory-bound, and the
 /// particles of a mixing flow scatter over the mesh. Each particle's result is computed on
 /// its own, so the order changes no value.
-fn sort_by_face(state: &mut Vec<Located>, live: &mut Vec<usize>) {
+fn sort_by_face(state: &mut [Located], live: &mut [usize]) {
     let mut order: Vec<(u32, usize, Located)> = state
         .iter()
         .zip(live.iter())
