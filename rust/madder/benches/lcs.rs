@@ -71,6 +71,5 @@ fn main() {
         rayon::current_num_threads()
     );
     case("double gyre 401×201", 400, 200, 100);
-    case("100k-vertex grid", 447, 223, 100);
-    case("100k-vertex grid", 447, 223, 50);
+
 }
