@@ -326,10 +326,21 @@ struct FaceChart {
     nbr_edge: [u8; 3],
 }
 
+/// How the chart of the face across an edge lies in a face's chart (the unfolding), and
+/// which of its corners are the edge's ends (in the face's order `k + 1`, `k + 2`).
+#[derive(Debug, Clone, Copy)]
+struct Link {
+    rot: DMat2,
+    shift: DVec2,
+    corners: [u8; 2],
+}
+
 /// The triangles' charts at `t0` and their neighbours: what the walks need.
 #[derive(Debug, Clone)]
 pub struct Charts {
     face: Vec<FaceChart>,
+    /// Per face and edge (opposite corner `k`), the neighbour's unfolding.
+    link: Vec<[Link; 3]>,
     /// A face at every vertex and the vertex's corner in it (`u32::MAX` for a loose vertex).
     vertex_face: Vec<(u32, u8)>,
 }
@@ -382,7 +393,48 @@ impl Charts {
                 nbr_edge: neighbour[f].map(|n| n.1),
             })
             .collect();
-        Ok(Self { face, vertex_face })
+        let mut charts = Self {
+            face,
+            link: Vec::new(),
+            vertex_face,
+        };
+        charts.link = (0..faces.len())
+            .into_par_iter()
+            .map(|f| std::array::from_fn(|k| charts.link_across(f, k)))
+            .collect();
+        Ok(charts)
+    }
+
+    /// The unfolding of the neighbour across edge `k` of face `f` into `f`'s chart.
+    fn link_across(&self, f: usize, k: usize) -> Link {
+        let here = &self.face[f];
+        let (g, l) = (here.nbr[k], here.nbr_edge[k] as usize);
+        if g == NONE {
+            return Link {
+                rot: DMat2::IDENTITY,
+                shift: DVec2::ZERO,
+                corners: [0, 0],
+            };
+        }
+        let (a, b) = (here.verts[(k + 1) % 3], here.verts[(k + 2) % 3]);
+        let tg = self.face[g as usize].verts;
+        let corner_in_g = |v: u32| (0..3).find(|&m| tg[m] == v).unwrap_or(0);
+        let (ga, gb) = (corner_in_g(a), corner_in_g(b));
+        let cf = self.corners(f);
+        let cg = self.corners(g as usize);
+        let (rot, shift) = unfold(
+            cf[(k + 1) % 3],
+            cf[(k + 2) % 3],
+            cf[k],
+            cg[ga],
+            cg[gb],
+            cg[l],
+        );
+        Link {
+            rot,
+            shift,
+            corners: [ga as u8, gb as u8],
+        }
     }
 
     /// The corners of face `f` in its chart.
@@ -487,20 +539,11 @@ impl Charts {
                 break;
             }
             let (g, l) = (g as usize, l as usize);
-            // the shared edge's ends, in this face's corners and the neighbour's
-            let tri = here.verts;
-            let (a, b) = (tri[(k + 1) % 3], tri[(k + 2) % 3]);
-            let tg = self.face[g].verts;
-            let corner_in_g = |v: u32| (0..3).find(|&m| tg[m] == v).unwrap_or(0);
-            let (ga, gb) = (corner_in_g(a), corner_in_g(b));
-            let cf = self.corners(face);
-            let cg = self.corners(g);
-            let pa = rot * cf[(k + 1) % 3] + shift;
-            let pb = rot * cf[(k + 2) % 3] + shift;
-            let far = rot * cf[k] + shift;
-            let (new_rot, new_shift) = unfold(pa, pb, far, cg[ga], cg[gb], cg[l]);
-            rot = new_rot;
-            shift = new_shift;
+            // the neighbour's chart in this one's, composed into the base chart
+            let link = &self.link[face][k];
+            let (ga, gb) = (link.corners[0] as usize, link.corners[1] as usize);
+            shift += rot * link.shift;
+            rot *= link.rot;
             s = DVec3::ZERO;
             s[ga] = cross[(k + 1) % 3];
             s[gb] = cross[(k + 2) % 3];
