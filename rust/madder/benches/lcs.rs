@@ -73,5 +73,4 @@ fn main() {
     case("double gyre 401×201", 400, 200, 100);
     case("double gyre 401×201", 400, 200, 50);
     case("100k-vertex grid", 447, 223, 100);
-
 }

@@ -99,7 +99,7 @@ pub fn ftle_from_flow_map(
     (0..start.len())
         .into_par_iter()
         .map(|i| {
-            let (a, b) = one_ring_fit(rings.spokes(i), i, |j| {
+            let (a, b) = one_ring_fit(rings.spokes(i), |j| {
                 (frames.to_local(i, start[j] - start[i]), end[j] - end[i])
             });
             let Some(j) = solve_fit(a, b) else {
@@ -122,7 +122,6 @@ pub fn ftle_from_flow_map(
 /// `Σ Δ d_y`) of a least-squares gradient over the spokes of `i`.
 pub(crate) fn one_ring_fit<V>(
     spokes: &[u32],
-    _i: usize,
     sample: impl Fn(usize) -> (DVec2, V),
 ) -> (DMat2, [V; 2])
 where

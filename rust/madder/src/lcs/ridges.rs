@@ -342,7 +342,7 @@ impl FieldOps<'_> {
             .into_par_iter()
             .map(|i| {
                 let (a, b) =
-                    one_ring_fit(self.rings.spokes(i), i, |j| (self.local(i, j), f[j] - f[i]));
+                    one_ring_fit(self.rings.spokes(i), |j| (self.local(i, j), f[j] - f[i]));
                 solve_fit(a, b).map_or(DVec3::ZERO, |[gx, gy]| {
                     self.frames.to_world(i, DVec2::new(gx, gy))
                 })
@@ -357,7 +357,7 @@ impl FieldOps<'_> {
             .into_par_iter()
             .map(|i| {
                 let (a, b) =
-                    one_ring_fit(self.rings.spokes(i), i, |j| (self.local(i, j), g[j] - g[i]));
+                    one_ring_fit(self.rings.spokes(i), |j| (self.local(i, j), g[j] - g[i]));
                 let Some([dx, dy]) = solve_fit(a, b) else {
                     return DMat3::ZERO;
                 };
