@@ -4,6 +4,7 @@
 //! MadderError
 //! ├── MeshError       (also a ValueError)  bad topology, positions or UVs; names face/vertex
 //! ├── ParameterError  (also a ValueError)  out-of-range parameters; names the parameter
+//! │                                        (FTLE/ridges: the array, vertex or time too)
 //! ├── FabricError     (also a ValueError)  a weave or cell tensor is invalid; names the cell
 //! ├── SolveError                           a linear solve failed
 //! └── CacheError      (also an OSError)    cache, PC2/MDD or image file missing, truncated,
@@ -95,41 +96,13 @@ pub fn to_py(e: impl Into<madder::Error>) -> PyErr {
 
 fn build(py: Python<'_>, e: &madder::Error) -> PyResult<PyErr> {
     use madder::error::{
-        CacheError as C, Error, MeshError as M, ParamError as P, TextureError as T, WeaveError as W,
+        CacheError as C, Error, ParamError as P, TextureError as T, WeaveError as W,
     };
     use madder::io::point_cache::PointCacheError as Pc;
     let f = Fields::new(py);
     let (class, f) = match e {
-        Error::Mesh(m) => (
-            py.get_type::<MeshError>(),
-            match m {
-                M::Empty => f,
-                M::VertexOutOfRange {
-                    face,
-                    vertex,
-                    n_vertices,
-                } => f
-                    .set("face", face)
-                    .set("vertex", vertex)
-                    .set("n_vertices", n_vertices),
-                M::RepeatedVertex { face, vertex } => f.set("face", face).set("vertex", vertex),
-                M::VertexCountMismatch { expected, got } => {
-                    f.set("expected", expected).set("got", got)
-                }
-                M::NonFinitePosition { vertex } => f.set("vertex", vertex),
-                M::PolygonMapLength { expected, got } => {
-                    f.set("expected", expected).set("got", got)
-                }
-                M::DetailTooLarge {
-                    level,
-                    vertices,
-                    max,
-                } => f
-                    .set("level", level)
-                    .set("vertices", vertices)
-                    .set("max", max),
-            },
-        ),
+        Error::Mesh(m) => (py.get_type::<MeshError>(), mesh_fields(f, m)),
+        Error::Lcs(l) => lcs_class_fields(py, f, l),
         Error::Param(p) => (
             py.get_type::<ParameterError>(),
             match p {
@@ -357,5 +330,93 @@ fn solve_fields<'py>(f: Fields<'py>, s: &madder::error::SolveError) -> Fields<'p
             iterations,
             residual,
         } => f.set("iterations", iterations).set("residual", residual),
+    }
+}
+
+fn mesh_fields<'py>(f: Fields<'py>, m: &madder::error::MeshError) -> Fields<'py> {
+    use madder::error::MeshError as M;
+    match m {
+        M::Empty => f,
+        M::VertexOutOfRange {
+            face,
+            vertex,
+            n_vertices,
+        } => f
+            .set("face", face)
+            .set("vertex", vertex)
+            .set("n_vertices", n_vertices),
+        M::RepeatedVertex { face, vertex } => f.set("face", face).set("vertex", vertex),
+        M::VertexCountMismatch { expected, got } => f.set("expected", expected).set("got", got),
+        M::NonFinitePosition { vertex } => f.set("vertex", vertex),
+        M::PolygonMapLength { expected, got } => f.set("expected", expected).set("got", got),
+        M::DetailTooLarge {
+            level,
+            vertices,
+            max,
+        } => f
+            .set("level", level)
+            .set("vertices", vertices)
+            .set("max", max),
+    }
+}
+
+/// FTLE and ridges (`madder.ftle`, `madder.ridges`): bad arrays, times and options are
+/// `ParameterError`s naming the array, the vertex or the time; mesh problems `MeshError`s.
+fn lcs_class_fields<'py>(
+    py: Python<'py>,
+    f: Fields<'py>,
+    l: &madder::LcsError,
+) -> (Bound<'py, pyo3::types::PyType>, Fields<'py>) {
+    use madder::LcsError as L;
+    let param = py.get_type::<ParameterError>();
+    match l {
+        L::NoTriangles => (py.get_type::<MeshError>(), f),
+        L::Mesh(m) => (py.get_type::<MeshError>(), mesh_fields(f, m)),
+        L::Solve(s) => (py.get_type::<SolveError>(), solve_fields(f, s)),
+        L::ZeroSpan { span } => (param, f.set("name", "T").set("value", span)),
+        L::NonFiniteVelocity { at, time } => (
+            param,
+            f.set("name", "velocity").set("at", at).set("time", time),
+        ),
+        L::Shape {
+            name,
+            expected,
+            got,
+        } => (
+            param,
+            f.set("name", name)
+                .set("expected", expected)
+                .set("got", got),
+        ),
+        L::TimeOutOfRange { time, first, last } => (
+            param,
+            f.set("name", "times")
+                .set("time", time)
+                .set("first", first)
+                .set("last", last),
+        ),
+        L::FrameTimes { index, value } => (
+            param,
+            f.set("name", "times")
+                .set("index", index)
+                .set("value", value),
+        ),
+        L::NonFiniteField { vertex } => (param, f.set("name", "field").set("vertex", vertex)),
+        L::Option {
+            name,
+            requirement,
+            value,
+        } => (
+            param,
+            f.set("name", name)
+                .set("requirement", requirement)
+                .set("value", value),
+        ),
+        L::Callable { time, message } => (
+            param,
+            f.set("name", "velocity")
+                .set("time", time)
+                .set("message", message),
+        ),
     }
 }

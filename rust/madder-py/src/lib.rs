@@ -9,6 +9,7 @@ use pyo3::prelude::*;
 
 mod errors;
 mod io;
+mod lcs;
 mod mesh;
 mod point_cache;
 mod simulate;
@@ -34,6 +35,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<simulate::Simulator>()?;
     m.add_class::<io::CacheWriter>()?;
     m.add_class::<io::CacheReader>()?;
+    m.add_function(wrap_pyfunction!(lcs::ftle, m)?)?;
+    m.add_function(wrap_pyfunction!(lcs::ridges, m)?)?;
     weave::register(m)?;
     point_cache::register(m)?;
     texture::register(m)?;

@@ -462,6 +462,89 @@ pub enum TextureError {
     },
 }
 
+/// Bad input to the Lagrangian coherent structure tools (module [`crate::lcs`], seed ch. 5).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum LcsError {
+    /// The mesh has no triangle.
+    #[error("the mesh has no triangles (FTLE and ridges need a triangle mesh)")]
+    NoTriangles,
+    /// A zero (or non-finite) integration time span `T`.
+    #[error("the time span T must be finite and non-zero, got {}", Compact(*.span))]
+    ZeroSpan {
+        /// The span given.
+        span: f64,
+    },
+    /// A velocity with a NaN or infinite component.
+    #[error("velocity at {at} at time {} is not finite", Compact(*.time))]
+    NonFiniteVelocity {
+        /// Where: `vertex 12` for per-vertex velocities, `point 12` for a callable's batch.
+        at: String,
+        /// The time at which it was evaluated.
+        time: f64,
+    },
+    /// An array or a callable's result of the wrong shape.
+    #[error("{name} has shape {got}, expected {expected}")]
+    Shape {
+        /// The array or the callable.
+        name: String,
+        /// The shape expected, e.g. `(100, 3)`.
+        expected: String,
+        /// The shape given.
+        got: String,
+    },
+    /// A time outside the frames given (per-frame positions or velocities).
+    #[error(
+        "time {} is outside the frames' times [{}, {}] (the flow from t0 over T must stay within them)",
+        Compact(*.time), Compact(*.first), Compact(*.last)
+    )]
+    TimeOutOfRange {
+        /// The time asked for.
+        time: f64,
+        /// The first frame's time.
+        first: f64,
+        /// The last frame's time.
+        last: f64,
+    },
+    /// Frame times that are not finite and strictly increasing.
+    #[error("frame times must be finite and strictly increasing: times[{index}] = {}", Compact(*.value))]
+    FrameTimes {
+        /// The first bad entry.
+        index: usize,
+        /// Its value.
+        value: f64,
+    },
+    /// A scalar field value (the field whose ridges are extracted) that is not finite.
+    #[error("field value at vertex {vertex} is not finite")]
+    NonFiniteField {
+        /// The vertex.
+        vertex: usize,
+    },
+    /// An option out of its range.
+    #[error("{name} must be {requirement}, got {}", Compact(*.value))]
+    Option {
+        /// The option.
+        name: &'static str,
+        /// What it must be.
+        requirement: &'static str,
+        /// The value given.
+        value: f64,
+    },
+    /// An error raised by a user's velocity callable (its message).
+    #[error("the velocity callable failed at time {}: {message}", Compact(*.time))]
+    Callable {
+        /// The time of the failing call.
+        time: f64,
+        /// The callable's error.
+        message: String,
+    },
+    /// Bad positions (wrong count, non-finite).
+    #[error(transparent)]
+    Mesh(#[from] MeshError),
+    /// The smoothing solve failed.
+    #[error("ridge smoothing: {0}")]
+    Solve(#[from] SolveError),
+}
+
 /// Any core error. The binding crate maps each variant to a typed Python exception.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
@@ -486,6 +569,9 @@ pub enum Error {
     /// A texture that cannot be rasterized, written or read.
     #[error(transparent)]
     Texture(#[from] TextureError),
+    /// Bad input to FTLE or ridge extraction.
+    #[error(transparent)]
+    Lcs(#[from] LcsError),
 }
 
 #[cfg(test)]

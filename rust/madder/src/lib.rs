@@ -36,7 +36,12 @@
 //! Detail: the simulation on the cloth's triangles split into 4^L
 //! ([`mesh::Refinement`], [`stain::Detailed`]).
 //!
-//! ## Chapter 5: Lagrangian coherent structures — not built yet
+//! ## Chapter 5: Lagrangian coherent structures — [`lcs`]
+//! | seed | what | where |
+//! |---|---|---|
+//! | §5.2, §5.5.1 | particles traced through a time-dependent tangent velocity on a (deforming) mesh, RK4 with edge crossings | [`lcs::flow_map`] (`lcs/trace.rs`) |
+//! | §5.2 | flow-map gradient, Cauchy–Green, FTLE `σ` | [`lcs::ftle()`] (`lcs/ftle.rs`) |
+//! | §5.4, §5.5.2–§5.5.5, eqs. 5.3–5.4 | ridges: threshold, smoothing, Hessian, zero crossings, marching triangles, joining, cleanup | [`lcs::ridges()`] (`lcs/ridges.rs`) |
 //!
 //! ## Around the science
 //! - [`io`]: the Madder cache file and the playback attributes read from it; PC2/MDD point
@@ -60,6 +65,7 @@
 
 pub mod error;
 pub mod io;
+pub mod lcs;
 pub mod mesh;
 pub mod ops;
 pub mod rng;
@@ -67,5 +73,7 @@ pub mod stain;
 pub mod texture;
 pub mod weave;
 
-pub use error::{CacheError, Error, MeshError, ParamError, SolveError, TextureError, WeaveError};
+pub use error::{
+    CacheError, Error, LcsError, MeshError, ParamError, SolveError, TextureError, WeaveError,
+};
 pub use io::point_cache::PointCacheError;

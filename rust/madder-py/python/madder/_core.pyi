@@ -6,6 +6,7 @@ parameter names and defaults wherever pyo3 gives a signature. A binding change w
 change here fails that test. Arrays are numpy arrays; float32 at the boundary unless said.
 """
 
+from collections.abc import Callable
 from os import PathLike
 from typing import Any, Final
 
@@ -49,6 +50,35 @@ class Topology:
     def non_manifold_edges(self) -> _U32: ...
     def loose_vertices(self) -> _U32: ...
     def __repr__(self) -> str: ...
+
+def ftle(
+    faces: _U32,
+    positions: _F64,
+    velocity: Callable[[float, _F64], npt.ArrayLike] | _F64,
+    t0: float,
+    T: float,
+    *,
+    steps: int = 100,
+    times: _F64 | None = None,
+) -> _F64:
+    """FTLE σ = ln √λmax / |T| per vertex (seed §5.2, §5.5.1); positions (N, 3) or (K, N, 3)."""
+
+def ridges(
+    faces: _U32,
+    positions: _F64,
+    field: _F64,
+    *,
+    smoothing: float = 1.0,
+    hessian_smoothing: float = 1.0,
+    field_smoothing: float = 0.0,
+    threshold: float | None = None,
+    s0: float = 100.0,
+    min_edges: int = 20,
+    min_branch: int = 10,
+    join: bool = True,
+    remove_valleys: bool = False,
+) -> dict[str, npt.NDArray[Any]]:
+    """Ridges of a field: triangles (P,), barycentric (P, 3), points (P, 3), edges (E, 2)."""
 
 def weft_directions(
     topology: Topology,

@@ -1,0 +1,308 @@
+//! `ftle` and `ridges`: Lagrangian coherent structures (core module `lcs`, seed ch. 5).
+//!
+//! Conversion only: numpy arrays in and out, a Python velocity callable wrapped as a core
+//! `Velocity` (called once per RK stage with every live particle, the GIL taken back for
+//! each call), the GIL released for everything else.
+
+use glam::DVec3;
+use numpy::{
+    PyArray1, PyArrayDyn, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArrayDyn,
+    PyUntypedArrayMethods,
+};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use madder::LcsError;
+use madder::lcs::{FrameTimes, Located, Motion, RidgeOptions, Velocity, VertexVelocity};
+
+use crate::errors::to_py;
+
+/// The topology of `faces` (`(F, 3)` uint32), an error naming a mesh without triangles.
+fn topology(faces: &PyReadonlyArray2<'_, u32>, n: usize) -> PyResult<madder::mesh::Topology> {
+    let shape = faces.shape();
+    if shape[1] != 3 {
+        return Err(to_py(shape_error("faces", "(F, 3)", shape)));
+    }
+    if shape[0] == 0 {
+        return Err(to_py(LcsError::NoTriangles));
+    }
+    let tris = faces
+        .as_array()
+        .rows()
+        .into_iter()
+        .map(|r| [r[0], r[1], r[2]])
+        .collect();
+    madder::mesh::Topology::from_triangles(n, tris).map_err(to_py)
+}
+
+fn shape_error(name: &str, expected: &str, got: &[usize]) -> LcsError {
+    LcsError::Shape {
+        name: name.into(),
+        expected: expected.into(),
+        got: format!("{got:?}").replace('[', "(").replace(']', ")"),
+    }
+}
+
+/// `(..., 3)` float64 rows as points.
+fn rows3(a: &numpy::ndarray::ArrayViewD<'_, f64>) -> Vec<DVec3> {
+    a.as_slice().map_or_else(
+        || {
+            let v: Vec<f64> = a.iter().copied().collect();
+            v.chunks_exact(3)
+                .map(|c| DVec3::new(c[0], c[1], c[2]))
+                .collect()
+        },
+        |s| {
+            s.chunks_exact(3)
+                .map(|c| DVec3::new(c[0], c[1], c[2]))
+                .collect()
+        },
+    )
+}
+
+/// Per-frame `(K, N, 3)` or single `(N, 3)` positions: `(frames, n_vertices)`.
+fn frames(name: &str, a: &PyReadonlyArrayDyn<'_, f64>) -> PyResult<(Vec<Vec<DVec3>>, usize)> {
+    let shape = a.shape().to_vec();
+    let view = a.as_array();
+    match shape.as_slice() {
+        [n, 3] => Ok((vec![rows3(&view)], *n)),
+        [k, n, 3] => {
+            let all = rows3(&view);
+            Ok((
+                (0..*k).map(|f| all[f * n..(f + 1) * n].to_vec()).collect(),
+                *n,
+            ))
+        }
+        _ => Err(to_py(shape_error(name, "(N, 3) or (K, N, 3)", &shape))),
+    }
+}
+
+/// A Python callable `f(t, points (M, 3)) -> (M, 3)` as a core velocity.
+struct PyVelocity<'a> {
+    f: &'a Py<PyAny>,
+    /// The callable's own exception, raised as it is.
+    raised: Option<PyErr>,
+}
+
+impl Velocity for PyVelocity<'_> {
+    fn eval(
+        &mut self,
+        t: f64,
+        _at: &[Located],
+        points: &[DVec3],
+        out: &mut [DVec3],
+    ) -> Result<(), LcsError> {
+        Python::attach(|py| {
+            let flat: Vec<f64> = points.iter().flat_map(|p| p.to_array()).collect();
+            let m = points.len();
+            let result = PyArray1::from_vec(py, flat)
+                .reshape([m, 3])
+                .and_then(|arr| self.f.call1(py, (t, arr)))
+                .and_then(|r| {
+                    py.import("numpy")?
+                        .getattr("asarray")?
+                        .call1((r, "float64"))
+                });
+            let r = match result {
+                Ok(r) => r,
+                Err(e) => {
+                    let message = e.to_string();
+                    self.raised = Some(e);
+                    return Err(LcsError::Callable { time: t, message });
+                }
+            };
+            let name = || {
+                let repr = self.f.bind(py).repr().map_or("?".into(), |r| r.to_string());
+                format!("the result of the velocity callable {repr} at time {t}")
+            };
+            let arr = r
+                .cast_into::<PyArrayDyn<f64>>()
+                .map_err(|_| shape_error(&name(), "a float array", &[]))?;
+            let ro = arr.readonly();
+            if ro.shape() != [m, 3] {
+                return Err(shape_error(&name(), &format!("({m}, 3)"), ro.shape()));
+            }
+            for (o, p) in out.iter_mut().zip(rows3(&ro.as_array())) {
+                *o = p;
+            }
+            Ok(())
+        })
+    }
+}
+
+/// Finite-time Lyapunov exponent `σ = ln √λ_max / |T|` at every vertex (seed §5.2, §5.5.1).
+///
+/// `faces` `(F, 3)` uint32; `positions` `(N, 3)` float64 for a fixed mesh or `(K, N, 3)`
+/// per frame (at `times`, `(K,)` increasing); `velocity` a callable
+/// `f(t, points (M, 3)) -> (M, 3)` of world points (called once per RK4 stage with all
+/// particles) or a `(K, N, 3)` array of per-vertex velocities at `times` (`(N, 3)`:
+/// constant), relative to the cloth, projected on each triangle. Particles start at the
+/// vertices at `t0` and are traced over `T` (negative: backward) in `steps` RK4 steps.
+/// Returns `(N,)` float64.
+#[pyfunction]
+#[pyo3(signature = (faces, positions, velocity, t0, T, *, steps=100, times=None))]
+#[allow(non_snake_case, clippy::too_many_arguments)]
+pub fn ftle<'py>(
+    py: Python<'py>,
+    faces: PyReadonlyArray2<'py, u32>,
+    positions: PyReadonlyArrayDyn<'py, f64>,
+    velocity: Bound<'py, PyAny>,
+    t0: f64,
+    T: f64,
+    steps: usize,
+    times: Option<PyReadonlyArray1<'py, f64>>,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let (pos_frames, n) = frames("positions", &positions)?;
+    let topo = topology(&faces, n)?;
+    let times = match times {
+        Some(t) => Some(FrameTimes::new(t.as_array().to_vec()).map_err(to_py)?),
+        None => None,
+    };
+    let need_times = |what: &str, k: usize| -> PyResult<FrameTimes> {
+        match &times {
+            Some(t) if t.times().len() == k => Ok(t.clone()),
+            Some(t) => Err(to_py(shape_error(
+                "times",
+                &format!("({k},), one per frame of {what}"),
+                &[t.times().len()],
+            ))),
+            None => Err(to_py(shape_error(
+                "times",
+                &format!("({k},) for the {k} frames of {what}"),
+                &[],
+            ))),
+        }
+    };
+    let motion = if pos_frames.len() == 1 && positions.ndim() == 2 {
+        Motion::fixed(pos_frames.into_iter().next().unwrap_or_default())
+    } else {
+        let k = pos_frames.len();
+        Motion::frames(need_times("positions", k)?, pos_frames).map_err(to_py)?
+    };
+    let sigma = if velocity.is_callable() {
+        let f: Py<PyAny> = velocity.unbind();
+        let mut v = PyVelocity {
+            f: &f,
+            raised: None,
+        };
+        let r = py.detach(|| madder::lcs::ftle(&topo, &motion, &mut v, t0, T, steps));
+        match (r, v.raised.take()) {
+            (Ok(s), _) => s,
+            (Err(LcsError::Callable { .. }), Some(e)) => return Err(e),
+            (Err(e), _) => return Err(to_py(e)),
+        }
+    } else {
+        let arr: PyReadonlyArrayDyn<'py, f64> = velocity.extract().map_err(|_| {
+            to_py(shape_error(
+                "velocity",
+                "a callable f(t, points) or a float64 array (K, N, 3)",
+                &[],
+            ))
+        })?;
+        let (vel_frames, nv) = frames("velocity", &arr)?;
+        if nv != n {
+            return Err(to_py(shape_error(
+                "velocity",
+                &format!("({}, {n}, 3)", vel_frames.len()),
+                arr.shape(),
+            )));
+        }
+        let ft = if arr.ndim() == 2 {
+            FrameTimes::new(vec![t0]).map_err(to_py)?
+        } else {
+            need_times("velocity", vel_frames.len())?
+        };
+        let constant = arr.ndim() == 2;
+        let mut v = VertexVelocity::new(ft, vel_frames, &topo).map_err(to_py)?;
+        if constant {
+            let mut c = Constant(v);
+            py.detach(|| madder::lcs::ftle(&topo, &motion, &mut c, t0, T, steps))
+        } else {
+            py.detach(|| madder::lcs::ftle(&topo, &motion, &mut v, t0, T, steps))
+        }
+        .map_err(to_py)?
+    };
+    Ok(PyArray1::from_vec(py, sigma))
+}
+
+/// Per-vertex velocities of one frame, the same at every time.
+struct Constant(VertexVelocity);
+
+impl Velocity for Constant {
+    fn eval(
+        &mut self,
+        _t: f64,
+        at: &[Located],
+        points: &[DVec3],
+        out: &mut [DVec3],
+    ) -> Result<(), LcsError> {
+        let t = self.0.times()[0];
+        self.0.eval(t, at, points, out)
+    }
+}
+
+/// Ridges of a scalar `field` `(N,)` on a triangle mesh (seed §5.4, §5.5.2–§5.5.5):
+/// a dict with `triangles` `(P,)` uint32 and `barycentric` `(P, 3)` float64 (where each
+/// point is on the mesh), `points` `(P, 3)` float64 (at `positions`) and `edges` `(E, 2)`
+/// uint32 (pairs of points). `smoothing`, `hessian_smoothing` and `field_smoothing` are
+/// implicit diffusion times in units of the mean edge length squared; `threshold` is
+/// `σ0` (default `0.75 max + 0.25 min`); `s0` the candidate level of the smoothed
+/// indicator (0–1000); components under `min_edges` edges and T-junction branches and
+/// loops under `min_branch` edges are removed.
+#[pyfunction]
+#[pyo3(signature = (faces, positions, field, *, smoothing=1.0, hessian_smoothing=1.0, field_smoothing=0.0, threshold=None, s0=100.0, min_edges=20, min_branch=10, join=true, remove_valleys=false))]
+#[allow(clippy::too_many_arguments)]
+pub fn ridges<'py>(
+    py: Python<'py>,
+    faces: PyReadonlyArray2<'py, u32>,
+    positions: PyReadonlyArray2<'py, f64>,
+    field: PyReadonlyArray1<'py, f64>,
+    smoothing: f64,
+    hessian_smoothing: f64,
+    field_smoothing: f64,
+    threshold: Option<f64>,
+    s0: f64,
+    min_edges: usize,
+    min_branch: usize,
+    join: bool,
+    remove_valleys: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    if positions.shape()[1] != 3 {
+        return Err(to_py(shape_error("positions", "(N, 3)", positions.shape())));
+    }
+    let pos = rows3(&positions.as_array().into_dyn());
+    let topo = topology(&faces, pos.len())?;
+    let field = field.as_array().to_vec();
+    let options = RidgeOptions {
+        field_smoothing,
+        smoothing,
+        hessian_smoothing,
+        threshold,
+        s0,
+        min_edges,
+        min_branch,
+        join,
+        remove_valleys,
+    };
+    let r = py
+        .detach(|| madder::lcs::ridges(&topo, &pos, &field, &options))
+        .map_err(to_py)?;
+    let p = r.points.len();
+    let d = PyDict::new(py);
+    let tri: Vec<u32> = r.points.iter().map(|q| q.at.face).collect();
+    let bary: Vec<f64> = r.points.iter().flat_map(|q| q.at.bary.to_array()).collect();
+    let xyz: Vec<f64> = r
+        .points
+        .iter()
+        .flat_map(|q| q.position.to_array())
+        .collect();
+    let edges: Vec<u32> = r.edges.iter().flatten().copied().collect();
+    d.set_item("triangles", PyArray1::from_vec(py, tri))?;
+    d.set_item("barycentric", PyArray1::from_vec(py, bary).reshape([p, 3])?)?;
+    d.set_item("points", PyArray1::from_vec(py, xyz).reshape([p, 3])?)?;
+    d.set_item(
+        "edges",
+        PyArray1::from_vec(py, edges).reshape([r.edges.len(), 2])?,
+    )?;
+    Ok(d)
+}

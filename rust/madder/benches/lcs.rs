@@ -1,0 +1,76 @@
+//! `make bench`: FTLE and ridges (`madder::lcs`, seed ch. 5). Prints figures; asserts
+//! nothing about time.
+//!
+//! - the double gyre (A = 0.1, ε = 0.25, ω = 0.2π) on a 401×201-vertex triangulated grid of
+//!   [0, 2] × [0, 1], T = −10: flow map + FTLE, then ridges;
+//! - FTLE and ridges on a ≈100k-vertex mesh (a 447×223-cell grid, the same flow).
+
+use std::f64::consts::PI;
+use std::time::Instant;
+
+use glam::{DVec2, DVec3};
+use madder::lcs::{FnVelocity, Motion, RidgeOptions, ftle, ridges};
+use madder::mesh::Topology;
+
+fn double_gyre(t: f64, p: DVec2) -> DVec2 {
+    let (amp, eps, omega) = (0.1, 0.25, 0.2 * PI);
+    let a = eps * (omega * t).sin();
+    let b = 1.0 - 2.0 * a;
+    let f = a * p.x * p.x + b * p.x;
+    let df = 2.0 * a * p.x + b;
+    DVec2::new(
+        -PI * amp * (PI * f).sin() * (PI * p.y).cos(),
+        PI * amp * (PI * f).cos() * (PI * p.y).sin() * df,
+    )
+}
+
+/// A triangulated grid of `nx × ny` cells over [0, 2] × [0, 1].
+fn grid(nx: usize, ny: usize) -> (Topology, Vec<DVec3>) {
+    let idx = |i: usize, j: usize| (i * (nx + 1) + j) as u32;
+    let mut faces = Vec::with_capacity(2 * nx * ny);
+    for i in 0..ny {
+        for j in 0..nx {
+            let (a, b, c, d) = (idx(i, j), idx(i, j + 1), idx(i + 1, j + 1), idx(i + 1, j));
+            faces.extend([[a, b, c], [a, c, d]]);
+        }
+    }
+    let p = (0..=ny)
+        .flat_map(|i| {
+            (0..=nx).map(move |j| DVec3::new(2.0 * j as f64 / nx as f64, i as f64 / ny as f64, 0.0))
+        })
+        .collect();
+    (
+        Topology::from_triangles((nx + 1) * (ny + 1), faces).unwrap(),
+        p,
+    )
+}
+
+fn case(label: &str, nx: usize, ny: usize, steps: usize) {
+    let (topo, p) = grid(nx, ny);
+    let mut v = FnVelocity(|t, x: DVec3| double_gyre(t, x.truncate()).extend(0.0));
+    let t = Instant::now();
+    let s = ftle(&topo, &Motion::fixed(p.clone()), &mut v, 0.0, -10.0, steps).unwrap();
+    let t_ftle = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let r = ridges(&topo, &p, &s, &RidgeOptions::default()).unwrap();
+    let t_ridges = t.elapsed().as_secs_f64();
+    println!(
+        "{label}: {} vertices, {steps} RK4 steps: flow map + FTLE {:.3} s, ridges {:.3} s ({} points, {} edges), total {:.3} s",
+        topo.n_vertices(),
+        t_ftle,
+        t_ridges,
+        r.points.len(),
+        r.edges.len(),
+        t_ftle + t_ridges
+    );
+}
+
+fn main() {
+    println!(
+        "FTLE + ridges of the double gyre, T = −10, {} rayon threads",
+        rayon::current_num_threads()
+    );
+    case("double gyre 401×201", 400, 200, 100);
+    case("double gyre 401×201", 400, 200, 50);
+    case("100k-vertex grid", 447, 223, 100);
+}

@@ -1,0 +1,703 @@
+//! Particle tracing on a (deforming) triangle mesh: the flow map `φ_{t0}^{t0+T}` of §5.2,
+//! traced from every vertex as in §5.5.1.
+//!
+//! ## The particle and its charts
+//! A particle is a point of the mesh, `(triangle, barycentric coordinates)`: material
+//! coordinates, which move with the cloth when the mesh deforms. Its world position at time
+//! `t` is `x = Σ_k b_k x_k(t)`, with the vertex positions `x_k(t)` interpolated linearly
+//! between frames ([`Motion`]). The velocity `w(t, x)` ([`Velocity`]) is the fluid's
+//! velocity *relative to the cloth*, a 3-D vector; in a triangle `(x_0, x_1, x_2)` at time
+//! `t` it is taken as barycentric rates `(ḃ_1, ḃ_2)` by least squares,
+//!
+//! ```text
+//! [E_1·E_1  E_1·E_2] [ḃ_1]   [E_1·w]
+//! [E_1·E_2  E_2·E_2] [ḃ_2] = [E_2·w],      E_k = x_k(t) − x_0(t),
+//! ```
+//!
+//! which is the tangent projection of `w` on the triangle's plane, pulled back to material
+//! coordinates. Each triangle has a *chart*: its shape at `t0` laid in the plane, corner 0
+//! at the origin, corner 1 on the `+x` axis, corner 2 above it (`c_1 = (|E_1|, 0)`,
+//! `c_2 = (E_2·u, E_2·(n̂ × u))`, `u = E_1/|E_1|`); the particle's velocity in the chart is
+//! `ḃ_1 c_1 + ḃ_2 c_2`. On a fixed mesh that is exactly the projected velocity; on a
+//! deforming one it is the velocity seen from the cloth at `t0`, so the flow map is a map
+//! of the surface at `t0` to itself, and the FTLE measures its stretching between the
+//! surfaces at `t0` and `t0 + T` ([`super::ftle`]). An isometric motion of the cloth
+//! (bending without stretching) changes nothing.
+//!
+//! ## Crossing edges: unfolding
+//! A displacement `d` from a particle is a straight segment in its triangle's chart. When
+//! it leaves through an edge, the neighbouring triangle's chart is laid next to the current
+//! one by the isometry (a rotation, or a reflection if the two faces' windings disagree)
+//! that maps the shared edge onto itself, and the segment continues, as many triangles as
+//! needed ("following the strip", as the stain's back-trace does in `stain::advect`). The
+//! orthogonal map between the charts carries the neighbour's velocity back into the first
+//! chart: it is the discrete parallel transport across the edge (the face-to-face form of
+//! the transport `R_ij` of eq. 4.4; on a flat or developable mesh it is the identity of the
+//! plane, so the transport is exact). The walk stops at a border edge (the particle stays
+//! on the border, sliding along it in later steps) or a non-manifold edge.
+//!
+//! A segment through a vertex leaves by either of the two edges at that vertex; the edge it
+//! entered by is never its exit, so the walk turns around the vertex until it finds the
+//! wedge that contains the direction.
+//!
+//! ## Integrator: classical RK4 in the chart, order 4
+//! With step `h = T / steps` the stages are evaluated at `p + h/2 k_1`, `p + h/2 k_2`,
+//! `p + h k_3` from the particle `p`, each stage's velocity brought back into `p`'s chart,
+//! and the particle moves to `p + h (k_1 + 2k_2 + 2k_3 + k_4) / 6`. Each of these points is
+//! walked to from the previous one, not from `p` (`p + h/2 k_2` is `p + h/2 k_1` moved by
+//! `h/2 (k_2 − k_1)`, and so on): on a flat or developable mesh the unfolded strip is the
+//! plane and the points are the same, but a step crosses its edges once instead of four
+//! times (the walks are most of the cost). On a curved mesh the unfolding, hence the point
+//! reached, depends on the path by the holonomy of the vertices passed, a discretization
+//! error of the same order as the unfolding's. On a flat mesh with a velocity that is smooth across
+//! the triangles this is the classical fourth-order Runge–Kutta method, global error
+//! `O(h⁴)` (`tests/ftle.rs` measures the order on an analytic rotation). Per-vertex
+//! velocities ([`VertexVelocity`]) are linear in each triangle and continuous, but their
+//! derivative jumps across edges: the error there is limited by the mesh, `O(Δx²)`.
+//!
+//! Every stage is evaluated for all particles at once ([`Velocity::eval`] gets the batch),
+//! which is what lets a Python callable be called once per stage. The walks run in
+//! parallel, each particle writing its own slot: results do not depend on the number of
+//! threads.
+
+use glam::{DMat2, DVec2, DVec3};
+use rayon::prelude::*;
+
+use crate::error::{LcsError, MeshError};
+use crate::mesh::Topology;
+use crate::mesh::geometry::check_positions;
+
+/// Most edges one walk crosses before it stops (only reached by a step of hundreds of
+/// edge lengths).
+pub(crate) const MAX_CROSSINGS: usize = 1000;
+
+/// Barycentric coordinates above `−BARY_TOLERANCE` count as inside a triangle.
+const BARY_TOLERANCE: f64 = 1e-12;
+
+/// A point of the mesh: a triangle and barycentric coordinates in it (summing to 1).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Located {
+    /// The triangle.
+    pub face: u32,
+    /// Barycentric coordinates of its corners `0, 1, 2`.
+    pub bary: DVec3,
+}
+
+/// Frame times: finite, strictly increasing.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameTimes(Vec<f64>);
+
+impl FrameTimes {
+    /// Checks the times, naming the first bad entry.
+    pub fn new(times: Vec<f64>) -> Result<Self, LcsError> {
+        for (i, &t) in times.iter().enumerate() {
+            if !t.is_finite() || (i > 0 && t <= times[i - 1]) {
+                return Err(LcsError::FrameTimes { index: i, value: t });
+            }
+        }
+        if times.is_empty() {
+            return Err(LcsError::Shape {
+                name: "times".into(),
+                expected: "at least one frame time".into(),
+                got: "(0,)".into(),
+            });
+        }
+        Ok(Self(times))
+    }
+
+    /// The times.
+    pub fn times(&self) -> &[f64] {
+        &self.0
+    }
+
+    /// The frame `k` and weight `s` with `t = (1 − s) t_k + s t_{k+1}` (`k + 1` clamped to
+    /// the last frame); an error if `t` is outside the frames (beyond rounding).
+    pub fn locate(&self, t: f64) -> Result<(usize, f64), LcsError> {
+        let ts = &self.0;
+        let (first, last) = (ts[0], ts[ts.len() - 1]);
+        let slack = 1e-9 * (last - first).abs().max(t.abs()).max(1.0);
+        if !(t >= first - slack && t <= last + slack) {
+            return Err(LcsError::TimeOutOfRange {
+                time: t,
+                first,
+                last,
+            });
+        }
+        if ts.len() == 1 {
+            return Ok((0, 0.0));
+        }
+        let k = ts.partition_point(|&x| x <= t).clamp(1, ts.len() - 1) - 1;
+        let s = ((t - ts[k]) / (ts[k + 1] - ts[k])).clamp(0.0, 1.0);
+        Ok((k, s))
+    }
+}
+
+/// The mesh's vertex positions over time: one frame (a fixed mesh) or frames at given
+/// times, linearly interpolated between them.
+#[derive(Debug, Clone)]
+pub struct Motion {
+    times: Option<FrameTimes>,
+    frames: Vec<Vec<DVec3>>,
+}
+
+impl Motion {
+    /// A mesh that does not move.
+    pub fn fixed(positions: Vec<DVec3>) -> Self {
+        Self {
+            times: None,
+            frames: vec![positions],
+        }
+    }
+
+    /// A deforming mesh: `frames[k]` are the positions at `times[k]`.
+    pub fn frames(times: FrameTimes, frames: Vec<Vec<DVec3>>) -> Result<Self, LcsError> {
+        if frames.len() != times.times().len() {
+            return Err(LcsError::Shape {
+                name: "positions".into(),
+                expected: format!("{} frames (one per frame time)", times.times().len()),
+                got: format!("{} frames", frames.len()),
+            });
+        }
+        Ok(Self {
+            times: Some(times),
+            frames,
+        })
+    }
+
+    /// Checks every frame against the topology (count, finiteness; names frame and vertex).
+    pub(crate) fn check(&self, topology: &Topology) -> Result<(), LcsError> {
+        for frame in &self.frames {
+            check_positions(topology, frame)?;
+        }
+        Ok(())
+    }
+
+    /// Where to read the positions at time `t`.
+    pub(crate) fn at(&self, t: f64) -> Result<Lerp, LcsError> {
+        Ok(match &self.times {
+            None => Lerp { k: 0, s: 0.0 },
+            Some(times) => {
+                let (k, s) = times.locate(t)?;
+                Lerp { k, s }
+            }
+        })
+    }
+
+    /// The position of vertex `v` at `at`.
+    pub(crate) fn position(&self, at: Lerp, v: usize) -> DVec3 {
+        let a = self.frames[at.k][v];
+        if at.s == 0.0 {
+            return a;
+        }
+        a.lerp(self.frames[(at.k + 1).min(self.frames.len() - 1)][v], at.s)
+    }
+
+    /// All positions at time `t`.
+    pub(crate) fn positions(&self, t: f64) -> Result<Vec<DVec3>, LcsError> {
+        let at = self.at(t)?;
+        Ok((0..self.frames[0].len())
+            .map(|v| self.position(at, v))
+            .collect())
+    }
+}
+
+/// A frame index and the weight of the next frame.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Lerp {
+    k: usize,
+    s: f64,
+}
+
+/// A velocity field on the mesh: the fluid's 3-D velocity relative to the cloth.
+pub trait Velocity {
+    /// Writes the velocity at time `t` at every point into `out`: the point on the mesh
+    /// `at[i]` whose world position is `points[i]`.
+    fn eval(
+        &mut self,
+        t: f64,
+        at: &[Located],
+        points: &[DVec3],
+        out: &mut [DVec3],
+    ) -> Result<(), LcsError>;
+}
+
+/// An analytic velocity `f(t, x)` of world position (evaluated in parallel).
+pub struct FnVelocity<F>(pub F);
+
+impl<F: Fn(f64, DVec3) -> DVec3 + Sync> Velocity for FnVelocity<F> {
+    fn eval(
+        &mut self,
+        t: f64,
+        _at: &[Located],
+        points: &[DVec3],
+        out: &mut [DVec3],
+    ) -> Result<(), LcsError> {
+        out.par_iter_mut()
+            .zip(points)
+            .for_each(|(o, &x)| *o = (self.0)(t, x));
+        Ok(())
+    }
+}
+
+/// Per-vertex velocities per frame, linear in time between frames and linear in each
+/// triangle (barycentric interpolation), e.g. the stain simulator's baked velocity.
+#[derive(Debug, Clone)]
+pub struct VertexVelocity {
+    times: FrameTimes,
+    frames: Vec<Vec<DVec3>>,
+    faces: Vec<[u32; 3]>,
+}
+
+impl VertexVelocity {
+    /// `frames[k][v]`: the velocity of vertex `v` of `topology` at `times[k]`. Checks the
+    /// shape and that every value is finite (naming vertex and frame time).
+    pub fn new(
+        times: FrameTimes,
+        frames: Vec<Vec<DVec3>>,
+        topology: &Topology,
+    ) -> Result<Self, LcsError> {
+        let n_vertices = topology.n_vertices();
+        let k = times.times().len();
+        if frames.len() != k || frames.iter().any(|f| f.len() != n_vertices) {
+            let got = frames.iter().map(Vec::len).find(|&l| l != n_vertices);
+            return Err(LcsError::Shape {
+                name: "velocity".into(),
+                expected: format!("({k}, {n_vertices}, 3)"),
+                got: format!("({}, {}, 3)", frames.len(), got.unwrap_or(n_vertices)),
+            });
+        }
+        for (f, frame) in frames.iter().enumerate() {
+            if let Some(v) = frame.iter().position(|u| !u.is_finite()) {
+                return Err(LcsError::NonFiniteVelocity {
+                    at: format!("vertex {v}"),
+                    time: times.times()[f],
+                });
+            }
+        }
+        Ok(Self {
+            times,
+            frames,
+            faces: topology.faces().to_vec(),
+        })
+    }
+}
+
+impl VertexVelocity {
+    /// The frames' times.
+    pub fn times(&self) -> &[f64] {
+        self.times.times()
+    }
+}
+
+impl Velocity for VertexVelocity {
+    fn eval(
+        &mut self,
+        t: f64,
+        at: &[Located],
+        _points: &[DVec3],
+        out: &mut [DVec3],
+    ) -> Result<(), LcsError> {
+        let (k, s) = self.times.locate(t)?;
+        let k1 = (k + 1).min(self.frames.len() - 1);
+        let (a, b) = (&self.frames[k], &self.frames[k1]);
+        out.par_iter_mut().zip(at).for_each(|(o, l)| {
+            let tri = self.faces[l.face as usize];
+            *o = (0..3)
+                .map(|c| l.bary[c] * a[tri[c] as usize].lerp(b[tri[c] as usize], s))
+                .sum();
+        });
+        Ok(())
+    }
+}
+
+/// What a walk reads of one face, in one cache line (a crossing touches one new face).
+#[derive(Debug, Clone, Copy)]
+#[repr(align(64))]
+struct FaceChart {
+    /// `(c_1.x, c_2.x, c_2.y)` (`c_0` at the origin, `c_1.y = 0`); all zero for a
+    /// degenerate face.
+    chart: [f64; 3],
+    /// The corners' vertices.
+    verts: [u32; 3],
+    /// The face across the edge opposite corner `k` (`u32::MAX` on a border or
+    /// non-manifold edge) ...
+    nbr: [u32; 3],
+    /// ... and that edge's local index in it.
+    nbr_edge: [u8; 3],
+}
+
+/// How the chart of the face across an edge lies in a face's chart (the unfolding), and
+/// which of its corners are the edge's ends (in the face's order `k + 1`, `k + 2`).
+#[derive(Debug, Clone, Copy)]
+struct Link {
+    rot: DMat2,
+    shift: DVec2,
+    corners: [u8; 2],
+}
+
+/// The triangles' charts at `t0` and their neighbours: what the walks need.
+#[derive(Debug, Clone)]
+pub struct Charts {
+    face: Vec<FaceChart>,
+    /// Per face and edge (opposite corner `k`), the neighbour's unfolding.
+    link: Vec<[Link; 3]>,
+    /// A face at every vertex and the vertex's corner in it (`u32::MAX` for a loose vertex).
+    vertex_face: Vec<(u32, u8)>,
+}
+
+/// No neighbour (border or non-manifold edge) / no face (loose vertex).
+const NONE: u32 = u32::MAX;
+
+impl Charts {
+    /// Charts of `topology` at `positions` (the shape at `t0`).
+    pub fn new(topology: &Topology, positions: &[DVec3]) -> Result<Self, MeshError> {
+        check_positions(topology, positions)?;
+        let faces = topology.faces();
+        let chart: Vec<[f64; 3]> = faces
+            .par_iter()
+            .map(|tri| {
+                let [x0, x1, x2] = tri.map(|v| positions[v as usize]);
+                let (e1, e2) = (x1 - x0, x2 - x0);
+                let (l1, n) = (e1.length(), e1.cross(e2));
+                if l1 == 0.0 || n.length() <= 1e-14 * l1 * e2.length() {
+                    return [0.0; 3];
+                }
+                let u = e1 / l1;
+                let w = n.normalize().cross(u);
+                [l1, e2.dot(u), e2.dot(w)]
+            })
+            .collect();
+        let mut edge_faces: Vec<Vec<(u32, u8)>> = vec![Vec::new(); topology.n_edges()];
+        for (f, fe) in topology.face_edges().iter().enumerate() {
+            for (k, &e) in fe.iter().enumerate() {
+                edge_faces[e as usize].push((f as u32, k as u8));
+            }
+        }
+        let mut neighbour = vec![[(NONE, 0u8); 3]; faces.len()];
+        for pair in edge_faces.iter().filter(|p| p.len() == 2) {
+            let [(f, k), (g, l)] = [pair[0], pair[1]];
+            neighbour[f as usize][k as usize] = (g, l);
+            neighbour[g as usize][l as usize] = (f, k);
+        }
+        let mut vertex_face = vec![(NONE, 0u8); topology.n_vertices()];
+        for (f, tri) in faces.iter().enumerate().rev() {
+            for (c, &v) in tri.iter().enumerate() {
+                vertex_face[v as usize] = (f as u32, c as u8);
+            }
+        }
+        let face = (0..faces.len())
+            .map(|f| FaceChart {
+                chart: chart[f],
+                verts: faces[f],
+                nbr: neighbour[f].map(|n| n.0),
+                nbr_edge: neighbour[f].map(|n| n.1),
+            })
+            .collect();
+        let mut charts = Self {
+            face,
+            link: Vec::new(),
+            vertex_face,
+        };
+        charts.link = (0..faces.len())
+            .into_par_iter()
+            .map(|f| std::array::from_fn(|k| charts.link_across(f, k)))
+            .collect();
+        Ok(charts)
+    }
+
+    /// The unfolding of the neighbour across edge `k` of face `f` into `f`'s chart.
+    fn link_across(&self, f: usize, k: usize) -> Link {
+        let here = &self.face[f];
+        let (g, l) = (here.nbr[k], here.nbr_edge[k] as usize);
+        if g == NONE {
+            return Link {
+                rot: DMat2::IDENTITY,
+                shift: DVec2::ZERO,
+                corners: [0, 0],
+            };
+        }
+        let (a, b) = (here.verts[(k + 1) % 3], here.verts[(k + 2) % 3]);
+        let tg = self.face[g as usize].verts;
+        let corner_in_g = |v: u32| (0..3).find(|&m| tg[m] == v).unwrap_or(0);
+        let (ga, gb) = (corner_in_g(a), corner_in_g(b));
+        let cf = self.corners(f);
+        let cg = self.corners(g as usize);
+        let (rot, shift) = unfold(
+            cf[(k + 1) % 3],
+            cf[(k + 2) % 3],
+            cf[k],
+            cg[ga],
+            cg[gb],
+            cg[l],
+        );
+        Link {
+            rot,
+            shift,
+            corners: [ga as u8, gb as u8],
+        }
+    }
+
+    /// The corners of face `f` in its chart.
+    fn corners(&self, f: usize) -> [DVec2; 3] {
+        let [a, b, c] = self.face[f].chart;
+        [DVec2::ZERO, DVec2::new(a, 0.0), DVec2::new(b, c)]
+    }
+
+    /// Barycentric coordinates of chart point `p` in face `f` (`None` if degenerate).
+    fn bary(&self, f: usize, p: DVec2) -> Option<DVec3> {
+        let [a, b, c] = self.face[f].chart;
+        if a == 0.0 {
+            return None;
+        }
+        let b2 = p.y / c;
+        let b1 = (p.x - b2 * b) / a;
+        Some(DVec3::new(1.0 - b1 - b2, b1, b2))
+    }
+
+    /// [`Self::walk`] from a point `l` whose chart maps into the base chart by `rot`, with `d`
+    /// in the base chart; returns the end and its map into the base chart.
+    pub(crate) fn walk_on(&self, l: &Located, rot: DMat2, d: DVec2) -> (Located, DMat2) {
+        let (end, r) = self.walk(l, rot.transpose() * d);
+        (end, rot * r)
+    }
+
+    /// The particle that starts at vertex `v` (`None` for a loose vertex).
+    pub fn at_vertex(&self, v: usize) -> Option<Located> {
+        let (f, c) = self.vertex_face[v];
+        (f != NONE).then(|| {
+            let mut bary = DVec3::ZERO;
+            bary[c as usize] = 1.0;
+            Located { face: f, bary }
+        })
+    }
+
+    /// The world position of `l` at `at`.
+    pub(crate) fn world(&self, motion: &Motion, at: Lerp, l: &Located) -> DVec3 {
+        let tri = self.face[l.face as usize].verts;
+        (0..3)
+            .map(|c| l.bary[c] * motion.position(at, tri[c] as usize))
+            .sum()
+    }
+
+    /// The velocity `w` at `l` (time `at`) in the chart of `l`'s face (module doc).
+    fn chart_velocity(&self, motion: &Motion, at: Lerp, l: &Located, w: DVec3) -> DVec2 {
+        let f = l.face as usize;
+        let tri = self.face[f].verts;
+        let [x0, x1, x2] = tri.map(|v| motion.position(at, v as usize));
+        let (e1, e2) = (x1 - x0, x2 - x0);
+        let (g11, g12, g22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+        let det = g11 * g22 - g12 * g12;
+        if self.face[f].chart[0] == 0.0 || det <= 1e-24 * g11 * g22 {
+            return DVec2::ZERO;
+        }
+        let (r1, r2) = (e1.dot(w), e2.dot(w));
+        let b1 = (g22 * r1 - g12 * r2) / det;
+        let b2 = (g11 * r2 - g12 * r1) / det;
+        let [_, c1, c2] = self.corners(f);
+        b1 * c1 + b2 * c2
+    }
+
+    /// Walks the straight segment `d` (in the chart of `start`'s face) from `start` across
+    /// edges (module doc). Returns where it ends and the orthogonal map from the end face's
+    /// chart to the start face's chart.
+    pub(crate) fn walk(&self, start: &Located, d: DVec2) -> (Located, DMat2) {
+        let mut face = start.face as usize;
+        let (mut rot, mut shift) = (DMat2::IDENTITY, DVec2::ZERO);
+        let c = self.corners(face);
+        let q = start.bary.x * c[0] + start.bary.y * c[1] + start.bary.z * c[2] + d;
+        let mut s = start.bary;
+        let mut entry = 3usize;
+        for _ in 0..MAX_CROSSINGS {
+            let Some(bq) = self.bary(face, rot.transpose() * (q - shift)) else {
+                break;
+            };
+            if bq.min_element() >= -BARY_TOLERANCE {
+                return (
+                    Located {
+                        face: face as u32,
+                        bary: clamp(bq),
+                    },
+                    rot,
+                );
+            }
+            // exit edge: the first one the segment s → q crosses (never the entry edge)
+            let exit = (0..3)
+                .filter(|&k| k != entry && bq[k] < -BARY_TOLERANCE)
+                .map(|k| {
+                    let sk = s[k].max(0.0);
+                    (sk / (sk - bq[k]), k)
+                })
+                .min_by(|a, b| a.0.total_cmp(&b.0));
+            let Some((tau, k)) = exit else { break };
+            let mut cross = s + tau * (bq - s);
+            cross[k] = 0.0;
+            let cross = clamp(cross);
+            let here = &self.face[face];
+            let (g, l) = (here.nbr[k], here.nbr_edge[k]);
+            if g == NONE || self.face[g as usize].chart[0] == 0.0 {
+                s = cross;
+                break;
+            }
+            let (g, l) = (g as usize, l as usize);
+            // the neighbour's chart in this one's, composed into the base chart
+            let link = &self.link[face][k];
+            let (ga, gb) = (link.corners[0] as usize, link.corners[1] as usize);
+            shift += rot * link.shift;
+            rot *= link.rot;
+            s = DVec3::ZERO;
+            s[ga] = cross[(k + 1) % 3];
+            s[gb] = cross[(k + 2) % 3];
+            face = g;
+            entry = l;
+        }
+        (
+            Located {
+                face: face as u32,
+                bary: clamp(s),
+            },
+            rot,
+        )
+    }
+}
+
+/// The orthogonal map `x ↦ R x + t` of a neighbour's chart into the current one that puts
+/// the shared edge's ends `ga, gb` on `pa, pb` and the neighbour's far corner `gf` on the
+/// other side of the edge from this face's far corner `far`.
+fn unfold(pa: DVec2, pb: DVec2, far: DVec2, ga: DVec2, gb: DVec2, gf: DVec2) -> (DMat2, DVec2) {
+    let u = (pb - pa).normalize_or_zero();
+    let v = (gb - ga).normalize_or_zero();
+    let (cos, sin) = (u.dot(v), v.perp_dot(u));
+    let mut rot = DMat2::from_cols(DVec2::new(cos, sin), DVec2::new(-sin, cos));
+    let side = |p: DVec2| u.perp_dot(p - pa);
+    if side(rot * (gf - ga) + pa) * side(far) > 0.0 {
+        // windings disagree: reflect across the edge's line
+        let refl = DMat2::from_cols(
+            DVec2::new(u.x * u.x - u.y * u.y, 2.0 * u.x * u.y),
+            DVec2::new(2.0 * u.x * u.y, u.y * u.y - u.x * u.x),
+        );
+        rot = refl * rot;
+    }
+    (rot, pa - rot * ga)
+}
+
+/// Barycentric coordinates clamped to `[0, 1]` and renormalized (removes rounding).
+fn clamp(b: DVec3) -> DVec3 {
+    let c = b.max(DVec3::ZERO);
+    let sum = c.element_sum();
+    if sum > 0.0 {
+        c / sum
+    } else {
+        DVec3::new(1.0, 0.0, 0.0)
+    }
+}
+
+/// The particles are reordered by face every this many steps.
+const SORT_EVERY: usize = 4;
+
+/// Orders the particles by their face (then start vertex, so the order is unique), so that
+/// consecutive particles walk through the same faces: the walks are memory-bound, and the
+/// particles of a mixing flow scatter over the mesh. Each particle's result is computed on
+/// its own, so the order changes no value.
+fn sort_by_face(state: &mut [Located], live: &mut [usize]) {
+    let mut order: Vec<(u32, usize, Located)> = state
+        .iter()
+        .zip(live.iter())
+        .map(|(l, &v)| (l.face, v, *l))
+        .collect();
+    order.par_sort_unstable_by_key(|&(f, v, _)| (f, v));
+    for (i, (_, v, l)) in order.into_iter().enumerate() {
+        live[i] = v;
+        state[i] = l;
+    }
+}
+
+/// Traces one particle from every vertex through `velocity` from `t0` over `span` in
+/// `steps` RK4 steps (module doc) and returns where each ends (`None` for a loose vertex).
+///
+/// `charts` must be built from `motion`'s positions at `t0`. Errors: a velocity that is not
+/// finite (naming the particle's start vertex and the time), a time outside the motion's
+/// frames, the velocity's own errors.
+pub fn flow_map(
+    charts: &Charts,
+    motion: &Motion,
+    velocity: &mut dyn Velocity,
+    t0: f64,
+    span: f64,
+    steps: usize,
+) -> Result<Vec<Option<Located>>, LcsError> {
+    let n = charts.vertex_face.len();
+    let start: Vec<Option<Located>> = (0..n).map(|v| charts.at_vertex(v)).collect();
+    let mut live: Vec<usize> = (0..n).filter(|&v| start[v].is_some()).collect();
+    let mut state: Vec<Located> = live.iter().filter_map(|&v| start[v]).collect();
+    let m = state.len();
+    let h = span / steps.max(1) as f64;
+    let mut stage_at = vec![state[0]; m];
+    let mut stage_rot = vec![DMat2::IDENTITY; m];
+    let mut points = vec![DVec3::ZERO; m];
+    let mut w = vec![DVec3::ZERO; m];
+    let mut k: [Vec<DVec2>; 4] = std::array::from_fn(|_| vec![DVec2::ZERO; m]);
+    for step in 0..steps.max(1) {
+        if step % SORT_EVERY == 0 {
+            sort_by_face(&mut state, &mut live);
+        }
+        let t = t0 + step as f64 * h;
+        for stage in 0..4 {
+            let ts = match stage {
+                0 => t,
+                1 | 2 => t + 0.5 * h,
+                _ => t0 + (step + 1) as f64 * h,
+            };
+            let at = motion.at(ts)?;
+            let k_ref = &k;
+            (&mut stage_at, &mut stage_rot, &mut points)
+                .into_par_iter()
+                .zip(&state)
+                .enumerate()
+                .for_each(|(i, ((l, r, x), p))| {
+                    // each stage point walked on from the previous one (module doc)
+                    let step_from_prev = match stage {
+                        0 => None,
+                        1 => Some(0.5 * h * k_ref[0][i]),
+                        2 => Some(0.5 * h * (k_ref[1][i] - k_ref[0][i])),
+                        _ => Some(h * k_ref[2][i] - 0.5 * h * k_ref[1][i]),
+                    };
+                    (*l, *r) = match step_from_prev {
+                        None => (*p, DMat2::IDENTITY),
+                        Some(d) => charts.walk_on(l, *r, d),
+                    };
+                    *x = charts.world(motion, at, l);
+                });
+            velocity.eval(ts, &stage_at, &points, &mut w)?;
+            if let Some(i) = w.iter().position(|u| !u.is_finite()) {
+                return Err(LcsError::NonFiniteVelocity {
+                    at: format!(
+                        "point ({}, {}, {}) (the particle from vertex {})",
+                        points[i].x, points[i].y, points[i].z, live[i]
+                    ),
+                    time: ts,
+                });
+            }
+            k[stage]
+                .par_iter_mut()
+                .zip(&stage_at)
+                .zip(&stage_rot)
+                .zip(&w)
+                .for_each(|(((ki, l), r), &wi)| {
+                    *ki = *r * charts.chart_velocity(motion, at, l, wi);
+                });
+        }
+        let [k1, k2, k3, k4] = &k;
+        (&mut state, &stage_at, &stage_rot)
+            .into_par_iter()
+            .enumerate()
+            .for_each(|(i, (p, l, r))| {
+                let d = h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+                *p = charts.walk_on(l, *r, d - h * k3[i]).0;
+            });
+    }
+    let mut out = vec![None; n];
+    for (i, &v) in live.iter().enumerate() {
+        out[v] = Some(state[i]);
+    }
+    Ok(out)
+}
