@@ -133,7 +133,10 @@ impl TriWeave {
         self.fabric = f as usize;
         self.dx = [a[0] / s, a[2] / s];
         self.dy = [a[1] / s, a[3] / s];
-        self.base = [0.5 * (self.dx[0] + self.dy[0]), 0.5 * (self.dx[1] + self.dy[1])];
+        self.base = [
+            0.5 * (self.dx[0] + self.dy[0]),
+            0.5 * (self.dx[1] + self.dy[1]),
+        ];
         // ∇_y = A⁻ᵀ ∇_uv, ∇_uv = size · (g_x, g_y)
         let inv = s / (a[0] * a[3] - a[1] * a[2]);
         self.grad.clear();

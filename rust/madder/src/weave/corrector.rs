@@ -120,11 +120,7 @@ impl Corrector {
             value,
         };
         if uptake.len() != tensors.len() {
-            return Err(option(
-                "uptake",
-                "one factor per cell",
-                uptake.len() as f64,
-            ));
+            return Err(option("uptake", "one factor per cell", uptake.len() as f64));
         }
         if let Some(&u) = uptake.iter().find(|u| !(u.is_finite() && **u >= 0.0)) {
             return Err(option("uptake", "finite and ≥ 0", u));
@@ -144,9 +140,10 @@ impl Corrector {
         let fine = refine(width, height, tensors, r)?;
         let k = scale_exponent(&fine);
         let (upper, mut chi) = Grid::shared(gw, gh)?.solve_scaled(&fine, k)?;
+        // the solve's unit is the refined grid's cell: χ in tile cells is χ_grid / r
         for c in &mut chi {
             let m = c.iter().sum::<f64>() / c.len() as f64;
-            c.iter_mut().for_each(|v| *v -= m);
+            c.iter_mut().for_each(|v| *v = (*v - m) / r as f64);
         }
         let uptake: Vec<f64> = uptake.iter().map(|u| u / mean).collect();
         // m = ⟨(U − 1) y⟩: cell (i, j) has mean position (i + ½, j + ½)
@@ -197,7 +194,8 @@ impl Corrector {
         self.refine
     }
 
-    /// `χ_x` (`i = 0`) or `χ_y` (`i = 1`) at the `(w r) × (h r)` corner vertices, row-major,
+    /// `χ_x` (`i = 0`) or `χ_y` (`i = 1`), in tile cells, at the `(w r) × (h r)` corner
+    /// vertices, row-major,
     /// row 0 at the bottom; vertex `(p, q)` sits at the tile coordinate `(p / r, q / r)`.
     pub fn samples(&self, i: usize) -> &[f64] {
         &self.chi[i]
@@ -246,7 +244,12 @@ impl Corrector {
     /// refined tile's criss-cross mesh): the primal effective tensor of that discretization.
     pub fn energy(&self) -> Tensor2 {
         let (gw, gh) = (self.width * self.refine, self.height * self.refine);
-        corrector_energy(gw, gh, &self.tensors, &self.chi)
+        let r = self.refine as f64;
+        let chi = self
+            .chi
+            .clone()
+            .map(|c| c.into_iter().map(|v| v * r).collect());
+        corrector_energy(gw, gh, &self.tensors, &chi)
     }
 
     /// The effective tensor the solve itself reported (the same quantity as
