@@ -613,9 +613,10 @@ impl Band<'_> {
             let q = corner.map(|k| [su[k] / SUB_TEXEL as f64, sv[k] / SUB_TEXEL as f64]);
             self.setup_values::<C>(ctx, t, corner, q);
             let c = if C == 0 { ctx.channels } else { C };
-            let woven = ctx
-                .weave
-                .is_some_and(|d| self.tw.setup(d, t, ctx.size, &self.gx[..c], &self.gy[..c]));
+            let woven = ctx.weave.is_some_and(|d| {
+                let field = [&self.base[..c], &self.gx[..c], &self.gy[..c]];
+                self.tw.setup(d, t, ctx.size, field)
+            });
             let w = SUB_TEXEL as f64;
             let s = [x0 as f64 * w + w / 2.0, y0 as f64 * w + w / 2.0];
             let box_ = [x0, x1, y0, y1];

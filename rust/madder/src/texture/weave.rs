@@ -97,7 +97,8 @@ impl WeaveDetail<'_> {
 }
 
 /// One triangle's detail, set up once per triangle: the tile coordinate at texel `(x, y)`
-/// is `base + dx·x + dy·y` (cells), and channel `k`'s gradient in tile units is `grad[k]`.
+/// is `base + dx·x + dy·y` (in sample-grid units, cells × the corrector's refinement),
+/// and channel `k`'s gradient in tile cells is `grad[k]`.
 #[derive(Debug, Default)]
 pub(crate) struct TriWeave {
     fabric: usize,
@@ -108,26 +109,29 @@ pub(crate) struct TriWeave {
 }
 
 impl TriWeave {
-    /// Sets up triangle `t` from the rasterizer's per-texel gradients `gx`, `gy` (one per
-    /// channel); false when the face has no detail.
+    /// Sets up triangle `t` from the rasterizer's per-texel field `base + gx·x + gy·y`
+    /// (one of each per channel); false when the face has no detail, or when its field is
+    /// zero in every channel (the detail of 0 is exactly 0: most of a frame is unstained).
     pub(crate) fn setup(
         &mut self,
         detail: &WeaveDetail<'_>,
         t: usize,
         size: usize,
-        gx: &[f64],
-        gy: &[f64],
+        [base, gx, gy]: [&[f64]; 3],
     ) -> bool {
         let f = detail.face_fabric[t];
         let m = detail.face_map[t];
-        if f == NO_WEAVE || m.iter().all(|&x| x == 0.0) {
+        let zero = |v: &[f64]| v.iter().all(|&x| x == 0.0);
+        if f == NO_WEAVE || zero(&m) || (zero(base) && zero(gx) && zero(gy)) {
             return false;
         }
         let corr = detail.correctors[f as usize];
         let (w, h) = corr.cells();
         let [tx, ty] = corr.threads();
         // A = diag(cells per thread) · J: UV → cells
-        let (sx, sy) = (w as f64 / tx, h as f64 / ty);
+        // in sample-grid units: × samples per cell
+        let r = corr.refine() as f64;
+        let (sx, sy) = (r * w as f64 / tx, r * h as f64 / ty);
         let a = [m[0] * sx, m[1] * sx, m[2] * sy, m[3] * sy];
         let s = size as f64;
         self.fabric = f as usize;
@@ -137,8 +141,8 @@ impl TriWeave {
             0.5 * (self.dx[0] + self.dy[0]),
             0.5 * (self.dx[1] + self.dy[1]),
         ];
-        // ∇_y = A⁻ᵀ ∇_uv, ∇_uv = size · (g_x, g_y)
-        let inv = s / (a[0] * a[3] - a[1] * a[2]);
+        // ∇_y = A⁻ᵀ ∇_uv, ∇_uv = size · (g_x, g_y) (A in cells: the grid's A over r)
+        let inv = r * s / (a[0] * a[3] - a[1] * a[2]);
         self.grad.clear();
         self.grad.extend(gx.iter().zip(gy).map(|(&gu, &gv)| {
             [
@@ -164,8 +168,7 @@ impl TriWeave {
             self.base[0] + self.dx[0] * x + self.dy[0] * y,
             self.base[1] + self.dx[1] * x + self.dy[1] * y,
         ];
-        let chi = corr.chi(p);
-        let u = corr.uptake_at(p);
+        let (chi, u) = corr.sample(p);
         let m = corr.moment();
         for (k, o) in out.iter_mut().enumerate() {
             let g = self.grad[k];

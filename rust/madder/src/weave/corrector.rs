@@ -90,6 +90,17 @@ pub struct Corrector {
     moment: [f64; 2],
     threads: [f64; 2],
     upper: Tensor2,
+    /// per patch `(p, q)` of the sample grid (row-major): the bilinear coefficients
+    /// `c0 + c1 t_x + c2 t_y + c3 t_x t_y` of `χ_x` (0..4) and `χ_y` (4..8), and the uptake
+    /// of the cell holding it (8): one read per texel
+    patches: Vec<[f64; 9]>,
+}
+
+/// `⌊x⌋` for `|x| < 2^63` without a library call (`f64::floor` is one on baseline x86-64).
+#[inline(always)]
+fn floor(x: f64) -> f64 {
+    let t = x as i64 as f64;
+    if t > x { t - 1.0 } else { t }
 }
 
 impl Corrector {
@@ -154,7 +165,27 @@ impl Corrector {
             moment[1] += (u - 1.0) * (j + 0.5);
         }
         let n = uptake.len() as f64;
+        let patches = (0..gw * gh)
+            .map(|v| {
+                let (p, q) = (v % gw, v / gw);
+                let (p1, q1) = ((p + 1) % gw, (q + 1) % gh);
+                let mut c = [0.0; 9];
+                for (i, x) in chi.iter().enumerate() {
+                    let [v00, v10, v01, v11] =
+                        [q * gw + p, q * gw + p1, q1 * gw + p, q1 * gw + p1].map(|k| x[k]);
+                    c[4 * i..4 * i + 4].copy_from_slice(&[
+                        v00,
+                        v10 - v00,
+                        v01 - v00,
+                        v11 - v10 - v01 + v00,
+                    ]);
+                }
+                c[8] = uptake[(q / r) * width + p / r];
+                c
+            })
+            .collect();
         Ok(Corrector {
+            patches,
             width,
             height,
             refine: r,
@@ -213,23 +244,26 @@ impl Corrector {
 
     /// `(χ_x, χ_y)` at tile coordinate `y` (in cells, any value: the tile repeats),
     /// bilinear between the corner samples.
-    #[inline]
     pub fn chi(&self, y: [f64; 2]) -> [f64; 2] {
-        let (gw, gh) = (self.width * self.refine, self.height * self.refine);
         let r = self.refine as f64;
-        let (gx, gy) = (y[0] * r, y[1] * r);
-        let (fx, fy) = (gx.floor(), gy.floor());
-        let (tx, ty) = (gx - fx, gy - fy);
-        let x0 = (fx as i64).rem_euclid(gw as i64) as usize;
-        let y0 = (fy as i64).rem_euclid(gh as i64) as usize;
-        let (x1, y1) = ((x0 + 1) % gw, (y0 + 1) % gh);
-        let (r0, r1) = (y0 * gw, y1 * gw);
-        [0, 1].map(|i| {
-            let c = &self.chi[i];
-            let bottom = c[r0 + x0] + tx * (c[r0 + x1] - c[r0 + x0]);
-            let top = c[r1 + x0] + tx * (c[r1 + x1] - c[r1 + x0]);
-            bottom + ty * (top - bottom)
-        })
+        self.sample([y[0] * r, y[1] * r]).0
+    }
+
+    /// `((χ_x, χ_y), U)` at `g`, in sample-grid units (tile cells × [`Corrector::refine`]):
+    /// the texel pass's one lookup.
+    #[inline(always)]
+    pub(crate) fn sample(&self, g: [f64; 2]) -> ([f64; 2], f64) {
+        let (gw, gh) = (self.width * self.refine, self.height * self.refine);
+        let (nw, nh) = (gw as f64, gh as f64);
+        // wrap into [0, n): q = g − n ⌊g / n⌋, then the patch and the offset in it
+        let qx = g[0] - nw * floor(g[0] * (1.0 / nw));
+        let qy = g[1] - nh * floor(g[1] * (1.0 / nh));
+        let (ix, iy) = ((qx as usize).min(gw - 1), (qy as usize).min(gh - 1));
+        let (tx, ty) = (qx - ix as f64, qy - iy as f64);
+        let c = &self.patches[iy * gw + ix];
+        let x = c[0] + tx * c[1] + ty * (c[2] + tx * c[3]);
+        let y = c[4] + tx * c[5] + ty * (c[6] + tx * c[7]);
+        ([x, y], c[8])
     }
 
     /// The uptake factor of the cell holding tile coordinate `y` (cells, periodic).
