@@ -133,6 +133,40 @@ fn time<T>(runs: usize, mut f: impl FnMut() -> T) -> (Timing, T) {
     (timing, out.expect("runs ≥ 1"))
 }
 
+/// The weave's detail (issue 13 part 4) on every face: a plain weave with gaps at 1000
+/// threads per UV unit (about half a thread per texel at 2048²), weft at 30°.
+struct Woven {
+    corr: Corrector,
+    map: Vec<[f64; 4]>,
+    fabric: Vec<u32>,
+}
+
+impl Woven {
+    fn new(n_faces: usize) -> Woven {
+        let corr = Corrector::of_tile(
+            &Tile::builtin(Weave::Plain, true),
+            &PairCoefficients::default(),
+            [2.0, 2.0],
+        )
+        .unwrap();
+        let (c, s) = (30f64.to_radians().cos(), 30f64.to_radians().sin());
+        Woven {
+            corr,
+            map: vec![[1000.0 * c, 1000.0 * s, -1000.0 * s, 1000.0 * c]; n_faces],
+            fabric: vec![0u32; n_faces],
+        }
+    }
+
+    fn detail<'a>(&'a self, correctors: &'a [&'a Corrector]) -> WeaveDetail<'a> {
+        WeaveDetail {
+            correctors,
+            face_fabric: &self.fabric,
+            face_map: &self.map,
+            uptake: &[true; CHANNELS],
+        }
+    }
+}
+
 fn bench(l: &Load, size: usize, threads: usize) {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
@@ -153,24 +187,9 @@ fn bench(l: &Load, size: usize, threads: usize) {
         let (padding, n) = time(9, || {
             texture::pad(it.next().unwrap(), texture::DEFAULT_PADDING)
         });
-        // the weave's detail (issue 13 part 4) on every face: a plain weave with gaps at
-        // 1000 threads per UV unit (about half a thread per texel at 2048²), weft at 30°
-        let corr = Corrector::of_tile(
-            &Tile::builtin(Weave::Plain, true),
-            &PairCoefficients::default(),
-            [2.0, 2.0],
-        )
-        .unwrap();
-        let cs = [&corr];
-        let (c, s) = (30f64.to_radians().cos(), 30f64.to_radians().sin());
-        let map = vec![[1000.0 * c, 1000.0 * s, -1000.0 * s, 1000.0 * c]; l.faces.len()];
-        let fabric = vec![0u32; l.faces.len()];
-        let detail = WeaveDetail {
-            correctors: &cs,
-            face_fabric: &fabric,
-            face_map: &map,
-            uptake: &[true; CHANNELS],
-        };
+        let w = Woven::new(l.faces.len());
+        let cs = [&w.corr];
+        let detail = w.detail(&cs);
         let (woven, _) = time(9, || {
             texture::rasterize_with(&l.faces, &l.uv, &l.stain, CHANNELS, size, Some(&detail))
                 .unwrap()
@@ -262,10 +281,34 @@ fn main() {
             .num_threads(threads)
             .build()
             .unwrap();
+        // MADDER_BENCH_WEAVE=1: with the weave's detail
+        let woven = Woven::new(fine.faces.len());
+        let cs = [&woven.corr];
+        let detail = std::env::var_os("MADDER_BENCH_WEAVE").map(|_| woven.detail(&cs));
         pool.install(|| {
             for _ in 0..n {
-                texture::rasterize_into(&mut r, &fine.faces, &fine.uv, &fine.stain, CHANNELS, size)
-                    .unwrap();
+                match &detail {
+                    None => texture::rasterize_into(
+                        &mut r,
+                        &fine.faces,
+                        &fine.uv,
+                        &fine.stain,
+                        CHANNELS,
+                        size,
+                    )
+                    .unwrap(),
+                    Some(d) => {
+                        r = texture::rasterize_with(
+                            &fine.faces,
+                            &fine.uv,
+                            &fine.stain,
+                            CHANNELS,
+                            size,
+                            Some(d),
+                        )
+                        .unwrap()
+                    }
+                }
             }
         });
         return;
