@@ -316,8 +316,9 @@ class Exporter:
         for kind in kinds:
             values, channels = ((self._rgba.reshape(-1, 4), STAIN_CHANNELS) if kind == "stain"
                                 else (self._wet_values, WET_CHANNELS))
+            extra = {"weave": self.weave[kind]} if kind in self.weave else {}  # none: as without fabrics
             image, overlapping = self.madder.rasterize(self.faces, self.uv, values, self.size, self.padding,
-                                                       weave=self.weave.get(kind))
+                                                       **extra)
             if self.overlapping is None:  # the same on every frame: the UV layout's
                 self.overlapping = int(overlapping)
             path = frame_file(self.folder, self.name, kind, frame)
