@@ -46,7 +46,8 @@ def detail_image(angle, threads=None, k=THREADS_PER_UV, weave="PLAIN"):
     corr = madder.fabric_corrector(weave, gaps=True)
     # the map as the add-on makes it, on a unit cloth: world area = UV area
     positions = np.c_[pos, np.zeros(len(pos))]
-    maps = textures.weave_maps(positions, faces.astype(np.int64), uv, np.full(len(faces), k), np.full(len(faces), angle))
+    n = len(faces)
+    maps = textures.weave_maps(positions, faces.astype(np.int64), uv, np.full(n, k), np.full(n, angle))
     detail = madder.WeaveDetail([corr], np.zeros(len(faces), np.uint32), np.ascontiguousarray(maps), [True] * 4)
     plain, _ = madder.rasterize(faces, uv, values, SIZE, 0, threads=threads)
     woven, _ = madder.rasterize(faces, uv, values, SIZE, 0, threads=threads, weave=detail)

@@ -306,7 +306,7 @@ fn main() {
                             size,
                             Some(d),
                         )
-                        .unwrap()
+                        .unwrap();
                     }
                 }
             }

@@ -19,9 +19,12 @@ use madder::weave::{
     homogenize_report,
 };
 
+/// Faces, their corner UVs and the vertices' UVs.
+type Square = (Vec<[u32; 3]>, Vec<[[f64; 2]; 3]>, Vec<[f64; 2]>);
+
 /// `n × n` quads of the unit square in UV, two triangles each; vertex `(i, j)` at
 /// `(j/n, i/n)`.
-fn square(n: usize) -> (Vec<[u32; 3]>, Vec<[[f64; 2]; 3]>, Vec<[f64; 2]>) {
+fn square(n: usize) -> Square {
     let idx = |i: usize, j: usize| (i * (n + 1) + j) as u32;
     let pos: Vec<[f64; 2]> = (0..(n + 1) * (n + 1))
         .map(|v| {

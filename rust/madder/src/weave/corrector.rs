@@ -137,7 +137,7 @@ impl Corrector {
             return Err(option("uptake", "finite and ≥ 0", u));
         }
         let mean = uptake.iter().sum::<f64>() / uptake.len() as f64;
-        if !(mean > 0.0) {
+        if mean.is_nan() || mean <= 0.0 {
             return Err(option("uptake", "of positive mean", mean));
         }
         if let Some(&t) = threads.iter().find(|t| !(t.is_finite() && **t > 0.0)) {
@@ -300,7 +300,8 @@ pub fn corrector_cached(
     coefficients: &PairCoefficients,
     threads: [f64; 2],
 ) -> Result<Arc<Corrector>, WeaveError> {
-    static CACHE: OnceLock<Mutex<VecDeque<(u128, Arc<Corrector>)>>> = OnceLock::new();
+    type Entries = VecDeque<(u128, Arc<Corrector>)>;
+    static CACHE: OnceLock<Mutex<Entries>> = OnceLock::new();
     let cache = CACHE.get_or_init(Default::default);
     let lock = || cache.lock().unwrap_or_else(|e| e.into_inner());
     let tensors = cell_tensors(tile, coefficients)?;
