@@ -203,6 +203,19 @@ fn bench(l: &Load, size: usize, threads: usize) {
             woven.best / fresh.best,
             woven.median / fresh.median,
         );
+        // the worst case: every texel stained (the detail is skipped where the field is 0)
+        let (dense, _) = time(9, || {
+            texture::rasterize(&l.faces, &l.uv, &l.dense, CHANNELS, size).unwrap()
+        });
+        let (dense_woven, _) = time(9, || {
+            texture::rasterize_with(&l.faces, &l.uv, &l.dense, CHANNELS, size, Some(&detail))
+                .unwrap()
+        });
+        println!(
+            "          dense field: rasterize {dense}, with the detail {dense_woven}: {:.2}× (best), {:.2}× (median)",
+            dense_woven.best / dense.best,
+            dense_woven.median / dense.median,
+        );
         if threads == 1 {
             println!(
                 "          {} texels inside, {} padded, {} overlapping",
