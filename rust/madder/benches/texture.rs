@@ -298,6 +298,12 @@ fn main() {
         let woven = Woven::new(fine.faces.len());
         let cs = [&woven.corr];
         let detail = std::env::var_os("MADDER_BENCH_WEAVE").map(|_| woven.detail(&cs));
+        // MADDER_BENCH_DENSE=1: the dense field (every texel stained)
+        let field = if std::env::var_os("MADDER_BENCH_DENSE").is_some() {
+            &fine.dense
+        } else {
+            &fine.stain
+        };
         pool.install(|| {
             for _ in 0..n {
                 match &detail {
@@ -305,7 +311,7 @@ fn main() {
                         &mut r,
                         &fine.faces,
                         &fine.uv,
-                        &fine.stain,
+                        field,
                         CHANNELS,
                         size,
                     )
@@ -314,7 +320,7 @@ fn main() {
                         r = texture::rasterize_with(
                             &fine.faces,
                             &fine.uv,
-                            &fine.stain,
+                            field,
                             CHANNELS,
                             size,
                             Some(d),

@@ -92,8 +92,9 @@ pub struct Corrector {
     upper: Tensor2,
     /// per patch `(p, q)` of the sample grid (row-major): the bilinear coefficients
     /// `c0 + c1 t_x + c2 t_y + c3 t_x t_y` of `χ_x` (0..4) and `χ_y` (4..8), and the uptake
-    /// of the cell holding it (8): one read per texel
-    patches: Vec<[f64; 9]>,
+    /// of the cell holding it (8): one read per texel, in `f32` (the image's precision;
+    /// half the cache of `f64`)
+    patches: Vec<[f32; 9]>,
 }
 
 /// `⌊x⌋` for `|x| < 2^63` without a library call (`f64::floor` is one on baseline x86-64).
@@ -169,18 +170,16 @@ impl Corrector {
             .map(|v| {
                 let (p, q) = (v % gw, v / gw);
                 let (p1, q1) = ((p + 1) % gw, (q + 1) % gh);
-                let mut c = [0.0; 9];
+                let mut c = [0.0f32; 9];
                 for (i, x) in chi.iter().enumerate() {
                     let [v00, v10, v01, v11] =
                         [q * gw + p, q * gw + p1, q1 * gw + p, q1 * gw + p1].map(|k| x[k]);
-                    c[4 * i..4 * i + 4].copy_from_slice(&[
-                        v00,
-                        v10 - v00,
-                        v01 - v00,
-                        v11 - v10 - v01 + v00,
-                    ]);
+                    let b = [v00, v10 - v00, v01 - v00, v11 - v10 - v01 + v00];
+                    for (o, v) in c[4 * i..4 * i + 4].iter_mut().zip(b) {
+                        *o = v as f32;
+                    }
                 }
-                c[8] = uptake[(q / r) * width + p / r];
+                c[8] = uptake[(q / r) * width + p / r] as f32;
                 c
             })
             .collect();
@@ -243,10 +242,23 @@ impl Corrector {
     }
 
     /// `(χ_x, χ_y)` at tile coordinate `y` (in cells, any value: the tile repeats),
-    /// bilinear between the corner samples.
+    /// bilinear between the corner samples (in `f64`; the texture reads the same function
+    /// rounded to `f32`).
     pub fn chi(&self, y: [f64; 2]) -> [f64; 2] {
+        let (gw, gh) = (self.width * self.refine, self.height * self.refine);
         let r = self.refine as f64;
-        self.sample([y[0] * r, y[1] * r]).0
+        let g = [y[0] * r, y[1] * r];
+        let (fx, fy) = (floor(g[0]), floor(g[1]));
+        let (tx, ty) = (g[0] - fx, g[1] - fy);
+        let x0 = (fx as i64).rem_euclid(gw as i64) as usize;
+        let y0 = (fy as i64).rem_euclid(gh as i64) as usize;
+        let (x1, y1) = ((x0 + 1) % gw, (y0 + 1) % gh);
+        [0, 1].map(|i| {
+            let at = |x: usize, y: usize| self.chi[i][y * gw + x];
+            let bottom = at(x0, y0) + tx * (at(x1, y0) - at(x0, y0));
+            let top = at(x0, y1) + tx * (at(x1, y1) - at(x0, y1));
+            bottom + ty * (top - bottom)
+        })
     }
 
     /// `((χ_x, χ_y), U)` at `g`, in sample-grid units (tile cells × [`Corrector::refine`]):
@@ -258,12 +270,16 @@ impl Corrector {
         // wrap into [0, n): q = g − n ⌊g / n⌋, then the patch and the offset in it
         let qx = g[0] - nw * floor(g[0] * (1.0 / nw));
         let qy = g[1] - nh * floor(g[1] * (1.0 / nh));
-        let (ix, iy) = ((qx as usize).min(gw - 1), (qy as usize).min(gh - 1));
-        let (tx, ty) = (qx - ix as f64, qy - iy as f64);
+        // via i64: a float-to-unsigned conversion costs more on x86-64
+        let (ix, iy) = (
+            (qx as i64 as usize).min(gw - 1),
+            (qy as i64 as usize).min(gh - 1),
+        );
+        let (tx, ty) = ((qx - ix as f64) as f32, (qy - iy as f64) as f32);
         let c = &self.patches[iy * gw + ix];
         let x = c[0] + tx * c[1] + ty * (c[2] + tx * c[3]);
         let y = c[4] + tx * c[5] + ty * (c[6] + tx * c[7]);
-        ([x, y], c[8])
+        ([f64::from(x), f64::from(y)], f64::from(c[8]))
     }
 
     /// The uptake factor of the cell holding tile coordinate `y` (cells, periodic).
