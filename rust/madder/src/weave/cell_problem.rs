@@ -45,6 +45,9 @@
 //! negative sum of the others because every right-hand side sums to zero (`Σ_v ∇φ_v = 0`).
 //! Only `∇χ` enters the energy, so the constant chosen is irrelevant.
 //!
+//! The solution itself, `χ_x` and `χ_y` at the corners, is what
+//! [`super::corrector`](mod@super::corrector) keeps for the texture (issue 13 part 4).
+//!
 //! # Bounds (Keller duality)
 //!
 //! P1 minimizes the energy over a subspace, so `A_h ≥ A` as quadratic forms: the primal
