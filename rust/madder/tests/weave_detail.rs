@@ -184,6 +184,7 @@ fn detail_integrates_to_zero_over_whole_tiles() {
         };
         let (a, b) = (sum(&plain), sum(&woven));
         let rel = ((b - a) / a).abs();
+        println!("channel {k}: mass {b} vs {a}, relative error {rel:e}");
         assert!(rel < 1e-6, "channel {k}: mass {b} vs {a} ({rel:e})");
         // and the detail is really there
         let diff = plain
