@@ -1,7 +1,8 @@
 """The weave's fine scale in a real bake's image sequence (issue 13 part 4): a fabric with a
 Thread Count writes images whose detail (against the same bake at Thread Count 0) has its
 spectrum's peak on the tile's repeat at the flag's physical scale and keeps the coverage's
-total, and a Thread Count finer than a texel bakes with a warning naming the object and the
+total, Re-export Textures applies the current Thread Count (0: the smooth images, bit for
+bit), and a Thread Count finer than a texel bakes with a warning naming the object and the
 fabric."""
 
 import os
@@ -90,3 +91,16 @@ def test_threads_finer_than_a_texel_bake_with_a_warning_naming_object_and_fabric
     bake(open_fixture, 60.0)
     out = capsys.readouterr().out
     assert "'Flag': the Thread Count of fabric 'Cotton'" in out and "cannot be resolved" in out, out
+
+
+def test_reexport_applies_the_current_thread_count(open_fixture):
+    smooth = stain_image(bake(open_fixture, 0.0), FRAMES[1])
+    flag = bake(open_fixture, 1.0)
+    woven = stain_image(flag, FRAMES[1])
+    assert not np.array_equal(woven, smooth)
+    # re-exporting from the fine cache gives the bake's images, with or without the weave
+    assert bpy.ops.madder.export_textures() == {"FINISHED"}
+    assert np.array_equal(stain_image(flag, FRAMES[1]), woven)
+    flag.active_material.madder_fabric.thread_count = 0.0
+    assert bpy.ops.madder.export_textures() == {"FINISHED"}
+    assert np.array_equal(stain_image(flag, FRAMES[1]), smooth)
