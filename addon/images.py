@@ -115,7 +115,8 @@ def rest_positions(obj, unit):
 def weave_detail(madder, obj, faces, face_polygon, uv, level, size, unit):
     """`(details, warnings)`: per image kind the `madder.WeaveDetail` of `obj`'s fabrics
     with a Thread Count, over the cloth refined at Detail `level` (None when no fabric has
-    one), and a warning per fabric whose threads are finer than a texel at `size`.
+    one), and a warning per fabric whose threads are finer than a texel at `size` (those
+    faces keep the smooth stain: `textures.drop_unresolved`).
     Raises ExportError naming the material whose fabric is invalid."""
     spec = fabrics.face_weave(obj, face_polygon)
     if spec is None:
@@ -141,7 +142,7 @@ def weave_detail(madder, obj, faces, face_polygon, uv, level, size, unit):
                 warnings.append(why)
     n = 4 ** level
     face_fabric = np.repeat(index[slot], n)
-    face_map = np.ascontiguousarray(np.repeat(maps, n, axis=0))
+    face_map = np.ascontiguousarray(np.repeat(textures.drop_unresolved(maps, size), n, axis=0))
     details = {kind: madder.WeaveDetail(correctors, face_fabric, face_map, list(textures.UPTAKE[kind]))
                for kind in KINDS}
     return details, warnings

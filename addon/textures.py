@@ -246,7 +246,15 @@ def thread_problem(obj_name, material, maps, size):
         return None
     return (f"'{obj_name}': the Thread Count of fabric '{material}' puts up to {per.max():.1f} threads in a "
             f"texel of the {size} px images on {over.mean():.0%} of its faces: the weave cannot be resolved "
-            "there (raise Size, or lower Thread Count)")
+            "there and is left out (raise Size, or lower Thread Count)")
+
+
+def drop_unresolved(maps, size):
+    """`maps` with the faces of more than one thread per texel at `size` zeroed: sampled
+    that coarsely the weave would alias into a moiré, so those faces keep the smooth stain."""
+    out = np.array(maps, dtype=np.float64)
+    out[threads_per_texel(out, size) > 1.0] = 0.0
+    return out
 
 
 # -- the export loop

@@ -3,7 +3,7 @@ Thread Count writes images whose detail (against the same bake at Thread Count 0
 spectrum's peak on the tile's repeat at the flag's physical scale and keeps the coverage's
 total, Re-export Textures applies the current Thread Count (0: the smooth images, bit for
 bit), and a Thread Count finer than a texel bakes with a warning naming the object and the
-fabric."""
+fabric, the weave left out rather than aliased."""
 
 import os
 
@@ -87,10 +87,13 @@ def test_the_weave_shows_in_the_images_at_its_thread_count(open_fixture, capsys)
 
 
 def test_threads_finer_than_a_texel_bake_with_a_warning_naming_object_and_fabric(open_fixture, capsys):
+    smooth = stain_image(bake(open_fixture, 0.0), FRAMES[1])
     capsys.readouterr()
-    bake(open_fixture, 60.0)
+    flag = bake(open_fixture, 60.0)
     out = capsys.readouterr().out
     assert "'Flag': the Thread Count of fabric 'Cotton'" in out and "cannot be resolved" in out, out
+    # and left out, rather than aliased into a moiré
+    assert np.array_equal(stain_image(flag, FRAMES[1]), smooth)
 
 
 def test_reexport_applies_the_current_thread_count(open_fixture):

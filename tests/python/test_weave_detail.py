@@ -131,3 +131,6 @@ def test_more_than_one_thread_per_texel_is_a_warning_naming_object_and_fabric():
     msg = textures.thread_problem("Shirt", "Cotton", maps, 1024)
     assert msg is not None and "'Shirt'" in msg and "'Cotton'" in msg and "2.9 threads" in msg and "50%" in msg
     assert textures.thread_problem("Shirt", "Cotton", maps, 4096) is None
+    # the unresolved face is left smooth (zero map), the other kept
+    kept = textures.drop_unresolved(maps, 1024)
+    assert not kept[0].any() and np.array_equal(kept[1], maps[1])
