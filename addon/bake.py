@@ -177,6 +177,7 @@ class BakeJob:
         self.dt = scene.render.fps_base / scene.render.fps
         mesh = obj.data
         faces, face_polygon, n_polygons = bridge.topology_arrays(mesh)
+        self.face_polygon = face_polygon
         self.n_vertices = len(mesh.vertices)
         if len(faces) == 0:
             raise BakeError(f"'{obj.name}' has no faces", object=obj.name)
@@ -339,9 +340,11 @@ class BakeJob:
         self.fine_writer.finish()
         self.fine_writer = None
         size, uv, _ = self.images
+        weave = images.weave_detail(self.madder, self.obj, self.faces, self.face_polygon, uv, self.detail, size,
+                                    self.unit)
         self.export = images.SequenceExport(self.madder, self.obj, self.fine_staged, self.topology, self.detail,
                                             uv, self.references, size, self.staging.path,
-                                            textures.stem(self.path))
+                                            textures.stem(self.path), weave=weave)
 
     def _step_images(self):
         try:

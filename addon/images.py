@@ -6,8 +6,9 @@ Re-export Textures). Paths, numbering, staging and the export loop are bpy-free,
 import os
 
 import bpy
+import numpy as np
 
-from . import bridge, handlers, presets, textures
+from . import bridge, fabrics, handlers, presets, textures
 from .errors import ExportError
 
 KINDS = textures.KINDS
@@ -103,16 +104,61 @@ def _stored_path(path):
     return path
 
 
+def rest_positions(obj, unit):
+    """`obj`'s mesh vertices in world space, metres (`unit`: metres per Blender unit)."""
+    co = np.empty(3 * len(obj.data.vertices), dtype=np.float32)
+    obj.data.vertices.foreach_get("co", co)
+    m = np.array(obj.matrix_world, dtype=np.float64)
+    return (co.reshape(-1, 3).astype(np.float64) @ m[:3, :3].T + m[:3, 3]) * unit
+
+
+def weave_detail(madder, obj, faces, face_polygon, uv, level, size, unit):
+    """`(details, warnings)`: per image kind the `madder.WeaveDetail` of `obj`'s fabrics
+    with a Thread Count, over the cloth refined at Detail `level` (None when no fabric has
+    one), and a warning per fabric whose threads are finer than a texel at `size` (those
+    faces keep the smooth stain: `textures.drop_unresolved`).
+    Raises ExportError naming the material whose fabric is invalid."""
+    spec = fabrics.face_weave(obj, face_polygon)
+    if spec is None:
+        return None, []
+    slots, slot = spec
+    correctors, index = [], np.full(len(slots), madder.NO_WEAVE, dtype=np.uint32)
+    for i, sl in enumerate(slots):
+        if sl is None:
+            continue
+        try:
+            correctors.append(madder.fabric_corrector(**sl[1]))
+        except madder.MadderError as e:
+            raise ExportError(f"'{obj.name}': material '{sl[0]}': {e}", object=obj.name) from e
+        index[i] = len(correctors) - 1
+    threads = np.array([sl[2] if sl else 0.0 for sl in slots])[slot]
+    angle = np.array([sl[3] if sl else 0.0 for sl in slots])[slot]
+    maps = textures.weave_maps(rest_positions(obj, unit), faces, uv, threads, angle)
+    warnings = []
+    for i, sl in enumerate(slots):
+        if sl is not None and (slot == i).any():
+            why = textures.thread_problem(obj.name, sl[0], maps[slot == i], size)
+            if why:
+                warnings.append(why)
+    n = 4 ** level
+    face_fabric = np.repeat(index[slot], n)
+    face_map = np.ascontiguousarray(np.repeat(textures.drop_unresolved(maps, size), n, axis=0))
+    details = {kind: madder.WeaveDetail(correctors, face_fabric, face_map, list(textures.UPTAKE[kind]))
+               for kind in KINDS}
+    return details, warnings
+
+
 class SequenceExport:
     """Writes `obj`'s image sequence from the fine cache at `fine_path` into
     `folder`, one frame per `step()` (`textures.Exporter`).
 
     `topology` and `level`: the cloth's `madder.Topology` and the Detail level the fine
     cache was baked at (its refinement numbers the fine cache's vertices); `uv`: the
-    cloth triangles' corner UVs (F, 3, 2); `references`: the bake's. Errors are
-    `ExportError`s naming the object, the frame and the file."""
+    cloth triangles' corner UVs (F, 3, 2); `references`: the bake's; `weave`: the
+    `(details, warnings)` of `weave_detail`, or None. Errors are `ExportError`s naming the
+    object, the frame and the file."""
 
-    def __init__(self, madder, obj, fine_path, topology, level, uv, references, size, folder, name):
+    def __init__(self, madder, obj, fine_path, topology, level, uv, references, size, folder, name, weave=None):
         self.madder, self.obj = madder, obj
         try:
             self.reader = madder.CacheReader(fine_path)
@@ -126,7 +172,8 @@ class SequenceExport:
                 object=obj.name, filename=fine_path)
         self.exporter = textures.Exporter(
             madder, self.reader, refinement.faces(), refinement.face_uv(uv), references,
-            tuple(obj.madder.stain_color), size, folder, name)
+            tuple(obj.madder.stain_color), size, folder, name, weave=weave[0] if weave else None)
+        self.weave_warnings = list(weave[1]) if weave else []
         self.first, self.last = self.exporter.first, self.exporter.last
         self.size = self.exporter.size
         # one image per step: a 4096² image takes about a second to write
@@ -161,10 +208,11 @@ class SequenceExport:
 
     def warnings(self):
         n = self.overlapping
+        out = list(self.weave_warnings)
         if n:
-            return [f"its UV islands overlap ({n} texels at {self.size} px): where they do, the image "
+            return out + [f"its UV islands overlap ({n} texels at {self.size} px): where they do, the image "
                     "sequence shows one island's stain on both (give each face its own UV space)"]
-        return []
+        return out
 
     def close(self):
         self.reader = self.exporter = None
@@ -222,8 +270,10 @@ class ReexportJob:
         if not any(refs):
             refs = presets.references(s)
         self.staging = textures.Staging(folder)
+        weave = weave_detail(self.madder, obj, faces, face_polygon, uv, s.bake_detail, size,
+                             bake.unit_scale(scene))
         self.export = SequenceExport(self.madder, obj, fine, topology, s.bake_detail, uv, refs, size,
-                                     self.staging.path, name)
+                                     self.staging.path, name, weave=weave)
         self.size = size
         self.warnings = []
         self._begun = False

@@ -15,6 +15,10 @@ every path derived from the cache's (so Save As and Relocate Cache carry them al
                                            R: wetness, G: deposit (Blender reads the
                                            missing B as 0, A as 1)
 
+With a fabric's Thread Count, the images carry the weave's fine scale (`weave_maps`,
+`madder.WeaveDetail`: the homogenization's corrector and the threads' uptake), laid along
+each face's weft at its physical size; Vertex Colors never do.
+
 `####` is the scene frame (4 digits, more when needed). The values are exactly the
 playback attributes (`CacheReader.read_stain`, core `io::attributes`), rasterized over
 the refined cloth's UV triangles (`madder.rasterize`: barycentric at texel centres,
@@ -201,6 +205,58 @@ def _reason(e):
     return e.strerror or str(e)
 
 
+# -- the weave's detail (issue 13 part 4)
+
+UPTAKE = {"stain": (True, True, True, True), "wet": (False, True)}
+"""Per image kind and channel, whether the threads' uptake applies (the deposit: the stain's
+colour and coverage, the wet image's deposit) or only the corrector (wetness)."""
+
+
+def weave_maps(positions, faces, uv, threads_per_m, angle):
+    """Per triangle, the (F, 2, 2) map from UV to threads along the fabric's weft (row 0)
+    and warp (row 1), the `face_map` of `madder.WeaveDetail`:
+    `threads_per_m[f] · s_f · [[cos θ, sin θ], [−sin θ, cos θ]]`, with `s_f = √(world area /
+    UV area)` the face's metres per UV unit (`positions` in metres) and `θ = angle[f]` the
+    weft's angle from the u axis, counter-clockwise. A face with a degenerate UV or world
+    triangle, or no threads, gets the zero map (no detail)."""
+    p = np.asarray(positions, dtype=np.float64)[np.asarray(faces)]
+    t = np.asarray(uv, dtype=np.float64)
+    world = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+    area_uv = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    ok = (area_uv > 0) & (world > 0)
+    s = np.zeros(len(p))
+    s[ok] = np.sqrt(world[ok] / area_uv[ok])
+    k = np.asarray(threads_per_m, dtype=np.float64) * s
+    c, n = np.cos(angle), np.sin(angle)
+    return np.stack([np.stack([k * c, k * n], axis=1), np.stack([-k * n, k * c], axis=1)], axis=1)
+
+
+def threads_per_texel(maps, size):
+    """Threads per texel of each face at image `size`: the map's scale over `size`."""
+    return np.sqrt(np.abs(np.linalg.det(maps))) / size
+
+
+def thread_problem(obj_name, material, maps, size):
+    """A warning when the weave of `material` on `obj_name` has more than one thread per
+    texel at `size` px on some of its faces (`maps`: theirs), or None."""
+    per = threads_per_texel(maps, size)
+    over = per > 1.0
+    if not over.any():
+        return None
+    return (f"'{obj_name}': the Thread Count of fabric '{material}' puts up to {per.max():.1f} threads in a "
+            f"texel of the {size} px images on {over.mean():.0%} of its faces: the weave cannot be resolved "
+            "there and is left out (raise Size, or lower Thread Count)")
+
+
+def drop_unresolved(maps, size):
+    """`maps` with the faces of more than one thread per texel at `size` zeroed: sampled
+    that coarsely the weave would alias into a moiré, so those faces keep the smooth stain."""
+    out = np.array(maps, dtype=np.float64)
+    out[threads_per_texel(out, size) > 1.0] = 0.0
+    return out
+
+
 # -- the export loop
 
 
@@ -214,10 +270,13 @@ class Exporter:
     - `references`, `color`: as `CacheReader.read_stain` takes them (the bake's);
     - `size` (one of `SIZES`), `folder` (where the files go) and `name` (their prefix).
 
+    `weave`: None, or per kind the `madder.WeaveDetail` that adds the weave's fine scale.
+
     `overlapping` holds the texels covered by more than one UV triangle (overlapping
     islands), as `madder.rasterize` counts them on the first frame exported."""
 
-    def __init__(self, madder, reader, faces, uv, references, color, size, folder, name, padding=PADDING):
+    def __init__(self, madder, reader, faces, uv, references, color, size, folder, name, padding=PADDING,
+                 weave=None):
         self.madder, self.reader = madder, reader
         self.faces = np.ascontiguousarray(faces, dtype=np.uint32)
         self.uv = np.ascontiguousarray(uv, dtype=np.float32)
@@ -226,6 +285,7 @@ class Exporter:
         self.references, self.color = tuple(references), tuple(color)
         self.size, self.padding = check_size(size), padding
         self.folder, self.name = folder, name
+        self.weave = weave or {}
         n = reader.n_vertices
         self._rgba = np.zeros(4 * n, dtype=np.float32)
         self._wet = np.zeros(n, dtype=np.float32)
@@ -264,7 +324,9 @@ class Exporter:
         for kind in kinds:
             values, channels = ((self._rgba.reshape(-1, 4), STAIN_CHANNELS) if kind == "stain"
                                 else (self._wet_values, WET_CHANNELS))
-            image, overlapping = self.madder.rasterize(self.faces, self.uv, values, self.size, self.padding)
+            extra = {"weave": self.weave[kind]} if kind in self.weave else {}  # none: as without fabrics
+            image, overlapping = self.madder.rasterize(self.faces, self.uv, values, self.size, self.padding,
+                                                       **extra)
             if self.overlapping is None:  # the same on every frame: the UV layout's
                 self.overlapping = int(overlapping)
             path = frame_file(self.folder, self.name, kind, frame)

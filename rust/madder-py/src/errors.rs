@@ -274,6 +274,10 @@ fn build(py: Python<'_>, e: &madder::Error) -> PyResult<PyErr> {
                 py.get_type::<MeshError>(),
                 f.set("face", face).set("corner", corner).set("uv", (u, v)),
             ),
+            T::WeaveFace { face, problem } => (
+                py.get_type::<ParameterError>(),
+                f.set("face", face).set("problem", problem),
+            ),
             T::Size { name, size, max } => (
                 py.get_type::<ParameterError>(),
                 f.set("name", name).set("value", size).set("max", max),

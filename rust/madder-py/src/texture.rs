@@ -3,14 +3,17 @@
 
 use std::path::PathBuf;
 
+use std::sync::Arc;
+
 use numpy::{
-    PyArray1, PyArrayDyn, PyArrayMethods, PyReadonlyArray2, PyReadonlyArray3, PyReadonlyArrayDyn,
-    PyUntypedArrayMethods,
+    PyArray1, PyArrayDyn, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
+    PyReadonlyArrayDyn, PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
 
 use crate::errors::{ParameterError, to_py};
 use crate::threads::Pool;
+use crate::weave::Corrector;
 use madder::texture as core;
 
 /// The `(T, 3, 2)` UVs, float32 or float64, as owned `f64` triples.
@@ -77,9 +80,59 @@ fn size_arg(name: &str, size: i64) -> PyResult<usize> {
     }
 }
 
+/// The weave's fine scale for `rasterize(..., weave=)` (core `texture::WeaveDetail`).
+///
+/// `WeaveDetail(correctors, face_fabric, face_map, uptake)`: `correctors` a list of
+/// `Corrector`s (`fabric_corrector`); `face_fabric` `(T,)` uint32, per triangle its
+/// corrector's index or `NO_WEAVE`; `face_map` `(T, 2, 2)` float64, per triangle the map
+/// from UV to threads along the weft (row 0) and the warp (row 1), zero for none;
+/// `uptake`, per image channel, whether the threads' uptake applies (the deposit) or only
+/// the corrector (wetness). Checked against the faces by `rasterize`.
+#[pyclass(module = "madder", frozen)]
+pub struct WeaveDetail {
+    correctors: Vec<Arc<madder::weave::Corrector>>,
+    face_fabric: Vec<u32>,
+    face_map: Vec<[f64; 4]>,
+    uptake: Vec<bool>,
+}
+
+#[pymethods]
+impl WeaveDetail {
+    #[new]
+    fn new(
+        correctors: Vec<PyRef<'_, Corrector>>,
+        face_fabric: PyReadonlyArray1<'_, u32>,
+        face_map: PyReadonlyArray3<'_, f64>,
+        uptake: Vec<bool>,
+    ) -> PyResult<Self> {
+        let m = face_map.as_array();
+        if m.shape()[1..] != [2, 2] {
+            return Err(ParameterError::new_err(format!(
+                "face_map must have shape (T, 2, 2), got {:?}",
+                m.shape()
+            )));
+        }
+        Ok(Self {
+            correctors: correctors.iter().map(|c| c.inner.clone()).collect(),
+            face_fabric: face_fabric.as_array().to_vec(),
+            face_map: m
+                .outer_iter()
+                .map(|t| [t[[0, 0]], t[[0, 1]], t[[1, 0]], t[[1, 1]]])
+                .collect(),
+            uptake,
+        })
+    }
+
+    /// Triangles the detail covers (woven or not).
+    #[getter]
+    fn n_faces(&self) -> usize {
+        self.face_fabric.len()
+    }
+}
+
 /// Rasterizes a per-vertex field into a `size × size` UV texture and pads its UV islands.
 ///
-/// `rasterize(faces, uv, values, size, padding=4, *, threads=None)
+/// `rasterize(faces, uv, values, size, padding=4, *, out=None, threads=None, weave=None)
 /// -> (image, overlapping_texels)`
 ///
 /// `faces` `(T, 3)` uint32: the vertices whose values triangle `t` interpolates; `uv`
@@ -94,12 +147,13 @@ fn size_arg(name: &str, size: i64) -> PyResult<usize> {
 /// released; `threads` caps the worker threads (the result does not depend on it).
 /// `out`, a C-contiguous float32 array of the image's shape, is filled and returned
 /// instead of a new array: a sequence of frames then reuses one buffer (a fresh 2048²
-/// RGBA image is 64 MB of new memory per frame).
+/// RGBA image is 64 MB of new memory per frame). `weave`, a `WeaveDetail`, adds the
+/// weave's fine scale back on its woven triangles (issue 13 part 4); `None` changes no bit.
 ///
 /// Raises `ParameterError` for a size out of 1..=16384 or mismatched lengths, `MeshError`
 /// naming the face (and corner) for a vertex index past the values or a non-finite UV.
 #[pyfunction]
-#[pyo3(signature = (faces, uv, values, size, padding=4, *, out=None, threads=None))]
+#[pyo3(signature = (faces, uv, values, size, padding=4, *, out=None, threads=None, weave=None))]
 #[allow(clippy::type_complexity, clippy::too_many_arguments)]
 pub fn rasterize<'py>(
     py: Python<'py>,
@@ -110,7 +164,18 @@ pub fn rasterize<'py>(
     padding: i64,
     out: Option<Bound<'py, PyArrayDyn<f32>>>,
     threads: Option<usize>,
+    weave: Option<PyRef<'py, WeaveDetail>>,
 ) -> PyResult<(Bound<'py, PyArrayDyn<f32>>, usize)> {
+    let refs: Vec<&madder::weave::Corrector> = weave.as_ref().map_or(Vec::new(), |w| {
+        w.correctors.iter().map(|c| c.as_ref()).collect()
+    });
+    let detail = weave.as_ref().map(|w| core::WeaveDetail {
+        correctors: &refs,
+        face_fabric: &w.face_fabric,
+        face_map: &w.face_map,
+        uptake: &w.uptake,
+    });
+    let detail = detail.as_ref();
     let size = size_arg("size", size)?;
     let padding = usize::try_from(padding)
         .map_err(|_| ParameterError::new_err(format!("padding must be ≥ 0, got {padding}")))?;
@@ -150,7 +215,7 @@ pub fn rasterize<'py>(
             })?;
             let mut coverage = vec![0u8; size * size];
             pool.run(py, || {
-                let n = core::rasterize_to(
+                let n = core::rasterize_to_with(
                     pixels,
                     &mut coverage,
                     &faces,
@@ -158,6 +223,7 @@ pub fn rasterize<'py>(
                     &values,
                     channels,
                     size,
+                    detail,
                 )?;
                 core::pad_to(pixels, &mut coverage, size, channels, padding);
                 Ok::<_, madder::error::TextureError>(n)
@@ -168,7 +234,7 @@ pub fn rasterize<'py>(
     }
     let raster = pool
         .run(py, || {
-            let mut r = core::rasterize(&faces, &uv, &values, channels, size)?;
+            let mut r = core::rasterize_with(&faces, &uv, &values, channels, size, detail)?;
             core::pad(&mut r, padding);
             Ok::<_, madder::error::TextureError>(r)
         })
@@ -223,6 +289,8 @@ pub fn read_exr<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyAr
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rasterize, m)?)?;
+    m.add_class::<WeaveDetail>()?;
+    m.add("NO_WEAVE", core::NO_WEAVE)?;
     m.add_function(wrap_pyfunction!(write_exr, m)?)?;
     m.add_function(wrap_pyfunction!(read_exr, m)?)?;
     Ok(())

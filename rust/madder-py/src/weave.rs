@@ -1,6 +1,8 @@
 //! Fabrics: weave tiles and their homogenized tensors (core module `weave`).
 
-use numpy::{PyArray1, PyReadonlyArray3};
+use std::sync::Arc;
+
+use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray3};
 use pyo3::prelude::*;
 
 use crate::errors::{ParameterError, to_py};
@@ -110,6 +112,96 @@ pub fn homogenize<'py>(
     Ok(PyArray1::from_vec(py, eff.to_vec()))
 }
 
+/// The cell problem's correctors of a fabric's tile and its per-cell uptake (core
+/// `weave::Corrector`): what `WeaveDetail` adds back to the texture. Made by
+/// `fabric_corrector`.
+#[pyclass(module = "madder", frozen)]
+pub struct Corrector {
+    pub(crate) inner: Arc<madder::weave::Corrector>,
+}
+
+/// A `(rows, cols)` float64 array of row-major values.
+fn grid<'py>(py: Python<'py>, v: &[f64], cols: usize) -> Bound<'py, PyArray2<f64>> {
+    PyArray1::from_slice(py, v)
+        .reshape([v.len() / cols, cols])
+        .expect("a whole number of rows")
+}
+
+#[pymethods]
+impl Corrector {
+    /// `(width, height)` of the tile in cells.
+    #[getter]
+    fn cells(&self) -> (usize, usize) {
+        self.inner.cells()
+    }
+    /// Threads per tile along the weft and the warp.
+    #[getter]
+    fn threads(&self) -> (f64, f64) {
+        let [x, y] = self.inner.threads();
+        (x, y)
+    }
+    /// Corrector samples per cell side.
+    #[getter]
+    fn refine(&self) -> usize {
+        self.inner.refine()
+    }
+    /// `χ_x` (`i = 0`) or `χ_y` (`i = 1`) in tile cells, `(height·refine, width·refine)`
+    /// float64, row 0 at the bottom (zero mean).
+    fn samples<'py>(&self, py: Python<'py>, i: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        if i > 1 {
+            return Err(ParameterError::new_err(format!(
+                "i must be 0 or 1, got {i}"
+            )));
+        }
+        let (w, _) = self.inner.cells();
+        Ok(grid(py, self.inner.samples(i), w * self.inner.refine()))
+    }
+    /// Per-cell uptake factors, `(height, width)` float64, row 0 at the bottom (mean 1).
+    fn uptake<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        grid(py, self.inner.uptake(), self.inner.cells().0)
+    }
+    /// `⟨(e_i + ∇χ_i)ᵀ a (e_j + ∇χ_j)⟩` as `[s11, s12, s22]`: the effective tensor of the
+    /// corrector's discretization.
+    #[getter]
+    fn energy(&self) -> [f64; 3] {
+        self.inner.energy()
+    }
+
+    fn __repr__(&self) -> String {
+        let (w, h) = self.inner.cells();
+        format!(
+            "Corrector(cells=({w}, {h}), refine={})",
+            self.inner.refine()
+        )
+    }
+}
+
+/// The corrector of a weave (arguments as `fabric_tensor`); cached in the core. A
+/// built-in weave's tile holds its repeat of threads each way (a cell per thread, two
+/// with gaps); a custom grid a thread per cell.
+#[pyfunction]
+#[pyo3(signature = (weave, grid=None, coefficients=None, gaps=true))]
+pub fn fabric_corrector(
+    py: Python<'_>,
+    weave: &str,
+    grid: Option<&str>,
+    coefficients: Option<[f64; 6]>,
+    gaps: bool,
+) -> PyResult<Corrector> {
+    let t = tile(weave, grid, gaps)?;
+    let per = if weave_kind(weave)?.is_some() && gaps {
+        2.0
+    } else {
+        1.0
+    };
+    let threads = [t.width() as f64 / per, t.height() as f64 / per];
+    let c = self::coefficients(coefficients);
+    let inner = py
+        .detach(|| madder::weave::corrector_cached(&t, &c, threads))
+        .map_err(to_py)?;
+    Ok(Corrector { inner })
+}
+
 /// `(ratio, angle)` of a tensor's ellipse: major/minor eigenvalue ratio and the angle of
 /// the major axis from the weft, radians.
 #[pyfunction]
@@ -120,6 +212,8 @@ pub fn ellipse(tensor: [f64; 3]) -> (f64, f64) {
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(fabric_tile, m)?)?;
     m.add_function(wrap_pyfunction!(fabric_tensor, m)?)?;
+    m.add_function(wrap_pyfunction!(fabric_corrector, m)?)?;
+    m.add_class::<Corrector>()?;
     m.add_function(wrap_pyfunction!(homogenize, m)?)?;
     m.add_function(wrap_pyfunction!(ellipse, m)?)?;
     Ok(())

@@ -1,5 +1,6 @@
 //! `make bench`: one 2048² frame of UV texture output (module `madder::texture`):
-//! rasterize, pad (4 texels) and write the EXR, for two triangle loads built synthetically:
+//! rasterize (without and with the weave's detail, issue 13 part 4), pad (4 texels) and
+//! write the EXR, for two triangle loads built synthetically:
 //!
 //! - *fine*: a 20k-vertex cloth (a 140 × 140 grid of the unit square, 141² = 19,881
 //!   vertices) refined 16× (Detail 2), i.e. a 560 × 560 grid, 627,200 small triangles of
@@ -19,7 +20,8 @@
 
 use std::time::Instant;
 
-use madder::texture::{self, Compression, Raster};
+use madder::texture::{self, Compression, Raster, WeaveDetail};
+use madder::weave::{Corrector, PairCoefficients, Tile, Weave};
 
 const CHANNELS: usize = 4;
 
@@ -131,6 +133,40 @@ fn time<T>(runs: usize, mut f: impl FnMut() -> T) -> (Timing, T) {
     (timing, out.expect("runs ≥ 1"))
 }
 
+/// The weave's detail (issue 13 part 4) on every face: a plain weave with gaps at 1000
+/// threads per UV unit (about half a thread per texel at 2048²), weft at 30°.
+struct Woven {
+    corr: Corrector,
+    map: Vec<[f64; 4]>,
+    fabric: Vec<u32>,
+}
+
+impl Woven {
+    fn new(n_faces: usize) -> Woven {
+        let corr = Corrector::of_tile(
+            &Tile::builtin(Weave::Plain, true),
+            &PairCoefficients::default(),
+            [2.0, 2.0],
+        )
+        .unwrap();
+        let (c, s) = (30f64.to_radians().cos(), 30f64.to_radians().sin());
+        Woven {
+            corr,
+            map: vec![[1000.0 * c, 1000.0 * s, -1000.0 * s, 1000.0 * c]; n_faces],
+            fabric: vec![0u32; n_faces],
+        }
+    }
+
+    fn detail<'a>(&'a self, correctors: &'a [&'a Corrector]) -> WeaveDetail<'a> {
+        WeaveDetail {
+            correctors,
+            face_fabric: &self.fabric,
+            face_map: &self.map,
+            uptake: &[true; CHANNELS],
+        }
+    }
+}
+
 fn bench(l: &Load, size: usize, threads: usize) {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
@@ -151,9 +187,34 @@ fn bench(l: &Load, size: usize, threads: usize) {
         let (padding, n) = time(9, || {
             texture::pad(it.next().unwrap(), texture::DEFAULT_PADDING)
         });
+        let w = Woven::new(l.faces.len());
+        let cs = [&w.corr];
+        let detail = w.detail(&cs);
+        let (woven, _) = time(9, || {
+            texture::rasterize_with(&l.faces, &l.uv, &l.stain, CHANNELS, size, Some(&detail))
+                .unwrap()
+        });
         println!(
             "  {:>6}, {threads} thread(s): rasterize {fresh}, into a reused raster {reused}; pad 4 {padding}",
             l.name,
+        );
+        println!(
+            "          with the weave's detail {woven}: {:.2}× the rasterization (best), {:.2}× (median)",
+            woven.best / fresh.best,
+            woven.median / fresh.median,
+        );
+        // the worst case: every texel stained (the detail is skipped where the field is 0)
+        let (dense, _) = time(9, || {
+            texture::rasterize(&l.faces, &l.uv, &l.dense, CHANNELS, size).unwrap()
+        });
+        let (dense_woven, _) = time(9, || {
+            texture::rasterize_with(&l.faces, &l.uv, &l.dense, CHANNELS, size, Some(&detail))
+                .unwrap()
+        });
+        println!(
+            "          dense field: rasterize {dense}, with the detail {dense_woven}: {:.2}× (best), {:.2}× (median)",
+            dense_woven.best / dense.best,
+            dense_woven.median / dense.median,
         );
         if threads == 1 {
             println!(
@@ -233,10 +294,40 @@ fn main() {
             .num_threads(threads)
             .build()
             .unwrap();
+        // MADDER_BENCH_WEAVE=1: with the weave's detail
+        let woven = Woven::new(fine.faces.len());
+        let cs = [&woven.corr];
+        let detail = std::env::var_os("MADDER_BENCH_WEAVE").map(|_| woven.detail(&cs));
+        // MADDER_BENCH_DENSE=1: the dense field (every texel stained)
+        let field = if std::env::var_os("MADDER_BENCH_DENSE").is_some() {
+            &fine.dense
+        } else {
+            &fine.stain
+        };
         pool.install(|| {
             for _ in 0..n {
-                texture::rasterize_into(&mut r, &fine.faces, &fine.uv, &fine.stain, CHANNELS, size)
-                    .unwrap();
+                match &detail {
+                    None => texture::rasterize_into(
+                        &mut r,
+                        &fine.faces,
+                        &fine.uv,
+                        field,
+                        CHANNELS,
+                        size,
+                    )
+                    .unwrap(),
+                    Some(d) => {
+                        r = texture::rasterize_with(
+                            &fine.faces,
+                            &fine.uv,
+                            field,
+                            CHANNELS,
+                            size,
+                            Some(d),
+                        )
+                        .unwrap();
+                    }
+                }
             }
         });
         return;

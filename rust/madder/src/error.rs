@@ -436,6 +436,14 @@ pub enum TextureError {
         /// The V coordinate.
         v: f64,
     },
+    /// A face whose weave detail input is unusable (module [`crate::texture::weave`]).
+    #[error("weave detail of face {face}: {problem}")]
+    WeaveFace {
+        /// The face.
+        face: usize,
+        /// What is wrong with its fabric index or its UV-to-thread map.
+        problem: String,
+    },
     /// An image channel name OpenEXR cannot hold.
     #[error("image channel name {name:?}: {reason}")]
     ChannelName {

@@ -21,6 +21,10 @@
 //!    the island's own values across its border and UV seams do not show.
 //! 3. [`write_exr`] (`exr.rs`): a half-float OpenEXR file, written atomically.
 //!
+//! Optionally, [`rasterize_with`] adds the weave's fine scale back while it writes each
+//! texel (`weave.rs`: the two-scale expansion `σ0 + ε χ(x/ε)·∇σ0` and the threads' uptake,
+//! issue 13 part 4; see [`weave`] for the math and why it runs inside the rasterizer).
+//!
 //! ## Image layout
 //! `size × size × C` `f32`, row-major, **row 0 at the bottom** (`v ∈ [0, 1/size)`), as
 //! Blender's `Image.pixels`; texel `(x, y)` covers `[x/size, (x+1)/size) × [y/size,
@@ -42,8 +46,13 @@
 pub mod exr;
 pub mod pad;
 pub mod raster;
+pub mod weave;
 
 pub use self::exr::{Compression, ExrImage, read_exr, write_exr, write_exr_with};
 pub use crate::error::TextureError;
 pub use pad::{DEFAULT_PADDING, pad, pad_to};
-pub use raster::{MAX_CHANNELS, MAX_SIZE, Raster, rasterize, rasterize_into, rasterize_to};
+pub use raster::{
+    MAX_CHANNELS, MAX_SIZE, Raster, rasterize, rasterize_into, rasterize_to, rasterize_to_with,
+    rasterize_with,
+};
+pub use weave::{NO_WEAVE, WeaveDetail};

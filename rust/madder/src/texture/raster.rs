@@ -48,6 +48,7 @@
 
 use rayon::prelude::*;
 
+use super::weave::{TriWeave, WeaveDetail};
 use crate::error::TextureError;
 
 /// The largest image side accepted: 16384 texels (a 16384² RGBA float image is 4 GiB).
@@ -149,7 +150,25 @@ pub fn rasterize(
     channels: usize,
     size: usize,
 ) -> Result<Raster, TextureError> {
+    rasterize_with(faces, uv, values, channels, size, None)
+}
+
+/// [`rasterize`], adding the weave's fine scale on the faces `weave` gives a fabric
+/// (module [`super::weave`]); `None` is [`rasterize`] bit for bit. Errors as
+/// [`rasterize`], plus `weave`'s arrays of the wrong length and a face with a fabric index
+/// past its correctors or a map that is not finite or singular (naming the face).
+pub fn rasterize_with(
+    faces: &[[u32; 3]],
+    uv: &[[[f64; 2]; 3]],
+    values: &[f32],
+    channels: usize,
+    size: usize,
+    weave: Option<&WeaveDetail<'_>>,
+) -> Result<Raster, TextureError> {
     check_shape(faces, uv, values, channels, size)?;
+    if let Some(w) = weave {
+        w.check(faces.len(), channels)?;
+    }
     let bands = bin(faces, uv, values.len() / channels, size)?;
     // fresh zeroed memory: the bands need not clear it
     let mut raster = Raster::empty(size, channels);
@@ -163,6 +182,7 @@ pub fn rasterize(
             values,
             channels,
             size,
+            weave,
         },
         false,
     );
@@ -195,6 +215,7 @@ pub fn rasterize_into(
             values,
             channels,
             size,
+            weave: None,
         },
         true,
     );
@@ -214,7 +235,25 @@ pub fn rasterize_to(
     channels: usize,
     size: usize,
 ) -> Result<usize, TextureError> {
+    rasterize_to_with(pixels, coverage, faces, uv, values, channels, size, None)
+}
+
+/// [`rasterize_to`] with the weave detail of [`rasterize_with`].
+#[allow(clippy::too_many_arguments)]
+pub fn rasterize_to_with(
+    pixels: &mut [f32],
+    coverage: &mut [u8],
+    faces: &[[u32; 3]],
+    uv: &[[[f64; 2]; 3]],
+    values: &[f32],
+    channels: usize,
+    size: usize,
+    weave: Option<&WeaveDetail<'_>>,
+) -> Result<usize, TextureError> {
     check_shape(faces, uv, values, channels, size)?;
+    if let Some(w) = weave {
+        w.check(faces.len(), channels)?;
+    }
     for (name, expected, got) in [
         ("pixels", size * size * channels, pixels.len()),
         ("coverage", size * size, coverage.len()),
@@ -238,6 +277,7 @@ pub fn rasterize_to(
             values,
             channels,
             size,
+            weave,
         },
         true,
     ))
@@ -395,6 +435,7 @@ struct Context<'a> {
     values: &'a [f32],
     channels: usize,
     size: usize,
+    weave: Option<&'a WeaveDetail<'a>>,
 }
 
 /// Rasterizes every band (clearing it first if `clear`); returns the overlapping count.
@@ -427,6 +468,7 @@ fn fill(
                 gx: vec![0.0; c],
                 gy: vec![0.0; c],
                 rowv: vec![0.0; c],
+                tw: TriWeave::default(),
             };
             match c {
                 1 => band.triangles::<1>(ctx, list),
@@ -453,6 +495,8 @@ struct Band<'a> {
     gx: Vec<f64>,
     gy: Vec<f64>,
     rowv: Vec<f64>,
+    /// the weave detail of the triangle being scanned (module [`super::weave`])
+    tw: TriWeave,
 }
 
 /// The arithmetic of the edge functions: `f64` on the fast path (exact, see the module
@@ -568,15 +612,31 @@ impl Band<'_> {
             // the corners in texels, unsnapped (su, sv are in 1/256 texel)
             let q = corner.map(|k| [su[k] / SUB_TEXEL as f64, sv[k] / SUB_TEXEL as f64]);
             self.setup_values::<C>(ctx, t, corner, q);
+            let c = if C == 0 { ctx.channels } else { C };
+            let woven = ctx.weave.is_some_and(|d| {
+                let field = [&self.base[..c], &self.gx[..c], &self.gy[..c]];
+                self.tw.setup(d, t, ctx.size, field)
+            });
             let w = SUB_TEXEL as f64;
             let s = [x0 as f64 * w + w / 2.0, y0 as f64 * w + w / 2.0];
             let box_ = [x0, x1, y0, y1];
-            if fast {
-                let (e, dx, dy) = edges::<f64>(&p, s);
-                self.scan::<f64, C>(ctx, e, dx, dy, box_);
-            } else {
-                let (e, dx, dy) = edges::<i128>(&p, s);
-                self.scan::<i128, C>(ctx, e, dx, dy, box_);
+            match (fast, woven) {
+                (true, false) => {
+                    let (e, dx, dy) = edges::<f64>(&p, s);
+                    self.scan::<f64, C, false>(ctx, e, dx, dy, box_);
+                }
+                (true, true) => {
+                    let (e, dx, dy) = edges::<f64>(&p, s);
+                    self.scan::<f64, C, true>(ctx, e, dx, dy, box_);
+                }
+                (false, false) => {
+                    let (e, dx, dy) = edges::<i128>(&p, s);
+                    self.scan::<i128, C, false>(ctx, e, dx, dy, box_);
+                }
+                (false, true) => {
+                    let (e, dx, dy) = edges::<i128>(&p, s);
+                    self.scan::<i128, C, true>(ctx, e, dx, dy, box_);
+                }
             }
         }
     }
@@ -627,7 +687,7 @@ impl Band<'_> {
     }
 
     #[inline]
-    fn scan<T: Edge, const C: usize>(
+    fn scan<T: Edge, const C: usize, const W: bool>(
         &mut self,
         ctx: &Context<'_>,
         e: [T; 3],
@@ -648,6 +708,7 @@ impl Band<'_> {
             gx,
             gy,
             rowv,
+            tw,
             ..
         } = self;
         let (base, gx, gy, rowv) = (&base[..c], &gx[..c], &gy[..c], &mut rowv[..c]);
@@ -672,8 +733,13 @@ impl Band<'_> {
                     entered = true;
                     if *m == EMPTY {
                         *m = INSIDE;
-                        for k in 0..c {
-                            out[k] = (rowv[k] + gx[k] * xf) as f32;
+                        if W {
+                            let detail = ctx.weave.expect("a woven triangle has a weave");
+                            tw.texel(detail, xf, yf, |k| rowv[k] + gx[k] * xf, out);
+                        } else {
+                            for k in 0..c {
+                                out[k] = (rowv[k] + gx[k] * xf) as f32;
+                            }
                         }
                     } else if *m == INSIDE {
                         *m = OVERLAP;

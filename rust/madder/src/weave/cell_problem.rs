@@ -45,6 +45,9 @@
 //! negative sum of the others because every right-hand side sums to zero (`Σ_v ∇φ_v = 0`).
 //! Only `∇χ` enters the energy, so the constant chosen is irrelevant.
 //!
+//! The solution itself, `χ_x` and `χ_y` at the corners, is what
+//! [`super::corrector`](mod@super::corrector) keeps for the texture (issue 13 part 4).
+//!
 //! # Bounds (Keller duality)
 //!
 //! P1 minimizes the energy over a subspace, so `A_h ≥ A` as quadratic forms: the primal
@@ -254,12 +257,24 @@ impl Grid {
 
     /// [`Grid::effective`] of the checked tile `a · 2^-k`.
     fn effective_scaled(&self, a: &[Tensor2], k: i32) -> Result<Tensor2, WeaveError> {
+        self.solve_scaled(a, k).map(|(e, _)| e)
+    }
+
+    /// The primal solve of [`Grid::effective_scaled`], keeping its solution: the effective
+    /// tensor of `a · 2^−k` and the correctors `[χ_x, χ_y]` of `e_x`, `e_y` at the `w·h`
+    /// corner vertices (row-major, row 0 at the bottom; pinned: `χ = 0` at vertex 0).
+    /// The correctors of `a · 2^−k` and of `a` are the same (eq. 2.4 is homogeneous in `a`).
+    pub(crate) fn solve_scaled(
+        &self,
+        a: &[Tensor2],
+        k: i32,
+    ) -> Result<(Tensor2, [Vec<f64>; 2]), WeaveError> {
         let (w, h) = (self.w, self.h);
         let nv = w * h;
         if nv == 1 {
             // one cell: its four corners are one (pinned) vertex, and the condensed centre
             // does not couple to ξ, so the energy is ξᵀaξ
-            return Ok(tensor::scale(a[0], -k));
+            return Ok((tensor::scale(a[0], -k), [vec![0.0], vec![0.0]]));
         }
         let n = nv - 1;
         let forms: Vec<CellForm> = a
@@ -321,20 +336,12 @@ impl Grid {
         );
 
         // the energy, cell by cell (pinned vertex: χ = 0)
-        let chi = |i: usize, v: usize| reduced(v).map_or(0.0, |r| rhs[i * n + r]);
-        let mut e = [0.0; 3];
-        for (c, f) in forms.iter().enumerate() {
-            let g = corners(c);
-            let u = [
-                g.map(|v| chi(0, v)), // corrector of e_x
-                g.map(|v| chi(1, v)), // corrector of e_y
-            ];
-            for (slot, (i, j)) in [(0, 0), (0, 1), (1, 1)].into_iter().enumerate() {
-                e[slot] += f.energy(&u[i], i, &u[j], j);
-            }
-        }
-        let area = nv as f64;
-        Ok([e[0] / area, e[1] / area, e[2] / area])
+        let chi = [0, 1].map(|i| {
+            (0..nv)
+                .map(|v| reduced(v).map_or(0.0, |r| rhs[i * n + r]))
+                .collect::<Vec<f64>>()
+        });
+        Ok((cell_energy(w, h, &forms, &chi), chi))
     }
 
     /// Both bounds on this grid (the dual solve reuses the pattern and symbolic
@@ -362,6 +369,30 @@ impl Grid {
             lower: tensor::scale(lower?, k),
         })
     }
+}
+
+/// `⟨(e_i + ∇χ_i)ᵀ a (e_j + ∇χ_j)⟩` over the `w × h` torus (eq. 2.3 as an energy, module
+/// doc), `χ` given at the corner vertices (the condensed centres take their optimal
+/// values): the P1 effective tensor when `χ` solves the cell problem.
+fn cell_energy(w: usize, h: usize, forms: &[CellForm], chi: &[Vec<f64>; 2]) -> Tensor2 {
+    let mut e = [0.0; 3];
+    for (c, f) in forms.iter().enumerate() {
+        let (x, y) = (c % w, c / w);
+        let (x1, y1) = ((x + 1) % w, (y + 1) % h);
+        let g = [y * w + x, y * w + x1, y1 * w + x1, y1 * w + x];
+        let u = [g.map(|v| chi[0][v]), g.map(|v| chi[1][v])];
+        for (slot, (i, j)) in [(0, 0), (0, 1), (1, 1)].into_iter().enumerate() {
+            e[slot] += f.energy(&u[i], i, &u[j], j);
+        }
+    }
+    let area = (w * h) as f64;
+    [e[0] / area, e[1] / area, e[2] / area]
+}
+
+/// [`cell_energy`] of the tensors `a` (unscaled), for a corrector computed elsewhere.
+pub(crate) fn corrector_energy(w: usize, h: usize, a: &[Tensor2], chi: &[Vec<f64>; 2]) -> Tensor2 {
+    let forms: Vec<CellForm> = a.iter().map(|&t| CellForm::new(t)).collect();
+    cell_energy(w, h, &forms, chi)
 }
 
 /// The condensed quadratic form of one unit cell with tensor `a`: corner block `k` (4×4,

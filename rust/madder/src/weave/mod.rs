@@ -15,6 +15,9 @@
 //! 3. [`homogenize()`] (eq. 2.3): reduction of the tile, choice of discretization levels and
 //!    the primal–dual extrapolation that turns the bounds into one estimate; [`cache`]
 //!    memoizes it.
+//! 4. [`corrector`](mod@corrector): the cell problem's correctors `χ` kept (not thrown
+//!    away after the tensor), with a per-cell uptake, so the texture can add the weave's
+//!    fine scale back to the homogenized stain (`σ0 + ε χ(x/ε)·∇σ0`, [`crate::texture`]).
 //!
 //! **Orientation.** The tile's `x` axis is the weft direction (texture `u`), `y` the warp
 //! direction (`v`); cells are row-major with row 0 at the bottom. Tensors are `[s11, s12,
@@ -31,12 +34,16 @@
 
 pub(crate) mod cache;
 pub(crate) mod cell_problem;
+pub(crate) mod corrector;
 pub mod homogenize;
 pub(crate) mod pattern;
 pub mod tensor;
 
 pub use cache::{HomogenizationCache, homogenize_cached};
 pub use cell_problem::{Bounds, Grid};
+pub use corrector::{
+    CORRECTOR_SAMPLES, Corrector, MAX_CORRECTOR_REFINE, corrector_cached, default_uptake,
+};
 pub use homogenize::{
     HomogenizeOptions, Homogenized, Level, MAX_CONTRAST, Method, homogenize, homogenize_report,
     homogenize_with,

@@ -1,0 +1,342 @@
+//! The cell problem's correctors, kept for the texture: the weave's fine scale added back
+//! to the homogenized stain (issue 13 part 4, the seed's "dynamical texture for adding back
+//! high frequencies taken out during homogenization").
+//!
+//! # The two-scale expansion (seed §2.2, eqs. 2.1–2.4)
+//!
+//! Homogenization replaces the rapidly varying tensor `a(x/ε)` of eq. 2.1 by the constant
+//! `A` of eq. 2.3. The solution of the real, woven problem is, to first order in the
+//! period `ε`,
+//!
+//! ```text
+//! σ(x) ≈ σ0(x) + ε χ(x/ε) · ∇σ0(x)          (χ = (χ_x, χ_y), y = x/ε the tile coordinate)
+//! ```
+//!
+//! with `σ0` the homogenized solution and `χ_i` the periodic corrector of the macroscopic
+//! gradient `e_i`: the minimizer of `⟨(e_i + ∇χ_i)ᵀ a (e_i + ∇χ_i)⟩` (eq. 2.4 is its
+//! Euler–Lagrange equation). `ε χ · ∇σ0 = χ · ∇_y σ0`, the gradient in tile units, so the
+//! texture needs only `χ` on the tile and `σ0`'s gradient per cloth triangle.
+//!
+//! # Uptake
+//!
+//! The expansion moves liquid between threads and gaps; what a viewer sees of a dried
+//! stain also depends on how much of the deposit each cell takes up (a yarn on the face
+//! shows its dye, a yarn on the back is half hidden, a gap holds little). [`Corrector`]
+//! keeps a per-cell uptake factor `U` normalized to mean exactly 1 over the tile, and the
+//! stain channels of the texture become
+//!
+//! ```text
+//! σ = U(y) σ0 + (χ(y) − m) · ∇_y σ0,      m = ⟨(U − 1) y⟩  (the uptake's first moment)
+//! ```
+//!
+//! `⟨U⟩ = 1` and `⟨χ⟩ = 0` make the detail vanish on average where `σ0` is constant; the
+//! moment `m` (a constant vector per tile) removes the one first-order term `⟨(U − 1) y⟩ ·
+//! ∇_y σ0` that `U σ0` adds where `σ0` is linear, so the mass over whole tiles is `σ0`'s
+//! exactly for a linear `σ0`. Channels without uptake (wetness) get `σ0 + χ · ∇_y σ0`.
+//! The default factors ([`default_uptake`]) are a choice of look, not physics from the
+//! seed: 1 for a yarn on the face, ¾ on the back, ⅓ for a gap, before normalization.
+//!
+//! # Discretization
+//!
+//! The corrector is the primal P1 solve of [`super::cell_problem`] (same assembly, same
+//! factorization, the solution kept instead of dropped) on the tile refined `r` times,
+//! `r = ⌊√(4096 / (w h))⌋` clamped to `1..=8` (a plain weave with gaps, 4 × 4 cells,
+//! gets 32 × 32 samples: a thread is at most a few texels wide, see the add-on's
+//! warning, so finer samples would not show). It is stored at the corner vertices and
+//! read by bilinear interpolation, periodic; its mean *as interpolated* (the vertex mean)
+//! is removed, so `⟨χ⟩ = 0` holds for what the texture samples. [`Corrector::energy`]
+//! evaluates `⟨(e_i + ∇χ_i)ᵀ a (e_j + ∇χ_j)⟩` from the stored corners: the primal P1
+//! effective tensor of that refinement (an upper bound of eq. 2.3's `A`). Laminates are
+//! exact: their corrector is piecewise linear with kinks on cell edges.
+//!
+//! Correctors are memoized like the tensors ([`corrector_cached`]): the texture export
+//! asks for the same few fabrics on every frame.
+
+use std::collections::VecDeque;
+use std::hash::{DefaultHasher, Hash, Hasher};
+use std::sync::{Arc, Mutex, OnceLock};
+
+use super::cell_problem::{Grid, corrector_energy};
+use super::homogenize::{MAX_CONTRAST, bits, check_tensors, refine, scale_exponent};
+use super::pattern::{Cell, PairCoefficients, Tile, cell_tensors};
+use super::{Tensor2, tensor};
+use crate::error::WeaveError;
+
+/// Corrector samples per tile, at most: `r² w h ≤ 4096`.
+pub const CORRECTOR_SAMPLES: usize = 4096;
+
+/// The largest refinement of a tile cell for its corrector.
+pub const MAX_CORRECTOR_REFINE: usize = 8;
+
+/// The uptake of a cell before normalization (see the module doc): 1 for a yarn on the
+/// face, ¾ for a yarn on the back, ⅓ for a gap.
+pub fn default_uptake(cell: Cell) -> f64 {
+    match cell {
+        Cell::Warp { up: true } | Cell::Weft { up: true } => 1.0,
+        Cell::Warp { up: false } | Cell::Weft { up: false } => 0.75,
+        Cell::Gap => 1.0 / 3.0,
+    }
+}
+
+/// The periodic correctors `χ_x`, `χ_y` of a tile and its per-cell uptake (module doc).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Corrector {
+    width: usize,
+    height: usize,
+    refine: usize,
+    tensors: Vec<Tensor2>,
+    chi: [Vec<f64>; 2],
+    uptake: Vec<f64>,
+    moment: [f64; 2],
+    threads: [f64; 2],
+    upper: Tensor2,
+    /// per patch `(p, q)` of the sample grid (row-major): the bilinear coefficients
+    /// `c0 + c1 t_x + c2 t_y + c3 t_x t_y` of `χ_x` (0..4) and `χ_y` (4..8), and the uptake
+    /// of the cell holding it (8): one read per texel, in `f32` (the image's precision;
+    /// half the cache of `f64`)
+    patches: Vec<[f32; 9]>,
+}
+
+/// `⌊x⌋` for `|x| < 2^63` without a library call (`f64::floor` is one on baseline x86-64).
+#[inline(always)]
+fn floor(x: f64) -> f64 {
+    let t = x as i64 as f64;
+    if t > x { t - 1.0 } else { t }
+}
+
+impl Corrector {
+    /// The corrector of the `width × height` tile with per-cell tensors `tensors` and
+    /// uptake factors `uptake` (both row-major, row 0 at the bottom; the uptake is
+    /// normalized to mean 1), `threads` threads per tile along `x` (weft) and `y` (warp).
+    /// Errors: a bad tile (as [`super::homogenize()`]), an uptake that is not finite and
+    /// ≥ 0 with a positive mean, threads that are not finite and positive.
+    pub fn new(
+        width: usize,
+        height: usize,
+        tensors: &[Tensor2],
+        uptake: &[f64],
+        threads: [f64; 2],
+    ) -> Result<Corrector, WeaveError> {
+        let (contrast, weakest) = check_tensors(width, height, tensors)?;
+        if contrast > MAX_CONTRAST {
+            return Err(WeaveError::Contrast {
+                ratio: contrast,
+                limit: MAX_CONTRAST,
+                row: weakest / width,
+                col: weakest % width,
+            });
+        }
+        let option = |name, requirement, value| WeaveError::Option {
+            name,
+            requirement,
+            value,
+        };
+        if uptake.len() != tensors.len() {
+            return Err(option("uptake", "one factor per cell", uptake.len() as f64));
+        }
+        if let Some(&u) = uptake.iter().find(|u| !(u.is_finite() && **u >= 0.0)) {
+            return Err(option("uptake", "finite and ≥ 0", u));
+        }
+        let mean = uptake.iter().sum::<f64>() / uptake.len() as f64;
+        if mean.is_nan() || mean <= 0.0 {
+            return Err(option("uptake", "of positive mean", mean));
+        }
+        if let Some(&t) = threads.iter().find(|t| !(t.is_finite() && **t > 0.0)) {
+            return Err(option("threads", "finite and > 0", t));
+        }
+        let r = ((CORRECTOR_SAMPLES / (width * height)) as f64)
+            .sqrt()
+            .floor()
+            .clamp(1.0, MAX_CORRECTOR_REFINE as f64) as usize;
+        let (gw, gh) = (width * r, height * r);
+        let fine = refine(width, height, tensors, r)?;
+        let k = scale_exponent(&fine);
+        let (upper, mut chi) = Grid::shared(gw, gh)?.solve_scaled(&fine, k)?;
+        // the solve's unit is the refined grid's cell: χ in tile cells is χ_grid / r
+        for c in &mut chi {
+            let m = c.iter().sum::<f64>() / c.len() as f64;
+            c.iter_mut().for_each(|v| *v = (*v - m) / r as f64);
+        }
+        let uptake: Vec<f64> = uptake.iter().map(|u| u / mean).collect();
+        // m = ⟨(U − 1) y⟩: cell (i, j) has mean position (i + ½, j + ½)
+        let mut moment = [0.0; 2];
+        for (c, u) in uptake.iter().enumerate() {
+            let (i, j) = ((c % width) as f64, (c / width) as f64);
+            moment[0] += (u - 1.0) * (i + 0.5);
+            moment[1] += (u - 1.0) * (j + 0.5);
+        }
+        let n = uptake.len() as f64;
+        let patches = (0..gw * gh)
+            .map(|v| {
+                let (p, q) = (v % gw, v / gw);
+                let (p1, q1) = ((p + 1) % gw, (q + 1) % gh);
+                let mut c = [0.0f32; 9];
+                for (i, x) in chi.iter().enumerate() {
+                    let [v00, v10, v01, v11] =
+                        [q * gw + p, q * gw + p1, q1 * gw + p, q1 * gw + p1].map(|k| x[k]);
+                    let b = [v00, v10 - v00, v01 - v00, v11 - v10 - v01 + v00];
+                    for (o, v) in c[4 * i..4 * i + 4].iter_mut().zip(b) {
+                        *o = v as f32;
+                    }
+                }
+                c[8] = uptake[(q / r) * width + p / r] as f32;
+                c
+            })
+            .collect();
+        Ok(Corrector {
+            patches,
+            width,
+            height,
+            refine: r,
+            tensors: fine,
+            chi,
+            uptake,
+            moment: moment.map(|m| m / n),
+            threads,
+            upper: tensor::scale(upper, k),
+        })
+    }
+
+    /// The corrector of a weave tile with the tensors of `coefficients` and the
+    /// [`default_uptake`]; `threads` as in [`Corrector::new`].
+    pub fn of_tile(
+        tile: &Tile,
+        coefficients: &PairCoefficients,
+        threads: [f64; 2],
+    ) -> Result<Corrector, WeaveError> {
+        let tensors = cell_tensors(tile, coefficients)?;
+        let uptake: Vec<f64> = tile.cells().iter().map(|&c| default_uptake(c)).collect();
+        Corrector::new(tile.width(), tile.height(), &tensors, &uptake, threads)
+    }
+
+    /// Tile width and height in cells.
+    pub fn cells(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+
+    /// Threads per tile along the weft (`x`) and the warp (`y`).
+    pub fn threads(&self) -> [f64; 2] {
+        self.threads
+    }
+
+    /// Corrector samples per cell side.
+    pub fn refine(&self) -> usize {
+        self.refine
+    }
+
+    /// `χ_x` (`i = 0`) or `χ_y` (`i = 1`), in tile cells, at the `(w r) × (h r)` corner
+    /// vertices, row-major,
+    /// row 0 at the bottom; vertex `(p, q)` sits at the tile coordinate `(p / r, q / r)`.
+    pub fn samples(&self, i: usize) -> &[f64] {
+        &self.chi[i]
+    }
+
+    /// The per-cell uptake factors (mean 1), row-major, row 0 at the bottom.
+    pub fn uptake(&self) -> &[f64] {
+        &self.uptake
+    }
+
+    /// The uptake's first moment `m = ⟨(U − 1) y⟩` in cells.
+    pub fn moment(&self) -> [f64; 2] {
+        self.moment
+    }
+
+    /// `(χ_x, χ_y)` at tile coordinate `y` (in cells, any value: the tile repeats),
+    /// bilinear between the corner samples (in `f64`; the texture reads the same function
+    /// rounded to `f32`).
+    pub fn chi(&self, y: [f64; 2]) -> [f64; 2] {
+        let (gw, gh) = (self.width * self.refine, self.height * self.refine);
+        let r = self.refine as f64;
+        let g = [y[0] * r, y[1] * r];
+        let (fx, fy) = (floor(g[0]), floor(g[1]));
+        let (tx, ty) = (g[0] - fx, g[1] - fy);
+        let x0 = (fx as i64).rem_euclid(gw as i64) as usize;
+        let y0 = (fy as i64).rem_euclid(gh as i64) as usize;
+        let (x1, y1) = ((x0 + 1) % gw, (y0 + 1) % gh);
+        [0, 1].map(|i| {
+            let at = |x: usize, y: usize| self.chi[i][y * gw + x];
+            let bottom = at(x0, y0) + tx * (at(x1, y0) - at(x0, y0));
+            let top = at(x0, y1) + tx * (at(x1, y1) - at(x0, y1));
+            bottom + ty * (top - bottom)
+        })
+    }
+
+    /// `((χ_x, χ_y), U)` at `g`, in sample-grid units (tile cells × [`Corrector::refine`]):
+    /// the texel pass's one lookup.
+    #[inline(always)]
+    pub(crate) fn sample(&self, g: [f64; 2]) -> ([f64; 2], f64) {
+        let (gw, gh) = (self.width * self.refine, self.height * self.refine);
+        let (nw, nh) = (gw as f64, gh as f64);
+        // wrap into [0, n): q = g − n ⌊g / n⌋, then the patch and the offset in it
+        let qx = g[0] - nw * floor(g[0] * (1.0 / nw));
+        let qy = g[1] - nh * floor(g[1] * (1.0 / nh));
+        // via i64: a float-to-unsigned conversion costs more on x86-64
+        let (ix, iy) = (
+            (qx as i64 as usize).min(gw - 1),
+            (qy as i64 as usize).min(gh - 1),
+        );
+        let (tx, ty) = ((qx - ix as f64) as f32, (qy - iy as f64) as f32);
+        let c = &self.patches[iy * gw + ix];
+        let x = c[0] + tx * c[1] + ty * (c[2] + tx * c[3]);
+        let y = c[4] + tx * c[5] + ty * (c[6] + tx * c[7]);
+        ([f64::from(x), f64::from(y)], f64::from(c[8]))
+    }
+
+    /// The uptake factor of the cell holding tile coordinate `y` (cells, periodic).
+    #[inline]
+    pub fn uptake_at(&self, y: [f64; 2]) -> f64 {
+        let i = (y[0].floor() as i64).rem_euclid(self.width as i64) as usize;
+        let j = (y[1].floor() as i64).rem_euclid(self.height as i64) as usize;
+        self.uptake[j * self.width + i]
+    }
+
+    /// `⟨(e_i + ∇χ_i)ᵀ a (e_j + ∇χ_j)⟩` evaluated from the stored corrector (P1 on the
+    /// refined tile's criss-cross mesh): the primal effective tensor of that discretization.
+    pub fn energy(&self) -> Tensor2 {
+        let (gw, gh) = (self.width * self.refine, self.height * self.refine);
+        let r = self.refine as f64;
+        let chi = self
+            .chi
+            .clone()
+            .map(|c| c.into_iter().map(|v| v * r).collect());
+        corrector_energy(gw, gh, &self.tensors, &chi)
+    }
+
+    /// The effective tensor the solve itself reported (the same quantity as
+    /// [`Corrector::energy`], evaluated on the unshifted corrector, scaled).
+    pub fn upper(&self) -> Tensor2 {
+        self.upper
+    }
+}
+
+/// [`Corrector::of_tile`] through a process-wide cache of the 16 most recent tiles (keyed
+/// by a hash of the tile, the coefficients and the threads, as [`super::cache`]).
+pub fn corrector_cached(
+    tile: &Tile,
+    coefficients: &PairCoefficients,
+    threads: [f64; 2],
+) -> Result<Arc<Corrector>, WeaveError> {
+    type Entries = VecDeque<(u128, Arc<Corrector>)>;
+    static CACHE: OnceLock<Mutex<Entries>> = OnceLock::new();
+    let cache = CACHE.get_or_init(Default::default);
+    let lock = || cache.lock().unwrap_or_else(|e| e.into_inner());
+    let tensors = cell_tensors(tile, coefficients)?;
+    let hash = |salt: u64| {
+        let mut s = DefaultHasher::new();
+        (salt, tile).hash(&mut s);
+        for &t in &tensors {
+            bits(t).hash(&mut s);
+        }
+        threads.map(|t| (t + 0.0).to_bits()).hash(&mut s);
+        s.finish()
+    };
+    let key = ((hash(0x636f_7272) as u128) << 64) | hash(0x0063_6869) as u128;
+    if let Some((_, c)) = lock().iter().find(|(k, _)| *k == key) {
+        return Ok(c.clone());
+    }
+    let c = Arc::new(Corrector::of_tile(tile, coefficients, threads)?);
+    let mut l = lock();
+    l.push_front((key, c.clone()));
+    l.truncate(16);
+    Ok(c)
+}

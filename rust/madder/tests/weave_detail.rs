@@ -1,0 +1,328 @@
+//! The weave back at texture resolution (issue 13 part 4): the cell problem's correctors
+//! (`weave::Corrector`) against closed forms and the effective tensor, and the texel pass
+//! (`texture::rasterize_with`) against exact properties:
+//!
+//! - a laminate's corrector is the closed-form piecewise-linear function, and its energy
+//!   the harmonic / arithmetic means;
+//! - `⟨(e_i + ∇χ_i)ᵀ a (e_j + ∇χ_j)⟩` from the stored corrector equals the primal bound of
+//!   the same discretization, and lies in the homogenization's bracket;
+//! - the detail integrates to zero over whole tiles (mass within 1e-6) with a gradient and
+//!   the uptake contrast;
+//! - absent where the stain is flat with no uptake contrast (equal to the plain raster);
+//! - faces without a fabric are the plain raster bit for bit; the same bits on 1 and 2
+//!   threads; bad input names the face.
+
+use madder::error::TextureError;
+use madder::texture::{NO_WEAVE, WeaveDetail, rasterize, rasterize_with};
+use madder::weave::{
+    Corrector, Grid, HomogenizeOptions, PairCoefficients, Tile, Weave, cell_tensors,
+    homogenize_report,
+};
+
+/// Faces, their corner UVs and the vertices' UVs.
+type Square = (Vec<[u32; 3]>, Vec<[[f64; 2]; 3]>, Vec<[f64; 2]>);
+
+/// `n × n` quads of the unit square in UV, two triangles each; vertex `(i, j)` at
+/// `(j/n, i/n)`.
+fn square(n: usize) -> Square {
+    let idx = |i: usize, j: usize| (i * (n + 1) + j) as u32;
+    let pos: Vec<[f64; 2]> = (0..(n + 1) * (n + 1))
+        .map(|v| {
+            [
+                (v % (n + 1)) as f64 / n as f64,
+                (v / (n + 1)) as f64 / n as f64,
+            ]
+        })
+        .collect();
+    let mut faces = Vec::new();
+    for i in 0..n {
+        for j in 0..n {
+            let (a, b, c, d) = (idx(i, j), idx(i, j + 1), idx(i + 1, j + 1), idx(i + 1, j));
+            faces.extend([[a, b, c], [a, c, d]]);
+        }
+    }
+    let uv = faces.iter().map(|f| f.map(|v| pos[v as usize])).collect();
+    (faces, uv, pos)
+}
+
+fn plain_with_gaps() -> Corrector {
+    Corrector::of_tile(
+        &Tile::builtin(Weave::Plain, true),
+        &PairCoefficients::default(),
+        [2.0, 2.0],
+    )
+    .unwrap()
+}
+
+#[test]
+fn laminate_corrector_is_the_closed_form() {
+    // stripes along x: columns of conductivity k, isotropic cells
+    let k = [1.0, 4.0, 2.0, 8.0];
+    let tensors: Vec<[f64; 3]> = k.iter().map(|&k| [k, 0.0, k]).collect();
+    let c = Corrector::new(4, 1, &tensors, &[1.0; 4], [4.0, 1.0]).unwrap();
+    let r = c.refine();
+    let harmonic = 4.0 / k.iter().map(|k| 1.0 / k).sum::<f64>();
+    let arithmetic = k.iter().sum::<f64>() / 4.0;
+    // (1 + χ') k = H: χ(x) = ∫₀ˣ (H/k − 1), piecewise linear with kinks on cell edges
+    let big_f = |x: f64| {
+        let mut s = 0.0;
+        for (i, &ki) in k.iter().enumerate() {
+            let len = (x - i as f64).clamp(0.0, 1.0);
+            s += len * (harmonic / ki - 1.0);
+        }
+        s
+    };
+    let (gw, gh) = (4 * r, r);
+    let exact: Vec<f64> = (0..gw * gh)
+        .map(|v| big_f((v % gw) as f64 / r as f64))
+        .collect();
+    let mean = exact.iter().sum::<f64>() / exact.len() as f64;
+    for (v, (&got, &want)) in c.samples(0).iter().zip(&exact).enumerate() {
+        assert!(
+            (got - (want - mean)).abs() < 1e-12,
+            "χ_x at {v}: {got} vs {}",
+            want - mean
+        );
+    }
+    assert!(c.samples(1).iter().all(|x| x.abs() < 1e-12));
+    let e = c.energy();
+    assert!((e[0] - harmonic).abs() < 1e-12 * harmonic, "{e:?}");
+    assert!(e[1].abs() < 1e-12 && (e[2] - arithmetic).abs() < 1e-12 * arithmetic);
+    // and the bilinear read-out between samples is the same piecewise-linear function
+    let x = 1.3;
+    assert!((c.chi([x, 0.37])[0] - (big_f(x) - mean)).abs() < 1e-12);
+}
+
+#[test]
+fn corrector_energy_reproduces_the_effective_tensor() {
+    let tile = Tile::builtin(Weave::Twill21, true);
+    let coefficients = PairCoefficients::default();
+    let c = Corrector::of_tile(&tile, &coefficients, [3.0, 3.0]).unwrap();
+    let r = c.refine();
+    let (w, h) = (tile.width(), tile.height());
+    // the same discretization's primal bound, computed by the homogenization's own path
+    let tensors = cell_tensors(&tile, &coefficients).unwrap();
+    let fine = madder::weave::homogenize::refine(w, h, &tensors, r).unwrap();
+    let upper = Grid::new(w * r, h * r)
+        .unwrap()
+        .bounds(&fine, false)
+        .unwrap()
+        .upper;
+    let e = c.energy();
+    for k in 0..3 {
+        assert!(
+            (e[k] - upper[k]).abs() <= 1e-10 * upper[0],
+            "{e:?} vs {upper:?}"
+        );
+        assert!((c.upper()[k] - upper[k]).abs() <= 1e-12 * upper[0]);
+    }
+    // inside the bracket of the homogenization, close to its estimate
+    let hom = homogenize_report(w, h, &tensors, &HomogenizeOptions::default()).unwrap();
+    for k in [0, 2] {
+        assert!(e[k] >= hom.lower[k] && e[k] <= upper[k] * (1.0 + 1e-12));
+        assert!(
+            (e[k] - hom.tensor[k]).abs() < 2e-3 * hom.tensor[k],
+            "{e:?} vs {:?}",
+            hom.tensor
+        );
+    }
+    // zero mean, uptake of mean 1 with contrast (gaps take less)
+    for i in 0..2 {
+        assert!(c.samples(i).iter().sum::<f64>().abs() < 1e-12 * c.samples(i).len() as f64);
+    }
+    let u = c.uptake();
+    assert!((u.iter().sum::<f64>() / u.len() as f64 - 1.0).abs() < 1e-15);
+    assert!(u.iter().cloned().fold(0.0, f64::max) > 2.0 * u.iter().cloned().fold(9.0, f64::min));
+}
+
+/// The plain-with-gaps tile laid at 8 texels a cell on a 256² image: 16 threads per UV
+/// unit, 32 texels a tile, 8 tiles across the square.
+fn aligned_detail<'a>(
+    corr: &'a [&'a Corrector],
+    n_faces: usize,
+    map: &'a mut Vec<[f64; 4]>,
+    fabric: &'a mut Vec<u32>,
+) -> WeaveDetail<'a> {
+    *map = vec![[16.0, 0.0, 0.0, 16.0]; n_faces];
+    *fabric = vec![0; n_faces];
+    WeaveDetail {
+        correctors: corr,
+        face_fabric: fabric,
+        face_map: map,
+        uptake: &[true, false],
+    }
+}
+
+#[test]
+fn detail_integrates_to_zero_over_whole_tiles() {
+    let corr = plain_with_gaps();
+    let (faces, uv, pos) = square(16);
+    // a linear stain and a linear wetness
+    let values: Vec<f32> = pos
+        .iter()
+        .flat_map(|p| {
+            [
+                (0.3 + 0.2 * p[0] + 0.1 * p[1]) as f32,
+                (0.8 - 0.5 * p[1]) as f32,
+            ]
+        })
+        .collect();
+    let (mut map, mut fabric) = (Vec::new(), Vec::new());
+    let cs = [&corr];
+    let detail = aligned_detail(&cs, faces.len(), &mut map, &mut fabric);
+    let plain = rasterize(&faces, &uv, &values, 2, 256).unwrap();
+    let woven = rasterize_with(&faces, &uv, &values, 2, 256, Some(&detail)).unwrap();
+    assert_eq!(plain.coverage, woven.coverage);
+    for k in 0..2 {
+        let sum = |r: &madder::texture::Raster| {
+            r.pixels
+                .iter()
+                .skip(k)
+                .step_by(2)
+                .map(|&x| x as f64)
+                .sum::<f64>()
+        };
+        let (a, b) = (sum(&plain), sum(&woven));
+        let rel = ((b - a) / a).abs();
+        println!("channel {k}: mass {b} vs {a}, relative error {rel:e}");
+        assert!(rel < 1e-6, "channel {k}: mass {b} vs {a} ({rel:e})");
+        // and the detail is really there
+        let diff = plain
+            .pixels
+            .iter()
+            .zip(&woven.pixels)
+            .skip(k)
+            .step_by(2)
+            .map(|(p, w)| (p - w).abs())
+            .fold(0.0f32, f32::max);
+        assert!(
+            diff > if k == 0 { 0.1 } else { 1e-3 },
+            "channel {k}: {diff}"
+        );
+    }
+}
+
+#[test]
+fn no_detail_where_the_stain_is_flat_and_uptake_uniform() {
+    let tile = Tile::builtin(Weave::Twill21, true);
+    let tensors = cell_tensors(&tile, &PairCoefficients::default()).unwrap();
+    let n = tensors.len();
+    let corr = Corrector::new(
+        tile.width(),
+        tile.height(),
+        &tensors,
+        &vec![1.0; n],
+        [3.0; 2],
+    )
+    .unwrap();
+    let (faces, uv, pos) = square(9);
+    let values: Vec<f32> = pos.iter().flat_map(|_| [0.37f32, 0.61]).collect();
+    let map = vec![[40.0, -23.0, 23.0, 40.0]; faces.len()];
+    let fabric = vec![0u32; faces.len()];
+    let cs = [&corr];
+    let detail = WeaveDetail {
+        correctors: &cs,
+        face_fabric: &fabric,
+        face_map: &map,
+        uptake: &[true, false],
+    };
+    let plain = rasterize(&faces, &uv, &values, 2, 200).unwrap();
+    let woven = rasterize_with(&faces, &uv, &values, 2, 200, Some(&detail)).unwrap();
+    assert_eq!(plain, woven);
+}
+
+#[test]
+fn faces_without_fabric_are_the_plain_raster_and_threads_do_not_matter() {
+    let corr = plain_with_gaps();
+    let (faces, uv, pos) = square(12);
+    let values: Vec<f32> = pos
+        .iter()
+        .flat_map(|p| {
+            let s = (-((p[0] - 0.4).powi(2) + (p[1] - 0.5).powi(2)) / 0.05).exp() as f32;
+            [s, 0.5 * s]
+        })
+        .collect();
+    let cs = [&corr];
+    let none = vec![NO_WEAVE; faces.len()];
+    let map = vec![[0.0; 4]; faces.len()];
+    let off = WeaveDetail {
+        correctors: &cs,
+        face_fabric: &none,
+        face_map: &map,
+        uptake: &[true, true],
+    };
+    let plain = rasterize(&faces, &uv, &values, 2, 300).unwrap();
+    assert_eq!(
+        rasterize_with(&faces, &uv, &values, 2, 300, Some(&off)).unwrap(),
+        plain
+    );
+    // woven at 30°, every other face on: the same bits on 1 and 2 threads
+    let (c, s) = (30f64.to_radians().cos(), 30f64.to_radians().sin());
+    let k = 37.0;
+    let map = vec![[k * c, k * s, -k * s, k * c]; faces.len()];
+    let fabric: Vec<u32> = (0..faces.len() as u32)
+        .map(|t| if t % 2 == 0 { 0 } else { NO_WEAVE })
+        .collect();
+    let on = WeaveDetail {
+        correctors: &cs,
+        face_fabric: &fabric,
+        face_map: &map,
+        uptake: &[true, false],
+    };
+    let run = |threads| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| rasterize_with(&faces, &uv, &values, 2, 300, Some(&on)).unwrap())
+    };
+    let one = run(1);
+    assert_eq!(one, run(2));
+    assert_ne!(one, plain);
+}
+
+#[test]
+fn bad_weave_input_names_the_face() {
+    let corr = plain_with_gaps();
+    let (faces, uv, pos) = square(2);
+    let values: Vec<f32> = pos.iter().map(|_| 0.5).collect();
+    let cs = [&corr];
+    let mut fabric = vec![0u32; faces.len()];
+    let mut map = vec![[10.0, 0.0, 0.0, 10.0]; faces.len()];
+    fabric[3] = 1;
+    let run = |fabric: &[u32], map: &[[f64; 4]]| {
+        let d = WeaveDetail {
+            correctors: &cs,
+            face_fabric: fabric,
+            face_map: map,
+            uptake: &[true],
+        };
+        rasterize_with(&faces, &uv, &values, 1, 16, Some(&d)).unwrap_err()
+    };
+    let e = run(&fabric, &map);
+    assert!(matches!(e, TextureError::WeaveFace { face: 3, .. }), "{e}");
+    assert!(
+        e.to_string().contains("face 3") && e.to_string().contains("fabric 1"),
+        "{e}"
+    );
+    fabric[3] = 0;
+    map[5] = [1.0, 2.0, 2.0, 4.0];
+    let e = run(&fabric, &map);
+    assert!(
+        matches!(e, TextureError::WeaveFace { face: 5, .. }) && e.to_string().contains("singular"),
+        "{e}"
+    );
+    map[5] = [f64::NAN, 0.0, 0.0, 1.0];
+    assert!(run(&fabric, &map).to_string().contains("not finite"));
+    let e = run(&fabric[1..], &map);
+    assert!(
+        matches!(
+            e,
+            TextureError::Length {
+                name: "face_fabric",
+                ..
+            }
+        ),
+        "{e}"
+    );
+}
