@@ -12,6 +12,8 @@ use glam::{DVec2, DVec3};
 use madder::lcs::{FnVelocity, Motion, RidgeOptions, ftle, ridges};
 use madder::mesh::Topology;
 
+mod common;
+
 fn double_gyre(t: f64, p: DVec2) -> DVec2 {
     let (amp, eps, omega) = (0.1, 0.25, 0.2 * PI);
     let a = eps * (omega * t).sin();
@@ -24,25 +26,12 @@ fn double_gyre(t: f64, p: DVec2) -> DVec2 {
     )
 }
 
-/// A triangulated grid of `nx × ny` cells over [0, 2] × [0, 1].
+/// The benches' grid of `nx × ny` cells (`common::grid`, upright in x–z) laid flat over
+/// [0, 2] × [0, 1].
 fn grid(nx: usize, ny: usize) -> (Topology, Vec<DVec3>) {
-    let idx = |i: usize, j: usize| (i * (nx + 1) + j) as u32;
-    let mut faces = Vec::with_capacity(2 * nx * ny);
-    for i in 0..ny {
-        for j in 0..nx {
-            let (a, b, c, d) = (idx(i, j), idx(i, j + 1), idx(i + 1, j + 1), idx(i + 1, j));
-            faces.extend([[a, b, c], [a, c, d]]);
-        }
-    }
-    let p = (0..=ny)
-        .flat_map(|i| {
-            (0..=nx).map(move |j| DVec3::new(2.0 * j as f64 / nx as f64, i as f64 / ny as f64, 0.0))
-        })
-        .collect();
-    (
-        Topology::from_triangles((nx + 1) * (ny + 1), faces).unwrap(),
-        p,
-    )
+    let (topo, p) = common::grid(nx, ny);
+    let flat = p.iter().map(|q| DVec3::new(q.x, q.z / 1.2, 0.0)).collect();
+    (topo, flat)
 }
 
 fn case(label: &str, nx: usize, ny: usize, steps: usize) {

@@ -57,7 +57,7 @@ use std::hash::{DefaultHasher, Hash, Hasher};
 use std::sync::{Arc, Mutex, OnceLock};
 
 use super::cell_problem::{Grid, corrector_energy};
-use super::homogenize::{MAX_CONTRAST, bits, check_tensors, refine, scale_exponent};
+use super::homogenize::{bits, check_tile, refine, scale_exponent};
 use super::pattern::{Cell, PairCoefficients, Tile, cell_tensors};
 use super::{Tensor2, tensor};
 use crate::error::WeaveError;
@@ -117,15 +117,7 @@ impl Corrector {
         uptake: &[f64],
         threads: [f64; 2],
     ) -> Result<Corrector, WeaveError> {
-        let (contrast, weakest) = check_tensors(width, height, tensors)?;
-        if contrast > MAX_CONTRAST {
-            return Err(WeaveError::Contrast {
-                ratio: contrast,
-                limit: MAX_CONTRAST,
-                row: weakest / width,
-                col: weakest % width,
-            });
-        }
+        check_tile(width, height, tensors)?;
         let option = |name, requirement, value| WeaveError::Option {
             name,
             requirement,

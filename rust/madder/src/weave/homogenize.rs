@@ -271,6 +271,25 @@ fn check_count(width: usize, height: usize, got: usize) -> Result<(), WeaveError
 
 /// [`check_cells`], then the contrast (largest over smallest eigenvalue over the tile) and
 /// the cell with the smallest eigenvalue.
+/// [`check_tensors`], and the tile's contrast within [`MAX_CONTRAST`] (the error names
+/// the weakest cell): what every solve on a tile needs.
+pub(crate) fn check_tile(
+    width: usize,
+    height: usize,
+    tensors: &[Tensor2],
+) -> Result<(), WeaveError> {
+    let (contrast, weakest) = check_tensors(width, height, tensors)?;
+    if contrast > MAX_CONTRAST {
+        return Err(WeaveError::Contrast {
+            ratio: contrast,
+            limit: MAX_CONTRAST,
+            row: weakest / width,
+            col: weakest % width,
+        });
+    }
+    Ok(())
+}
+
 pub(crate) fn check_tensors(
     width: usize,
     height: usize,
@@ -473,15 +492,7 @@ pub fn homogenize_report(
     tensors: &[Tensor2],
     opts: &HomogenizeOptions,
 ) -> Result<Homogenized, WeaveError> {
-    let (contrast, weakest) = check_tensors(width, height, tensors)?;
-    if contrast > MAX_CONTRAST {
-        return Err(WeaveError::Contrast {
-            ratio: contrast,
-            limit: MAX_CONTRAST,
-            row: weakest / width,
-            col: weakest % width,
-        });
-    }
+    check_tile(width, height, tensors)?;
     if opts.max_cells == 0 {
         return Err(WeaveError::Option {
             name: "max_cells",
