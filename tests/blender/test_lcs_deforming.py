@@ -13,24 +13,25 @@ linearly, as it does for a bake. Three runs of `madder.ftle`, same particles and
 - *frozen*: the flag held at frame t0 with `J̄(t0) w` (the field pulled back to one pose);
 - *rest*: the flat rest pose with `w` itself.
 
-What differs, and the bounds tested:
+What differs, and the bounds tested. FTLE on a moving surface is the stretching from the
+surface at t0 to the surface at t0 + T (`lcs::ftle` fits the end points' offsets on the
+surface at t0 + T against the spokes at t0). With `A_t` the rest → t map of the flag,
+`∇Φ_def = A_end(Φ(X)) ∇Φ_rest A_t0(X)⁻¹`, so for the continuous maps
 
-1. *Interpolation*. The tracer pulls the velocity back with each triangle's own map,
-   `J_T⁺ P_T v_i`, which is `w(X_i)` only if `J̄_i = J_T`. The relative error `δ` of the
-   pulled-back velocity (measured below over every corner and frame: the one-ring's
-   variation of the deformation, stretch and bending) perturbs the material flow map; the
-   frozen run carries the same kind of error at t0 only. Deforming vs frozen therefore
-   differ by interpolation alone: tested, mean and 95th percentile of |Δσ| within a
-   stated multiple of `δ · σ_max`.
-2. *Metric* (rest only). FTLE is stretching measured in the surface's metric at t0 (the
-   flow map is a map of the surface at t0 to itself, `lcs::trace`). The flag's motion is
-   not isometric: with `A = J(t0)` the rest → t0 map, `∇Φ_t0 = A(Φ(X)) ∇Φ_rest A(X)⁻¹`, so
-   `|σ_t0 − σ_rest| ≤ ln(s_max / s_min) / |T|` with `s_max`, `s_min` the extreme principal
-   stretches of `A` over the flag (exact for the continuous maps). Tested: deforming vs
-   rest within that bound plus the interpolation allowance of 1, at every vertex.
+    |σ_def − σ_rest| ≤ max(ln(s_max(A_end) / s_min(A_t0)), ln(s_max(A_t0) / s_min(A_end))) / |T|,
 
-The runs must also differ from a wrong pull-back (the rest field `w` fed to the deforming
-mesh as world vectors, unprojected): that control shows the test can fail."""
+`s` the principal stretches over the flag: equal for an isometric motion, and the flag's
+is not (Blender's cloth stretches by up to about ±20% near the pole). On top of that the
+discretization: per-vertex velocities average the one-ring's deformation, while the
+tracer pulls each triangle's velocity back with that triangle's own map, so the velocity
+it integrates is off by a relative `δ` (printed: its mean, 95th percentile and maximum
+over corners at t0), and the fitted gradient is one-sided at the border, where the walk
+also stops particles. Tested: every vertex at least two cells from the border is within
+the metric bound, and their mean difference is under a quarter of it; the flag frozen at
+t0 (field pushed forward at t0, so only the end metric `A_end A_t0⁻¹` and the
+interpolation differ) is within that map's bound at 95% of them. A wrong pull-back (the
+rest field fed to the moving flag as world vectors, unprojected) fails the bound at
+more than 10% of them: the test can fail."""
 
 import bpy
 import numpy as np
@@ -103,18 +104,34 @@ def vertex_maps(faces, J, area, n):
     return out / weight[:, None, None]
 
 
-def pulled_back_error(faces, X, x, Jbar, w):
-    """max over corners of |J_T⁺ P_T J̄_i w_i − w_i| / max |w|: the relative error of the
-    velocity the tracer sees in material coordinates."""
+def pulled_back_errors(faces, X, x, Jbar, w):
+    """|J_T⁺ P_T J̄_i w_i − w_i| / max |w| at every corner (3F,): the relative error of the
+    velocity the tracer integrates, in rest coordinates."""
     J, _ = triangle_maps(faces, X, x)
     pinv = np.linalg.pinv(J)  # (F, 2, 3): pulls a world vector back (P_T included)
-    worst = 0.0
+    out = []
     for k in range(3):
         i = faces[:, k]
         v = np.einsum("fij,fj->fi", Jbar[i], w[i])
         back = np.einsum("fij,fj->fi", pinv, v)
-        worst = max(worst, np.linalg.norm(back - w[i], axis=1).max())
-    return worst / np.linalg.norm(w, axis=1).max()
+        out.append(np.linalg.norm(back - w[i], axis=1))
+    return np.concatenate(out) / np.linalg.norm(w, axis=1).max()
+
+
+def principal_stretches(faces, X, x):
+    """The principal stretches of each triangle's rest → `x` map, (F, 2)."""
+    J, _ = triangle_maps(faces, X, x)
+    return np.linalg.svd(J, compute_uv=False)
+
+
+def relative_stretches(faces, x0, x1):
+    """The principal stretches of each triangle's `x0` → `x1` map (3-D triangles), (F, 2)."""
+    a, b, c = faces[:, 0], faces[:, 1], faces[:, 2]
+    e0 = np.stack([x0[b] - x0[a], x0[c] - x0[a]], axis=2)
+    e1 = np.stack([x1[b] - x1[a], x1[c] - x1[a]], axis=2)
+    g0 = np.einsum("fki,fkj->fij", e0, e0)
+    g1 = np.einsum("fki,fkj->fij", e1, e1)
+    return np.sqrt(np.linalg.eigvals(np.linalg.solve(g0, g1)).real)
 
 
 def test_ftle_on_the_deforming_flag_equals_the_pulled_back_field(open_fixture):
@@ -125,13 +142,8 @@ def test_ftle_on_the_deforming_flag_equals_the_pulled_back_field(open_fixture):
     # the rest plane's world axes (object x and z through the object's transform)
     axes = np.stack([m0[:3, 0], m0[:3, 2]], axis=1)  # (3, 2)
     w = np.array([gyre(X, t) for t in times])  # (K, N, 2)
-    Jbar = []
-    delta = 0.0
-    for k, x in enumerate(positions):
-        J, area = triangle_maps(faces, X, x)
-        Jbar.append(vertex_maps(faces, J, area, n))
-        delta = max(delta, pulled_back_error(faces, X, x, Jbar[-1], w[k]))
-    Jbar = np.array(Jbar)
+    Jbar = np.array([vertex_maps(faces, *triangle_maps(faces, X, x), n) for x in positions])
+    delta = pulled_back_errors(faces, X, positions[0], Jbar[0], w[0])
     v_def = np.einsum("knij,knj->kni", Jbar, w)
     v_frozen = np.einsum("nij,knj->kni", Jbar[0], w)
     v_rest = np.einsum("ij,knj->kni", axes, w)
@@ -142,41 +154,44 @@ def test_ftle_on_the_deforming_flag_equals_the_pulled_back_field(open_fixture):
     for s in (s_def, s_frozen, s_rest):
         assert np.isfinite(s).all()
     smax = s_rest.max()
-    assert smax > 0.5, "the gyre must stretch for the comparison to mean anything"
+    assert smax > 1.0, "the gyre must stretch for the comparison to mean anything"
 
     # the flag really deforms, and not isometrically
-    J0, _ = triangle_maps(faces, X, positions[0])
-    stretches = np.linalg.svd(J0, compute_uv=False)  # (F, 2)
-    s_hi, s_lo = stretches.max(), stretches.min()
-    metric = np.log(s_hi / s_lo) / T
+    s0, s1 = principal_stretches(faces, X, positions[0]), principal_stretches(faces, X, positions[-1])
+    metric = max(np.log(s1.max() / s0.min()), np.log(s0.max() / s1.min())) / abs(T)
+    b = relative_stretches(faces, positions[0], positions[-1])
+    metric_frozen = max(np.log(b.max()), -np.log(b.min())) / abs(T)
     moved = np.linalg.norm(positions - rest, axis=2).max()
-    print(f"flag: moved up to {moved:.3f} m; principal stretches at t0 {s_lo:.4f}–{s_hi:.4f}; "
-          f"metric bound {metric:.4f}/s; pulled-back velocity error δ = {delta:.4f}; σ_max {smax:.3f}/s")
-    assert moved > 0.2 and s_hi / s_lo > 1.0001
+    print(f"\nflag: moved up to {moved:.3f} m; principal stretches at t0 {s0.min():.3f}–{s0.max():.3f}, "
+          f"at t0+T {s1.min():.3f}–{s1.max():.3f}; bounds {metric:.3f}/s (rest), {metric_frozen:.3f}/s (frozen); "
+          f"σ_max {smax:.3f}/s; pulled-back velocity error δ mean {delta.mean():.4f}, "
+          f"p95 {np.percentile(delta, 95):.4f}, max {delta.max():.4f}")
+    assert moved > 0.2 and s0.max() / s0.min() > 1.01
 
-    # 1. deforming vs frozen at t0: interpolation only
-    d1 = np.abs(s_def - s_frozen)
-    allowance = INTERPOLATION * delta * smax
-    print(f"deforming vs frozen: mean {d1.mean():.2e}, p95 {np.percentile(d1, 95):.2e}, max {d1.max():.2e}"
-          f" (allowance {allowance:.2e})")
-    assert d1.mean() < allowance / 4 and np.percentile(d1, 95) < allowance
+    # vertices at least two cells (0.05 m) from the border
+    cell = 2.0 / 40
+    inner = ((X[:, 0] > 1.5 * cell) & (X[:, 0] < 2.0 - 1.5 * cell)
+             & (X[:, 1] > 1.5 * cell) & (X[:, 1] < 1.2 - 1.5 * cell))
+    assert inner.sum() == (41 - 4) * (25 - 4)  # the two outer rings of the 41 × 25 grid are out
 
-    # 2. deforming vs rest: the metric bound plus the interpolation allowance, every vertex
-    d2 = np.abs(s_def - s_rest)
-    print(f"deforming vs rest: mean {d2.mean():.2e}, p95 {np.percentile(d2, 95):.2e}, max {d2.max():.2e}"
-          f" (bound {metric:.2e} + {allowance:.2e})")
-    assert np.percentile(d2, 99) <= metric + allowance
-    assert d2.mean() <= metric
+    def report(label, d, bound):
+        print(f"{label}: inner mean {d[inner].mean():.4f}, p95 {np.percentile(d[inner], 95):.4f}, "
+              f"max {d[inner].max():.4f}, within the bound {np.mean(d[inner] <= bound):.1%}; "
+              f"all vertices mean {d.mean():.4f}, within {np.mean(d <= bound):.1%}")
+
+    d = np.abs(s_def - s_rest)
+    report("deforming vs rest", d, metric)
+    assert (d[inner] <= metric).all()
+    assert d[inner].mean() < metric / 4
+
+    d_frozen = np.abs(s_def - s_frozen)
+    report("deforming vs frozen", d_frozen, metric_frozen)
+    assert np.mean(d_frozen[inner] <= metric_frozen) >= 0.95
 
     # control: the rest field fed to the moving flag as world vectors (no push-forward)
     s_wrong = madder.ftle(faces, positions, np.broadcast_to(v_rest, positions.shape).copy(), t0, T,
                           steps=STEPS, times=times)
     d_wrong = np.abs(s_wrong - s_rest)
-    print(f"control (no push-forward): mean {d_wrong.mean():.2e}, p95 {np.percentile(d_wrong, 95):.2e}")
-    assert d_wrong.mean() > 3 * d2.mean()
-
-
-# |Δσ| per unit of relative velocity error δ and of σ_max allowed for interpolation (see the
-# module doc); set from the measured figures with margin, see ARCHITECTURE.md.
-INTERPOLATION = 2.0
-
+    report("control (no push-forward) vs rest", d_wrong, metric)
+    assert np.mean(d_wrong[inner] > metric) > 0.10
+    assert d_wrong[inner].mean() > 3 * d[inner].mean()
