@@ -301,7 +301,7 @@ impl CacheReader {
         let (time, rest) = rest.split_at(timed);
         let frame_time = match time.try_into().map(f64::from_le_bytes) {
             Ok(t) if t > 0.0 && t.is_finite() => Some(t),
-            Ok(t) if t == 0.0 => None,
+            Ok(0.0) => None,
             Ok(_) => return Err(header_err("frame time is not a finite positive number")),
             Err(_) => None, // version 1: not recorded
         };
