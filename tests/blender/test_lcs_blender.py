@@ -160,3 +160,47 @@ def test_requests_that_cannot_be_served_say_why_and_change_nothing(open_fixture)
     lcs.frame, lcs.direction = 3, "BACKWARD"
     assert bpy.ops.madder.coherent_structures() == {"FINISHED"}
     assert "madder_ftle" in flag.data.attributes
+
+
+class RecordingLayout:
+    """Stands in for a panel's UILayout (none exists without a window): records what the
+    panel draws and checks each property and operator against the real RNA."""
+
+    def __init__(self, props, operators):
+        self.props, self.operators = props, operators
+        self.use_property_split = self.active = self.alert = False
+
+    def prop(self, data, name, **_kw):
+        assert name in data.bl_rna.properties, f"{type(data).__name__} has no property {name}"
+        self.props.append(name)
+
+    def operator(self, idname, **_kw):
+        category, name = idname.split(".")
+        assert hasattr(getattr(bpy.ops, category), name), idname
+        self.operators.append(idname)
+
+    def label(self, **_kw):
+        pass
+
+    def column(self, **_kw):
+        return self
+
+    row = column
+
+
+def test_the_panel_draws_every_setting(open_fixture, addon):
+    import sys
+    from types import SimpleNamespace
+
+    panels = sys.modules[addon + ".panels"]
+    open_fixture("flag.blend")
+    flag = bpy.data.objects["Flag"]
+    props, operators = [], []
+    panel = SimpleNamespace(layout=RecordingLayout(props, operators))
+    panel.layout_of = lambda context: panels._StainSubPanel.layout_of(panel, context)
+    panels.MADDER_PT_stain_lcs.draw(panel, SimpleNamespace(object=flag))
+    settings = [p.identifier for p in flag.madder.lcs.bl_rna.properties
+                if p.identifier not in ("rna_type", "name", "ridge_object")]
+    assert sorted(set(props) - {"bake_flow"}) == sorted(settings) and "bake_flow" in props
+    assert operators == ["madder.coherent_structures"]
+    assert panels.MADDER_PT_stain_lcs.bl_parent_id == "MADDER_PT_stain"
