@@ -21,7 +21,7 @@ surface at t0 + T against the spokes at t0). With `A_t` the rest → t map of th
     |σ_def − σ_rest| ≤ max(ln(s_max(A_end) / s_min(A_t0)), ln(s_max(A_t0) / s_min(A_end))) / |T|,
 
 `s` the principal stretches over the flag: equal for an isometric motion, and the flag's
-is not (Blender's cloth stretches by up to about ±20% near the pole). On top of that the
+is not (its triangles stretch or shrink by up to about 20% at t0). On top of that the
 discretization: per-vertex velocities average the one-ring's deformation, while the
 tracer pulls each triangle's velocity back with that triangle's own map, so the velocity
 it integrates is off by a relative `δ` (printed: its mean, 95th percentile and maximum
