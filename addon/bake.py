@@ -19,7 +19,7 @@ from .errors import BakeError, ExportError, FabricSettingsError
 from .placement import check_transform as _check_transform, placed
 
 CACHE_EXT = ".madder"
-FIELDS, COLOR_FIELDS = bridge.FIELDS, bridge.COLOR_FIELDS
+FIELDS, COLOR_FIELDS, FLOW_FIELDS = bridge.FIELDS, bridge.COLOR_FIELDS, bridge.FLOW_FIELDS
 __all__ = ["BakeError", "BakeJob", "MotionFile", "bake", "free", "placed", "simulator_settings", "unit_scale"]
 
 
@@ -154,7 +154,10 @@ class BakeJob:
     initial wetness of the Spill Group (weight × Amount of the object's liquid) and
     starts its splash. Every later frame steps the simulator to the frame's positions,
     then lets each source pour what it brought during that frame (and splash, the first
-    time it pours). Each frame's densities go to the cache (`FIELDS`, kg/m²).
+    time it pours). Each frame's densities go to the cache (`FIELDS`, kg/m²). With Bake
+    Flow on, so do the liquid's velocity and the cloth's positions (`FLOW_FIELDS`, m/s and
+    m, world space: what the Coherent Structures operator integrates); the cache records
+    the frame time either way.
 
     The simulator runs at the object's Detail (`madder.Simulator(detail=…)`); the cache
     holds its values at the cloth's vertices either way. With Image Sequence on, each
@@ -192,6 +195,10 @@ class BakeJob:
         self.wet0 = bridge.vertex_group_weights(obj, settings.source_group) if settings.source_group else None
         # with sources, colours can differ: track them (three more fields)
         self.fields = FIELDS + (COLOR_FIELDS if self.sources else [])
+        # the flow goes to the cloth's cache only (the fine cache feeds the images)
+        self.flow = bool(settings.bake_flow)
+        self.cache_fields = self.fields + (FLOW_FIELDS if self.flow else [])
+        self._pos = None  # this frame's positions (m), for the flow fields
         self.topology = _topology(self.madder, obj, faces, self.n_vertices, face_polygon, n_polygons)
         self.warnings = []
         n_nonmanifold = len(self.topology.non_manifold_edges())
@@ -280,7 +287,8 @@ class BakeJob:
                                             **simulator_settings(self.scene, obj, self.unit),
                                             **self.conductivity, detail=self.detail)
                 self._spill(pos)
-                self.writer = madder.CacheWriter(self.path, self.n_vertices, self.fields, self.first, self.frames)
+                self.writer = madder.CacheWriter(self.path, self.n_vertices, self.cache_fields, self.first,
+                                                 self.frames, self.dt)
                 if self.images:
                     self._begin_images()
             else:
@@ -294,7 +302,8 @@ class BakeJob:
                 self._evaluating = frame
                 self.sim.step(pos, self.dt, after=after)
                 self._pour(contacts)
-            self.writer.push_frame(self._outputs())
+            self._pos = pos
+            self.writer.push_frame(self._outputs() + self._flow())
             if self.fine_writer is not None:
                 self.fine_writer.push_frame(self._outputs(fine=True))
             self.frame = frame
@@ -323,6 +332,15 @@ class BakeJob:
             out += list(np.ascontiguousarray(sim.solute_color(fine=fine).T))
         return out
 
+    def _flow(self):
+        """With Bake Flow: this frame's liquid velocity (m/s, relative to the cloth) and
+        cloth positions (m), world space, one field per component; else nothing."""
+        if not self.flow:
+            return []
+        vel = np.asarray(self.sim.velocity, dtype=np.float32)
+        pos = np.asarray(self._pos, dtype=np.float32)
+        return [np.ascontiguousarray(a[:, k]) for a in (vel, pos) for k in range(3)]
+
     # -- the image sequence
 
     def _begin_images(self):
@@ -332,7 +350,7 @@ class BakeJob:
         self.staging.begin()
         self.fine_staged = os.path.join(self.staging.path, os.path.basename(fine))
         self.fine_writer = self.madder.CacheWriter(self.fine_staged, self.sim.n_fine_vertices, self.fields,
-                                                   self.first, self.frames)
+                                                   self.first, self.frames, self.dt)
 
     def _start_export(self):
         """Every frame is simulated: the fine cache is complete (in the staging folder);

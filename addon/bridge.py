@@ -13,8 +13,14 @@ LEGACY_DENSITY_ATTR = "madder_density"  # written by Madder before the full simu
 # with sources, also the solute's colour (the mass-weighted mix of the liquids)
 FIELDS = ["solute", "wetness", "deposit"]
 COLOR_FIELDS = ["color_r", "color_g", "color_b"]
+# with Bake Flow on (what the LCS tools integrate): the liquid's velocity relative to the
+# cloth (m/s, world space, tangent) and the cloth's positions (m, world space) per vertex
+VELOCITY_FIELDS = ["velocity_x", "velocity_y", "velocity_z"]
+POSITION_FIELDS = ["position_x", "position_y", "position_z"]
+FLOW_FIELDS = VELOCITY_FIELDS + POSITION_FIELDS
+FTLE_ATTR = "madder_ftle"
 # every attribute a bake or playback may have written (Free Bake removes them)
-ATTRIBUTES = (STAIN_ATTR, WETNESS_ATTR, DEPOSIT_ATTR, WEFT_ATTR, LEGACY_DENSITY_ATTR)
+ATTRIBUTES = (STAIN_ATTR, WETNESS_ATTR, DEPOSIT_ATTR, WEFT_ATTR, FTLE_ATTR, LEGACY_DENSITY_ATTR)
 
 
 def topology_arrays(mesh):

@@ -32,3 +32,8 @@ class RelocateError(AddonError):
 class ExportError(AddonError):
     """An image sequence cannot be written (`filename`: the file or folder; `object` once
     known)."""
+
+
+class LcsError(AddonError):
+    """Coherent structures cannot be computed from a bake (`object`, `frame`, `filename`:
+    the cache)."""

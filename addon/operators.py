@@ -7,8 +7,8 @@ bake) and blocking when executed from a script or in background mode."""
 import bpy
 from bpy.props import BoolProperty, StringProperty
 
-from . import bake, handlers, images
-from .errors import ExportError, RelocateError
+from . import bake, bridge, handlers, images, structures
+from .errors import ExportError, LcsError, RelocateError
 
 
 def _targets(context, all_objects):
@@ -249,7 +249,50 @@ class MADDER_OT_relocate_cache(bpy.types.Operator):
         return {"FINISHED"}
 
 
-classes = (MADDER_OT_bake, MADDER_OT_free_bake, MADDER_OT_export_textures, MADDER_OT_relocate_cache)
+class MADDER_OT_coherent_structures(bpy.types.Operator):
+    """FTLE of the baked liquid flow from the chosen frame over the span (the madder_ftle attribute)
+    and its ridges as curves that follow the cloth (needs a bake with Bake Flow)"""
+
+    bl_idname = "madder.coherent_structures"
+    bl_label = "Compute Coherent Structures"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        return context.object is not None
+
+    def execute(self, context):
+        obj = context.object
+        wm = context.window_manager
+        shown = []
+
+        def progress(done, total):
+            if not shown:
+                wm.progress_begin(0, total)
+                shown.append(True)
+            wm.progress_update(done)
+
+        # everything is computed before the scene changes: an error leaves it as it was
+        try:
+            result = structures.compute(bake.core(), obj, progress)
+        except (LcsError, bake.BakeError) as e:
+            self.report({"ERROR"}, f"Madder: {e}")
+            return {"CANCELLED"}
+        finally:
+            if shown:
+                wm.progress_end()
+        structures.write_ftle(obj, result.sigma)
+        ridge = structures.add_ridges(context.scene, obj, result.ridges, bake.unit_scale(context.scene))
+        s = obj.madder.lcs
+        found = f"{len(result.ridges['edges'])} ridge edges in '{ridge.name}'" if ridge else "no ridges"
+        self.report({"INFO"}, f"Madder: '{obj.name}' FTLE at frame {s.frame} over {s.span} frames "
+                              f"{s.direction.lower()}: {result.sigma.min():.3g}–{result.sigma.max():.3g} 1/s "
+                              f"(attribute {bridge.FTLE_ATTR}), {found}")
+        return {"FINISHED"}
+
+
+classes = (MADDER_OT_bake, MADDER_OT_free_bake, MADDER_OT_export_textures, MADDER_OT_relocate_cache,
+           MADDER_OT_coherent_structures)
 
 
 def register():

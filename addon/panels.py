@@ -178,6 +178,34 @@ class MADDER_PT_stain_cache(_StainSubPanel, bpy.types.Panel):
         layout.prop(s, "cache_dir")
 
 
+class MADDER_PT_stain_lcs(_StainSubPanel, bpy.types.Panel):
+    bl_label = "Coherent Structures"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout, s = self.layout_of(context)
+        lcs = s.lcs
+        layout.prop(s, "bake_flow")
+        if not s.bake_flow:
+            layout.label(text="Tick Bake Flow and bake to compute them", icon="INFO")
+        col = layout.column(align=True)
+        col.prop(lcs, "frame")
+        col.prop(lcs, "span")
+        layout.prop(lcs, "direction", expand=True)
+        layout.prop(lcs, "steps_per_frame")
+        col = layout.column(heading="Ridges", align=True)
+        col.prop(lcs, "smoothing")
+        col.prop(lcs, "hessian_smoothing")
+        col.prop(lcs, "min_edges")
+        col.prop(lcs, "min_branch")
+        col.prop(lcs, "join")
+        col.prop(lcs, "remove_valleys")
+        layout.prop(lcs, "radius")
+        layout.operator("madder.coherent_structures", icon="FORCE_VORTEX")
+        if lcs.ridge_object is not None:
+            layout.label(text=f"Ridges: {lcs.ridge_object.name}", icon="OUTLINER_OB_CURVES")
+
+
 class MADDER_PT_source(_PhysicsPanel, bpy.types.Panel):
     bl_label = "Madder Source"
 
@@ -266,6 +294,7 @@ classes = (
     MADDER_PT_stain_interactions,
     MADDER_PT_stain_look,
     MADDER_PT_stain_cache,
+    MADDER_PT_stain_lcs,
     MADDER_PT_source,
     MADDER_PT_fabric,
 )

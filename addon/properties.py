@@ -101,6 +101,98 @@ def _splash_seed():
     )
 
 
+class MadderLcsSettings(bpy.types.PropertyGroup):
+    """Coherent Structures (seed ch. 5): FTLE of the baked flow at a frame, and its ridges."""
+
+    frame: IntProperty(
+        name="Frame",
+        description="Scene frame the particles start from (t0); the FTLE and the ridges are of the "
+        "cloth at this frame",
+        default=1,
+    )
+    span: IntProperty(
+        name="Span",
+        description="How many frames the particles are traced for (the time span |T|); the span must "
+        "lie inside the bake",
+        default=12,
+        min=0,
+        soft_min=1,
+    )
+    direction: EnumProperty(
+        name="Direction",
+        description="Trace forward in time (ridges are repelling structures: where the liquid splits) "
+        "or backward (attracting structures: where it gathers)",
+        items=[
+            ("FORWARD", "Forward", "Trace from the frame forward: repelling structures"),
+            ("BACKWARD", "Backward", "Trace from the frame backward: attracting structures"),
+        ],
+        default="FORWARD",
+    )
+    steps_per_frame: IntProperty(
+        name="Steps per Frame",
+        description="RK4 steps per frame of the span (the baked velocity is linear between frames)",
+        default=4,
+        min=1,
+        soft_max=16,
+        max=256,
+    )
+    smoothing: FloatProperty(
+        name="Smoothing",
+        description="Diffusion applied to the thresholded FTLE before the ridge test, in mean edge "
+        "lengths squared (more: smoother, fewer ridges)",
+        default=1.0,
+        min=0.0,
+        soft_max=10.0,
+    )
+    hessian_smoothing: FloatProperty(
+        name="Hessian Smoothing",
+        description="Diffusion applied to the Hessian that gives the direction across a ridge, in mean "
+        "edge lengths squared",
+        default=1.0,
+        min=0.0,
+        soft_max=10.0,
+    )
+    min_edges: IntProperty(
+        name="Minimum Edges",
+        description="Cleanup: remove ridge pieces with fewer edges than this",
+        default=20,
+        min=0,
+        soft_max=200,
+    )
+    min_branch: IntProperty(
+        name="Minimum Branch",
+        description="Cleanup: remove side branches and loops at junctions shorter than this many edges",
+        default=10,
+        min=0,
+        soft_max=100,
+    )
+    join: BoolProperty(
+        name="Join at Maxima",
+        description="Let ridges meet at local maxima of the FTLE (junctions of three or more ridges)",
+        default=True,
+    )
+    remove_valleys: BoolProperty(
+        name="Remove Valleys",
+        description="Drop crossings where the FTLE slopes away from the ridge (spurious valleys of "
+        "noisy fields)",
+        default=False,
+    )
+    radius: FloatProperty(
+        name="Curve Radius",
+        description="Radius of the ridge curves as they render",
+        default=0.005,
+        min=0.0,
+        soft_max=0.1,
+        subtype="DISTANCE",
+    )
+    ridge_object: PointerProperty(
+        name="Ridge Object",
+        description="The curves object holding this cloth's ridges (replaced by the next run)",
+        type=bpy.types.Object,
+        options={"HIDDEN"},
+    )
+
+
 class MadderObjectSettings(bpy.types.PropertyGroup):
     enabled: BoolProperty(
         name="Madder Stain",
@@ -389,6 +481,17 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         default="",
         options={"HIDDEN"},
     )
+    bake_flow: BoolProperty(
+        name="Bake Flow",
+        description="The bake also stores the liquid's velocity and the cloth's positions every frame "
+        "(the cache grows about threefold), which Coherent Structures needs",
+        default=False,
+    )
+    lcs: PointerProperty(
+        type=MadderLcsSettings,
+        name="Coherent Structures",
+        description="Settings of the Coherent Structures tool (FTLE and ridges of the baked flow)",
+    )
     render_without_cache: BoolProperty(
         name="Render Without Stain",
         description="Render frames whose stain cache is missing, damaged or stale without the stain "
@@ -467,6 +570,7 @@ class MadderSourceSettings(bpy.types.PropertyGroup):
 
 
 def register():
+    bpy.utils.register_class(MadderLcsSettings)
     bpy.utils.register_class(MadderObjectSettings)
     bpy.utils.register_class(MadderSourceSettings)
     bpy.types.Object.madder = PointerProperty(type=MadderObjectSettings)
@@ -478,3 +582,4 @@ def unregister():
     del bpy.types.Object.madder
     bpy.utils.unregister_class(MadderSourceSettings)
     bpy.utils.unregister_class(MadderObjectSettings)
+    bpy.utils.unregister_class(MadderLcsSettings)

@@ -68,7 +68,7 @@ def assert_bare(obj):
 def cut_inside(path, frame):
     """Cuts the cache in the middle of `frame`'s block (layout: io/cache.rs)."""
     r = madder.CacheReader(path)
-    header = 8 + 5 * 4 + 32 * len(r.fields) + 4
+    header = 8 + 5 * 4 + 8 + 32 * len(r.fields) + 4  # version 2: + the frame time (f64)
     block = 4 + 4 * len(r.fields) * r.n_vertices + 4
     data = open(path, "rb").read()
     assert len(data) == header + block * (r.last_frame - r.first_frame + 1)
@@ -102,7 +102,7 @@ def test_a_corrupt_frame_shows_no_stain_and_names_the_frame(open_fixture, addon)
     flag, path = baked_flag(12)
     r = madder.CacheReader(path)
     block = 4 + 4 * len(r.fields) * r.n_vertices + 4
-    header = 8 + 5 * 4 + 32 * len(r.fields) + 4
+    header = 8 + 5 * 4 + 8 + 32 * len(r.fields) + 4  # version 2: + the frame time (f64)
     good = expected(path, 9)
     data = bytearray(open(path, "rb").read())
     data[header + 9 * block + 100] ^= 0xFF  # inside frame 10
@@ -121,7 +121,7 @@ def test_an_animation_render_stops_at_a_corrupt_frame(open_fixture, tmp_path, ca
     flag, path = baked_flag(12)
     r = madder.CacheReader(path)
     block = 4 + 4 * len(r.fields) * r.n_vertices + 4
-    header = 8 + 5 * 4 + 32 * len(r.fields) + 4
+    header = 8 + 5 * 4 + 8 + 32 * len(r.fields) + 4  # version 2: + the frame time (f64)
     data = bytearray(open(path, "rb").read())
     data[header + 9 * block + 100] ^= 0xFF  # inside frame 10
     open(path, "wb").write(bytes(data))

@@ -10,6 +10,7 @@ use crate::errors::{CacheError, to_py};
 
 /// Writes a cache atomically: frames go to a temporary file that replaces `path` only on
 /// `finish()`. Dropping or `abort()`-ing an unfinished writer leaves `path` untouched.
+/// `frame_time`: seconds between frames, recorded in the header (0: none).
 #[pyclass(module = "madder")]
 pub struct CacheWriter {
     inner: Option<madder::io::cache::CacheWriter>,
@@ -18,17 +19,25 @@ pub struct CacheWriter {
 #[pymethods]
 impl CacheWriter {
     #[new]
+    #[pyo3(signature = (path, n_vertices, fields, first_frame, n_frames, frame_time=0.0))]
     fn new(
         path: PathBuf,
         n_vertices: usize,
         fields: Vec<String>,
         first_frame: i32,
         n_frames: u32,
+        frame_time: f64,
     ) -> PyResult<Self> {
         let names: Vec<&str> = fields.iter().map(String::as_str).collect();
-        let inner =
-            madder::io::cache::CacheWriter::create(path, n_vertices, &names, first_frame, n_frames)
-                .map_err(to_py)?;
+        let inner = madder::io::cache::CacheWriter::create_timed(
+            path,
+            n_vertices,
+            &names,
+            first_frame,
+            n_frames,
+            frame_time,
+        )
+        .map_err(to_py)?;
         Ok(Self { inner: Some(inner) })
     }
 
@@ -176,5 +185,16 @@ impl CacheReader {
     #[getter]
     fn truncated_at(&self) -> Option<i32> {
         self.inner.truncated_at()
+    }
+    /// The file's format version (1: before frame times were recorded).
+    #[getter]
+    fn version(&self) -> u32 {
+        self.inner.version()
+    }
+    /// Seconds between frames as the bake recorded them (`None`: not recorded, e.g. a
+    /// version-1 file).
+    #[getter]
+    fn frame_time(&self) -> Option<f64> {
+        self.inner.frame_time()
     }
 }

@@ -14,8 +14,9 @@ const N_VERTICES: usize = 3;
 const FIELDS: [&str; 2] = ["solute", "wetness"];
 const FIRST: i32 = -2; // negative on purpose: frame numbers are signed
 const N_FRAMES: u32 = 5;
-/// magic + 5 words + one 32-byte name per field + the header CRC
-const HEADER: usize = 8 + 5 * 4 + 32 * FIELDS.len() + 4;
+/// magic + 5 words + the frame time (f64, version 2) + one 32-byte name per field + the
+/// header CRC
+const HEADER: usize = 8 + 5 * 4 + 8 + 32 * FIELDS.len() + 4;
 /// frame number + the fields' values + the block CRC
 const BLOCK: usize = 4 + 4 * FIELDS.len() * N_VERTICES + 4;
 
@@ -133,4 +134,131 @@ fn a_flipped_byte_fails_only_its_own_frame() {
             }
         }
     }
+}
+
+/// The fields a bake with Bake Flow on writes (the add-on's `bridge.FLOW_FIELDS`): the
+/// stain's three, then the liquid's velocity and the cloth's positions per vertex.
+const FLOW_FIELDS: [&str; 9] = [
+    "solute",
+    "wetness",
+    "deposit",
+    "velocity_x",
+    "velocity_y",
+    "velocity_z",
+    "position_x",
+    "position_y",
+    "position_z",
+];
+
+#[test]
+fn velocity_and_frame_time_round_trip() {
+    let d = tmpdir("flow");
+    let p = d.join("flow.madder");
+    let n = 4;
+    // f32 values whose bits must survive: negatives, subnormal, tiny and large
+    let value = |i: usize, k: usize, v: usize| -> f32 {
+        let base = [-3.5e-7f32, 1.0e-40, 2.75, -1.0e6][v];
+        base * (1.0 + i as f32) + (k as f32) * 0.125
+    };
+    let dt = 1.0 / 24.0;
+    let mut w = CacheWriter::create_timed(&p, n, &FLOW_FIELDS, 7, 3, dt).unwrap();
+    for i in 0..3 {
+        let fields: Vec<Vec<f32>> = (0..FLOW_FIELDS.len())
+            .map(|k| (0..n).map(|v| value(i, k, v)).collect())
+            .collect();
+        let refs: Vec<&[f32]> = fields.iter().map(Vec::as_slice).collect();
+        w.push_frame(&refs).unwrap();
+    }
+    w.finish().unwrap();
+    let bytes = std::fs::read(&p).unwrap();
+    assert_eq!(
+        bytes.len(),
+        8 + 5 * 4 + 8 + 32 * 9 + 4 + 3 * (4 + 4 * 9 * n + 4),
+        "version-2 layout"
+    );
+    let mut r = CacheReader::open(&p).unwrap();
+    assert_eq!(r.version(), 2);
+    assert_eq!(r.frame_time(), Some(dt));
+    assert_eq!(r.field_names(), FLOW_FIELDS);
+    for i in 0..3 {
+        for (k, name) in FLOW_FIELDS.iter().enumerate() {
+            let got = r.read(7 + i as i32, name).unwrap();
+            let want: Vec<f32> = (0..n).map(|v| value(i, k, v)).collect();
+            assert_eq!(
+                got.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+                want.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+                "frame {} field {name}",
+                7 + i
+            );
+        }
+    }
+    // no frame time recorded: None, and a bad one is refused before anything is written
+    let q = d.join("untimed.madder");
+    let mut w = CacheWriter::create(&q, 1, &["solute"], 0, 1).unwrap();
+    w.push_frame(&[&[1.0]]).unwrap();
+    w.finish().unwrap();
+    assert_eq!(CacheReader::open(&q).unwrap().frame_time(), None);
+    for bad in [f64::NAN, -0.5, f64::INFINITY] {
+        let e = CacheWriter::create_timed(d.join("bad.madder"), 1, &["s"], 0, 1, bad)
+            .err()
+            .unwrap_or_else(|| panic!("frame time {bad} accepted"));
+        assert!(e.to_string().contains("frame time"), "{e}");
+    }
+}
+
+/// A version-1 file (Madder before the LCS tools), built byte by byte from the layout
+/// version 1 had: the same header without `frame_time`. It still opens and reads; it has
+/// no frame time and no velocity field, and asking for one names the field and the file.
+#[test]
+fn a_version_1_cache_still_reads() {
+    let d = tmpdir("v1");
+    let p = d.join("old.madder");
+    let names = ["solute", "wetness", "deposit"];
+    let (n, first, frames) = (2usize, 3i32, 2u32);
+    let mut h = b"MADDERC\0".to_vec();
+    for w in [1u32, n as u32, names.len() as u32, first as u32, frames] {
+        h.extend_from_slice(&w.to_le_bytes());
+    }
+    for name in names {
+        let mut field = [0u8; 32];
+        field[..name.len()].copy_from_slice(name.as_bytes());
+        h.extend_from_slice(&field);
+    }
+    let crc = crc32fast::hash(&h);
+    h.extend_from_slice(&crc.to_le_bytes());
+    let value = |i: usize, k: usize, v: usize| (10 * i + 3 * k + v) as f32 * 0.5;
+    for i in 0..frames as usize {
+        let mut block = (first + i as i32).to_le_bytes().to_vec();
+        for k in 0..names.len() {
+            for v in 0..n {
+                block.extend_from_slice(&value(i, k, v).to_le_bytes());
+            }
+        }
+        let crc = crc32fast::hash(&block);
+        block.extend_from_slice(&crc.to_le_bytes());
+        h.extend_from_slice(&block);
+    }
+    std::fs::write(&p, &h).unwrap();
+    let mut r = CacheReader::open(&p).unwrap();
+    assert_eq!(r.version(), 1);
+    assert_eq!(r.frame_time(), None);
+    assert_eq!(r.field_names(), names);
+    assert_eq!((r.first_frame(), r.last_frame()), (3, 4));
+    for i in 0..2 {
+        for (k, name) in names.iter().enumerate() {
+            let want: Vec<f32> = (0..n).map(|v| value(i, k, v)).collect();
+            assert_eq!(r.read(3 + i as i32, name).unwrap(), want);
+        }
+    }
+    let e = r.read(3, "velocity_x").unwrap_err();
+    assert!(matches!(e, CacheError::FieldMissing { .. }), "{e}");
+    assert!(
+        e.to_string().contains("velocity_x") && e.to_string().contains("old.madder"),
+        "{e}"
+    );
+    // the playback read-out works on it as before
+    let (mut rgba, mut wet, mut dep) = (vec![0.0; 4 * n], vec![0.0; n], vec![0.0; n]);
+    r.read_stain(4, [100.0; 3], [1.0; 3], &mut rgba, &mut wet, &mut dep)
+        .unwrap();
+    assert_eq!(wet, vec![value(1, 1, 0) / 100.0, value(1, 1, 1) / 100.0]);
 }

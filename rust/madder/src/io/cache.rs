@@ -1,11 +1,12 @@
 //! The Madder bake cache: one file per baked object, holding named per-vertex `f32` fields
 //! for a contiguous range of frames.
 //!
-//! ## Layout (version 1, little-endian)
+//! ## Layout (version 2, little-endian)
 //! ```text
 //! header   magic  b"MADDERC\0"                 8 bytes
-//!          version u32 = 1
+//!          version u32 = 2
 //!          n_vertices u32, n_fields u32, first_frame i32, n_frames u32
+//!          frame_time f64                      (version 2 only: seconds per frame, 0 = not recorded)
 //!          n_fields × name: 32 bytes, UTF-8, NUL-padded
 //!          header_crc u32                      (CRC-32 of everything above)
 //! frames   n_frames × block, in frame order:
@@ -15,6 +16,16 @@
 //! block, not the whole file. Values are kept at full `f32` precision: densities span
 //! orders of magnitude (a faint halo next to a saturated centre), and the shader needs the
 //! faint end.
+//!
+//! ## Versions
+//! Version 1 (Madder before the LCS tools) has no `frame_time`; the reader reads both, and
+//! [`CacheReader::frame_time`] is `None` for a version-1 file (or a version-2 file written
+//! without one). Version 2 records the time between frames because the fields may include
+//! a velocity (the add-on's optional `velocity_x/y/z`, m/s, with the cloth's
+//! `position_x/y/z`, m): integrating it (seed ch. 5, `lcs`) needs the bake's frame time,
+//! which the scene's frame rate no longer tells once it is changed after the bake. Which
+//! fields a cache holds is already in its header (named fields), so the velocity itself
+//! needed no format change: a cache without it simply lacks those names.
 //!
 //! ## Safety
 //! [`CacheWriter`] writes to a temporary file next to the target and renames it over the
@@ -41,7 +52,9 @@ use crate::error::CacheError;
 use crate::io::attributes::{StainColour, stain_attributes};
 
 pub(crate) const MAGIC: &[u8; 8] = b"MADDERC\0";
-pub(crate) const VERSION: u32 = 1;
+pub(crate) const VERSION: u32 = 2;
+/// The first version, without `frame_time`, still read.
+pub(crate) const VERSION_1: u32 = 1;
 const NAME_LEN: usize = 32;
 
 /// Streams frames into a new cache file; the target is replaced only on [`finish`](Self::finish).
@@ -57,13 +70,27 @@ pub struct CacheWriter {
 }
 
 impl CacheWriter {
-    /// Starts a cache for `n_frames` frames from `first_frame`, with fields `names`.
+    /// Starts a cache for `n_frames` frames from `first_frame`, with fields `names` (no
+    /// frame time recorded).
     pub fn create(
         path: impl AsRef<Path>,
         n_vertices: usize,
         names: &[&str],
         first_frame: i32,
         n_frames: u32,
+    ) -> Result<Self, CacheError> {
+        Self::create_timed(path, n_vertices, names, first_frame, n_frames, 0.0)
+    }
+
+    /// [`Self::create`], recording `frame_time` seconds between frames (finite, > 0; 0 records
+    /// none).
+    pub fn create_timed(
+        path: impl AsRef<Path>,
+        n_vertices: usize,
+        names: &[&str],
+        first_frame: i32,
+        n_frames: u32,
+        frame_time: f64,
     ) -> Result<Self, CacheError> {
         let path = path.as_ref().to_path_buf();
         let usage = |reason: String| CacheError::Usage { reason };
@@ -86,6 +113,11 @@ impl CacheWriter {
                 "{n_frames} frames from frame {first_frame} run past the i32 frame range"
             )));
         }
+        if !(frame_time.is_finite() && frame_time >= 0.0) {
+            return Err(usage(format!(
+                "frame time {frame_time} s must be finite and ≥ 0 (0: not recorded)"
+            )));
+        }
         let mut tmp_name = path.file_name().unwrap_or_default().to_os_string();
         tmp_name.push(format!(".tmp{}", std::process::id()));
         let tmp = path.with_file_name(tmp_name);
@@ -101,6 +133,7 @@ impl CacheWriter {
         header.extend_from_slice(&(names.len() as u32).to_le_bytes());
         header.extend_from_slice(&first_frame.to_le_bytes());
         header.extend_from_slice(&n_frames.to_le_bytes());
+        header.extend_from_slice(&frame_time.to_le_bytes());
         for n in names {
             let mut field = [0u8; NAME_LEN];
             field[..n.len()].copy_from_slice(n.as_bytes());
@@ -201,6 +234,8 @@ pub struct CacheReader {
     names: Vec<String>,
     first_frame: i32,
     n_frames: u32,
+    version: u32,
+    frame_time: Option<f64>,
     /// Whole blocks in the file (`n_frames` unless it is truncated).
     complete: u32,
     header_len: u64,
@@ -232,7 +267,7 @@ impl CacheReader {
         }
         let word = |i: usize| u32::from_le_bytes(fixed[i..i + 4].try_into().unwrap());
         let version = word(8);
-        if version != VERSION {
+        if version != VERSION && version != VERSION_1 {
             return Err(CacheError::Version {
                 path,
                 found: version,
@@ -251,17 +286,26 @@ impl CacheReader {
         if !frame_range_fits(first_frame, n_frames) {
             return Err(header_err("frame range does not fit in i32"));
         }
-        let mut rest = vec![0u8; n_fields * NAME_LEN + 4];
+        let timed = if version == VERSION { 8 } else { 0 };
+        let mut rest = vec![0u8; timed + n_fields * NAME_LEN + 4];
         read_exact_or(&mut file, &mut rest, || {
             header_err("file is shorter than the header")
         })?;
         let mut header = fixed.to_vec();
-        header.extend_from_slice(&rest[..n_fields * NAME_LEN]);
-        let crc = u32::from_le_bytes(rest[n_fields * NAME_LEN..].try_into().unwrap());
+        let (rest, crc) = rest.split_at(timed + n_fields * NAME_LEN);
+        header.extend_from_slice(rest);
+        let crc = u32::from_le_bytes(crc.try_into().unwrap());
         if crc32fast::hash(&header) != crc {
             return Err(header_err("header checksum mismatch"));
         }
-        let names = rest[..n_fields * NAME_LEN]
+        let (time, rest) = rest.split_at(timed);
+        let frame_time = match time.try_into().map(f64::from_le_bytes) {
+            Ok(t) if t > 0.0 && t.is_finite() => Some(t),
+            Ok(0.0) => None,
+            Ok(_) => return Err(header_err("frame time is not a finite positive number")),
+            Err(_) => None, // version 1: not recorded
+        };
+        let names = rest
             .chunks(NAME_LEN)
             .map(|c| {
                 let end = c.iter().position(|&b| b == 0).unwrap_or(NAME_LEN);
@@ -277,6 +321,8 @@ impl CacheReader {
             names,
             first_frame,
             n_frames,
+            version,
+            frame_time,
             complete: n_frames,
             header_len,
             block: Vec::new(),
@@ -316,6 +362,15 @@ impl CacheReader {
     /// The fields of every frame, in stored order.
     pub fn field_names(&self) -> &[String] {
         &self.names
+    }
+    /// The format version of the file (1 or 2).
+    pub fn version(&self) -> u32 {
+        self.version
+    }
+    /// Seconds between frames, as the bake recorded it (`None`: a version-1 file, or none
+    /// recorded).
+    pub fn frame_time(&self) -> Option<f64> {
+        self.frame_time
     }
     /// The first frame the header declares.
     pub fn first_frame(&self) -> i32 {
@@ -585,6 +640,7 @@ mod tests {
             for w in [VERSION, n_vertices, 1, first_frame as u32, n_frames] {
                 h.extend_from_slice(&w.to_le_bytes());
             }
+            h.extend_from_slice(&0f64.to_le_bytes());
             h.extend_from_slice(&[b'd'; NAME_LEN]);
             let crc = crc32fast::hash(&h);
             h.extend_from_slice(&crc.to_le_bytes());
