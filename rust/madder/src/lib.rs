@@ -63,6 +63,7 @@
 #![warn(unreachable_pub)]
 #![allow(rustdoc::private_intra_doc_links)]
 
+pub mod angles;
 pub mod error;
 pub mod io;
 pub mod lcs;
@@ -74,6 +75,7 @@ pub mod texture;
 pub mod weave;
 
 pub use error::{
-    CacheError, Error, LcsError, MeshError, ParamError, SolveError, TextureError, WeaveError,
+    AngleError, CacheError, Error, LcsError, MeshError, ParamError, SolveError, TextureError,
+    WeaveError,
 };
 pub use io::point_cache::PointCacheError;
