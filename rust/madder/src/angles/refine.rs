@@ -165,7 +165,10 @@ pub(crate) fn descend(
     iterations: usize,
 ) -> (DMat3, Vec<f64>) {
     let mut l = l0;
-    let (mut e, mut g) = residual_gradient(mesh, target, &embed(l, q));
+    let x0 = embed(l, q);
+    // E from `residual` throughout (the gradient's own sum runs in another order)
+    let mut e = residual(mesh, target, &x0);
+    let mut g = residual_gradient(mesh, target, &x0).1;
     let mut history = vec![e];
     let mut step = f64::NAN;
     for _ in 0..iterations {
@@ -196,9 +199,8 @@ pub(crate) fn descend(
             let ec = residual(mesh, target, &xe);
             if ec <= e - 1e-4 * step * gn2 && ec < e {
                 l = cand;
-                let (ne, ng) = residual_gradient(mesh, target, &xe);
-                e = ne;
-                g = ng;
+                e = ec;
+                g = residual_gradient(mesh, target, &xe).1;
                 accepted = true;
                 step *= 2.0;
                 break;
