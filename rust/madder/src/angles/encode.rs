@@ -187,7 +187,7 @@ impl AngleMesh {
             let p = t.map(|v| positions[v as usize]);
             let n = (p[1] - p[0]).cross(p[2] - p[0]).length();
             let scale = (p[1] - p[0]).length() * (p[2] - p[0]).length();
-            if !(n > 1e-14 * scale) {
+            if n.is_nan() || n <= 1e-14 * scale {
                 return Err(AngleError::DegenerateFace { face });
             }
         }

@@ -49,7 +49,7 @@ impl Placement {
         }
         let [p0, p1, p2] = self.positions;
         let n = (p1 - p0).cross(p2 - p0).length();
-        if !self.positions.iter().all(|p| p.is_finite()) || !(n > 0.0) {
+        if !self.positions.iter().all(|p| p.is_finite()) || n.is_nan() || n <= 0.0 {
             return Err(AngleError::PlacementPositions);
         }
         Ok(())

@@ -180,7 +180,7 @@ pub(crate) fn descend(
             .iter()
             .map(|c| c.length_squared())
             .sum::<f64>();
-        if !(gn2 > 0.0) || !gn2.is_finite() {
+        if !gn2.is_finite() || gn2 <= 0.0 {
             break;
         }
         if !step.is_finite() {

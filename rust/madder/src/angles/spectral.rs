@@ -197,9 +197,8 @@ fn sym_matvec(p: &Pattern, values: &[f64], x: &[f64], y: &mut [f64]) {
     for c in 0..p.n {
         let (s, e) = (p.col_ptr[c] as usize, p.col_ptr[c + 1] as usize);
         let mut acc = 0.0;
-        for k in s..e {
-            let r = p.row_idx[k] as usize;
-            let v = values[k];
+        for (&r, &v) in p.row_idx[s..e].iter().zip(&values[s..e]) {
+            let r = r as usize;
             if r == c {
                 acc += v * x[c];
             } else {
@@ -337,7 +336,7 @@ fn lowest(
     orthonormalize(&mut x, n, BLOCK);
     let mut ax = vec![0.0; n * BLOCK];
     let mut prev_change = f64::INFINITY;
-    let mut ritz = vec![0.0; BLOCK];
+    let mut ritz = [0.0; BLOCK];
     let mut rounds = 0;
     loop {
         rounds += 1;
@@ -489,13 +488,13 @@ fn vote(mesh: &AngleMesh, local: &[(DMat3, DMat3)], g: &[DMat3], l0: DMat3) -> D
             let ba = *fb1 * f1.transpose() + *fb2 * f2.transpose();
             let aa = f1 * f1.transpose() + f2 * f2.transpose();
             let det = aa.determinant();
-            if !(det.abs() > 0.0) || !det.is_finite() {
+            if !det.is_finite() || det == 0.0 {
                 return None;
             }
             let t = ba * aa.inverse();
             let s = svd3(t);
             let norm = s.sigma.length();
-            if !(norm > 0.0) || !norm.is_finite() {
+            if !norm.is_finite() || norm <= 0.0 {
                 return None;
             }
             let v = s.v;
