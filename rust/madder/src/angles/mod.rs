@@ -66,7 +66,7 @@
 //! 10⁻⁴ per round on consistent angles: a handful of triangular solves, each reusing the one
 //! factorization. LOBPCG would need fewer solves on a poor shift but more code and
 //! breakdown handling; with the shift this good, the plain iteration is simpler and
-//! deterministic. Stopping: when the wanted subspace moves by less than `10⁻¹³`, or stops
+//! deterministic. Stopping: when the wanted subspace moves by less than `10⁻¹⁰`, or stops
 //! improving (rounding floor) once below `10⁻⁸`; else an error after 200 rounds.
 //!
 //! ## Affine correction by voting (§3.3.2, Algorithm 1)

@@ -21,7 +21,7 @@ const SHIFT_REL: f64 = 1e-12;
 const WANTED: usize = 3;
 const BLOCK: usize = 7;
 /// Subspace iteration: converged below this change of the wanted subspace...
-const TOL: f64 = 1e-13;
+const TOL: f64 = 1e-10;
 /// ... or when the change stops shrinking below this one (the rounding floor).
 const FLOOR: f64 = 1e-8;
 const MAX_ROUNDS: usize = 200;
