@@ -62,8 +62,9 @@
 //! shift of the spectrum's origin, which makes the singular matrix positive definite yet
 //! sits far below `λ₅`) and run subspace iteration with `(A₁ + σI)⁻¹` on a block of 7 (3
 //! wanted + 4 guard vectors), kept orthogonal to the translation, with a Rayleigh–Ritz step
-//! on `A₁` each round. The wanted vectors converge like `((λ₃' + σ)/(λ₈' + σ))ᵏ`, about
-//! 10⁻⁴ per round on consistent angles: a handful of triangular solves, each reusing the one
+//! on `A₁` each round. The wanted vectors converge like `((λ₃' + σ)/(λ₈' + σ))ᵏ`: on
+//! consistent angles `λ₃' ≈ 0` and the factor is below `σ/λ₄ ≈ 10⁻⁷` at 10k vertices,
+//! `10⁻⁵` at 100k (measured `λ₄/diag` 4·10⁻⁶ and 4·10⁻⁸): a handful of triangular solves, each reusing the one
 //! factorization. LOBPCG would need fewer solves on a poor shift but more code and
 //! breakdown handling; with the shift this good, the plain iteration is simpler and
 //! deterministic. Stopping: when the wanted subspace moves by less than `10⁻¹⁰`, or stops
