@@ -103,6 +103,7 @@ fn build(py: Python<'_>, e: &madder::Error) -> PyResult<PyErr> {
     let (class, f) = match e {
         Error::Mesh(m) => (py.get_type::<MeshError>(), mesh_fields(f, m)),
         Error::Lcs(l) => lcs_class_fields(py, f, l),
+        Error::Angles(a) => angle_class_fields(py, f, a),
         Error::Param(p) => (
             py.get_type::<ParameterError>(),
             match p {
@@ -361,6 +362,80 @@ fn mesh_fields<'py>(f: Fields<'py>, m: &madder::error::MeshError) -> Fields<'py>
             .set("level", level)
             .set("vertices", vertices)
             .set("max", max),
+    }
+}
+
+/// The angle representation (`madder.encode_angles`, `madder.decode_angles`): mesh
+/// problems are `MeshError`s naming the edge, face or vertex; bad angles, arrays and options
+/// `ParameterError`s naming the face corner, the edge or the array.
+fn angle_class_fields<'py>(
+    py: Python<'py>,
+    f: Fields<'py>,
+    a: &madder::AngleError,
+) -> (Bound<'py, pyo3::types::PyType>, Fields<'py>) {
+    use madder::AngleError as A;
+    let param = py.get_type::<ParameterError>();
+    let mesh = py.get_type::<MeshError>();
+    match a {
+        A::Mesh(m) => (mesh, mesh_fields(f, m)),
+        A::NonManifoldEdge { a, b, faces } => (mesh, f.set("edge", (a, b)).set("faces", faces)),
+        A::NotOrientable {
+            a,
+            b,
+            face_a,
+            face_b,
+        } => (
+            mesh,
+            f.set("edge", (a, b))
+                .set("face", face_a)
+                .set("other_face", face_b),
+        ),
+        A::LooseVertex { vertex } => (mesh, f.set("vertex", vertex)),
+        A::Disconnected { face } | A::DegenerateFace { face } => (mesh, f.set("face", face)),
+        A::CornerCount { expected, got } => (
+            param,
+            f.set("name", "corners")
+                .set("expected", expected)
+                .set("got", got),
+        ),
+        A::DihedralCount { expected, got } => (
+            param,
+            f.set("name", "dihedrals")
+                .set("expected", expected)
+                .set("got", got),
+        ),
+        A::NonFiniteCorner { face, corner } => (
+            param,
+            f.set("name", "corners")
+                .set("face", face)
+                .set("corner", corner),
+        ),
+        A::NonFiniteDihedral { edge, a, b } => (
+            param,
+            f.set("name", "dihedrals")
+                .set("index", edge)
+                .set("edge", (a, b)),
+        ),
+        A::PlacementFace { face, n_faces } => (
+            param,
+            f.set("name", "reference_face")
+                .set("face", face)
+                .set("n_faces", n_faces),
+        ),
+        A::PlacementPositions => (param, f.set("name", "reference_positions")),
+        A::PlacementIncomplete => (param, f.set("name", "reference_face")),
+        A::Method { method } => (param, f.set("name", "method").set("value", method)),
+        A::Shape {
+            name,
+            expected,
+            got,
+        } => (
+            param,
+            f.set("name", name)
+                .set("expected", expected)
+                .set("got", got),
+        ),
+        A::Solve(s) => (py.get_type::<SolveError>(), solve_fields(f, s)),
     }
 }
 

@@ -7,6 +7,7 @@
 
 use pyo3::prelude::*;
 
+mod angles;
 mod errors;
 mod io;
 mod lcs;
@@ -37,6 +38,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<io::CacheReader>()?;
     m.add_function(wrap_pyfunction!(lcs::ftle, m)?)?;
     m.add_function(wrap_pyfunction!(lcs::ridges, m)?)?;
+    m.add_function(wrap_pyfunction!(angles::encode_angles, m)?)?;
+    m.add_function(wrap_pyfunction!(angles::decode_angles, m)?)?;
     weave::register(m)?;
     point_cache::register(m)?;
     texture::register(m)?;

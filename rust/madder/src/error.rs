@@ -553,6 +553,130 @@ pub enum LcsError {
     Solve(#[from] SolveError),
 }
 
+/// Bad input to the angle-based surface representation (module [`crate::angles`], seed
+/// ch. 3). Edges are named by their two vertices, faces and corners by index.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum AngleError {
+    /// Bad topology or positions (count, non-finite, index out of range).
+    #[error(transparent)]
+    Mesh(#[from] MeshError),
+    /// An edge shared by three or more faces.
+    #[error(
+        "edge ({a}, {b}) is shared by {faces} faces: the angle representation needs a manifold mesh"
+    )]
+    NonManifoldEdge {
+        /// One end.
+        a: u32,
+        /// The other end.
+        b: u32,
+        /// How many faces share it.
+        faces: usize,
+    },
+    /// An edge traversed in the same direction by both of its faces.
+    #[error(
+        "edge ({a}, {b}) runs the same way in faces {face_a} and {face_b}: the faces are not \
+         consistently oriented (or the mesh is not orientable)"
+    )]
+    NotOrientable {
+        /// One end.
+        a: u32,
+        /// The other end.
+        b: u32,
+        /// One face.
+        face_a: usize,
+        /// The other face.
+        face_b: usize,
+    },
+    /// A vertex used by no face (its position is not determined by any angle).
+    #[error("vertex {vertex} is used by no face (its position is not determined by the angles)")]
+    LooseVertex {
+        /// The vertex.
+        vertex: usize,
+    },
+    /// A face not reachable from face 0 across interior edges.
+    #[error(
+        "face {face} is not connected to face 0 across interior edges: reconstruct each \
+         connected piece on its own"
+    )]
+    Disconnected {
+        /// The first face not reached.
+        face: usize,
+    },
+    /// A face of zero area (its angles are undefined).
+    #[error("face {face} is degenerate (zero area): its angles are undefined")]
+    DegenerateFace {
+        /// The face.
+        face: usize,
+    },
+    /// Corner angles for another number of faces.
+    #[error("expected corner angles for {expected} faces, got {got}")]
+    CornerCount {
+        /// How many faces the mesh has.
+        expected: usize,
+        /// How many rows were given.
+        got: usize,
+    },
+    /// Dihedral angles for another number of interior edges.
+    #[error("expected {expected} dihedral angles (one per interior edge), got {got}")]
+    DihedralCount {
+        /// How many interior edges the mesh has.
+        expected: usize,
+        /// How many were given.
+        got: usize,
+    },
+    /// A corner angle that is NaN or infinite.
+    #[error("corner {corner} of face {face} has a non-finite angle")]
+    NonFiniteCorner {
+        /// The face.
+        face: usize,
+        /// The corner (0, 1 or 2).
+        corner: usize,
+    },
+    /// A dihedral angle that is NaN or infinite.
+    #[error("the dihedral angle of edge ({a}, {b}) (interior edge {edge}) is not finite")]
+    NonFiniteDihedral {
+        /// Index into the interior edge list.
+        edge: usize,
+        /// One end.
+        a: u32,
+        /// The other end.
+        b: u32,
+    },
+    /// A reference face (the rigid placement) that the mesh does not have.
+    #[error("reference face {face} is out of range (the mesh has {n_faces} faces)")]
+    PlacementFace {
+        /// The face.
+        face: usize,
+        /// How many faces the mesh has.
+        n_faces: usize,
+    },
+    /// Reference positions that are non-finite or a degenerate triangle.
+    #[error("the reference triangle's positions are not finite or have zero area")]
+    PlacementPositions,
+    /// Only one of a reference face and its positions (from the binding).
+    #[error("reference_face and reference_positions must be given together")]
+    PlacementIncomplete,
+    /// A reconstruction method that does not exist (from the binding).
+    #[error("method must be 'spectral' or 'sequential', got {method:?}")]
+    Method {
+        /// The method given.
+        method: String,
+    },
+    /// An array of the wrong shape (from the binding).
+    #[error("{name} has shape {got}, expected {expected}")]
+    Shape {
+        /// The array.
+        name: String,
+        /// The shape expected, e.g. `(100, 3)`.
+        expected: String,
+        /// The shape given.
+        got: String,
+    },
+    /// The eigen-solve (sparse Cholesky or subspace iteration) failed.
+    #[error("angle reconstruction: {0}")]
+    Solve(#[from] SolveError),
+}
+
 /// Any core error. The binding crate maps each variant to a typed Python exception.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
@@ -580,6 +704,9 @@ pub enum Error {
     /// Bad input to FTLE or ridge extraction.
     #[error(transparent)]
     Lcs(#[from] LcsError),
+    /// Bad input to the angle representation.
+    #[error(transparent)]
+    Angles(#[from] AngleError),
 }
 
 #[cfg(test)]

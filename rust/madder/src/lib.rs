@@ -12,7 +12,16 @@
 //! | §2.2.2, eq. 2.4 | the periodic cell problem, P1 on the torus: rigorous upper and lower bounds | [`weave::Grid`], [`weave::Bounds`] (`weave/cell_problem.rs`) |
 //! | §2.2.2, eq. 2.3 | the effective tensor: tile reduction, levels, primal–dual extrapolation; memoized | [`weave::homogenize()`], [`weave::homogenize_cached`] |
 //!
-//! ## Chapter 3: angle-based surface representation — not built yet
+//! ## Chapter 3: angle-based surface representation — [`angles`]
+//! | seed | what | where |
+//! |---|---|---|
+//! | §3.3, eq. 3.1 | corner and signed dihedral angles of a manifold, oriented mesh | [`angles::AngleMesh::encode`] (`angles/encode.rs`) |
+//! | §3.3.4 | preprocessing: clamp with ε = 0.02, corners rescaled to sum to π | `angles/local.rs` |
+//! | §3.3.1, eq. 3.2, Figs. 3.1–3.2 | local four-vertex constructions, face frames, transition matrices | `angles/local.rs` |
+//! | §3.3.1–§3.3.2, eq. 3.3 | the quadratic form, its lowest eigenvectors (shift-invert subspace iteration), voting with polar decomposition | [`angles::AngleMesh::reconstruct`] (`angles/spectral.rs`) |
+//! | §3.3.3 | descent in the 12-D space with analytic angle derivatives | `angles/refine.rs` |
+//! | §3.3, §3.4 | the sequential breadth-first construction (baseline) | [`angles::AngleMesh::sequential`] (`angles/sequential.rs`) |
+//! | — | rigid placement and scale kept apart: a reference triangle | [`angles::Placement`] (`angles/place.rs`) |
 //!
 //! ## Chapter 4: fluid simulation on a deforming surface — [`mesh`], [`ops`], [`stain`]
 //! | seed | what | where |
@@ -63,6 +72,7 @@
 #![warn(unreachable_pub)]
 #![allow(rustdoc::private_intra_doc_links)]
 
+pub mod angles;
 pub mod error;
 pub mod io;
 pub mod lcs;
@@ -74,6 +84,7 @@ pub mod texture;
 pub mod weave;
 
 pub use error::{
-    CacheError, Error, LcsError, MeshError, ParamError, SolveError, TextureError, WeaveError,
+    AngleError, CacheError, Error, LcsError, MeshError, ParamError, SolveError, TextureError,
+    WeaveError,
 };
 pub use io::point_cache::PointCacheError;

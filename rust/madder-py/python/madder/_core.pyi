@@ -82,6 +82,21 @@ def ridges(
 ) -> dict[str, npt.NDArray[Any]]:
     """Ridges of a field: triangles (P,), barycentric (P, 3), points (P, 3), edges (E, 2)."""
 
+def encode_angles(faces: _U32, positions: _F64) -> tuple[_F64, _F64, _U32]:
+    """Corner angles (F, 3), signed dihedral angles (E,) and interior edges (E, 2) (seed ch. 3)."""
+
+def decode_angles(
+    faces: _U32,
+    corners: _F64,
+    dihedrals: _F64,
+    *,
+    reference_face: int | None = None,
+    reference_positions: _F64 | None = None,
+    refine_iterations: int = 0,
+    method: str = "spectral",
+) -> _F64:
+    """Vertex positions (N, 3) from corner and dihedral angles (spectral or sequential)."""
+
 def weft_directions(
     topology: Topology,
     positions: _F32,

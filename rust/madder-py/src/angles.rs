@@ -1,0 +1,151 @@
+//! `encode_angles` and `decode_angles`: the angle-based surface representation (core module
+//! `angles`, seed ch. 3). Conversion only; the GIL is released around the core calls.
+
+use glam::DVec3;
+use numpy::{
+    PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
+};
+use pyo3::prelude::*;
+
+use madder::AngleError;
+use madder::angles::{AngleMesh, Angles, Placement, ReconstructOptions};
+
+use crate::errors::to_py;
+
+fn shape_error(name: &str, expected: &str, got: &[usize]) -> PyErr {
+    to_py(AngleError::Shape {
+        name: name.into(),
+        expected: expected.into(),
+        got: format!("{got:?}").replace('[', "(").replace(']', ")"),
+    })
+}
+
+fn faces_of(faces: &PyReadonlyArray2<'_, u32>) -> PyResult<Vec<[u32; 3]>> {
+    let shape = faces.shape();
+    if shape[1] != 3 || shape[0] == 0 {
+        return Err(shape_error("faces", "(F, 3) with F > 0", shape));
+    }
+    Ok(faces
+        .as_array()
+        .rows()
+        .into_iter()
+        .map(|r| [r[0], r[1], r[2]])
+        .collect())
+}
+
+fn rows3(name: &str, a: &PyReadonlyArray2<'_, f64>, n: Option<usize>) -> PyResult<Vec<DVec3>> {
+    let shape = a.shape();
+    if shape[1] != 3 || n.is_some_and(|n| n != shape[0]) {
+        let expected = n.map_or("(N, 3)".to_string(), |n| format!("({n}, 3)"));
+        return Err(shape_error(name, &expected, shape));
+    }
+    Ok(a.as_array()
+        .rows()
+        .into_iter()
+        .map(|r| DVec3::new(r[0], r[1], r[2]))
+        .collect())
+}
+
+/// The vertex count of a mesh whose every vertex is used: the largest index + 1.
+fn vertex_count(faces: &[[u32; 3]]) -> usize {
+    faces.iter().flatten().max().map_or(0, |&m| m as usize + 1)
+}
+
+/// Corner angles `(F, 3)`, signed dihedral angles `(E,)` and the interior edges `(E, 2)`
+/// (`a < b`, the dihedrals' order) of the mesh `faces` at `positions`.
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+pub fn encode_angles<'py>(
+    py: Python<'py>,
+    faces: PyReadonlyArray2<'py, u32>,
+    positions: PyReadonlyArray2<'py, f64>,
+) -> PyResult<(
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray2<u32>>,
+)> {
+    let tris = faces_of(&faces)?;
+    let pos = rows3("positions", &positions, None)?;
+    let n = pos.len();
+    let (angles, edges) = py
+        .detach(|| {
+            let mesh = AngleMesh::new(n, tris)?;
+            let a = mesh.encode(&pos)?;
+            Ok::<_, AngleError>((a, mesh.interior_edges()))
+        })
+        .map_err(to_py)?;
+    let f = angles.corners.len();
+    let e = edges.len();
+    let corners = PyArray1::from_vec(py, angles.corners.concat()).reshape([f, 3])?;
+    let dihedrals = PyArray1::from_vec(py, angles.dihedrals);
+    let edges = PyArray1::from_vec(py, edges.concat()).reshape([e, 2])?;
+    Ok((corners, dihedrals, edges))
+}
+
+/// Vertex positions `(N, 3)` from corner angles `(F, 3)` and dihedral angles `(E,)`.
+#[pyfunction]
+#[pyo3(signature = (faces, corners, dihedrals, *, reference_face=None, reference_positions=None, refine_iterations=0, method="spectral"))]
+#[allow(clippy::too_many_arguments)]
+pub fn decode_angles<'py>(
+    py: Python<'py>,
+    faces: PyReadonlyArray2<'py, u32>,
+    corners: PyReadonlyArray2<'py, f64>,
+    dihedrals: PyReadonlyArray1<'py, f64>,
+    reference_face: Option<usize>,
+    reference_positions: Option<PyReadonlyArray2<'py, f64>>,
+    refine_iterations: usize,
+    method: &str,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let tris = faces_of(&faces)?;
+    let cs = corners.shape();
+    if cs[1] != 3 {
+        return Err(shape_error("corners", &format!("({}, 3)", tris.len()), cs));
+    }
+    let corners: Vec<[f64; 3]> = corners
+        .as_array()
+        .rows()
+        .into_iter()
+        .map(|r| [r[0], r[1], r[2]])
+        .collect();
+    let dihedrals = dihedrals.as_array().to_vec();
+    let placement = match (reference_face, reference_positions) {
+        (None, None) => None,
+        (Some(face), Some(p)) => {
+            let p = rows3("reference_positions", &p, Some(3))?;
+            Some(Placement {
+                face,
+                positions: [p[0], p[1], p[2]],
+            })
+        }
+        _ => {
+            return Err(to_py(AngleError::PlacementIncomplete));
+        }
+    };
+    let sequential = match method {
+        "spectral" => false,
+        "sequential" => true,
+        _ => {
+            return Err(to_py(AngleError::Method {
+                method: method.into(),
+            }));
+        }
+    };
+    let n = vertex_count(&tris);
+    let x = py
+        .detach(|| {
+            let mesh = AngleMesh::new(n, tris)?;
+            let angles = Angles { corners, dihedrals };
+            if sequential {
+                mesh.sequential(&angles, placement.as_ref())
+            } else {
+                let opts = ReconstructOptions {
+                    refine_iterations,
+                    placement,
+                };
+                mesh.reconstruct(&angles, &opts).map(|r| r.positions)
+            }
+        })
+        .map_err(to_py)?;
+    let flat: Vec<f64> = x.iter().flat_map(|p| p.to_array()).collect();
+    PyArray1::from_vec(py, flat).reshape([n, 3])
+}

@@ -1,0 +1,89 @@
+//! `make bench`: surfaces from angles (`madder::angles`, seed ch. 3). Prints figures; asserts
+//! nothing about time.
+//!
+//! Spectral reconstruction of a closed mesh (a wavy torus, 10k and 100k vertices) from its
+//! exact angles and from angles with ±10 % dihedral noise, and the sequential baseline on the
+//! same input. Targets (issue 15): 10k ≤ 1 s, 100k ≤ 15 s on 2 cores.
+
+use std::f64::consts::PI;
+use std::time::Instant;
+
+use glam::DVec3;
+use madder::angles::{AngleMesh, Angles, ReconstructOptions};
+use madder::rng::SplitMix64;
+
+fn torus(nu: usize, nv: usize) -> (Vec<[u32; 3]>, Vec<DVec3>) {
+    let idx = |i: usize, j: usize| ((i % nu) * nv + (j % nv)) as u32;
+    let mut f = Vec::with_capacity(2 * nu * nv);
+    for i in 0..nu {
+        for j in 0..nv {
+            let (a, b, c, d) = (idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1));
+            f.extend([[a, b, c], [a, c, d]]);
+        }
+    }
+    let mut x = Vec::with_capacity(nu * nv);
+    for i in 0..nu {
+        for j in 0..nv {
+            let u = 2.0 * PI * i as f64 / nu as f64;
+            let v = 2.0 * PI * j as f64 / nv as f64;
+            let r = 0.4 * (1.0 + 0.15 * (5.0 * u).sin() * (3.0 * v).cos());
+            let big = 1.0 + r * v.cos();
+            x.push(DVec3::new(big * u.cos(), big * u.sin(), r * v.sin()));
+        }
+    }
+    (f, x)
+}
+
+fn noisy(a: &Angles, pct: f64) -> Angles {
+    let mut rng = SplitMix64::new(1);
+    Angles {
+        corners: a.corners.clone(),
+        dihedrals: a
+            .dihedrals
+            .iter()
+            .map(|d| d * (1.0 + pct / 100.0 * (2.0 * rng.unit() - 1.0)))
+            .collect(),
+    }
+}
+
+fn case(nu: usize, nv: usize) {
+    let (f, x) = torus(nu, nv);
+    let t = Instant::now();
+    let mesh = AngleMesh::new(x.len(), f).unwrap();
+    let exact = mesh.encode(&x).unwrap();
+    let t_encode = t.elapsed().as_secs_f64();
+    println!(
+        "torus {} vertices, {} faces: connectivity + encode {:.3} s",
+        x.len(),
+        mesh.n_faces(),
+        t_encode
+    );
+    for (label, a) in [
+        ("exact", exact.clone()),
+        ("10 % noise", noisy(&exact, 10.0)),
+    ] {
+        let t = Instant::now();
+        let r = mesh
+            .reconstruct(&a, &ReconstructOptions::default())
+            .unwrap();
+        let t_rec = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let _ = mesh.sequential(&a, None).unwrap();
+        let t_seq = t.elapsed().as_secs_f64();
+        println!(
+            "  {label:10}: spectral {t_rec:.3} s ({} rounds, λ/diag {:.1e} {:.1e} {:.1e} | {:.1e}), sequential {t_seq:.3} s",
+            r.rounds, r.eigenvalues[0], r.eigenvalues[1], r.eigenvalues[2], r.eigenvalues[3]
+        );
+    }
+}
+
+fn main() {
+    println!(
+        "angles bench, {} rayon threads",
+        rayon::current_num_threads()
+    );
+    case(125, 80);
+    if std::env::var_os("MADDER_BENCH_QUICK").is_none() {
+        case(400, 250);
+    }
+}

@@ -1,0 +1,548 @@
+//! The spectral reconstruction (§3.3.1–§3.3.2, Algorithm 1): the scalar quadratic form
+//! `A₁` (eqs. 3.2–3.3), its lowest eigenvectors by shift-invert subspace iteration, the
+//! affine correction by voting, and the optional descent (§3.3.3). The math is in the
+//! module docs of [`crate::angles`].
+
+use glam::{DMat3, DVec3};
+use rayon::prelude::*;
+
+use super::encode::{AngleMesh, Angles};
+use super::local::{preprocess, transitions};
+use super::place::Placement;
+use super::refine::{descend, embed, residual};
+use crate::error::{AngleError, SolveError};
+use crate::mesh::kabsch::svd3;
+use crate::ops::{LowerCsc, PrefactoredSpd};
+use crate::rng::SplitMix64;
+
+/// The shift `σ` relative to the mean diagonal of `A₁` (see the module docs).
+const SHIFT_REL: f64 = 1e-12;
+/// Wanted eigenvectors (after deflating the translation) and the guard vectors.
+const WANTED: usize = 3;
+const BLOCK: usize = 7;
+/// Subspace iteration: converged below this change of the wanted subspace...
+const TOL: f64 = 1e-10;
+/// ... or when the change stops shrinking below this one (the rounding floor).
+const FLOOR: f64 = 1e-8;
+const MAX_ROUNDS: usize = 200;
+
+/// Options of [`AngleMesh::reconstruct`].
+#[derive(Debug, Clone, Default)]
+pub struct ReconstructOptions {
+    /// Gradient-descent steps in the 12-D space after the voting (§3.3.3); 0 for none.
+    pub refine_iterations: usize,
+    /// Where to put the result; `None`: centroid at the origin, mean edge length 1.
+    pub placement: Option<Placement>,
+}
+
+/// The result of a reconstruction.
+#[derive(Debug, Clone)]
+pub struct Reconstruction {
+    /// Vertex positions.
+    pub positions: Vec<DVec3>,
+    /// The angle residual `E` (module docs) after the voting, then after each accepted
+    /// descent step: never increasing.
+    pub residual: Vec<f64>,
+    /// The lowest eigenvalues of `A₁ / mean diagonal` after the translation: the three
+    /// used and the next (a clear gap between the third and the fourth means the angles
+    /// were nearly consistent).
+    pub eigenvalues: [f64; 4],
+    /// Subspace-iteration rounds.
+    pub rounds: usize,
+}
+
+/// `A₁`'s lower triangle in CSC: unknown `v` for vertex `v`, `V + 3f + c` for column `c` of
+/// face `f`'s frame (one coordinate).
+#[derive(Clone)]
+struct Pattern {
+    n: usize,
+    col_ptr: Vec<u32>,
+    row_idx: Vec<u32>,
+}
+
+impl LowerCsc for Pattern {
+    fn n(&self) -> usize {
+        self.n
+    }
+    fn col_ptr(&self) -> &[u32] {
+        &self.col_ptr
+    }
+    fn row_idx(&self) -> &[u32] {
+        &self.row_idx
+    }
+}
+
+/// One element of the energy: its unknowns and the rows `Σ coef · unknown` it penalizes.
+struct Element<const N: usize> {
+    idx: [u32; N],
+    rows: [[f64; N]; 3],
+}
+
+impl<const N: usize> Element<N> {
+    /// The local matrix `Σ rows rowᵀ`, visited as `(global row, global col, value)` for the
+    /// lower triangle.
+    fn for_each(&self, mut f: impl FnMut(u32, u32, f64)) {
+        for i in 0..N {
+            for j in 0..N {
+                let (r, c) = (self.idx[i], self.idx[j]);
+                if r < c {
+                    continue;
+                }
+                let v: f64 = self.rows.iter().map(|row| row[i] * row[j]).sum();
+                f(r, c, v);
+            }
+        }
+    }
+}
+
+/// Eq. 3.3 for face `f`: unknowns `[x_p0, x_p1, x_p2, F0, F1]`.
+fn face_element(faces: &[[u32; 3]], nv: usize, f: usize) -> Element<5> {
+    let [p0, p1, p2] = faces[f];
+    let base = (nv + 3 * f) as u32;
+    Element {
+        idx: [p0, p1, p2, base, base + 1],
+        rows: [
+            [-1.0, 1.0, 0.0, -1.0, 0.0],
+            [0.0, -1.0, 1.0, 1.0, -1.0],
+            [1.0, 0.0, -1.0, 0.0, 1.0],
+        ],
+    }
+}
+
+/// Eq. 3.2 for an interior edge: `F₁[c] − Σ_d F₂[d] R[d][c] = 0`; unknowns `[F₁, F₂]`.
+fn edge_element(nv: usize, f1: u32, f2: u32, r: &DMat3) -> Element<6> {
+    let b1 = (nv + 3 * f1 as usize) as u32;
+    let b2 = (nv + 3 * f2 as usize) as u32;
+    let mut rows = [[0.0; 6]; 3];
+    for (c, row) in rows.iter_mut().enumerate() {
+        row[c] = 1.0;
+        let col = r.col(c);
+        row[3] = -col.x;
+        row[4] = -col.y;
+        row[5] = -col.z;
+    }
+    Element {
+        idx: [b1, b1 + 1, b1 + 2, b2, b2 + 1, b2 + 2],
+        rows,
+    }
+}
+
+/// Assembles `A₁` (pattern and values) from the transitions.
+fn assemble(mesh: &AngleMesh, r: &[DMat3]) -> (Pattern, Vec<f64>) {
+    let faces = mesh.faces();
+    let nv = mesh.n_vertices();
+    let n = nv + 3 * faces.len();
+    let fe: Vec<Element<5>> = (0..faces.len())
+        .map(|f| face_element(faces, nv, f))
+        .collect();
+    let ee: Vec<Element<6>> = mesh
+        .interior()
+        .iter()
+        .zip(r)
+        .map(|(e, r)| edge_element(nv, e.f1, e.f2, r))
+        .collect();
+    let mut keys: Vec<u64> = Vec::with_capacity(15 * fe.len() + 21 * ee.len() + n);
+    let mut push = |r: u32, c: u32, _v: f64| keys.push(((c as u64) << 32) | r as u64);
+    for el in &fe {
+        el.for_each(&mut push);
+    }
+    for el in &ee {
+        el.for_each(&mut push);
+    }
+    for i in 0..n as u32 {
+        keys.push(((i as u64) << 32) | i as u64);
+    }
+    keys.par_sort_unstable();
+    keys.dedup();
+    let mut col_ptr = vec![0u32; n + 1];
+    let mut row_idx = Vec::with_capacity(keys.len());
+    for &k in &keys {
+        col_ptr[(k >> 32) as usize + 1] += 1;
+        row_idx.push(k as u32);
+    }
+    drop(keys);
+    for c in 0..n {
+        col_ptr[c + 1] += col_ptr[c];
+    }
+    let mut values = vec![0.0; row_idx.len()];
+    let mut add = |r: u32, c: u32, v: f64| {
+        let (s, e) = (
+            col_ptr[c as usize] as usize,
+            col_ptr[c as usize + 1] as usize,
+        );
+        let at = row_idx[s..e]
+            .binary_search(&r)
+            .expect("entry is in the pattern");
+        values[s + at] += v;
+    };
+    for el in &fe {
+        el.for_each(&mut add);
+    }
+    for el in &ee {
+        el.for_each(&mut add);
+    }
+    (
+        Pattern {
+            n,
+            col_ptr,
+            row_idx,
+        },
+        values,
+    )
+}
+
+/// `y = A x` for the symmetric matrix whose lower triangle is `values` on `p`.
+fn sym_matvec(p: &Pattern, values: &[f64], x: &[f64], y: &mut [f64]) {
+    y.fill(0.0);
+    for c in 0..p.n {
+        let (s, e) = (p.col_ptr[c] as usize, p.col_ptr[c + 1] as usize);
+        let mut acc = 0.0;
+        for (&r, &v) in p.row_idx[s..e].iter().zip(&values[s..e]) {
+            let r = r as usize;
+            if r == c {
+                acc += v * x[c];
+            } else {
+                acc += v * x[r];
+                y[r] += v * x[c];
+            }
+        }
+        y[c] += acc;
+    }
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// Removes from `x` its component along the unit vector that is `1/√nv` on the first `nv`
+/// entries (the translation).
+fn deflate(x: &mut [f64], nv: usize) {
+    let m = x[..nv].iter().sum::<f64>() / nv as f64;
+    x[..nv].iter_mut().for_each(|v| *v -= m);
+}
+
+/// Modified Gram–Schmidt, twice, on the `k` columns of `x` (column-major, length `n`).
+fn orthonormalize(x: &mut [f64], n: usize, k: usize) {
+    for _ in 0..2 {
+        for j in 0..k {
+            for i in 0..j {
+                let (a, b) = x.split_at_mut(j * n);
+                let qi = &a[i * n..(i + 1) * n];
+                let xj = &mut b[..n];
+                let d = dot(qi, xj);
+                xj.iter_mut().zip(qi).for_each(|(v, q)| *v -= d * q);
+            }
+            let xj = &mut x[j * n..(j + 1) * n];
+            let nrm = dot(xj, xj).sqrt();
+            if nrm > 0.0 {
+                xj.iter_mut().for_each(|v| *v /= nrm);
+            }
+        }
+    }
+}
+
+/// Eigen-decomposition of a small symmetric matrix (row-major `k×k`) by cyclic Jacobi:
+/// eigenvalues ascending and the eigenvectors as columns (row-major `k×k`).
+fn jacobi(mut a: Vec<f64>, k: usize) -> (Vec<f64>, Vec<f64>) {
+    let mut v = vec![0.0; k * k];
+    for i in 0..k {
+        v[i * k + i] = 1.0;
+    }
+    for _sweep in 0..100 {
+        let off: f64 = (0..k)
+            .flat_map(|i| (0..k).filter(move |&j| j != i).map(move |j| (i, j)))
+            .map(|(i, j)| a[i * k + j] * a[i * k + j])
+            .sum();
+        let diag: f64 = (0..k).map(|i| a[i * k + i] * a[i * k + i]).sum();
+        if off <= 1e-32 * diag || off == 0.0 {
+            break;
+        }
+        for p in 0..k {
+            for q in p + 1..k {
+                let apq = a[p * k + q];
+                if apq == 0.0 {
+                    continue;
+                }
+                let tau = (a[q * k + q] - a[p * k + p]) / (2.0 * apq);
+                let t = tau.signum() / (tau.abs() + (1.0 + tau * tau).sqrt());
+                let t = if tau == 0.0 { 1.0 } else { t };
+                let c = 1.0 / (1.0 + t * t).sqrt();
+                let s = t * c;
+                for r in 0..k {
+                    let (arp, arq) = (a[r * k + p], a[r * k + q]);
+                    a[r * k + p] = c * arp - s * arq;
+                    a[r * k + q] = s * arp + c * arq;
+                }
+                for r in 0..k {
+                    let (apr, aqr) = (a[p * k + r], a[q * k + r]);
+                    a[p * k + r] = c * apr - s * aqr;
+                    a[q * k + r] = s * apr + c * aqr;
+                }
+                for r in 0..k {
+                    let (vrp, vrq) = (v[r * k + p], v[r * k + q]);
+                    v[r * k + p] = c * vrp - s * vrq;
+                    v[r * k + q] = s * vrp + c * vrq;
+                }
+            }
+        }
+    }
+    let mut order: Vec<usize> = (0..k).collect();
+    order.sort_by(|&i, &j| a[i * k + i].total_cmp(&a[j * k + j]));
+    let vals = order.iter().map(|&i| a[i * k + i]).collect();
+    let mut vecs = vec![0.0; k * k];
+    for (new, &old) in order.iter().enumerate() {
+        for r in 0..k {
+            vecs[r * k + new] = v[r * k + old];
+        }
+    }
+    (vals, vecs)
+}
+
+/// The 3 lowest eigenvectors of `A₁` orthogonal to the translation (column-major, `n` each),
+/// the 4 lowest Ritz values (relative to the mean diagonal) and the rounds taken.
+fn lowest(
+    pattern: &Pattern,
+    values: &[f64],
+    nv: usize,
+) -> Result<(Vec<f64>, [f64; 4], usize), SolveError> {
+    let n = pattern.n;
+    let diag_mean = (0..n)
+        .map(|c| values[pattern.col_ptr[c] as usize])
+        .sum::<f64>()
+        / n as f64;
+    let mut shift = SHIFT_REL * diag_mean;
+    let mut solver = PrefactoredSpd::new(pattern.clone(), faer::Par::Seq)?;
+    // A₁ is positive semi-definite: the shift makes it definite in exact arithmetic; if
+    // rounding still meets a non-positive pivot, retry with a larger shift.
+    let mut shifted = values.to_vec();
+    loop {
+        shifted.copy_from_slice(values);
+        for c in 0..n {
+            shifted[pattern.col_ptr[c] as usize] += shift;
+        }
+        match solver.factorize(&shifted) {
+            Ok(()) => break,
+            Err(SolveError::NotPositiveDefinite { .. }) if shift < 1e-6 * diag_mean => {
+                shift *= 100.0;
+            }
+            Err(e) => return Err(e),
+        }
+    }
+    let mut rng = SplitMix64::new(0x5eed_a461e5);
+    let mut x: Vec<f64> = (0..n * BLOCK).map(|_| rng.unit() - 0.5).collect();
+    for j in 0..BLOCK {
+        deflate(&mut x[j * n..(j + 1) * n], nv);
+    }
+    orthonormalize(&mut x, n, BLOCK);
+    let mut ax = vec![0.0; n * BLOCK];
+    let mut prev_change = f64::INFINITY;
+    let mut ritz = [0.0; BLOCK];
+    let mut rounds = 0;
+    loop {
+        rounds += 1;
+        let mut y = x.clone();
+        solver.solve_in_place(&mut y);
+        for j in 0..BLOCK {
+            deflate(&mut y[j * n..(j + 1) * n], nv);
+        }
+        orthonormalize(&mut y, n, BLOCK);
+        y.par_chunks(n)
+            .zip(ax.par_chunks_mut(n))
+            .for_each(|(yj, axj)| sym_matvec(pattern, values, yj, axj));
+        let mut h = vec![0.0; BLOCK * BLOCK];
+        for i in 0..BLOCK {
+            for j in i..BLOCK {
+                let v = dot(&y[i * n..(i + 1) * n], &ax[j * n..(j + 1) * n]);
+                h[i * BLOCK + j] = v;
+                h[j * BLOCK + i] = v;
+            }
+        }
+        let (vals, vecs) = jacobi(h, BLOCK);
+        ritz.copy_from_slice(&vals);
+        let mut xn = vec![0.0; n * BLOCK];
+        xn.par_chunks_mut(n).enumerate().for_each(|(j, col)| {
+            for i in 0..BLOCK {
+                let w = vecs[i * BLOCK + j];
+                col.iter_mut()
+                    .zip(&y[i * n..(i + 1) * n])
+                    .for_each(|(c, yi)| *c += w * yi);
+            }
+        });
+        // change of the wanted subspace: ‖Xn − X (Xᵀ Xn)‖_F over the wanted columns
+        let mut change2 = 0.0;
+        for j in 0..WANTED {
+            let xj = &xn[j * n..(j + 1) * n];
+            let mut r = xj.to_vec();
+            for i in 0..WANTED {
+                let xi = &x[i * n..(i + 1) * n];
+                let d = dot(xi, xj);
+                r.iter_mut().zip(xi).for_each(|(v, q)| *v -= d * q);
+            }
+            change2 += dot(&r, &r);
+        }
+        let change = change2.sqrt();
+        x = xn;
+        if change < TOL || (rounds > 2 && change < FLOOR && change > 0.5 * prev_change) {
+            break;
+        }
+        if rounds >= MAX_ROUNDS {
+            return Err(SolveError::NotConverged {
+                iterations: rounds,
+                residual: change,
+            });
+        }
+        prev_change = change;
+    }
+    x.truncate(n * WANTED);
+    let eig = std::array::from_fn(|i| ritz[i] / diag_mean);
+    Ok((x, eig, rounds))
+}
+
+impl AngleMesh {
+    /// Reconstructs vertex positions from angles by the spectral method (seed §3.3,
+    /// Algorithm 1): preprocessing, transitions, the quadratic form, its lowest
+    /// eigenvectors, the affine correction by voting, the optional descent, then the
+    /// placement.
+    ///
+    /// Errors: angle counts that do not match, a non-finite angle (naming the face corner or
+    /// the edge), a mesh whose faces are not all connected across interior edges (naming a
+    /// face), a bad placement, a failed eigen-solve.
+    pub fn reconstruct(
+        &self,
+        angles: &Angles,
+        options: &ReconstructOptions,
+    ) -> Result<Reconstruction, AngleError> {
+        self.check_angles(angles)?;
+        self.check_connected()?;
+        if let Some(p) = &options.placement {
+            p.check(self.n_faces())?;
+        }
+        let target = preprocess(angles);
+        let tr = transitions(self, &target);
+        let (pattern, values) = assemble(self, &tr.r);
+        let nv = self.n_vertices();
+        let (q, eigenvalues, rounds) = lowest(&pattern, &values, nv)?;
+        let n = pattern.n;
+        let col = |a: usize, i: usize| q[a * n + i];
+        let qv: Vec<DVec3> = (0..nv)
+            .map(|v| DVec3::new(col(0, v), col(1, v), col(2, v)))
+            .collect();
+        // G_t: row a = eigenvector a's entries of the frame of t
+        let g: Vec<DMat3> = (0..self.n_faces())
+            .map(|f| {
+                let b = nv + 3 * f;
+                DMat3::from_cols(
+                    DVec3::new(col(0, b), col(1, b), col(2, b)),
+                    DVec3::new(col(0, b + 1), col(1, b + 1), col(2, b + 1)),
+                    DVec3::new(col(0, b + 2), col(1, b + 2), col(2, b + 2)),
+                )
+            })
+            .collect();
+        // orientation: most frames with a positive determinant
+        let positive = g.iter().filter(|m| m.determinant() > 0.0).count();
+        let l0 = if 2 * positive >= g.len() {
+            DMat3::IDENTITY
+        } else {
+            -DMat3::IDENTITY
+        };
+        let t = vote(self, &tr.local, &g, l0);
+        let mut l = t * l0;
+        let mut history = vec![residual(self, &target, &embed(l, &qv))];
+        if options.refine_iterations > 0 {
+            let (l1, h) = descend(self, &target, &qv, l, options.refine_iterations);
+            l = l1;
+            history = h;
+        }
+        let mut positions = embed(l, &qv);
+        match &options.placement {
+            Some(p) => p.apply(self.faces(), &mut positions),
+            None => normalize(self.edges(), &mut positions),
+        }
+        Ok(Reconstruction {
+            positions,
+            residual: history,
+            eigenvalues,
+            rounds,
+        })
+    }
+
+    /// The angle residual `E` (module docs) of `positions` against `angles` after the
+    /// preprocessing: what the descent lowers.
+    pub fn angle_residual(&self, angles: &Angles, positions: &[DVec3]) -> Result<f64, AngleError> {
+        self.check_angles(angles)?;
+        crate::mesh::geometry::check_positions(self.topology(), positions)?;
+        Ok(residual(self, &preprocess(angles), positions))
+    }
+}
+
+/// The voting of §3.3.2: `T = S/‖S‖_F`, `S = Σ_e S_e/‖S_e‖_F` with `S_e` the symmetric
+/// polar factor of each edge's least-squares map onto its local construction.
+fn vote(mesh: &AngleMesh, local: &[(DMat3, DMat3)], g: &[DMat3], l0: DMat3) -> DMat3 {
+    let votes: Vec<Option<DMat3>> = mesh
+        .interior()
+        .par_iter()
+        .zip(local.par_iter())
+        .map(|(e, (fb1, fb2))| {
+            let f1 = l0 * g[e.f1 as usize];
+            let f2 = l0 * g[e.f2 as usize];
+            let ba = *fb1 * f1.transpose() + *fb2 * f2.transpose();
+            let aa = f1 * f1.transpose() + f2 * f2.transpose();
+            let det = aa.determinant();
+            if !det.is_finite() || det == 0.0 {
+                return None;
+            }
+            let t = ba * aa.inverse();
+            let s = svd3(t);
+            let norm = s.sigma.length();
+            if !norm.is_finite() || norm <= 0.0 {
+                return None;
+            }
+            let v = s.v;
+            let d = DMat3::from_diagonal(s.sigma / norm);
+            Some(v * d * v.transpose())
+        })
+        .collect();
+    let s = votes.iter().flatten().fold(DMat3::ZERO, |a, b| a + *b);
+    let norm = [s.x_axis, s.y_axis, s.z_axis]
+        .iter()
+        .map(|c| c.length_squared())
+        .sum::<f64>()
+        .sqrt();
+    if norm > 0.0 {
+        s * (1.0 / norm)
+    } else {
+        DMat3::IDENTITY
+    }
+}
+
+/// Centroid at the origin, mean edge length 1.
+pub(crate) fn normalize(edges: &[[u32; 2]], x: &mut [DVec3]) {
+    let c = x.iter().copied().sum::<DVec3>() / x.len() as f64;
+    let mean = edges
+        .iter()
+        .map(|&[a, b]| (x[a as usize] - x[b as usize]).length())
+        .sum::<f64>()
+        / edges.len() as f64;
+    let s = if mean > 0.0 { 1.0 / mean } else { 1.0 };
+    for p in x.iter_mut() {
+        *p = (*p - c) * s;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn jacobi_diagonalizes() {
+        let a = vec![4.0, 1.0, 0.5, 1.0, 3.0, 0.2, 0.5, 0.2, 1.0];
+        let (vals, vecs) = jacobi(a.clone(), 3);
+        assert!(vals[0] <= vals[1] && vals[1] <= vals[2]);
+        for j in 0..3 {
+            for i in 0..3 {
+                let av: f64 = (0..3).map(|k| a[i * 3 + k] * vecs[k * 3 + j]).sum();
+                assert!((av - vals[j] * vecs[i * 3 + j]).abs() < 1e-12);
+            }
+        }
+    }
+}
