@@ -3,7 +3,9 @@
 //!
 //! - the double gyre (A = 0.1, ε = 0.25, ω = 0.2π) on a 401×201-vertex triangulated grid of
 //!   [0, 2] × [0, 1], T = −10: flow map + FTLE, then ridges;
-//! - FTLE and ridges on a ≈100k-vertex mesh (a 447×223-cell grid, the same flow).
+//! - FTLE and ridges on a ≈100k-vertex mesh (a 447×223-cell grid, the same flow), flat
+//!   (the flat fast path of `lcs::planar`) and rolled into a half cylinder (curved: every
+//!   stage point walked across the triangles).
 
 use std::f64::consts::PI;
 use std::time::Instant;
@@ -34,9 +36,33 @@ fn grid(nx: usize, ny: usize) -> (Topology, Vec<DVec3>) {
     (topo, flat)
 }
 
-fn case(label: &str, nx: usize, ny: usize, steps: usize) {
-    let (topo, p) = grid(nx, ny);
-    let mut v = FnVelocity(|t, x: DVec3| double_gyre(t, x.truncate()).extend(0.0));
+/// The same grid rolled into a half cylinder around the x axis (circumference 2 per turn,
+/// so the roll is an isometry and the FTLE is the flat one): a curved mesh, which walks.
+fn roll(p: &[DVec3]) -> Vec<DVec3> {
+    let r = 1.0 / PI;
+    p.iter()
+        .map(|q| DVec3::new(q.x, r * (PI * q.y).cos(), r * (PI * q.y).sin()))
+        .collect()
+}
+
+/// The gyre on the rolled grid: the flat velocity pushed forward by the roll.
+fn rolled_gyre(t: f64, x: DVec3) -> DVec3 {
+    let theta = x.z.atan2(x.y);
+    let v = double_gyre(t, DVec2::new(x.x, theta / PI));
+    DVec3::new(v.x, -v.y * theta.sin(), v.y * theta.cos())
+}
+
+fn case(label: &str, nx: usize, ny: usize, steps: usize, rolled: bool) {
+    let (topo, flat) = grid(nx, ny);
+    let p = if rolled { roll(&flat) } else { flat };
+    let flow = move |t, x: DVec3| {
+        if rolled {
+            rolled_gyre(t, x)
+        } else {
+            double_gyre(t, x.truncate()).extend(0.0)
+        }
+    };
+    let mut v = FnVelocity(flow);
     let t = Instant::now();
     let s = ftle(&topo, &Motion::fixed(p.clone()), &mut v, 0.0, -10.0, steps).unwrap();
     let t_ftle = t.elapsed().as_secs_f64();
@@ -59,7 +85,11 @@ fn main() {
         "FTLE + ridges of the double gyre, T = −10, {} rayon threads",
         rayon::current_num_threads()
     );
-    case("double gyre 401×201", 400, 200, 100);
-    case("double gyre 401×201", 400, 200, 50);
-    case("100k-vertex grid", 447, 223, 100);
+    for steps in [100, 50, 25] {
+        case("double gyre 401×201, flat", 400, 200, steps, false);
+    }
+    case("100k-vertex grid, flat", 447, 223, 100, false);
+    case("100k-vertex grid, flat", 447, 223, 50, false);
+    case("100k-vertex grid rolled into a half cylinder", 447, 223, 100, true);
+    case("100k-vertex grid rolled into a half cylinder", 447, 223, 50, true);
 }

@@ -24,6 +24,7 @@
 //!   ([`ridges()`](ridges::ridges)).
 
 pub mod ftle;
+mod planar;
 pub mod ridges;
 pub mod trace;
 
