@@ -42,6 +42,9 @@ use crate::mesh::Topology;
 /// Vertices farther from the plane than this fraction of the mesh's size: not flat.
 const FLAT_TOLERANCE: f64 = 1e-12;
 
+/// Particles per parallel task, at least.
+const MIN_LEN: usize = 512;
+
 /// Halvings of a segment before it is walked.
 const BISECTIONS: u32 = 5;
 
@@ -57,6 +60,7 @@ pub(crate) struct Planar {
     affine: Vec<(DVec2, DMat2)>,
     lo: DVec2,
     size: f64,
+    inv_size: f64,
     nx: usize,
     ny: usize,
     /// Faces per bucket (CSR: `bucket_faces[start[b]..start[b + 1]]`).
@@ -153,6 +157,7 @@ impl Planar {
             affine,
             lo,
             size,
+            inv_size: 1.0 / size,
             nx,
             ny,
             start: Vec::new(),
@@ -285,7 +290,7 @@ impl Planar {
 
     /// The bucket of `p` (`None` outside the grid).
     fn bucket(&self, p: DVec2) -> Option<usize> {
-        let c = (p - self.lo) / self.size;
+        let c = (p - self.lo) * self.inv_size;
         (c.x >= 0.0 && c.y >= 0.0 && c.x < self.nx as f64 && c.y < self.ny as f64)
             .then(|| c.y as usize * self.nx + c.x as usize)
     }
@@ -369,22 +374,21 @@ fn walk_plane(charts: &Charts, planar: &Planar, l: &Located, a: DVec2, b: DVec2)
 }
 
 /// The next point of a particle: from `a` (located `a_at` if known) to `b`, straight if
-/// provably inside, else walked (stopping at a border). `anchor` is the particle's
-/// located start of step at plane point `anchor_p`, from which a point the buckets
-/// cannot place (rounding at a bucket's edge; not expected) is reached by a walk.
+/// provably inside, else walked (stopping at a border). `anchor` is the last point where
+/// the particle was located, from which a point the buckets cannot place is walked to.
 fn advance(
     charts: &Charts,
     planar: &Planar,
     (a, a_at): (DVec2, Option<Located>),
     b: DVec2,
-    (anchor, anchor_p): (&Located, DVec2),
+    (anchor, anchor_p): &(Located, DVec2),
 ) -> (DVec2, Option<Located>) {
     if planar.straight(a, b) {
         return (b, None);
     }
     let from = a_at
         .or_else(|| planar.locate(a))
-        .unwrap_or_else(|| walk_plane(charts, planar, anchor, anchor_p, a).0);
+        .unwrap_or_else(|| walk_plane(charts, planar, anchor, *anchor_p, a).0);
     let (end, e) = walk_plane(charts, planar, &from, a, b);
     (e, Some(end))
 }
@@ -401,8 +405,14 @@ pub(crate) fn flow_map_planar(
     let n = planar.xy.len();
     let live: Vec<usize> = (0..n).filter(|&v| charts.at_vertex(v).is_some()).collect();
     let mut p: Vec<DVec2> = live.iter().map(|&v| planar.xy[v]).collect();
-    // each particle's start of step, always located (a walk's end, or by its bucket)
-    let mut p_at: Vec<Located> = live.iter().filter_map(|&v| charts.at_vertex(v)).collect();
+    // each particle's start of step, located if a walk ended there; and the last point
+    // where it was located, from which a point the buckets cannot place (not expected:
+    // rounding at a bucket's edge) is reached by a walk
+    let mut anchor: Vec<(Located, DVec2)> = live
+        .iter()
+        .filter_map(|&v| Some((charts.at_vertex(v)?, planar.xy[v])))
+        .collect();
+    let mut p_at: Vec<Option<Located>> = anchor.iter().map(|a| Some(a.0)).collect();
     let m = p.len();
     let h = span / steps.max(1) as f64;
     let with_at = velocity.uses_location();
@@ -421,13 +431,14 @@ pub(crate) fn flow_map_planar(
                 _ => t0 + (step + 1) as f64 * h,
             };
             let k_ref = &k;
-            let (p_ref, p_at_ref) = (&p, &p_at);
+            let (p_ref, p_at_ref, anchor_ref) = (&p, &p_at, &anchor);
             (&mut q, &mut q_at, &mut points)
                 .into_par_iter()
+                .with_min_len(MIN_LEN)
                 .enumerate()
                 .for_each(|(i, (qi, qa, x))| {
                     (*qi, *qa) = match stage {
-                        0 => (p_ref[i], Some(p_at_ref[i])),
+                        0 => (p_ref[i], p_at_ref[i]),
                         _ => {
                             // each stage point walked on from the previous one, by the
                             // same displacements as trace.rs (the same points when no
@@ -438,17 +449,18 @@ pub(crate) fn flow_map_planar(
                                     2 => 0.5 * h * (k_ref[1][i] - k_ref[0][i]),
                                     _ => h * k_ref[2][i] - 0.5 * h * k_ref[1][i],
                                 };
-                            advance(charts, planar, (*qi, *qa), target, (&p_at_ref[i], p_ref[i]))
+                            advance(charts, planar, (*qi, *qa), target, &anchor_ref[i])
                         }
                     };
                     *x = planar.world(*qi);
                 });
             if with_at {
-                stage_at = (&q, &q_at, &p, &p_at)
+                stage_at = (&q, &q_at, &anchor)
                     .into_par_iter()
-                    .map(|(&x, &xa, &pi, pa)| {
+                    .with_min_len(MIN_LEN)
+                    .map(|(&x, &xa, (a, ap))| {
                         xa.or_else(|| planar.locate(x))
-                            .unwrap_or_else(|| walk_plane(charts, planar, pa, pi, x).0)
+                            .unwrap_or_else(|| walk_plane(charts, planar, a, *ap, x).0)
                     })
                     .collect();
             }
@@ -468,22 +480,29 @@ pub(crate) fn flow_map_planar(
                 .for_each(|(ki, wi)| *ki = DVec2::new(planar.u.dot(*wi), planar.w.dot(*wi)));
         }
         let [k1, k2, k3, k4] = &k;
-        (&mut p, &mut p_at, &q, &q_at)
+        (&mut p, &mut p_at, &mut anchor, &q, &q_at)
             .into_par_iter()
+            .with_min_len(MIN_LEN)
             .enumerate()
-            .for_each(|(i, (pi, pa, &a, &a_at))| {
+            .for_each(|(i, (pi, pa, an, &a, &a_at))| {
                 let d = h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
                 let target = a + (d - h * k3[i]);
-                let (e, end) = advance(charts, planar, (a, a_at), target, (pa, *pi));
-                let end = end
-                    .or_else(|| planar.locate(e))
-                    .unwrap_or_else(|| walk_plane(charts, planar, pa, *pi, e).0);
-                (*pi, *pa) = (e, end);
+                (*pi, *pa) = advance(charts, planar, (a, a_at), target, an);
+                if let Some(l) = *pa {
+                    *an = (l, *pi);
+                }
             });
     }
+    let ends: Vec<Located> = (&p, &p_at, &anchor)
+        .into_par_iter()
+        .map(|(&x, &xa, (a, ap))| {
+            xa.or_else(|| planar.locate(x))
+                .unwrap_or_else(|| walk_plane(charts, planar, a, *ap, x).0)
+        })
+        .collect();
     let mut out = vec![None; n];
     for (i, &v) in live.iter().enumerate() {
-        out[v] = Some(p_at[i]);
+        out[v] = Some(ends[i]);
     }
     Ok(out)
 }
