@@ -7,8 +7,9 @@ Run it with a Python that has numbacs installed and the madder wheel on the path
     PYTHONPATH=.venv/madder-wheel /tmp/numbacs/bin/python tests/bench/bench_numbacs.py
 
 Times are warm (numbacs compiles on its first call), best of `REPEAT`, both tools in the
-same run. Accuracy, over the interior vertices (numbacs' `ftle_grid_2D` leaves the border
-at 0), as |σ − σ_ref| over the true FTLE's range (mean and 95th percentile), against:
+same run, wall and CPU (all threads; on a shared machine the wall time follows the load).
+Accuracy, over the interior vertices (numbacs' `ftle_grid_2D` leaves the border at 0),
+as |σ − σ_ref| over the true FTLE's range (mean and 95th percentile), against:
 
 - the true FTLE: numbacs' flow map at rtol 1e-10 on an auxiliary grid (offsets 1e-5);
 - each tool's own gradient stencil applied to the exact flow map (numbacs at rtol 1e-10):
@@ -75,12 +76,14 @@ def one_ring_ftle(fm, dx, dy):
 
 
 def best(f):
+    """Best wall time of `REPEAT` calls, and its CPU time (all threads), as a string."""
     times, out = [], None
     for _ in range(REPEAT):
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         out = f()
-        times.append(time.perf_counter() - t)
-    return min(times), out
+        times.append((time.perf_counter() - t, time.process_time() - c))
+    wall, cpu = min(times)
+    return f"{wall:.3f} s (CPU {cpu:.2f} s)", out
 
 
 def main():
@@ -98,7 +101,8 @@ def main():
     aux = flowmap_aux_grid_2D(
         funcptr, T0, T, x, y, params, h=h_aux, eig_main=False, rtol=1e-10, atol=1e-12
     )
-    eigval_max = C_eig_aux_2D(aux, dx, dy, h=h_aux, eig_main=False)[0]
+    eigvals = C_eig_aux_2D(aux, dx, dy, h=h_aux, eig_main=False)[0]
+    eigval_max = eigvals.max(axis=-1) if eigvals.ndim == 3 else eigvals
     true = ftle_from_eig(eigval_max, T)  # (nx, ny)
     inner = np.zeros((NX, NY), bool)
     inner[1:-1, 1:-1] = True
@@ -110,12 +114,19 @@ def main():
         e = np.abs(s - ref)[inner] / scale
         return f"mean {e.mean():.1e} p95 {np.percentile(e, 95):.1e}"
 
-    print(f"double gyre {NX}×{NY}, T = {T}, {os.cpu_count()} cores; errors over interior vertices / range of the true FTLE")
-    print(f"  stencils on the exact flow map vs true FTLE: central differences {err(ref_cd, true)}; Madder's one-ring {err(ref_ring, true)}")
+    print(
+        f"double gyre {NX}×{NY}, T = {T}, {os.cpu_count()} cores;"
+        " errors over interior vertices / range of the true FTLE"
+    )
+    print(
+        f"  stencils on the exact flow map vs true FTLE: central differences {err(ref_cd, true)};"
+        f" Madder's one-ring {err(ref_ring, true)}"
+    )
     for rtol, atol in [(1e-6, 1e-8), (1e-4, 1e-6), (1e-3, 1e-5)]:
         t, s = best(lambda rtol=rtol, atol=atol: numbacs_ftle(rtol, atol))
         print(
-            f"  numbacs flow map + FTLE (dop853 rtol {rtol:g}): {t:.3f} s; integration error {err(s, ref_cd)}; vs true {err(s, true)}"
+            f"  numbacs flow map + FTLE (dop853 rtol {rtol:g}): {t};"
+            f" integration error {err(s, ref_cd)}; vs true {err(s, true)}"
         )
 
     faces, pos = grid_mesh(x, y)
@@ -124,8 +135,9 @@ def main():
         s = s.reshape(NY, NX).T
         t_r, r = best(lambda s=s: madder.ridges(faces, pos, np.ascontiguousarray(s.T).ravel()))
         print(
-            f"  madder flow map + FTLE (RK4, {steps} steps, numpy callable): {t:.3f} s; integration error {err(s, ref_ring)}; vs true {err(s, true)};"
-            f" ridges {t_r:.3f} s ({len(r['points'])} points)"
+            f"  madder flow map + FTLE (RK4, {steps} steps, numpy callable): {t};"
+            f" integration error {err(s, ref_ring)}; vs true {err(s, true)};"
+            f" ridges {t_r} ({len(r['points'])} points)"
         )
 
 

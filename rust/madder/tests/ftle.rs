@@ -345,7 +345,15 @@ fn end_points(
     if walk_everywhere {
         charts = charts.walk_everywhere();
     }
-    let end = flow_map(&charts, &Motion::fixed(p.to_vec()), velocity, 0.0, span, steps).unwrap();
+    let end = flow_map(
+        &charts,
+        &Motion::fixed(p.to_vec()),
+        velocity,
+        0.0,
+        span,
+        steps,
+    )
+    .unwrap();
     end.iter()
         .zip(p)
         .map(|(l, &x)| {
@@ -385,8 +393,14 @@ fn the_flat_fast_path_agrees_with_walking() {
         .zip(&p)
         .filter(|(a, b)| a.distance(**b) < 0.3 && a.x < 1.4)
         .count();
-    let moved = walked.iter().zip(&p).filter(|(a, b)| a.distance(**b) > 0.8).count();
-    eprintln!("fast path vs walking: max distance {diff:.1e}; {on_hole} stopped by the hole, {moved} moved > 0.8");
+    let moved = walked
+        .iter()
+        .zip(&p)
+        .filter(|(a, b)| a.distance(**b) > 0.8)
+        .count();
+    eprintln!(
+        "fast path vs walking: max distance {diff:.1e}; {on_hole} stopped by the hole, {moved} moved > 0.8"
+    );
     assert!(on_hole > 20 && moved > 500, "{on_hole} {moved}");
     assert!(diff < 1e-10, "{diff}");
 

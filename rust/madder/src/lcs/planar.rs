@@ -137,10 +137,11 @@ impl Planar {
                 border.push(topology.edges()[e]);
             }
         }
-        let (lo, hi) = xy.iter().fold(
-            (DVec2::INFINITY, DVec2::NEG_INFINITY),
-            |(l, h), &p| (l.min(p), h.max(p)),
-        );
+        let (lo, hi) = xy
+            .iter()
+            .fold((DVec2::INFINITY, DVec2::NEG_INFINITY), |(l, h), &p| {
+                (l.min(p), h.max(p))
+            });
         let extent = hi - lo;
         let mean_edge = edge_sum / (3 * faces.len()) as f64;
         // about one edge per bucket, at most ~4 buckets per face
@@ -240,7 +241,8 @@ impl Planar {
                 }
                 // an irrational-ish point of the bucket, unlikely to lie on an edge
                 let p = self.lo + self.size * DVec2::new(i as f64 + 0.381966, j as f64 + 0.618034);
-                let covering = self.faces_in(b)
+                let covering = self
+                    .faces_in(b)
                     .iter()
                     .filter(|&&f| self.bary(f as usize, p).min_element() > 1e-9)
                     .count();
@@ -331,10 +333,7 @@ impl Planar {
             let bq = self.bary(f as usize, p);
             if bq.min_element() > depth {
                 depth = bq.min_element();
-                best = Some(Located {
-                    face: f,
-                    bary: bq,
-                });
+                best = Some(Located { face: f, bary: bq });
             }
         }
         best.map(|l| Located {
@@ -364,7 +363,13 @@ impl Planar {
 
 /// A walk from `l` (at plane point `a`) to plane point `b` by [`Charts::walk`]; returns
 /// where it ends, located and in the plane.
-fn walk_plane(charts: &Charts, planar: &Planar, l: &Located, a: DVec2, b: DVec2) -> (Located, DVec2) {
+fn walk_plane(
+    charts: &Charts,
+    planar: &Planar,
+    l: &Located,
+    a: DVec2,
+    b: DVec2,
+) -> (Located, DVec2) {
     let t = charts.face_verts(l.face as usize);
     // the face's chart axes in the plane: corner 1 on +x, the normal's turn gives +y
     let g1 = (planar.xy[t[1] as usize] - planar.xy[t[0] as usize]).normalize();

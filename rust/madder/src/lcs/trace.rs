@@ -59,6 +59,13 @@
 //! which is what lets a Python callable be called once per stage. The walks run in
 //! parallel, each particle writing its own slot: results do not depend on the number of
 //! threads.
+//!
+//! ## Fast paths
+//! On a fixed mesh each face's shape at `t0` in space is precomputed ([`FaceFrame`]): a
+//! stage's world point and chart velocity are then a few dot products, with no vertex
+//! read and no 2×2 solve. On a flat fixed mesh the walks themselves are skipped where
+//! they are provably straight ([`super::planar`]); the results agree with the walks up to
+//! rounding (tested).
 
 use glam::{DMat2, DVec2, DVec3};
 use rayon::prelude::*;
