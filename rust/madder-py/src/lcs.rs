@@ -128,6 +128,10 @@ impl Velocity for PyVelocity<'_> {
             Ok(())
         })
     }
+
+    fn uses_location(&self) -> bool {
+        false
+    }
 }
 
 /// Finite-time Lyapunov exponent `σ = ln √λ_max / |T|` at every vertex (seed §5.2, §5.5.1).

@@ -3,7 +3,9 @@
 //!
 //! - the double gyre (A = 0.1, ε = 0.25, ω = 0.2π) on a 401×201-vertex triangulated grid of
 //!   [0, 2] × [0, 1], T = −10: flow map + FTLE, then ridges;
-//! - FTLE and ridges on a ≈100k-vertex mesh (a 447×223-cell grid, the same flow).
+//! - FTLE and ridges on a ≈100k-vertex mesh (a 447×223-cell grid, the same flow), flat
+//!   (the flat fast path of `lcs::planar`) and rolled into a half cylinder (curved: every
+//!   stage point walked across the triangles).
 
 use std::f64::consts::PI;
 use std::time::Instant;
@@ -34,20 +36,61 @@ fn grid(nx: usize, ny: usize) -> (Topology, Vec<DVec3>) {
     (topo, flat)
 }
 
-fn case(label: &str, nx: usize, ny: usize, steps: usize) {
-    let (topo, p) = grid(nx, ny);
-    let mut v = FnVelocity(|t, x: DVec3| double_gyre(t, x.truncate()).extend(0.0));
-    let t = Instant::now();
+/// The same grid rolled into a half cylinder around the x axis (circumference 2 per turn,
+/// so the roll is an isometry and the FTLE is the flat one): a curved mesh, which walks.
+fn roll(p: &[DVec3]) -> Vec<DVec3> {
+    let r = 1.0 / PI;
+    p.iter()
+        .map(|q| DVec3::new(q.x, r * (PI * q.y).cos(), r * (PI * q.y).sin()))
+        .collect()
+}
+
+/// The gyre on the rolled grid: the flat velocity pushed forward by the roll.
+fn rolled_gyre(t: f64, x: DVec3) -> DVec3 {
+    let theta = x.z.atan2(x.y);
+    let v = double_gyre(t, DVec2::new(x.x, theta / PI));
+    DVec3::new(v.x, -v.y * theta.sin(), v.y * theta.cos())
+}
+
+/// CPU seconds of this process so far (all threads; `/proc/self/stat`, Linux): on a
+/// shared machine the wall time varies with the other jobs, the CPU time much less.
+fn cpu_seconds() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    let after = stat.rsplit(')').next().unwrap_or("");
+    let f: Vec<f64> = after
+        .split_whitespace()
+        .map(|x| x.parse().unwrap_or(0.0))
+        .collect();
+    // utime, stime: fields 14, 15 of the line (11, 12 after the command name), in ticks
+    f.get(11)
+        .zip(f.get(12))
+        .map_or(0.0, |(u, s)| (u + s) / 100.0)
+}
+
+fn case(label: &str, nx: usize, ny: usize, steps: usize, rolled: bool) {
+    let (topo, flat) = grid(nx, ny);
+    let p = if rolled { roll(&flat) } else { flat };
+    let flow = move |t, x: DVec3| {
+        if rolled {
+            rolled_gyre(t, x)
+        } else {
+            double_gyre(t, x.truncate()).extend(0.0)
+        }
+    };
+    let mut v = FnVelocity(flow);
+    let (t, c) = (Instant::now(), cpu_seconds());
     let s = ftle(&topo, &Motion::fixed(p.clone()), &mut v, 0.0, -10.0, steps).unwrap();
-    let t_ftle = t.elapsed().as_secs_f64();
-    let t = Instant::now();
+    let (t_ftle, c_ftle) = (t.elapsed().as_secs_f64(), cpu_seconds() - c);
+    let (t, c) = (Instant::now(), cpu_seconds());
     let r = ridges(&topo, &p, &s, &RidgeOptions::default()).unwrap();
-    let t_ridges = t.elapsed().as_secs_f64();
+    let (t_ridges, c_ridges) = (t.elapsed().as_secs_f64(), cpu_seconds() - c);
     println!(
-        "{label}: {} vertices, {steps} RK4 steps: flow map + FTLE {:.3} s, ridges {:.3} s ({} points, {} edges), total {:.3} s",
+        "{label}: {} vertices, {steps} RK4 steps: flow map + FTLE {:.3} s (CPU {:.2} s), ridges {:.3} s (CPU {:.2} s; {} points, {} edges), total {:.3} s",
         topo.n_vertices(),
         t_ftle,
+        c_ftle,
         t_ridges,
+        c_ridges,
         r.points.len(),
         r.edges.len(),
         t_ftle + t_ridges
@@ -59,7 +102,17 @@ fn main() {
         "FTLE + ridges of the double gyre, T = −10, {} rayon threads",
         rayon::current_num_threads()
     );
-    case("double gyre 401×201", 400, 200, 100);
-    case("double gyre 401×201", 400, 200, 50);
-    case("100k-vertex grid", 447, 223, 100);
+    // 25 RK4 steps: integration error 9e-5 of the range against numbacs' 1.8e-4 at rtol
+    // 1e-4 (tests/bench/bench_numbacs.py); 100 steps: 4e-7 against 1.5e-6 at rtol 1e-6
+    for steps in [100, 25] {
+        case("double gyre 401×201, flat", 400, 200, steps, false);
+        case("100k-vertex grid, flat", 447, 223, steps, false);
+    }
+    case(
+        "100k-vertex grid rolled into a half cylinder",
+        447,
+        223,
+        25,
+        true,
+    );
 }

@@ -330,3 +330,94 @@ fn results_do_not_depend_on_the_thread_count() {
     let (a, b) = (run(1), run(2));
     assert!(a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()));
 }
+
+/// End points of `flow_map` in world space, with the flat fast path or walking everywhere.
+fn end_points(
+    topo: &Topology,
+    p: &[DVec3],
+    velocity: &mut dyn Velocity,
+    span: f64,
+    steps: usize,
+    walk_everywhere: bool,
+) -> Vec<DVec3> {
+    let mut charts = Charts::new(topo, p).unwrap();
+    assert!(charts.is_flat());
+    if walk_everywhere {
+        charts = charts.walk_everywhere();
+    }
+    let end = flow_map(
+        &charts,
+        &Motion::fixed(p.to_vec()),
+        velocity,
+        0.0,
+        span,
+        steps,
+    )
+    .unwrap();
+    end.iter()
+        .zip(p)
+        .map(|(l, &x)| {
+            // a loose vertex (inside the hole) stays where it is
+            let Some(l) = l else { return x };
+            let tri = topo.faces()[l.face as usize].map(|v| p[v as usize]);
+            l.bary.x * tri[0] + l.bary.y * tri[1] + l.bary.z * tri[2]
+        })
+        .collect()
+}
+
+#[test]
+fn the_flat_fast_path_agrees_with_walking() {
+    // a grid with a square hole, a flow that sweeps particles into the hole's border and
+    // past it (the fast path must not jump the hole) and along the outer border
+    let (full, p) = rect_grid(48, 32, [-1.5, 1.5], [-1.0, 1.0]);
+    let in_hole = |x: DVec3| x.x.abs() < 0.4 && x.y.abs() < 0.3;
+    let faces: Vec<[u32; 3]> = full
+        .faces()
+        .iter()
+        .filter(|t| !in_hole(t.iter().map(|&v| p[v as usize]).sum::<DVec3>() / 3.0))
+        .copied()
+        .collect();
+    let topo = Topology::from_triangles(p.len(), faces).unwrap();
+    let flow = |t: f64, x: DVec3| DVec3::new(0.8 + 0.3 * (t + x.y).sin(), 0.4 * x.x, 0.0);
+    let fast = end_points(&topo, &p, &mut FnVelocity(flow), 1.6, 24, false);
+    let walked = end_points(&topo, &p, &mut FnVelocity(flow), 1.6, 24, true);
+    let diff = fast
+        .iter()
+        .zip(&walked)
+        .map(|(a, b)| a.distance(*b))
+        .fold(0.0, f64::max);
+    // particles stopped by the hole (the free flow moves every particle by ≥ 0.8; the
+    // outer border at x = 1.5 stops others), and far travellers
+    let on_hole = walked
+        .iter()
+        .zip(&p)
+        .filter(|(a, b)| a.distance(**b) < 0.3 && a.x < 1.4)
+        .count();
+    let moved = walked
+        .iter()
+        .zip(&p)
+        .filter(|(a, b)| a.distance(**b) > 0.8)
+        .count();
+    eprintln!(
+        "fast path vs walking: max distance {diff:.1e}; {on_hole} stopped by the hole, {moved} moved > 0.8"
+    );
+    assert!(on_hole > 20 && moved > 500, "{on_hole} {moved}");
+    assert!(diff < 1e-10, "{diff}");
+
+    // a velocity that reads the triangles (per-vertex values) on the same flat mesh
+    let ft = FrameTimes::new(vec![0.0, 2.0]).unwrap();
+    let frames: Vec<Vec<DVec3>> = [0.0, 2.0]
+        .iter()
+        .map(|&t| p.iter().map(|&x| flow(t, x)).collect())
+        .collect();
+    let vv = VertexVelocity::new(ft, frames, &topo).unwrap();
+    let fast = end_points(&topo, &p, &mut vv.clone(), 1.6, 24, false);
+    let walked = end_points(&topo, &p, &mut vv.clone(), 1.6, 24, true);
+    let diff = fast
+        .iter()
+        .zip(&walked)
+        .map(|(a, b)| a.distance(*b))
+        .fold(0.0, f64::max);
+    eprintln!("per-vertex velocity, fast path vs walking: max distance {diff:.1e}");
+    assert!(diff < 1e-10, "{diff}");
+}

@@ -16,6 +16,8 @@
 //!   by unfolding, the classical RK4 integrator ([`flow_map`]); velocities from an analytic
 //!   function ([`FnVelocity`]), per-vertex values per frame ([`VertexVelocity`]) or any
 //!   [`Velocity`] (the Python binding's callable); a fixed or deforming mesh ([`Motion`]).
+//! - `planar` (§5.5.1): the same flow map on a flat fixed mesh without walking, where a
+//!   bucket grid proves a segment stays inside (a fast path of `trace`).
 //! - [`ftle`] (§5.2, §5.5.1): the flow map's gradient by least squares over the one-ring
 //!   in the vertex's tangent frame, Cauchy–Green, `σ` ([`ftle()`](ftle::ftle)).
 //! - [`ridges`] (§5.4, §5.5.2–§5.5.5): threshold into `S` (eq. 5.3), implicit diffusion
@@ -24,6 +26,7 @@
 //!   ([`ridges()`](ridges::ridges)).
 
 pub mod ftle;
+mod planar;
 pub mod ridges;
 pub mod trace;
 

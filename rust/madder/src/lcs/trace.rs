@@ -59,10 +59,18 @@
 //! which is what lets a Python callable be called once per stage. The walks run in
 //! parallel, each particle writing its own slot: results do not depend on the number of
 //! threads.
+//!
+//! ## Fast paths
+//! On a fixed mesh each face's shape at `t0` in space is precomputed ([`FaceFrame`]): a
+//! stage's world point and chart velocity are then a few dot products, with no vertex
+//! read and no 2×2 solve. On a flat fixed mesh the walks themselves are skipped where
+//! they are provably straight ([`super::planar`]); the results agree with the walks up to
+//! rounding (tested).
 
 use glam::{DMat2, DVec2, DVec3};
 use rayon::prelude::*;
 
+use super::planar::{Planar, flow_map_planar};
 use crate::error::{LcsError, MeshError};
 use crate::mesh::Topology;
 use crate::mesh::geometry::check_positions;
@@ -192,6 +200,11 @@ impl Motion {
         a.lerp(self.frames[(at.k + 1).min(self.frames.len() - 1)][v], at.s)
     }
 
+    /// Whether the mesh does not move (one frame).
+    pub(crate) fn is_fixed(&self) -> bool {
+        self.frames.len() == 1
+    }
+
     /// All positions at time `t`.
     pub(crate) fn positions(&self, t: f64) -> Result<Vec<DVec3>, LcsError> {
         let at = self.at(t)?;
@@ -211,7 +224,8 @@ pub(crate) struct Lerp {
 /// A velocity field on the mesh: the fluid's 3-D velocity relative to the cloth.
 pub trait Velocity {
     /// Writes the velocity at time `t` at every point into `out`: the point on the mesh
-    /// `at[i]` whose world position is `points[i]`.
+    /// `at[i]` whose world position is `points[i]` (`at` may be empty if
+    /// [`Self::uses_location`] is `false`).
     fn eval(
         &mut self,
         t: f64,
@@ -219,6 +233,13 @@ pub trait Velocity {
         points: &[DVec3],
         out: &mut [DVec3],
     ) -> Result<(), LcsError>;
+
+    /// Whether [`Self::eval`] reads `at` (the points' triangles); a velocity of world
+    /// points alone returns `false`, which lets a flat mesh skip locating the points
+    /// ([`super::planar`]).
+    fn uses_location(&self) -> bool {
+        true
+    }
 }
 
 /// An analytic velocity `f(t, x)` of world position (evaluated in parallel).
@@ -236,6 +257,10 @@ impl<F: Fn(f64, DVec3) -> DVec3 + Sync> Velocity for FnVelocity<F> {
             .zip(points)
             .for_each(|(o, &x)| *o = (self.0)(t, x));
         Ok(())
+    }
+
+    fn uses_location(&self) -> bool {
+        false
     }
 }
 
@@ -343,6 +368,24 @@ pub struct Charts {
     link: Vec<[Link; 3]>,
     /// A face at every vertex and the vertex's corner in it (`u32::MAX` for a loose vertex).
     vertex_face: Vec<(u32, u8)>,
+    /// The flat mesh's plane and buckets, if the mesh is flat ([`super::planar`]).
+    planar: Option<Planar>,
+    /// Per face, its shape at `t0` in space: what a fixed mesh needs per stage.
+    frame: Vec<FaceFrame>,
+}
+
+/// A face at `t0` in space: corner 0, the edges `E_1`, `E_2`, and the chart's axes `u`,
+/// `n̂ × u` (unit, in the face's plane). On a fixed mesh the world point of barycentric
+/// `b` is `x_0 + b_1 E_1 + b_2 E_2` and the chart velocity of `w` (module doc) is
+/// `(u·w, (n̂ × u)·w)`, the tangent projection in the chart's orthonormal axes: the same
+/// as the least-squares rates `ḃ` mapped by `c_1, c_2`, without the 2×2 solve.
+#[derive(Debug, Clone, Copy)]
+struct FaceFrame {
+    x0: DVec3,
+    e1: DVec3,
+    e2: DVec3,
+    u: DVec3,
+    v: DVec3,
 }
 
 /// No neighbour (border or non-manifold edge) / no face (loose vertex).
@@ -397,12 +440,48 @@ impl Charts {
             face,
             link: Vec::new(),
             vertex_face,
+            planar: None,
+            frame: faces
+                .par_iter()
+                .zip(&chart)
+                .map(|(tri, c)| {
+                    let [x0, x1, x2] = tri.map(|v| positions[v as usize]);
+                    let (e1, e2) = (x1 - x0, x2 - x0);
+                    let (u, v) = if c[0] == 0.0 {
+                        (DVec3::ZERO, DVec3::ZERO)
+                    } else {
+                        let u = e1 / c[0];
+                        (u, e1.cross(e2).normalize().cross(u))
+                    };
+                    FaceFrame { x0, e1, e2, u, v }
+                })
+                .collect(),
         };
         charts.link = (0..faces.len())
             .into_par_iter()
             .map(|f| std::array::from_fn(|k| charts.link_across(f, k)))
             .collect();
+        if charts.face.iter().all(|f| f.chart[0] != 0.0) {
+            charts.planar = Planar::new(topology, positions);
+        }
         Ok(charts)
+    }
+
+    /// The same charts without the flat mesh's fast path: every stage point is walked
+    /// (for comparing the two; the results agree up to rounding).
+    pub fn walk_everywhere(mut self) -> Self {
+        self.planar = None;
+        self
+    }
+
+    /// Whether the mesh is flat and takes the fast path of [`super::planar`].
+    pub fn is_flat(&self) -> bool {
+        self.planar.is_some()
+    }
+
+    /// The vertices of face `f`.
+    pub(crate) fn face_verts(&self, f: usize) -> [u32; 3] {
+        self.face[f].verts
     }
 
     /// The unfolding of the neighbour across edge `k` of face `f` into `f`'s chart.
@@ -473,6 +552,10 @@ impl Charts {
 
     /// The world position of `l` at `at`.
     pub(crate) fn world(&self, motion: &Motion, at: Lerp, l: &Located) -> DVec3 {
+        if motion.is_fixed() {
+            let f = &self.frame[l.face as usize];
+            return f.x0 + l.bary.y * f.e1 + l.bary.z * f.e2;
+        }
         let tri = self.face[l.face as usize].verts;
         (0..3)
             .map(|c| l.bary[c] * motion.position(at, tri[c] as usize))
@@ -482,6 +565,10 @@ impl Charts {
     /// The velocity `w` at `l` (time `at`) in the chart of `l`'s face (module doc).
     fn chart_velocity(&self, motion: &Motion, at: Lerp, l: &Located, w: DVec3) -> DVec2 {
         let f = l.face as usize;
+        if motion.is_fixed() {
+            let fr = &self.frame[f];
+            return DVec2::new(fr.u.dot(w), fr.v.dot(w));
+        }
         let tri = self.face[f].verts;
         let [x0, x1, x2] = tri.map(|v| motion.position(at, v as usize));
         let (e1, e2) = (x1 - x0, x2 - x0);
@@ -581,7 +668,7 @@ fn unfold(pa: DVec2, pb: DVec2, far: DVec2, ga: DVec2, gb: DVec2, gf: DVec2) -> 
 }
 
 /// Barycentric coordinates clamped to `[0, 1]` and renormalized (removes rounding).
-fn clamp(b: DVec3) -> DVec3 {
+pub(crate) fn clamp(b: DVec3) -> DVec3 {
     let c = b.max(DVec3::ZERO);
     let sum = c.element_sum();
     if sum > 0.0 {
@@ -625,6 +712,11 @@ pub fn flow_map(
     span: f64,
     steps: usize,
 ) -> Result<Vec<Option<Located>>, LcsError> {
+    if let Some(planar) = &charts.planar
+        && motion.is_fixed()
+    {
+        return flow_map_planar(charts, planar, velocity, t0, span, steps);
+    }
     let n = charts.vertex_face.len();
     let start: Vec<Option<Located>> = (0..n).map(|v| charts.at_vertex(v)).collect();
     let mut live: Vec<usize> = (0..n).filter(|&v| start[v].is_some()).collect();
