@@ -220,7 +220,9 @@ def apply_frame(obj, frame):
 
 
 def _stained(scene):
-    return [o for o in scene.objects if o.type == "MESH" and o.madder.enabled and o.madder.cache_file]
+    # a Live object's attributes are its preview's (`preview`), not the cache's
+    return [o for o in scene.objects
+            if o.type == "MESH" and o.madder.enabled and o.madder.cache_file and not o.madder.live]
 
 
 @persistent
