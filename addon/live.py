@@ -17,16 +17,21 @@ import numpy as np
 RESTART, STEP, SHOW, RESET = "restart", "step", "show", "reset"
 
 
-def decide(frame, first, last, expected):
-    """What the frame change to `frame` does, with the range `first..last` and `expected`
-    the frame the simulation takes next (None: nothing simulated yet):
+def decide(frame, first, last, expected, complete=False):
+    """What the frame change to `frame` does, with the range `first..last`, `expected` the
+    frame the simulation takes next (None: nothing simulated yet) and `complete` whether
+    every frame of the range is finished and still held:
 
+    - `SHOW` for any frame once the preview is `complete`: it plays like a bake (looping
+      playback keeps it, for Bake from Preview);
     - `RESTART` at the start frame: a new simulation from the first pose;
     - `STEP` at `expected` (playing forward one frame at a time, within the range);
     - `SHOW` between the start frame and `expected` (scrubbing back, or the same frame
       again): the frames simulated so far are kept and shown, nothing is stepped;
     - `RESET` anywhere else (before the start, past the range, or a jump forward that
       skips frames): the simulation is dropped; playing from the start frame begins again."""
+    if complete and expected is not None:
+        return SHOW
     if frame == first:
         return RESTART
     if expected is None or frame < first or frame > last:

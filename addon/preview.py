@@ -13,7 +13,8 @@ the object's modifier stack once more for that frame (playback of a bake writes 
 simulating from evaluated positions.
 
 A session is dropped (and its stain cleared) on a jump that is not the next frame
-forward, scrubbing back excepted (`live.decide`), when any setting of the object, its
+forward, scrubbing back excepted, and restarts at the start frame unless every frame of
+the range is finished and held (then it plays like a bake; `live.decide`), when any setting of the object, its
 sources or the scene that the simulation reads changed (a key of every such value,
 compared at each frame change: edits by the UI, a script or undo alike), when Live is
 turned off, and when a file is loaded. The finished frames' cache fields are held
@@ -74,6 +75,11 @@ class Session:
         self.expected = None
         self.pending = None  # (frame, positions, contacts)
 
+    @property
+    def complete(self):
+        """Every frame of the range finished and held."""
+        return self.expected is not None and self.expected > self.last and not self.store.dropped
+
     def restart(self, depsgraph):
         st = self.stepper
         st.start(st._positions(self.first, depsgraph), depsgraph)
@@ -133,7 +139,8 @@ def frame_change(scene, obj, depsgraph):
     if s is not None and s.key != settings_key(scene, obj):
         drop(obj)
         s = None
-    action = live.decide(frame, scene.frame_start, scene.frame_end, s.expected if s is not None else None)
+    action = live.decide(frame, scene.frame_start, scene.frame_end, s.expected if s is not None else None,
+                         s is not None and s.complete)
     if action == live.RESET:
         if s is not None or obj.name in _errors:
             drop(obj)

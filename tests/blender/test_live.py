@@ -85,6 +85,11 @@ def test_frames_shown_in_order_give_a_bakes_fields(open_fixture, addon, tmp_path
         for got, want in zip(attributes(flag.data), baked_attributes(reader, done, flag), strict=True):
             np.testing.assert_allclose(got, want, rtol=0, atol=1e-7, err_msg=f"frame {f}")
     assert "8 frames held (1–8)" in preview.status(flag)
+    session = preview.session(flag)
+    scene.frame_set(1)  # looping back: a complete preview is kept and plays like the bake
+    assert preview.session(flag) is session and len(session.store) == LAST
+    for got, want in zip(attributes(flag.data), baked_attributes(reader, 1, flag), strict=True):
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-7)
 
 
 def test_scrubbing_back_shows_held_frames_and_jumps_reset(open_fixture, addon, tmp_path):

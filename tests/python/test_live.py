@@ -20,6 +20,9 @@ def test_decide_steps_forward_shows_back_and_resets_otherwise():
     assert live.decide(10, first, last, 9) == live.RESET  # a jump forward skips frames
     assert live.decide(13, first, last, 13) == live.RESET  # past the range
     assert live.decide(4, first, last, 9) == live.RESET  # before the start
+    # a complete preview (every frame held) plays like a bake: looping keeps it
+    for frame in (4, 5, 9, 12, 13):
+        assert live.decide(frame, first, last, 13, complete=True) == live.SHOW
 
 
 def test_store_drops_the_oldest_frames_past_its_limit():
