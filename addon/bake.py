@@ -148,7 +148,7 @@ class Stepper:
     references; `start(pos)` builds the simulator at the first frame and spills the Spill
     Group; `advance(pos, contacts, after)` steps to the next frame's positions (`after`:
     the positions one frame later, `schedule`'s lookahead, or None at the last frame) and
-    pours what the sources brought; `fields()` is the frame's cache fields
+    pours what the sources brought; `frame_fields()` is the frame's cache fields
     (`cache_fields`, in order). The frame's positions come from `positions(frame)` and
     the sources' pours from `contacts(frame, pos)` (both on the scene as it is now)."""
 
@@ -207,7 +207,7 @@ class Stepper:
         self._pour(contacts)
         self._pos = pos
 
-    def fields(self):
+    def frame_fields(self):
         """This frame's cache fields, in the order of `cache_fields`."""
         return self._outputs() + self._flow()
 
@@ -423,7 +423,7 @@ class BakeJob(Stepper):
                 after = self._walk.peek(frame + 1)[0] if frame < self.last else None
                 self._evaluating = frame
                 self.advance(pos, contacts, after)
-            self.writer.push_frame(self.fields())
+            self.writer.push_frame(self.frame_fields())
             if self.fine_writer is not None:
                 self.fine_writer.push_frame(self._outputs(fine=True))
             self.frame = frame

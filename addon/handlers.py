@@ -56,6 +56,11 @@ def resume():
     _suspended -= 1
 
 
+def suspended():
+    """Whether a bake is walking the frames (`suspend`)."""
+    return _suspended > 0
+
+
 def _reader(path):
     import madder
 

@@ -83,7 +83,7 @@ class Session:
     def restart(self, depsgraph):
         st = self.stepper
         st.start(st._positions(self.first, depsgraph), depsgraph)
-        self.store.put(self.first, st.fields())
+        self.store.put(self.first, st.frame_fields())
         self.expected = self.first + 1
 
     def step(self, frame, depsgraph):
@@ -93,11 +93,11 @@ class Session:
         if self.pending is not None:
             f0, pos0, contacts0 = self.pending
             st.advance(pos0, contacts0, after=pos)
-            self.store.put(f0, st.fields())
+            self.store.put(f0, st.frame_fields())
         self.pending = (frame, pos, contacts)
         if frame == self.last:  # a bake's last frame has no lookahead either
             st.advance(pos, contacts, after=None)
-            self.store.put(frame, st.fields())
+            self.store.put(frame, st.frame_fields())
             self.pending = None
         self.expected = frame + 1
 
@@ -168,7 +168,7 @@ def _live_objects(scene):
 @persistent
 def on_frame_change_post(scene, depsgraph=None):
     """Steps every live object of `scene` to the frame just evaluated (see the module doc)."""
-    if handlers._suspended:
+    if handlers.suspended():
         return
     objs = _live_objects(scene)
     if not objs:
