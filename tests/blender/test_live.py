@@ -197,3 +197,35 @@ def test_memory_limit_drops_the_oldest_frames(open_fixture, addon, tmp_path):
     # raising the limit keeps what is held; lowering it drops more
     flag.madder.live_memory = 0.05
     assert len(store) == int(0.05 * 2**20) // frame_bytes
+
+
+def test_live_with_a_moving_brush_and_bake_flow_gives_a_bakes_fields(addon, tmp_path):
+    """Pours (a brush coming down, with its splash), colours and the flow fields: the
+    sources are read from the frame change's depsgraph as the bake reads them."""
+    bpy.ops.wm.read_homefile(use_empty=True)
+    scene = bpy.context.scene
+    scene.frame_start, scene.frame_end = 1, 10
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=30, y_subdivisions=30, size=2.0)
+    cloth = bpy.context.object
+    cloth.madder.enabled = True
+    cloth.madder.cache_dir = str(tmp_path)
+    cloth.madder.bake_flow = True
+    bpy.ops.mesh.primitive_plane_add(size=0.3, location=(0.3, 0.0, 0.5))
+    brush = bpy.context.object
+    s = brush.madder_source
+    s.is_source, s.amount, s.distance, s.color, s.splash_speed = True, 4.0, 0.06, (0.0, 0.2, 1.0), 0.5
+    brush.keyframe_insert("location", frame=1)
+    brush.location.z = 0.02
+    brush.keyframe_insert("location", frame=6)
+    make_active(cloth)
+    bake_copy(cloth, tmp_path, "bake.madder")
+    ref, baked = read_all(tmp_path / "bake.madder")
+    assert len(ref.fields) == 12 and baked[10][0].max() > 0.0  # colours and flow; the brush poured
+    preview = preview_module(addon)
+    cloth.madder.live = True
+    play(scene, range(1, 11))
+    store = preview.session(cloth).store
+    assert store.frames() == list(range(1, 11))
+    for f in range(1, 11):
+        for name, a, b in zip(ref.fields, store.get(f), baked[f], strict=True):
+            np.testing.assert_array_equal(a, b, err_msg=f"frame {f} {name}")
