@@ -124,6 +124,11 @@ def test_scrubbing_back_shows_held_frames_and_jumps_reset(open_fixture, addon, t
     assert preview.session(flag) is None
     flag.madder.amount /= 2.0
     play(scene, (1, 2))
+    bpy.ops.wm.save_mainfile()
+    bpy.ops.wm.open_mainfile(filepath=bpy.data.filepath)  # a file load ends every session
+    scene, flag = bpy.context.scene, bpy.data.objects["Flag"]
+    assert flag.madder.live and preview.session(flag) is None
+    play(scene, (1, 2))
     flag.madder.live = False  # off: the session ends, the bake plays again
     assert preview.session(flag) is None
     for got, want in zip(attributes(flag.data), baked_attributes(reader, 2, flag), strict=True):
