@@ -2,12 +2,12 @@
 
 The parts that use bpy are imported when the add-on registers (or when one is asked for,
 e.g. `madder.addon.cli`), not on import: the package's bpy-free modules (`presets`,
-`placement`, `motion`, `pour`, `schedule`, `textures`, `errors`) can then be imported, and tested,
+`placement`, `motion`, `pour`, `schedule`, `live`, `textures`, `errors`) can then be imported, and tested,
 without Blender."""
 
 import importlib
 
-_PARTS = ("properties", "fabrics", "operators", "shading", "panels", "handlers", "cli")
+_PARTS = ("properties", "fabrics", "operators", "shading", "panels", "handlers", "preview", "cli")
 
 
 def __getattr__(name):

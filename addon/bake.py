@@ -139,7 +139,166 @@ class MotionFile(motion.MotionSamples):
         self.matrix = np.array(obj.matrix_world, dtype=np.float64)
 
 
-class BakeJob:
+class Stepper:
+    """One object's stain simulation, advanced a frame at a time from the object's
+    settings: the one code path that both a bake (`BakeJob`) and Live preview
+    (`live_session.LiveSession`) drive, so that a preview's frames are a bake's frames.
+
+    `Stepper(scene, obj)` checks the input and prepares the topology, the fabric and the
+    references; `start(pos)` builds the simulator at the first frame and spills the Spill
+    Group; `advance(pos, contacts, after)` steps to the next frame's positions (`after`:
+    the positions one frame later, `schedule`'s lookahead, or None at the last frame) and
+    pours what the sources brought; `frame_fields()` is the frame's cache fields
+    (`cache_fields`, in order). The frame's positions come from `positions(frame)` and
+    the sources' pours from `contacts(frame, pos)` (both on the scene as it is now)."""
+
+    def __init__(self, scene, obj):
+        self.madder = core()
+        self.sources = source_objects(scene, obj) if obj is not None else []
+        check_object(obj, self.sources)
+        self.scene, self.obj = scene, obj
+        self.dt = scene.render.fps_base / scene.render.fps
+        mesh = obj.data
+        faces, face_polygon, n_polygons = bridge.topology_arrays(mesh)
+        self.face_polygon = face_polygon
+        self.n_vertices = len(mesh.vertices)
+        if len(faces) == 0:
+            raise BakeError(f"'{obj.name}' has no faces", object=obj.name)
+        settings = obj.madder
+        self.detail = settings.detail
+        self.wet0 = bridge.vertex_group_weights(obj, settings.source_group) if settings.source_group else None
+        # with sources, colours can differ: track them (three more fields)
+        self.fields = FIELDS + (COLOR_FIELDS if self.sources else [])
+        # the flow goes to the cloth's cache only (the fine cache feeds the images)
+        self.flow = bool(settings.bake_flow)
+        self.cache_fields = self.fields + (FLOW_FIELDS if self.flow else [])
+        self._pos = None  # this frame's positions (m), for the flow fields
+        self.topology = _topology(self.madder, obj, faces, self.n_vertices, face_polygon, n_polygons)
+        self.warnings = []
+        n_nonmanifold = len(self.topology.non_manifold_edges())
+        if n_nonmanifold:
+            self.warnings.append(f"{n_nonmanifold} non-manifold edges (shared by 3+ faces)")
+        self.conductivity = _conductivity(self.madder, obj, self.topology, face_polygon, self.warnings)
+        self.references = presets.references(
+            settings, [o.madder_source for o in self.sources], spill=self.wet0 is not None
+        )
+        if self.references[0] == 0.0:
+            self.warnings.append("its liquid has no solute (concentration 0): it wets the cloth but leaves no stain")
+        self.unit = unit_scale(scene)
+        self.faces = faces.astype(np.int64)
+        self.motion = MotionFile(self.madder, obj) if settings.motion_file else None
+        self.sim = None
+        self.splashed = set()  # sources whose splash is done
+
+    def start(self, pos, depsgraph=None):
+        """Builds the simulator at the first frame (rest pose: `_rest()`; first pose: `pos`)
+        and spills the Spill Group."""
+        self.sim = self.madder.Simulator(self.topology, self._rest(depsgraph), pos,
+                                         **simulator_settings(self.scene, self.obj, self.unit),
+                                         **self.conductivity, detail=self.detail)
+        self.splashed = set()
+        self._spill(pos)
+        self._pos = pos
+
+    def advance(self, pos, contacts, after):
+        """Steps to the next frame (positions `pos`, `after` one frame later or None) and
+        pours the `contacts` of that frame."""
+        self.sim.step(pos, self.dt, after=after)
+        self._pour(contacts)
+        self._pos = pos
+
+    def frame_fields(self):
+        """This frame's cache fields, in the order of `cache_fields`."""
+        return self._outputs() + self._flow()
+
+    def _outputs(self, fine=False):
+        """This frame's cache fields: total solute, liquid and deposit densities (kg/m²),
+        and the solute's colour when sources may mix colours; at the refined cloth's
+        vertices with `fine`."""
+        sim = self.sim
+        out = [np.ascontiguousarray(sim.stain(fine=fine)[:, 3]), sim.wetness(fine=fine), sim.deposit(fine=fine)]
+        if self.sources:
+            out += list(np.ascontiguousarray(sim.solute_color(fine=fine).T))
+        return out
+
+    def _flow(self):
+        """With Bake Flow: this frame's liquid velocity (m/s, relative to the cloth) and
+        cloth positions (m), world space, one field per component; else nothing."""
+        if not self.flow:
+            return []
+        vel = np.asarray(self.sim.velocity, dtype=np.float32)
+        pos = np.asarray(self._pos, dtype=np.float32)
+        return [np.ascontiguousarray(a[:, k]) for a in (vel, pos) for k in range(3)]
+
+    def _spill(self, pos):
+        """The initial wetness: the Spill Group's weights × Amount of the object's liquid,
+        and its splash (outward from the weighted centroid of the wet area)."""
+        s = self.obj.madder
+        if self.wet0 is None or not self.wet0.any():
+            return
+        self.sim.add_liquid(pour.spilled(self.wet0, s.amount), s.concentration, tuple(s.stain_color))
+        if s.splash_speed > 0.0:
+            self.sim.splash(pour.centroid(self.wet0, pos), s.splash_speed * self.unit, s.splash_seed, self.wet0)
+
+    def _contacts(self, frame, pos, depsgraph=None):
+        """Per active source at `frame`: its pour weights on the cloth (1 at contact, fading
+        linearly to 0 at its reach) and its origin (the splash centre)."""
+        if not self.sources:
+            return []
+        depsgraph = depsgraph or bpy.context.evaluated_depsgraph_get()
+        out = []
+        for src in self.sources:
+            s = src.madder_source
+            if not pour.pours_at(frame, s.use_frame_range, s.frame_start, s.frame_end):
+                continue
+            src_eval = src.evaluated_get(depsgraph)
+            verts, tris = bridge.world_triangles(src_eval)
+            if len(tris) == 0:
+                continue
+            reach = s.distance * self.unit  # metres, like the positions
+            d = self.madder.distances_within(pos, verts * np.float32(self.unit), tris, reach)
+            weight = pour.falloff(d, reach)
+            if weight.any():
+                out.append((src, weight, tuple(np.asarray(src_eval.matrix_world.translation) * self.unit)))
+        return out
+
+    def _pour(self, contacts):
+        """Adds the liquid each source brought during the frame that just ended: `flow × dt`
+        per unit area times its weights. The first time a source pours, its splash starts
+        from the source's origin."""
+        for src, weight, origin in contacts:
+            s = src.madder_source
+            self.sim.add_liquid(pour.poured(s.amount, self.dt, weight), s.concentration, tuple(s.color))
+            if s.splash_speed > 0.0 and src.name not in self.splashed:
+                self.splashed.add(src.name)
+                self.sim.splash(origin, s.splash_speed * self.unit, s.splash_seed, weight)
+
+    def _positions(self, frame, depsgraph=None):
+        if self.motion is not None:
+            local = self.motion.local(frame)
+            check_transform(self.obj, frame, self.faces, local, self.motion.matrix)
+            return placed(local, self.motion.matrix, self.unit)
+        return frame_positions(self.obj, depsgraph or bpy.context.evaluated_depsgraph_get(), self.n_vertices, frame,
+                               self.faces, self.unit)
+
+    def _rest(self, depsgraph=None):
+        """The rest pose: the mesh's own (undeformed) vertices, placed in world space (in
+        metres) by the object's transform at the first frame (or the motion file's
+        placement)."""
+        co = bridge.rest_positions(self.obj.data).astype(np.float64)
+        if self.motion is not None:
+            matrix = self.motion.matrix
+        else:
+            matrix = self.obj.evaluated_get(depsgraph or bpy.context.evaluated_depsgraph_get()).matrix_world
+        rest = placed(co, matrix, self.unit)
+        bad = placement.first_non_finite(rest)
+        if bad is not None:
+            raise BakeError(f"'{self.obj.name}': vertex {bad} has a non-finite rest position",
+                            object=self.obj.name, vertex=bad)
+        return rest
+
+
+class BakeJob(Stepper):
     """One object's bake, advanced a frame at a time, so that a modal operator can show
     progress and cancel between frames, and a script can simply run it to the end.
 
@@ -169,59 +328,26 @@ class BakeJob:
     frame twice then."""
 
     def __init__(self, scene, obj, frames=None):
-        self.madder = core()
-        self.sources = source_objects(scene, obj) if obj is not None else []
-        check_object(obj, self.sources)
-        self.scene, self.obj = scene, obj
+        super().__init__(scene, obj)
+        settings = obj.madder
         self.path = cache_path(obj)
         self.first, self.last = frames or (scene.frame_start, scene.frame_end)
         if self.last < self.first:
             raise BakeError(f"'{obj.name}': the frame range {self.first}-{self.last} is empty", object=obj.name)
-        self.dt = scene.render.fps_base / scene.render.fps
-        mesh = obj.data
-        faces, face_polygon, n_polygons = bridge.topology_arrays(mesh)
-        self.face_polygon = face_polygon
-        self.n_vertices = len(mesh.vertices)
-        if len(faces) == 0:
-            raise BakeError(f"'{obj.name}' has no faces", object=obj.name)
-        settings = obj.madder
-        self.detail = settings.detail
         self.images = self._check_images(settings)  # before anything is written
         try:
             os.makedirs(os.path.dirname(self.path), exist_ok=True)
         except OSError as e:
             raise BakeError(f"'{obj.name}': cannot create the cache folder {os.path.dirname(self.path)}: {e}",
                             object=obj.name, filename=os.path.dirname(self.path)) from e
-        self.wet0 = bridge.vertex_group_weights(obj, settings.source_group) if settings.source_group else None
-        # with sources, colours can differ: track them (three more fields)
-        self.fields = FIELDS + (COLOR_FIELDS if self.sources else [])
-        # the flow goes to the cloth's cache only (the fine cache feeds the images)
-        self.flow = bool(settings.bake_flow)
-        self.cache_fields = self.fields + (FLOW_FIELDS if self.flow else [])
-        self._pos = None  # this frame's positions (m), for the flow fields
-        self.topology = _topology(self.madder, obj, faces, self.n_vertices, face_polygon, n_polygons)
-        self.warnings = []
-        n_nonmanifold = len(self.topology.non_manifold_edges())
-        if n_nonmanifold:
-            self.warnings.append(f"{n_nonmanifold} non-manifold edges (shared by 3+ faces)")
-        self.conductivity = _conductivity(self.madder, obj, self.topology, face_polygon, self.warnings)
-        self.references = presets.references(
-            settings, [o.madder_source for o in self.sources], spill=self.wet0 is not None
-        )
-        if self.references[0] == 0.0:
-            self.warnings.append("its liquid has no solute (concentration 0): it wets the cloth but leaves no stain")
-        self.unit = unit_scale(scene)
-        self.faces = faces.astype(np.int64)
-        self.motion = MotionFile(self.madder, obj) if settings.motion_file else None
         if self.motion is not None:
             outside = self.motion.outside(self.first, self.last)
             if outside:
                 self.warnings.append(outside)
         self.frame = None  # last frame baked
         self.frame_before = scene.frame_current
-        self.writer = self.sim = None
+        self.writer = None
         self.fine_writer = self.staging = self.export = None
-        self.splashed = set()  # sources whose splash is done
         # (positions, contacts) per frame, evaluated once each, one frame early
         self._walk = schedule.Lookahead(self._visit)
         self._evaluating = self.first  # the frame being read, for error messages
@@ -282,11 +408,7 @@ class BakeJob:
                 frame = self.first
                 self._evaluating = frame
                 self._goto(frame)
-                pos = self._positions(frame)
-                self.sim = madder.Simulator(self.topology, self._rest(), pos,
-                                            **simulator_settings(self.scene, obj, self.unit),
-                                            **self.conductivity, detail=self.detail)
-                self._spill(pos)
+                self.start(self._positions(frame))
                 self.writer = madder.CacheWriter(self.path, self.n_vertices, self.cache_fields, self.first,
                                                  self.frames, self.dt)
                 if self.images:
@@ -300,10 +422,8 @@ class BakeJob:
                 # once, in order
                 after = self._walk.peek(frame + 1)[0] if frame < self.last else None
                 self._evaluating = frame
-                self.sim.step(pos, self.dt, after=after)
-                self._pour(contacts)
-            self._pos = pos
-            self.writer.push_frame(self._outputs() + self._flow())
+                self.advance(pos, contacts, after)
+            self.writer.push_frame(self.frame_fields())
             if self.fine_writer is not None:
                 self.fine_writer.push_frame(self._outputs(fine=True))
             self.frame = frame
@@ -321,25 +441,6 @@ class BakeJob:
             self.cancel()
             raise
         return self.images is not None or self.frame < self.last
-
-    def _outputs(self, fine=False):
-        """This frame's cache fields: total solute, liquid and deposit densities (kg/m²),
-        and the solute's colour when sources may mix colours; at the refined cloth's
-        vertices with `fine`."""
-        sim = self.sim
-        out = [np.ascontiguousarray(sim.stain(fine=fine)[:, 3]), sim.wetness(fine=fine), sim.deposit(fine=fine)]
-        if self.sources:
-            out += list(np.ascontiguousarray(sim.solute_color(fine=fine).T))
-        return out
-
-    def _flow(self):
-        """With Bake Flow: this frame's liquid velocity (m/s, relative to the cloth) and
-        cloth positions (m), world space, one field per component; else nothing."""
-        if not self.flow:
-            return []
-        vel = np.asarray(self.sim.velocity, dtype=np.float32)
-        pos = np.asarray(self._pos, dtype=np.float32)
-        return [np.ascontiguousarray(a[:, k]) for a in (vel, pos) for k in range(3)]
 
     # -- the image sequence
 
@@ -374,16 +475,6 @@ class BakeJob:
             self.cancel()
             raise
 
-    def _spill(self, pos):
-        """The initial wetness: the Spill Group's weights × Amount of the object's liquid,
-        and its splash (outward from the weighted centroid of the wet area)."""
-        s = self.obj.madder
-        if self.wet0 is None or not self.wet0.any():
-            return
-        self.sim.add_liquid(pour.spilled(self.wet0, s.amount), s.concentration, tuple(s.stain_color))
-        if s.splash_speed > 0.0:
-            self.sim.splash(pour.centroid(self.wet0, pos), s.splash_speed * self.unit, s.splash_seed, self.wet0)
-
     def _visit(self, frame):
         """Positions at `frame` and what the sources bring there (`self._walk` calls it
         once per frame, in order)."""
@@ -392,68 +483,11 @@ class BakeJob:
         pos = self._positions(frame)
         return pos, self._contacts(frame, pos)
 
-    def _contacts(self, frame, pos):
-        """Per active source at `frame`: its pour weights on the cloth (1 at contact, fading
-        linearly to 0 at its reach) and its origin (the splash centre)."""
-        if not self.sources:
-            return []
-        depsgraph = bpy.context.evaluated_depsgraph_get()
-        out = []
-        for src in self.sources:
-            s = src.madder_source
-            if not pour.pours_at(frame, s.use_frame_range, s.frame_start, s.frame_end):
-                continue
-            src_eval = src.evaluated_get(depsgraph)
-            verts, tris = bridge.world_triangles(src_eval)
-            if len(tris) == 0:
-                continue
-            reach = s.distance * self.unit  # metres, like the positions
-            d = self.madder.distances_within(pos, verts * np.float32(self.unit), tris, reach)
-            weight = pour.falloff(d, reach)
-            if weight.any():
-                out.append((src, weight, tuple(np.asarray(src_eval.matrix_world.translation) * self.unit)))
-        return out
-
-    def _pour(self, contacts):
-        """Adds the liquid each source brought during the frame that just ended: `flow × dt`
-        per unit area times its weights. The first time a source pours, its splash starts
-        from the source's origin."""
-        for src, weight, origin in contacts:
-            s = src.madder_source
-            self.sim.add_liquid(pour.poured(s.amount, self.dt, weight), s.concentration, tuple(s.color))
-            if s.splash_speed > 0.0 and src.name not in self.splashed:
-                self.splashed.add(src.name)
-                self.sim.splash(origin, s.splash_speed * self.unit, s.splash_seed, weight)
-
     def _goto(self, frame):
         """Moves the scene to `frame` unless nothing needs the scene (motion from a file and
         no sources): then the bake never evaluates it."""
         if self.motion is None or self.sources:
             self.scene.frame_set(frame)
-
-    def _positions(self, frame):
-        if self.motion is not None:
-            local = self.motion.local(frame)
-            check_transform(self.obj, frame, self.faces, local, self.motion.matrix)
-            return placed(local, self.motion.matrix, self.unit)
-        return frame_positions(self.obj, bpy.context.evaluated_depsgraph_get(), self.n_vertices, frame,
-                               self.faces, self.unit)
-
-    def _rest(self):
-        """The rest pose: the mesh's own (undeformed) vertices, placed in world space (in
-        metres) by the object's transform at the first frame (or the motion file's
-        placement)."""
-        co = bridge.rest_positions(self.obj.data).astype(np.float64)
-        if self.motion is not None:
-            matrix = self.motion.matrix
-        else:
-            matrix = self.obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).matrix_world
-        rest = placed(co, matrix, self.unit)
-        bad = placement.first_non_finite(rest)
-        if bad is not None:
-            raise BakeError(f"'{self.obj.name}': vertex {bad} has a non-finite rest position",
-                            object=self.obj.name, vertex=bad)
-        return rest
 
     def finish(self):
         """Replaces the previous cache with the new one (and, with Image Sequence, the

@@ -56,6 +56,11 @@ def resume():
     _suspended -= 1
 
 
+def suspended():
+    """Whether a bake is walking the frames (`suspend`)."""
+    return _suspended > 0
+
+
 def _reader(path):
     import madder
 
@@ -220,7 +225,9 @@ def apply_frame(obj, frame):
 
 
 def _stained(scene):
-    return [o for o in scene.objects if o.type == "MESH" and o.madder.enabled and o.madder.cache_file]
+    # a Live object's attributes are its preview's (`preview`), not the cache's
+    return [o for o in scene.objects
+            if o.type == "MESH" and o.madder.enabled and o.madder.cache_file and not o.madder.live]
 
 
 @persistent

@@ -7,7 +7,7 @@ bake) and blocking when executed from a script or in background mode."""
 import bpy
 from bpy.props import BoolProperty, StringProperty
 
-from . import bake, bridge, handlers, images, structures
+from . import bake, bridge, handlers, images, preview, structures
 from .errors import ExportError, LcsError, RelocateError
 
 
@@ -291,8 +291,29 @@ class MADDER_OT_coherent_structures(bpy.types.Operator):
         return {"FINISHED"}
 
 
-classes = (MADDER_OT_bake, MADDER_OT_free_bake, MADDER_OT_export_textures, MADDER_OT_relocate_cache,
-           MADDER_OT_coherent_structures)
+class MADDER_OT_bake_from_preview(bpy.types.Operator):
+    """Write the frames Live simulated (from the start frame) to the cache, as Bake would"""
+
+    bl_idname = "madder.bake_from_preview"
+    bl_label = "Bake from Preview"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        return context.object is not None and context.object.type == "MESH"
+
+    def execute(self, context):
+        try:
+            path = preview.bake_from_preview(context.scene, context.object)
+        except bake.BakeError as e:
+            self.report({"ERROR"}, f"Madder: {e}")
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"Madder: baked the preview to {path}")
+        return {"FINISHED"}
+
+
+classes = (MADDER_OT_bake, MADDER_OT_free_bake, MADDER_OT_bake_from_preview, MADDER_OT_export_textures,
+           MADDER_OT_relocate_cache, MADDER_OT_coherent_structures)
 
 
 def register():

@@ -4,7 +4,7 @@ import textwrap
 
 import bpy
 
-from . import fabrics, handlers, images
+from . import fabrics, handlers, images, preview
 
 
 class _PhysicsPanel:
@@ -35,8 +35,20 @@ class MADDER_PT_stain(_PhysicsPanel, bpy.types.Panel):
         row.operator("madder.free_bake", icon="TRASH", text="Free")
         layout.operator("madder.bake", text="Bake All Stains", icon="SCENE_DATA").all_objects = True
         layout.operator("madder.add_stain_shader", icon="NODE_MATERIAL")
-        if s.cache_file:
+        _draw_live(layout, context.object)
+        if s.cache_file and not s.live:
             _draw_cache_status(layout, context.object, context.scene.frame_current)
+
+
+def _draw_live(layout, obj):
+    """Live preview: the toggle, its memory, what it holds, Bake from Preview."""
+    s = obj.madder
+    row = layout.row(align=True)
+    row.prop(s, "live", toggle=True, icon="PLAY")
+    row.prop(s, "live_memory")
+    if s.live:
+        layout.label(text=preview.status(obj), icon="INFO")
+        layout.operator("madder.bake_from_preview", icon="FILE_CACHE")
 
 
 def _draw_cache_status(layout, obj, frame):

@@ -101,6 +101,12 @@ def _splash_seed():
     )
 
 
+def _preview():
+    from . import preview  # needs the properties registered first
+
+    return preview
+
+
 class MadderLcsSettings(bpy.types.PropertyGroup):
     """Coherent Structures (seed ch. 5): FTLE of the baked flow at a frame, and its ridges."""
 
@@ -491,6 +497,25 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         type=MadderLcsSettings,
         name="Coherent Structures",
         description="Settings of the Coherent Structures tool (FTLE and ridges of the baked flow)",
+    )
+    # -- Live preview (addon/preview.py)
+    live: BoolProperty(
+        name="Live",
+        description="Simulate the stain as the timeline plays forward from the start frame, without a bake "
+        "(each frame shows the newest finished frame, one frame late; going back to the start frame, "
+        "a jump forward or a changed setting starts again). Bake from Preview writes it to the cache",
+        default=False,
+        update=lambda self, context: _preview().live_update(self, context),
+    )
+    live_memory: FloatProperty(
+        name="Live Memory",
+        description="Memory (MB) for the previewed frames kept to scrub back and to Bake from Preview; "
+        "past it the oldest frames are dropped",
+        default=512.0,
+        min=0.01,
+        soft_max=8192.0,
+        precision=1,
+        update=lambda self, context: _preview().memory_update(self, context),
     )
     render_without_cache: BoolProperty(
         name="Render Without Stain",

@@ -12,7 +12,8 @@ import pytest
 
 from madder.addon import errors, frames, motion, placement, playback, pour, presets, schedule
 
-BPY_FREE = ("errors", "frames", "lcs", "motion", "placement", "playback", "pour", "presets", "schedule", "textures")
+BPY_FREE = ("errors", "frames", "lcs", "live", "motion", "placement", "playback", "pour", "presets", "schedule",
+            "textures")
 
 
 def test_the_logic_modules_import_without_bpy():
