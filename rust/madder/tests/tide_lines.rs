@@ -35,6 +35,17 @@ fn coffee() -> InteractionRates {
 /// solute carried by the flow or not, and 1 kg/m² of coffee-strength liquid poured within
 /// 3 cm of its centre. Returns the simulator and the positions.
 fn spill(rings: usize, interaction: InteractionRates, carry: bool) -> (Simulator, Vec<DVec3>) {
+    spill_with(rings, interaction, carry, 0.0, false, 1.0)
+}
+
+fn spill_with(
+    rings: usize,
+    interaction: InteractionRates,
+    carry: bool,
+    residual: f64,
+    vapour: bool,
+    amount: f64,
+) -> (Simulator, Vec<DVec3>) {
     let (topo, pos) = disk(rings, 0.1);
     let params = StainParams {
         forces: Forces {
@@ -44,6 +55,15 @@ fn spill(rings: usize, interaction: InteractionRates, carry: bool) -> (Simulator
         },
         interaction,
         carry_solute: carry,
+        residual_saturation: residual,
+        vapour_limited: vapour,
+        wicking: madder::stain::Wicking {
+            exponent: std::env::var("WICK")
+                .ok()
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(0.0),
+            density: 0.1,
+        },
         ..Default::default()
     };
     let mut sim = Simulator::new(
@@ -58,7 +78,7 @@ fn spill(rings: usize, interaction: InteractionRates, carry: bool) -> (Simulator
     .unwrap();
     let start: Vec<f64> = pos
         .iter()
-        .map(|p| if p.length() < 0.03 { 1.0 } else { 0.0 })
+        .map(|p| if p.length() < 0.03 { amount } else { 0.0 })
         .collect();
     sim.add_liquid(&start, 0.012, None).unwrap();
     (sim, pos)
@@ -159,4 +179,59 @@ fn a_uniform_solution_stays_uniform_as_it_spreads() {
     }
     println!("uniform solution: concentration off by at most {worst:.2e}");
     assert!(worst < 1e-9, "{worst}");
+}
+
+#[test]
+#[ignore]
+fn explore() {
+    let get = |k: &str, d: f64| {
+        std::env::var(k)
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(d)
+    };
+    let mut rates = coffee();
+    rates.capacity = get("CAP", 1e-3);
+    rates.adsorption = get("KD", 0.05);
+    let (mut sim, pos) = spill_with(
+        get("RINGS", 50.0) as usize,
+        rates,
+        get("CARRY", 1.0) > 0.0,
+        get("RES", 0.2),
+        get("VAP", 1.0) > 0.0,
+        get("AMOUNT", 0.3),
+    );
+    let solute0 = sim.totals().solute;
+    let mut steps = 0;
+    let t = std::time::Instant::now();
+    while sim.totals().solvent > 1e-9 && steps < 20000 {
+        let dt = if sim.time() < get("T0", 20.0) {
+            get("DT0", 0.1)
+        } else {
+            get("DT", 4.0)
+        };
+        sim.step(&pos, dt, None).unwrap();
+        steps += 1;
+    }
+    let defect = (sim.totals().solute - solute0).abs() / solute0;
+    let s = sim.solute_density();
+    let area = sim.vertex_area();
+    let mut bins = vec![(0.0, 0.0); 50];
+    for ((p, &d), &a) in pos.iter().zip(&s).zip(area) {
+        let k = ((p.length() / 0.002) as usize).min(49);
+        bins[k].0 += a * d;
+        bins[k].1 += a;
+    }
+    let profile: Vec<f64> = bins
+        .iter()
+        .map(|(m, a)| if *a > 0.0 { m / a } else { 0.0 })
+        .collect();
+    let line: Vec<String> = profile.iter().map(|d| format!("{:.2}", d * 1e3)).collect();
+    println!("{}", line.join(" "));
+    println!(
+        "steps {steps} ({:.1} s), defect {defect:.1e}, min {:.1e}, rim/centre {:.2}",
+        t.elapsed().as_secs_f64(),
+        s.iter().cloned().fold(f64::INFINITY, f64::min),
+        ring_contrast(&profile)
+    );
 }

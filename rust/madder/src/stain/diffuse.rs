@@ -578,6 +578,7 @@ pub(super) fn diffuse_densities(
     h: f64,
     wicking: Option<&[f64]>,
     carry: bool,
+    held_scale: Option<&[f64]>,
 ) -> Result<usize, Error> {
     let region = ops.region;
     let vertices = &region.vertices;
@@ -587,6 +588,11 @@ pub(super) fn diffuse_densities(
         .conductivity
         .stiffness(ops.topology, geometry, ops.pattern, h, wicking);
     let values = region.scalar_values(ops.pattern, &full, area, false);
+    // the fibres' liquid on its own, pinned operator (its faces' scales), when carried
+    let held_full = held_scale.filter(|_| carry).map(|g| {
+        ops.conductivity
+            .stiffness(ops.topology, geometry, ops.pattern, h, Some(g))
+    });
     // with the solute carried (issue 13 §2) the two solvents, free and in the fibres,
     // are solved, and the solute moves with their fluxes; otherwise the free solvent, the
     // dissolved solute and its colour diffuse alike
@@ -616,7 +622,19 @@ pub(super) fn diffuse_densities(
             if a > 0.0 { m / a } else { 0.0 }
         })
         .collect();
-    cg.solve(&values, &rhs, &mut sigma)?;
+    let iterations = match &held_full {
+        None => {
+            cg.solve(&values, &rhs, &mut sigma)?;
+            cg.last_iterations
+        }
+        Some(held) => {
+            let held_values = region.scalar_values(ops.pattern, held, area, false);
+            cg.solve(&values, &rhs[..nv], &mut sigma[..nv])?;
+            let free = cg.last_iterations;
+            cg.solve(&held_values, &rhs[nv..], &mut sigma[nv..])?;
+            free + cg.last_iterations
+        }
+    };
     for (k, m) in fields.iter_mut().enumerate() {
         let before: f64 = vertices.iter().map(|&v| m[v as usize]).sum();
         let sigma = &sigma[k * nv..(k + 1) * nv];
@@ -672,7 +690,7 @@ pub(super) fn diffuse_densities(
             .collect();
         carry_with_solvent(
             ops,
-            &full,
+            held_full.as_ref().unwrap_or(&full),
             &sigma[nv..2 * nv],
             (held, &f.absorbed_solvent),
             &mut refs,
@@ -688,7 +706,7 @@ pub(super) fn diffuse_densities(
     if let (Some(c), Some(cf)) = (color, f.color_free.as_mut()) {
         merge_rgb(&c, cf);
     }
-    Ok(cg.last_iterations)
+    Ok(iterations)
 }
 
 /// Most Gauss–Seidel sweeps of the carried solute's concentrations ([`carry_with_solvent`]).

@@ -239,6 +239,147 @@ pub(crate) fn exposure(
         .collect()
 }
 
+/// Evaporation coefficient of every vertex when the evaporation is limited by the
+/// diffusion of vapour into still air (issue 13 §2; module doc, "Vapour-limited
+/// evaporation"): on a wet vertex at distance `d` from the edge of its wet patch,
+/// `J/J̄ = R / (2 √(d (2R − d)))` averaged over the vertex's cell, `R` the patch's largest
+/// distance to its edge, then scaled so that each patch's mean (by area) is exactly 1
+/// (`K_evap` stays the mean rate). Dry vertices get 1.
+///
+/// The edge of a patch lies half-way along every edge from a wet to a dry vertex
+/// (`wet > threshold`), and on the cloth's border (`boundary`); `d` is the shortest path
+/// along mesh edges (`edge_length`, indexed like [`Topology::edges`]) to it (Dijkstra,
+/// deterministic). A vertex's cell is `[d − ℓ/2, d + ℓ/2] ∩ [0, 2R]`, `ℓ = √A_i`. A patch
+/// without an edge (a closed cloth wet all over) evaporates uniformly.
+///
+/// # Panics
+/// If a slice does not have one value per vertex (per edge for `edge_length`).
+pub(crate) fn vapour_exposure(
+    topology: &Topology,
+    edge_length: &[f64],
+    area: &[f64],
+    boundary: &[bool],
+    wet: &[f64],
+    threshold: f64,
+) -> Vec<f64> {
+    use std::cmp::Reverse;
+    use std::collections::BinaryHeap;
+    let n = topology.n_vertices();
+    assert_eq!(boundary.len(), n, "vapour exposure: one boundary flag per vertex");
+    assert_eq!(wet.len(), n, "vapour exposure: one wetness value per vertex");
+    assert_eq!(area.len(), n, "vapour exposure: one area per vertex");
+    assert_eq!(edge_length.len(), topology.n_edges(), "vapour exposure: edge lengths");
+    let is_wet: Vec<bool> = wet.iter().map(|&w| w > threshold).collect();
+    // the wet graph (edges between wet vertices) and the distance to the patch's edge
+    let mut start = vec![0u32; n + 1];
+    for &[a, b] in topology.edges() {
+        if is_wet[a as usize] && is_wet[b as usize] {
+            start[a as usize + 1] += 1;
+            start[b as usize + 1] += 1;
+        }
+    }
+    for i in 0..n {
+        start[i + 1] += start[i];
+    }
+    let mut next = start.clone();
+    let mut link = vec![(0u32, 0.0f64); start[n] as usize];
+    let mut d = vec![f64::INFINITY; n];
+    for (i, b) in boundary.iter().enumerate() {
+        if *b && is_wet[i] {
+            d[i] = 0.0;
+        }
+    }
+    for (&[a, b], &len) in topology.edges().iter().zip(edge_length) {
+        let (a, b) = (a as usize, b as usize);
+        match (is_wet[a], is_wet[b]) {
+            (true, true) => {
+                link[next[a] as usize] = (b as u32, len);
+                next[a] += 1;
+                link[next[b] as usize] = (a as u32, len);
+                next[b] += 1;
+            }
+            (true, false) => d[a] = d[a].min(0.5 * len),
+            (false, true) => d[b] = d[b].min(0.5 * len),
+            _ => {}
+        }
+    }
+    // non-negative distances order like their bits; ties by vertex: deterministic
+    let mut heap: BinaryHeap<Reverse<(u64, u32)>> = (0..n)
+        .filter(|&i| d[i].is_finite())
+        .map(|i| Reverse((d[i].to_bits(), i as u32)))
+        .collect();
+    while let Some(Reverse((bits, i))) = heap.pop() {
+        let (di, i) = (f64::from_bits(bits), i as usize);
+        if di > d[i] {
+            continue;
+        }
+        for &(j, len) in &link[start[i] as usize..start[i + 1] as usize] {
+            let dj = di + len;
+            if dj < d[j as usize] {
+                d[j as usize] = dj;
+                heap.push(Reverse((dj.to_bits(), j)));
+            }
+        }
+    }
+    // the wet patches (connected components of the wet graph), labelled by a search
+    let mut patch = vec![u32::MAX; n];
+    let mut patches: Vec<Vec<u32>> = Vec::new();
+    for s in 0..n {
+        if !is_wet[s] || patch[s] != u32::MAX {
+            continue;
+        }
+        let id = patches.len() as u32;
+        let mut members = vec![s as u32];
+        patch[s] = id;
+        let mut k = 0;
+        while k < members.len() {
+            let i = members[k] as usize;
+            for &(j, _) in &link[start[i] as usize..start[i + 1] as usize] {
+                if patch[j as usize] == u32::MAX {
+                    patch[j as usize] = id;
+                    members.push(j);
+                }
+            }
+            k += 1;
+        }
+        patches.push(members);
+    }
+    let mut exposure = vec![1.0; n];
+    for members in &patches {
+        let r = members
+            .iter()
+            .map(|&i| d[i as usize])
+            .fold(0.0, f64::max);
+        if !(r.is_finite() && r > 0.0) {
+            continue; // no edge, or a single vertex on the border: uniform
+        }
+        // the cell average of R/(2√(x(2R − x))): (R/2)·[asin((x − R)/R)] over the cell
+        let primitive = |x: f64| 0.5 * r * ((x - r) / r).clamp(-1.0, 1.0).asin();
+        let (mut total, mut weighted) = (0.0, 0.0);
+        for &i in members {
+            let i = i as usize;
+            let half = 0.5 * area[i].max(0.0).sqrt();
+            let (lo, hi) = ((d[i] - half).max(0.0), (d[i] + half).min(2.0 * r));
+            let w = if hi > lo {
+                (primitive(hi) - primitive(lo)) / (hi - lo)
+            } else {
+                let x = d[i].clamp(1e-9 * r, r);
+                r / (2.0 * (x * (2.0 * r - x)).sqrt())
+            };
+            exposure[i] = w;
+            total += area[i];
+            weighted += area[i] * w;
+        }
+        if weighted > 0.0 {
+            let scale = total / weighted;
+            for &i in members {
+                exposure[i as usize] *= scale;
+            }
+        }
+    }
+    exposure
+}
+
 /// Vertices per parallel work item (a fixed split: the result does not depend on it).
 const CHUNK: usize = 1024;
 
