@@ -21,7 +21,10 @@ fn flag() -> (Topology, Vec<DVec3>) {
     let (nu, nv, su, sv) = (40usize, 24usize, 2.0, 1.2);
     let row = nu + 1;
     let pos = (0..=nv)
-        .flat_map(|j| (0..=nu).map(move |i| DVec3::new(su * i as f64 / nu as f64, 0.0, sv * j as f64 / nv as f64)))
+        .flat_map(|j| {
+            (0..=nu)
+                .map(move |i| DVec3::new(su * i as f64 / nu as f64, 0.0, sv * j as f64 / nv as f64))
+        })
         .collect();
     let mut faces = Vec::new();
     for j in 0..nv {
@@ -32,7 +35,10 @@ fn flag() -> (Topology, Vec<DVec3>) {
             faces.push([a, c, d]);
         }
     }
-    (Topology::from_triangles(row * (nv + 1), faces).unwrap(), pos)
+    (
+        Topology::from_triangles(row * (nv + 1), faces).unwrap(),
+        pos,
+    )
 }
 
 /// What a run left: the length of the trail (solute above a tenth of its peak) along
@@ -75,7 +81,13 @@ fn run(amount: f64, gravity: DVec3) -> Run {
     let centre = DVec3::new(1.0, 0.0, 0.95);
     let pour: Vec<f64> = pos
         .iter()
-        .map(|p| if (*p - centre).length() < 0.1 { amount } else { 0.0 })
+        .map(|p| {
+            if (*p - centre).length() < 0.1 {
+                amount
+            } else {
+                0.0
+            }
+        })
         .collect();
     sim.add_liquid(&pour, 0.02, None).unwrap();
     let solute0 = sim.totals().solute;
@@ -90,7 +102,8 @@ fn run(amount: f64, gravity: DVec3) -> Run {
     // the trail: where the solute is above a tenth of its peak
     let trail: Vec<usize> = (0..pos.len()).filter(|&i| s[i] > 0.1 * peak).collect();
     let along: Vec<f64> = trail.iter().map(|&i| (pos[i] - centre).dot(down)).collect();
-    let length = along.iter().cloned().fold(f64::MIN, f64::max) - along.iter().cloned().fold(f64::MAX, f64::min);
+    let length = along.iter().cloned().fold(f64::MIN, f64::max)
+        - along.iter().cloned().fold(f64::MAX, f64::min);
     // the run proper: the trail outside the poured disk, its centroid seen from the pour
     let (mut m, mut c) = (0.0, DVec3::ZERO);
     for &i in trail.iter().filter(|&&i| (pos[i] - centre).length() >= 0.1) {
@@ -121,7 +134,11 @@ fn a_run_grows_with_the_amount_and_follows_gravity() {
                 "gravity {tilt}° in the flag's plane, {amount} kg/m²: run {:.3} m, {:.2}° off gravity, solute defect {:.1e}",
                 r.length, r.angle, r.solute_defect
             );
-            assert!(r.solute_defect < 1e-12, "solute defect {:e}", r.solute_defect);
+            assert!(
+                r.solute_defect < 1e-12,
+                "solute defect {:e}",
+                r.solute_defect
+            );
             assert!(r.length > last, "the run does not grow with the amount");
             assert!(r.angle < 5.0, "{:.2}° off gravity", r.angle);
             last = r.length;

@@ -102,7 +102,10 @@ fn dry(how: Drying) -> (Vec<f64>, f64, f64) {
         sim.step(&pos, dt, None).unwrap();
         steps += 1;
     }
-    assert!(sim.totals().solvent <= 1e-9, "{how:?}: not dry after {steps} steps");
+    assert!(
+        sim.totals().solvent <= 1e-9,
+        "{how:?}: not dry after {steps} steps"
+    );
     let defect = (sim.totals().solute - solute0).abs() / solute0;
     let s = sim.solute_density();
     let lowest = s.iter().cloned().fold(f64::INFINITY, f64::min);
@@ -157,9 +160,15 @@ fn a_drying_coffee_blob_leaves_a_ring() {
     let (c0, c1) = (ring_contrast(&seed), ring_contrast(&ring));
     println!("rim/centre: seed's model {c0:.2}, tide lines {c1:.2}");
     assert!(d0 < 1e-12 && d1 < 1e-12, "solute defects {d0:e}, {d1:e}");
-    assert!(low0 >= 0.0 && low1 >= 0.0, "negative densities {low0:e}, {low1:e}");
+    assert!(
+        low0 >= 0.0 && low1 >= 0.0,
+        "negative densities {low0:e}, {low1:e}"
+    );
     assert!(c1 >= 2.0, "rim/centre {c1}");
-    assert!(c0 < 1.0, "without the drying flow the centre is darkest: {c0}");
+    assert!(
+        c0 < 1.0,
+        "without the drying flow the centre is darkest: {c0}"
+    );
 }
 
 #[test]
@@ -197,13 +206,19 @@ fn the_drying_flow_does_not_depend_on_the_thread_count() {
         pool.install(|| {
             let (mut sim, pos) = spill_with(30, coffee(), true, 0.1, true, 0.3);
             for k in 0..120 {
-                sim.step(&pos, if k < 60 { 0.1 } else { 4.0 }, None).unwrap();
+                sim.step(&pos, if k < 60 { 0.1 } else { 4.0 }, None)
+                    .unwrap();
             }
             let f = sim.fields();
-            [&f.free_solvent, &f.absorbed_solvent, &f.solute, &f.absorbed_solute]
-                .iter()
-                .flat_map(|v| v.iter().map(|x| x.to_bits()))
-                .collect::<Vec<u64>>()
+            [
+                &f.free_solvent,
+                &f.absorbed_solvent,
+                &f.solute,
+                &f.absorbed_solute,
+            ]
+            .iter()
+            .flat_map(|v| v.iter().map(|x| x.to_bits()))
+            .collect::<Vec<u64>>()
         })
     };
     assert_eq!(run(1), run(2));

@@ -63,11 +63,24 @@
 //! liquid is what moves by capillarity), and the dissolved and absorbed solute follow
 //! their fluxes by an implicit upwind sweep ([`carry_with_solvent`]) that keeps a uniform
 //! solution uniform to rounding. The molecular diffusion is left out: the upwind
-//! transport's own numerical diffusion is larger. Where evaporation draws the solvent
-//! toward the stain's rim, the solute goes with it: the coffee-ring mechanism. On its own
-//! it does not make a visible ring here (`tests/tide_lines.rs`): the spill keeps
-//! spreading, so its edge is not pinned, and eq. 4.8's faster evaporation covers only the
-//! outermost ring of vertices.
+//! transport's own numerical diffusion is larger.
+//!
+//! That alone leaves no ring: the fibres' liquid keeps creeping into the dry cloth, so
+//! the wet edge is never pinned and recedes as it dries. Deegan's mechanism needs a
+//! pinned edge where the evaporation is fastest. **Residual saturation** `θ_r`
+//! (`StainParams::residual_saturation`): liquid held below `θ_r σ_sat` is immobile
+//! (irreducible saturation: it sits in the fibres' smallest pores), and the fibres'
+//! liquid moves across a face only when all three corners hold more than that. The
+//! fibres' liquid is then solved on its own operator, every face scaled by 0 or 1 (times
+//! the wicking and irregularity factors), a second CG solve per sub-step, and the
+//! absorbed solute follows *its* fluxes. In the continuum a front of a liquid whose
+//! diffusivity vanishes below `θ_r` cannot advance into dry cloth at all (filling the step
+//! `θ_r` needs a finite flux, and the flux at the front is zero), so only the free liquid,
+//! absorbed where it arrives, decides how far a spill gets; once it is used up, the edge
+//! stays. With the evaporation fastest at that edge (vapour-limited,
+//! [`super::interact`]) the fibres' liquid flows outward down its saturation gradient and
+//! carries its solute there; when the saturation falls to `θ_r` the rest dries in place.
+//! Exact for a uniform solution with the pinned operator too (`tests/tide_lines.rs`).
 //!
 //! For the velocity's Bochner Laplacian the edge weights are clamped at zero: with
 //! negative (non-Delaunay) weights `K_∇` can be indefinite ([`crate::ops::bochner`]),

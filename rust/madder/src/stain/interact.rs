@@ -102,11 +102,24 @@
 //! wet (`wet_i > threshold`) and either lies on the border of the mesh or has a dry
 //! neighbour (`wet_j ≤ threshold`, neighbours by mesh edge): the rim of the wet region.
 //! The rim of a stain therefore dries faster than its middle, and the dissolved solute
-//! there dries in place first. (Whether that is enough for the halo ring of Fig. 4.6 is
-//! not established: in the runs tried so far the deposit of a drying blob falls off
-//! monotonically from its centre. The physical coffee ring comes from the capillary flow
-//! that carries solute to an evaporating, pinned rim, and the seed's model — external
-//! pressure ignored, solute diffusing down its own gradient — has no such flow.)
+//! there dries in place first. That alone makes no halo ring: the deposit of a drying
+//! blob falls off from its centre (`tests/tide_lines.rs`), and the rim it marks is one
+//! ring of vertices wide, whatever the mesh spacing.
+//!
+//! ## Vapour-limited evaporation (issue 13 §2)
+//! In still air a wet patch on a dry cloth evaporates as fast as its vapour diffuses
+//! away. For a flat patch that is the potential problem of a charged disk: the flux is
+//! `J(r) = J̄ / (2√(1 − r²/R²))` on a disk of radius `R`, which in terms of the distance
+//! `d = R − r` to the edge is `J/J̄ = R / (2√(d(2R − d)))`: half the mean at the centre,
+//! an integrable `1/√d` at the edge (Deegan et al. 1997, for a drop of small contact
+//! angle). With `vapour_limited` ([`vapour_exposure`]) every wet patch evaporates so, `d`
+//! the shortest distance along the mesh to its edge (Dijkstra), `R` its largest, each
+//! vertex taking the average of the law over its cell (`ℓ = √A_i` wide: the singularity is
+//! integrated, not sampled, so the rim's share converges as the mesh is refined) and each
+//! patch scaled so that its mean is exactly 1: `K_evap` stays the mean rate, the law only
+//! moves the evaporation to the edge. It replaces `a_evap`. For other shapes than a disk
+//! it is the disk's law in the distance to the edge (an approximation: the exact flux
+//! would need the patch's capacitance problem solved).
 //!
 //! ## Deviations from the seed
 //! - **Exact exponential integrator** instead of implicit Euler
@@ -265,10 +278,22 @@ pub(crate) fn vapour_exposure(
     use std::cmp::Reverse;
     use std::collections::BinaryHeap;
     let n = topology.n_vertices();
-    assert_eq!(boundary.len(), n, "vapour exposure: one boundary flag per vertex");
-    assert_eq!(wet.len(), n, "vapour exposure: one wetness value per vertex");
+    assert_eq!(
+        boundary.len(),
+        n,
+        "vapour exposure: one boundary flag per vertex"
+    );
+    assert_eq!(
+        wet.len(),
+        n,
+        "vapour exposure: one wetness value per vertex"
+    );
     assert_eq!(area.len(), n, "vapour exposure: one area per vertex");
-    assert_eq!(edge_length.len(), topology.n_edges(), "vapour exposure: edge lengths");
+    assert_eq!(
+        edge_length.len(),
+        topology.n_edges(),
+        "vapour exposure: edge lengths"
+    );
     let is_wet: Vec<bool> = wet.iter().map(|&w| w > threshold).collect();
     // the wet graph (edges between wet vertices) and the distance to the patch's edge
     let mut start = vec![0u32; n + 1];
@@ -346,10 +371,7 @@ pub(crate) fn vapour_exposure(
     }
     let mut exposure = vec![1.0; n];
     for members in &patches {
-        let r = members
-            .iter()
-            .map(|&i| d[i as usize])
-            .fold(0.0, f64::max);
+        let r = members.iter().map(|&i| d[i as usize]).fold(0.0, f64::max);
         if !(r.is_finite() && r > 0.0) {
             continue; // no edge, or a single vertex on the border: uniform
         }
@@ -1426,7 +1448,9 @@ mod tests {
             .collect();
         let area = crate::mesh::geometry::vertex_areas(
             &t,
-            &pos.iter().map(|p| glam::DVec3::new(p[0], p[1], 0.0)).collect::<Vec<_>>(),
+            &pos.iter()
+                .map(|p| glam::DVec3::new(p[0], p[1], 0.0))
+                .collect::<Vec<_>>(),
         );
         let radius = 40.0;
         let wet: Vec<f64> = pos
@@ -1465,7 +1489,10 @@ mod tests {
             // 3 %: the staircase edge of a disk on a grid, whose nearest point to the
             // centre along the diagonals is 40.3 rather than 40.5 (measured 2.6 % at x = 30,
             // 6.7 % at 35, where the staircase is a larger part of the distance)
-            assert!((got / want - 1.0).abs() < 0.03, "x = {x}: {got} against {want}");
+            assert!(
+                (got / want - 1.0).abs() < 0.03,
+                "x = {x}: {got} against {want}"
+            );
         }
         // the rim evaporates the fastest, the centre at about half the mean
         assert!(at(40) > at(35) && at(35) > at(0));

@@ -319,13 +319,8 @@ impl Simulator {
         } else {
             f64::INFINITY
         };
-        let (flowing, held) = find_liquid(
-            &scan,
-            &self.loose,
-            &st.fields,
-            &st.vertex_area,
-            mobile_held,
-        );
+        let (flowing, held) =
+            find_liquid(&scan, &self.loose, &st.fields, &st.vertex_area, mobile_held);
         // liquid moves at most one ring per transport sub-cycle
         let reach = ACTIVE_RINGS + self.last_frame_cycles;
         let (_, needed) = grow(&self.cloth.adjacency, &self.loose, &flowing, reach);
