@@ -580,6 +580,16 @@ pub(super) struct Ops<'a> {
     pub(super) region: &'a Restriction,
 }
 
+/// How the dissolved solute moves in [`diffuse_densities`] (module doc, "Tide lines").
+#[derive(Clone, Copy, Debug)]
+pub(super) enum SoluteMotion<'a> {
+    /// Diffusing with the free solvent's operator (the seed's).
+    Diffused,
+    /// Carried by the solvents' fluxes; the fibres' solvent on its own operator with these
+    /// face scales (a pinned edge) when given, on the free solvent's otherwise.
+    Carried { held_scale: Option<&'a [f64]> },
+}
+
 /// `(M + h K_A) σ' = m` for every flowing field on the active vertices, Neumann at the
 /// region's edge ([`crate::ops::restrict`]), then the exact mass restoration and the non-negativity
 /// repair; the masses outside are not touched. Returns the CG iterations.
@@ -590,9 +600,12 @@ pub(super) fn diffuse_densities(
     geometry: &Geometry,
     h: f64,
     wicking: Option<&[f64]>,
-    carry: bool,
-    held_scale: Option<&[f64]>,
+    solute: SoluteMotion<'_>,
 ) -> Result<usize, Error> {
+    let (carry, held_scale) = match solute {
+        SoluteMotion::Diffused => (false, None),
+        SoluteMotion::Carried { held_scale } => (true, held_scale),
+    };
     let region = ops.region;
     let vertices = &region.vertices;
     let nv = vertices.len();
@@ -602,7 +615,7 @@ pub(super) fn diffuse_densities(
         .stiffness(ops.topology, geometry, ops.pattern, h, wicking);
     let values = region.scalar_values(ops.pattern, &full, area, false);
     // the fibres' liquid on its own, pinned operator (its faces' scales), when carried
-    let held_full = held_scale.filter(|_| carry).map(|g| {
+    let held_full = held_scale.map(|g| {
         ops.conductivity
             .stiffness(ops.topology, geometry, ops.pattern, h, Some(g))
     });

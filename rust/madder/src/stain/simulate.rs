@@ -40,7 +40,13 @@
 //!    each face's weft basis; the velocity by the connection (Bochner) Laplacian of the
 //!    viscosity, eq. 4.6. Both by warm-started CG on the window's active vertices, each
 //!    total restored and any negative mass repaired afterwards ([`super::diffuse`]).
-//! 5. **Interactions** (§4.5): absorption, adsorption, evaporation ([`super::interact`]).
+//! 5. **Interactions** (§4.5): absorption, adsorption, evaporation ([`super::interact`]),
+//!    the evaporation faster on the wet patch's rim (eq. 4.8's factor on its outermost
+//!    vertices, or vapour-limited: `vapour_limited`).
+//!
+//! With `carry_solute` the solute moves with the solvents' fluxes in step 4, and with a
+//! `residual_saturation` the fibres' liquid has its own, pinned operator there (issue 13
+//! §2, tide lines: [`super::diffuse`]).
 //!
 //! ## Which velocity (issue 10)
 //! The momentum form is the default because only it conserves momentum where streams of
@@ -75,7 +81,7 @@ use rayon::prelude::*;
 
 use super::advect::{UpwindPlan, advect_velocity_in, dual_fluxes};
 use super::diffuse::{
-    Conductivity, Ops, Wicking, check_range, diffuse_densities, diffuse_velocity,
+    Conductivity, Ops, SoluteMotion, Wicking, check_range, diffuse_densities, diffuse_velocity,
 };
 use super::extend::{extend_velocity, wet_vertices};
 use super::forces::{
@@ -688,8 +694,13 @@ impl Simulator {
                         &geometry,
                         h,
                         face_scale.as_deref(),
-                        p.carry_solute,
-                        held_scale.as_deref(),
+                        if p.carry_solute {
+                            SoluteMotion::Carried {
+                                held_scale: held_scale.as_deref(),
+                            }
+                        } else {
+                            SoluteMotion::Diffused
+                        },
                     )
                 },
                 || {
