@@ -261,3 +261,15 @@ fn uniform_solution(residual: f64) {
     println!("uniform solution (residual {residual}): concentration off by at most {worst:.2e}");
     assert!(worst < 1e-9, "{worst}");
 }
+
+#[test]
+fn a_residual_saturation_out_of_range_is_named() {
+    for bad in [-0.1, 1.0, f64::NAN] {
+        let params = StainParams {
+            residual_saturation: bad,
+            ..Default::default()
+        };
+        let msg = params.validate().unwrap_err().to_string();
+        assert!(msg.starts_with("residual saturation"), "{msg}");
+    }
+}
