@@ -176,7 +176,12 @@ class MADDER_PT_stain_look(_StainSubPanel, bpy.types.Panel):
         sub.active = s.irregularity > 0.0
         sub.prop(s, "irregularity_length")
         sub.prop(s, "irregularity_seed")
-        layout.prop(s, "carry_solute")
+        col = layout.column(align=True)
+        col.prop(s, "carry_solute")
+        sub = col.column(align=True)
+        sub.active = s.carry_solute
+        sub.prop(s, "residual_saturation")
+        col.prop(s, "vapour_limited")
 
 
 class MADDER_PT_stain_cache(_StainSubPanel, bpy.types.Panel):

@@ -20,30 +20,41 @@ the fibres. The cloth's own properties (saturation, friction) and the flow
   to cellulose: fast adsorption (K_d = 0.5 /s), the default capacity. The ethanol
   makes it evaporate a little faster than water (6e-5).
 - Coffee: about 1.2 % dissolved solids (a typical brew's TDS), brown (0.25, 0.13, 0.05).
-  Its particles bind weakly (K_d = 0.05 /s, capacity 1e-3), so they stay in the liquid
-  longer, and its rim evaporates faster (boundary coefficient 1.5). A real coffee ring
-  needs the capillary flow toward a drying rim, which the model does not have (see
-  rust/madder/src/stain/interact.rs): do not expect a ring from this preset alone.
+  Its colloids hardly bind to the fibres (K_d = 0.05 /s, capacity 2e-4: a sixth of the
+  solute of a saturated spot), so they stay in the liquid until it dries, and it rings:
+  the solute is carried by the liquid's flow (carry_solute), the wet edge is pinned
+  (residual saturation 0.1: liquid below a tenth of the fibres' saturation stays put)
+  and the patch dries fastest at its edge (vapour-limited), so the liquid flows outward
+  and leaves its solute in a tide line (ARCHITECTURE.md, "Tide lines").
+- The tide-line physics is Coffee's only. Wine and ink bind their dyes within seconds
+  to a capacity at or above the solute of a saturated spot, so the dye is fixed where
+  the spill put it before the outward flow can move it (no ring to gain, and the drying
+  flow costs a second solve per step); water has no solute. They set it off, so that
+  switching from Coffee to another liquid switches it off.
 - Ink: about 5 % dye, blue-black (0.04, 0.05, 0.15). Surfactants make it wick faster
   (K_p = 3 /s), dyes are made to bind: fast adsorption (K_d = 1 /s) and a high
   capacity (5e-3 kg/m²); humectants (glycols) slow its drying (4e-5)."""
 
+# the drying that makes tide lines (issue 13 §2): Coffee's; the others set it off
+TIDE_LINES = dict(carry_solute=True, residual_saturation=0.1, vapour_limited=True)
+NO_TIDE_LINES = dict(carry_solute=False, residual_saturation=0.0, vapour_limited=False)
+
 LIQUIDS = {
     "WATER": dict(
         stain_color=(0.90, 0.93, 0.95), concentration=0.0, absorption=2.0, adsorption=0.0,
-        capacity=2e-3, evaporation=5e-5, evaporation_boundary=1.2,
+        capacity=2e-3, evaporation=5e-5, evaporation_boundary=1.2, **NO_TIDE_LINES,
     ),
     "RED_WINE": dict(
         stain_color=(0.30, 0.02, 0.07), concentration=0.02, absorption=2.0, adsorption=0.5,
-        capacity=2e-3, evaporation=6e-5, evaporation_boundary=1.2,
+        capacity=2e-3, evaporation=6e-5, evaporation_boundary=1.2, **NO_TIDE_LINES,
     ),
     "COFFEE": dict(
         stain_color=(0.25, 0.13, 0.05), concentration=0.012, absorption=2.0, adsorption=0.05,
-        capacity=1e-3, evaporation=5e-5, evaporation_boundary=1.5,
+        capacity=2e-4, evaporation=5e-5, evaporation_boundary=1.5, **TIDE_LINES,
     ),
     "INK": dict(
         stain_color=(0.04, 0.05, 0.15), concentration=0.05, absorption=3.0, adsorption=1.0,
-        capacity=5e-3, evaporation=4e-5, evaporation_boundary=1.2,
+        capacity=5e-3, evaporation=4e-5, evaporation_boundary=1.2, **NO_TIDE_LINES,
     ),
 }
 LIQUID_ITEMS = [
@@ -111,6 +122,8 @@ def simulator_keywords(s, gravity, scene_gravity, unit):
         irregularity_length=s.irregularity_length * 1e-3,
         irregularity_seed=s.irregularity_seed,
         carry_solute=bool(s.carry_solute),
+        residual_saturation=s.residual_saturation,
+        vapour_limited=bool(s.vapour_limited),
         use_gravity=bool(s.use_gravity and scene_gravity),
         use_rectilinear=s.use_rectilinear,
         use_coriolis=s.use_coriolis,

@@ -375,6 +375,25 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         description="The dissolved stain moves with the liquid's flow (and the liquid in the fibres "
         "wicks too) instead of spreading on its own at the liquid's rate",
         default=False,
+        update=_mark_custom,
+    )
+    residual_saturation: FloatProperty(
+        name="Residual Saturation",
+        description="Pins the wet edge: the fibres' liquid below this fraction of their saturation "
+        "neither moves nor lets liquid in, so the patch keeps its outline while it dries (with "
+        "Carry Solute; 0 = off)",
+        default=0.0,
+        min=0.0,
+        max=0.95,
+        update=_mark_custom,
+    )
+    vapour_limited: BoolProperty(
+        name="Vapour-Limited Drying",
+        description="A wet patch dries fastest at its edge, as vapour diffusing into still air does "
+        "(in place of Rim Evaporation); with Carry Solute and a Residual Saturation the liquid "
+        "flowing to the edge leaves a tide line",
+        default=False,
+        update=_mark_custom,
     )
     substeps: IntProperty(
         name="Substeps",

@@ -10,16 +10,19 @@ from conftest import ADDON, lumped_areas, make_active
 
 import madder
 
+# the tide-line physics is Coffee's (issue 13 §2); the others switch it off
+NO_RING = dict(carry_solute=False, residual_saturation=0.0, vapour_limited=False)
 # the documented preset values (addon/properties.py explains where they come from)
 PRESETS = {
     "WATER": dict(concentration=0.0, stain_color=(0.90, 0.93, 0.95), absorption=2.0, adsorption=0.0,
-                  capacity=2e-3, evaporation=5e-5, evaporation_boundary=1.2),
+                  capacity=2e-3, evaporation=5e-5, evaporation_boundary=1.2, **NO_RING),
     "RED_WINE": dict(concentration=0.02, stain_color=(0.30, 0.02, 0.07), absorption=2.0, adsorption=0.5,
-                     capacity=2e-3, evaporation=6e-5, evaporation_boundary=1.2),
+                     capacity=2e-3, evaporation=6e-5, evaporation_boundary=1.2, **NO_RING),
     "COFFEE": dict(concentration=0.012, stain_color=(0.25, 0.13, 0.05), absorption=2.0, adsorption=0.05,
-                   capacity=1e-3, evaporation=5e-5, evaporation_boundary=1.5),
+                   capacity=2e-4, evaporation=5e-5, evaporation_boundary=1.5, carry_solute=True,
+                   residual_saturation=0.1, vapour_limited=True),
     "INK": dict(concentration=0.05, stain_color=(0.04, 0.05, 0.15), absorption=3.0, adsorption=1.0,
-                capacity=5e-3, evaporation=4e-5, evaporation_boundary=1.2),
+                capacity=5e-3, evaporation=4e-5, evaporation_boundary=1.2, **NO_RING),
 }
 # StainParams::default and InteractionRates::default in the Rust core, and the core's
 # default isotropic diffusion and solute colour (the constants the binding exports)

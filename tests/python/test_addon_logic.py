@@ -58,12 +58,14 @@ def test_simulator_keywords_scale_gravity_and_need_both_switches():
         adsorption=0.1, capacity=2e-3, evaporation=5e-5, evaporation_boundary=1.2, substeps=2,
         use_gravity=True, use_rectilinear=False, use_coriolis=True, momentum_advection=False,
         wicking=2.0, irregularity=0.5, irregularity_length=4.0, irregularity_seed=7, carry_solute=True,
+        residual_saturation=0.1, vapour_limited=1,
     )
     kw = presets.simulator_keywords(s, (0.0, 0.0, -981.0), True, 0.01)
     # the look: the grain from millimetres to metres, wicking saturating at the fibres'
     assert kw["irregularity_length"] == pytest.approx(4e-3) and kw["wicking_density"] == 0.1
     assert (kw["wicking_exponent"], kw["irregularity"], kw["irregularity_seed"], kw["carry_solute"]) == (
         2.0, 0.5, 7, True)
+    assert (kw["residual_saturation"], kw["vapour_limited"]) == (0.1, True)
     assert kw["gravity"] == (0.0, 0.0, -981.0 * 0.01) and kw["color"] == (0.1, 0.2, 0.3)
     assert kw["use_gravity"] is True and kw["use_rectilinear"] is False and kw["substeps"] == 2
     assert presets.simulator_keywords(s, (0, 0, -9.81), False, 1.0)["use_gravity"] is False

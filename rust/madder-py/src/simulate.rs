@@ -21,7 +21,7 @@ use crate::threads::Pool;
 /// viscosity=..., friction=..., absorption=..., saturation=..., adsorption=...,
 /// capacity=..., evaporation=..., evaporation_boundary=1.2, wicking_exponent=0,
 /// wicking_density=0.1, irregularity=0, irregularity_length=0.003, irregularity_seed=0,
-/// carry_solute=False, substeps=1, use_gravity=True, use_rectilinear=True,
+/// carry_solute=False, residual_saturation=0, vapour_limited=False, substeps=1, use_gravity=True, use_rectilinear=True,
 /// use_coriolis=True, momentum_advection=True, detail=0, threads=None)`.
 ///
 /// `topology` is a `Topology` or an `(F, 3)` uint32 face array; `rest` and `positions`
@@ -40,6 +40,12 @@ use crate::threads::Pool;
 /// same for the same `irregularity_seed` (0, the default: a uniform fabric).
 /// `carry_solute` moves the dissolved solute with the solvent's capillary flow (and the
 /// liquid in the fibres wicks too) instead of diffusing it at the solvent's rate.
+/// `residual_saturation` (0 to 1, exclusive) pins the wet edge: the fibres' liquid below
+/// that fraction of `saturation` neither moves nor lets liquid in (0, the default: off).
+/// `vapour_limited` makes a wet patch evaporate fastest at its edge, as vapour diffusing
+/// into still air does (`J/J̄ = R/(2√(d(2R − d)))`, `d` the distance to the edge), in place
+/// of `evaporation_boundary` on the outermost vertices. With `carry_solute` the two
+/// draw the solute to the pinned edge as it dries: a tide line.
 /// Units are SI: densities in kg/m², rates in 1/s, evaporation in kg/(m²·s).
 /// `detail` (0–3) runs the simulation on the cloth's triangles each split into
 /// `4**detail` (the fine vertices placed on the cloth's triangles every frame): `step`,
@@ -134,7 +140,7 @@ impl Simulator {
         viscosity=None, friction=None, absorption=None, saturation=None, adsorption=None,
         capacity=None, evaporation=None, evaporation_boundary=None, wicking_exponent=None,
         wicking_density=None, irregularity=None, irregularity_length=None, irregularity_seed=0,
-        carry_solute=false, substeps=1,
+        carry_solute=false, residual_saturation=None, vapour_limited=false, substeps=1,
         use_gravity=true, use_rectilinear=true, use_coriolis=true, momentum_advection=true,
         detail=0, threads=None))]
     #[allow(clippy::too_many_arguments)]
@@ -163,6 +169,8 @@ impl Simulator {
         irregularity_length: Option<f64>,
         irregularity_seed: u64,
         carry_solute: bool,
+        residual_saturation: Option<f64>,
+        vapour_limited: bool,
         substeps: u32,
         use_gravity: bool,
         use_rectilinear: bool,
@@ -246,6 +254,8 @@ impl Simulator {
         );
         params.irregularity.seed = irregularity_seed;
         params.carry_solute = carry_solute;
+        set(&mut params.residual_saturation, residual_saturation);
+        params.vapour_limited = vapour_limited;
         let r = &mut params.interaction;
         set(&mut r.absorption, absorption);
         set(&mut r.saturation, saturation);

@@ -1,6 +1,7 @@
 //! `make bench`: the cost of the features that give a stain its look (issue 13), each
 //! against the same step without it, side by side in one run on the ≈ 10k-vertex waving
 //! flag (`benches/simulate.rs`'s grid and pour). Prints figures; asserts nothing about time.
+//! Runs (§5) add nothing to the step (free liquid under gravity, absorbed as it passes).
 
 mod common;
 
@@ -8,7 +9,9 @@ use std::time::Instant;
 
 use common::{grid, motion, pour, wave};
 use faer::Par;
-use madder::stain::{Conductivity, Irregularity, Simulator, StainParams, Wicking};
+use madder::stain::{
+    Conductivity, InteractionRates, Irregularity, Simulator, StainParams, Wicking,
+};
 
 fn ms_per_frame(name: &str, params: StainParams, frames: usize) -> f64 {
     let (topo, rest) = grid(127, 77);
@@ -74,4 +77,23 @@ fn main() {
         "the irregular fabric costs {:.2}× the step without it",
         uneven / base
     );
+    // tide lines (§2): the solute carried, the edge pinned and the vapour-limited rim (the
+    // Coffee preset's drying); against the seed's Coffee step on the same pour
+    let coffee = |tide: bool| StainParams {
+        interaction: InteractionRates {
+            adsorption: 0.05,
+            capacity: 2e-4,
+            evaporation_boundary: 1.5,
+            ..Default::default()
+        },
+        carry_solute: tide,
+        residual_saturation: if tide { 0.1 } else { 0.0 },
+        vapour_limited: tide,
+        ..Default::default()
+    };
+    let plain = ms_per_frame("coffee, seed's drying", coffee(false), frames);
+    let tide = ms_per_frame("coffee, tide lines (§2)", coffee(true), frames);
+    println!("tide lines cost {:.2}× the step without them", tide / plain);
+    // runs (§5) are the step itself (free liquid under gravity, absorbed as it passes):
+    // nothing is added to it
 }

@@ -38,7 +38,7 @@
 //! | §4.3.4 | anisotropic stiffness of a woven face, weft from the UVs | [`ops::weft_directions`], [`stain::Conductivity`] (`ops/aniso.rs`) |
 //! | §4.4 | comoving–corotating frames by Kabsch, fictitious forces | [`mesh::kabsch`], [`stain::Forces`] (`stain/forces.rs`) |
 //! | §4.5, eqs. 4.7–4.10 | absorption, adsorption, evaporation | [`stain::InteractionRates`] (`stain/interact.rs`) |
-//! | §4.5, Fig. 4.6 | the look: saturation-dependent wicking (porous-medium law), solute carried by the solvent's flux, an irregular fabric | [`stain::Wicking`] (`stain/diffuse.rs`), `carry_solute` in [`stain::StainParams`], [`stain::Irregularity`] (`stain/irregular.rs`) |
+//! | §4.5, Fig. 4.6 | the look: saturation-dependent wicking (porous-medium law), solute carried by the solvent's flux, tide lines (a residual saturation pinning the wet edge, vapour-limited evaporation fastest there), an irregular fabric | [`stain::Wicking`] (`stain/diffuse.rs`), `carry_solute`, `residual_saturation`, `vapour_limited` in [`stain::StainParams`] (`stain/diffuse.rs`, `stain/interact.rs`), [`stain::Irregularity`] (`stain/irregular.rs`) |
 //!
 //! Beyond the seed, for the same chapter: the velocity extended over the dry cloth
 //! ([`stain::extend`]), the distance from a brush to the cloth ([`mesh::proximity`]), and

@@ -37,6 +37,8 @@ fn ideal(forces: Forces, momentum_advection: bool) -> StainParams {
         wicking: Default::default(),
         irregularity: Default::default(),
         carry_solute: false,
+        residual_saturation: 0.0,
+        vapour_limited: false,
         substeps: 1,
         active_region: true,
     }

@@ -44,6 +44,8 @@ fn ideal(forces: Forces) -> StainParams {
         wicking: Default::default(),
         irregularity: Default::default(),
         carry_solute: false,
+        residual_saturation: 0.0,
+        vapour_limited: false,
         substeps: 1,
         active_region: true,
     }
@@ -669,8 +671,10 @@ fn full_params(momentum_advection: bool, substeps: u32) -> StainParams {
             correlation_length: 0.05,
             seed: 7,
         },
-        // the solute carried by the solvent's flow
+        // the solute carried by the solvent's flow, to a pinned edge drying fastest there
         carry_solute: true,
+        residual_saturation: 0.1,
+        vapour_limited: true,
         substeps,
         active_region: true,
     }

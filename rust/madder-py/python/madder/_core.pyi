@@ -158,6 +158,8 @@ class Simulator:
         irregularity_length: float | None = None,
         irregularity_seed: int = 0,
         carry_solute: bool = False,
+        residual_saturation: float | None = None,
+        vapour_limited: bool = False,
         substeps: int = 1,
         use_gravity: bool = True,
         use_rectilinear: bool = True,

@@ -63,11 +63,24 @@
 //! liquid is what moves by capillarity), and the dissolved and absorbed solute follow
 //! their fluxes by an implicit upwind sweep ([`carry_with_solvent`]) that keeps a uniform
 //! solution uniform to rounding. The molecular diffusion is left out: the upwind
-//! transport's own numerical diffusion is larger. Where evaporation draws the solvent
-//! toward the stain's rim, the solute goes with it: the coffee-ring mechanism. On its own
-//! it does not make a visible ring here (`tests/tide_lines.rs`): the spill keeps
-//! spreading, so its edge is not pinned, and eq. 4.8's faster evaporation covers only the
-//! outermost ring of vertices.
+//! transport's own numerical diffusion is larger.
+//!
+//! That alone leaves no ring: the fibres' liquid keeps creeping into the dry cloth, so
+//! the wet edge is never pinned and recedes as it dries. Deegan's mechanism needs a
+//! pinned edge where the evaporation is fastest. **Residual saturation** `θ_r`
+//! (`StainParams::residual_saturation`): liquid held below `θ_r σ_sat` is immobile
+//! (irreducible saturation: it sits in the fibres' smallest pores), and the fibres'
+//! liquid moves across a face only when all three corners hold more than that. The
+//! fibres' liquid is then solved on its own operator, every face scaled by 0 or 1 (times
+//! the wicking and irregularity factors), a second CG solve per sub-step, and the
+//! absorbed solute follows *its* fluxes. In the continuum a front of a liquid whose
+//! diffusivity vanishes below `θ_r` cannot advance into dry cloth at all (filling the step
+//! `θ_r` needs a finite flux, and the flux at the front is zero), so only the free liquid,
+//! absorbed where it arrives, decides how far a spill gets; once it is used up, the edge
+//! stays. With the evaporation fastest at that edge (vapour-limited,
+//! [`super::interact`]) the fibres' liquid flows outward down its saturation gradient and
+//! carries its solute there; when the saturation falls to `θ_r` the rest dries in place.
+//! Exact for a uniform solution with the pinned operator too (`tests/tide_lines.rs`).
 //!
 //! For the velocity's Bochner Laplacian the edge weights are clamped at zero: with
 //! negative (non-Delaunay) weights `K_∇` can be indefinite ([`crate::ops::bochner`]),
@@ -567,6 +580,16 @@ pub(super) struct Ops<'a> {
     pub(super) region: &'a Restriction,
 }
 
+/// How the dissolved solute moves in [`diffuse_densities`] (module doc, "Tide lines").
+#[derive(Clone, Copy, Debug)]
+pub(super) enum SoluteMotion<'a> {
+    /// Diffusing with the free solvent's operator (the seed's).
+    Diffused,
+    /// Carried by the solvents' fluxes; the fibres' solvent on its own operator with these
+    /// face scales (a pinned edge) when given, on the free solvent's otherwise.
+    Carried { held_scale: Option<&'a [f64]> },
+}
+
 /// `(M + h K_A) σ' = m` for every flowing field on the active vertices, Neumann at the
 /// region's edge ([`crate::ops::restrict`]), then the exact mass restoration and the non-negativity
 /// repair; the masses outside are not touched. Returns the CG iterations.
@@ -577,8 +600,12 @@ pub(super) fn diffuse_densities(
     geometry: &Geometry,
     h: f64,
     wicking: Option<&[f64]>,
-    carry: bool,
+    solute: SoluteMotion<'_>,
 ) -> Result<usize, Error> {
+    let (carry, held_scale) = match solute {
+        SoluteMotion::Diffused => (false, None),
+        SoluteMotion::Carried { held_scale } => (true, held_scale),
+    };
     let region = ops.region;
     let vertices = &region.vertices;
     let nv = vertices.len();
@@ -587,6 +614,11 @@ pub(super) fn diffuse_densities(
         .conductivity
         .stiffness(ops.topology, geometry, ops.pattern, h, wicking);
     let values = region.scalar_values(ops.pattern, &full, area, false);
+    // the fibres' liquid on its own, pinned operator (its faces' scales), when carried
+    let held_full = held_scale.map(|g| {
+        ops.conductivity
+            .stiffness(ops.topology, geometry, ops.pattern, h, Some(g))
+    });
     // with the solute carried (issue 13 §2) the two solvents, free and in the fibres,
     // are solved, and the solute moves with their fluxes; otherwise the free solvent, the
     // dissolved solute and its colour diffuse alike
@@ -616,7 +648,19 @@ pub(super) fn diffuse_densities(
             if a > 0.0 { m / a } else { 0.0 }
         })
         .collect();
-    cg.solve(&values, &rhs, &mut sigma)?;
+    let iterations = match &held_full {
+        None => {
+            cg.solve(&values, &rhs, &mut sigma)?;
+            cg.last_iterations
+        }
+        Some(held) => {
+            let held_values = region.scalar_values(ops.pattern, held, area, false);
+            cg.solve(&values, &rhs[..nv], &mut sigma[..nv])?;
+            let free = cg.last_iterations;
+            cg.solve(&held_values, &rhs[nv..], &mut sigma[nv..])?;
+            free + cg.last_iterations
+        }
+    };
     for (k, m) in fields.iter_mut().enumerate() {
         let before: f64 = vertices.iter().map(|&v| m[v as usize]).sum();
         let sigma = &sigma[k * nv..(k + 1) * nv];
@@ -672,7 +716,7 @@ pub(super) fn diffuse_densities(
             .collect();
         carry_with_solvent(
             ops,
-            &full,
+            held_full.as_ref().unwrap_or(&full),
             &sigma[nv..2 * nv],
             (held, &f.absorbed_solvent),
             &mut refs,
@@ -688,7 +732,7 @@ pub(super) fn diffuse_densities(
     if let (Some(c), Some(cf)) = (color, f.color_free.as_mut()) {
         merge_rgb(&c, cf);
     }
-    Ok(cg.last_iterations)
+    Ok(iterations)
 }
 
 /// Most Gauss–Seidel sweeps of the carried solute's concentrations ([`carry_with_solvent`]).

@@ -40,7 +40,13 @@
 //!    each face's weft basis; the velocity by the connection (Bochner) Laplacian of the
 //!    viscosity, eq. 4.6. Both by warm-started CG on the window's active vertices, each
 //!    total restored and any negative mass repaired afterwards ([`super::diffuse`]).
-//! 5. **Interactions** (§4.5): absorption, adsorption, evaporation ([`super::interact`]).
+//! 5. **Interactions** (§4.5): absorption, adsorption, evaporation ([`super::interact`]),
+//!    the evaporation faster on the wet patch's rim (eq. 4.8's factor on its outermost
+//!    vertices, or vapour-limited: `vapour_limited`).
+//!
+//! With `carry_solute` the solute moves with the solvents' fluxes in step 4, and with a
+//! `residual_saturation` the fibres' liquid has its own, pinned operator there (issue 13
+//! §2, tide lines: [`super::diffuse`]).
 //!
 //! ## Which velocity (issue 10)
 //! The momentum form is the default because only it conserves momentum where streams of
@@ -75,14 +81,14 @@ use rayon::prelude::*;
 
 use super::advect::{UpwindPlan, advect_velocity_in, dual_fluxes};
 use super::diffuse::{
-    Conductivity, Ops, Wicking, check_range, diffuse_densities, diffuse_velocity,
+    Conductivity, Ops, SoluteMotion, Wicking, check_range, diffuse_densities, diffuse_velocity,
 };
 use super::extend::{extend_velocity, wet_vertices};
 use super::forces::{
     Forces, corotating_frames_with, frame_angular_velocity, frame_body_acceleration,
     integrate_velocity, rest_frames, second_difference,
 };
-use super::interact::{InteractionRates, exposure, interact_varied};
+use super::interact::{InteractionRates, exposure, interact_varied, vapour_exposure};
 use super::irregular::{Irregularity, face_means};
 use super::state::{Fields, Local, State, merge_rgb, split_rgb};
 use super::window::{Cloth, Window, pick};
@@ -132,6 +138,16 @@ pub struct StainParams {
     /// The dissolved solute moves with the solvent's capillary flow instead of diffusing
     /// on its own ([`super::diffuse`], "Tide lines"); off by default.
     pub carry_solute: bool,
+    /// `θ_r`, from 0 to 1 (exclusive): the fibres' liquid below `θ_r` times their
+    /// saturation neither moves nor lets liquid in, so the edge of a wet patch stays where
+    /// the spill put it while it dries (issue 13 §2, [`super::diffuse`], "Tide lines");
+    /// the fibres' liquid moves only with [`Self::carry_solute`]. 0 (the default) is off.
+    pub residual_saturation: f64,
+    /// The evaporation is limited by the diffusion of vapour away from the flat wet patch:
+    /// fastest at its edge, `J/J̄ = R/(2√(d(2R − d)))` at distance `d` from the edge
+    /// ([`super::interact`], "Vapour-limited evaporation"), instead of eq. 4.8's factor on
+    /// the outermost vertices. Off by default.
+    pub vapour_limited: bool,
     /// Sub-steps per frame, at least: a frame whose vertex frames turn by more than
     /// [`MAX_TURN`] takes more on its own (module doc, "Fast rotation").
     pub substeps: u32,
@@ -152,6 +168,8 @@ impl Default for StainParams {
             wicking: Wicking::default(),
             irregularity: Irregularity::default(),
             carry_solute: false,
+            residual_saturation: 0.0,
+            vapour_limited: false,
             substeps: 1,
             active_region: true,
         }
@@ -184,6 +202,12 @@ impl StainParams {
             self.substeps as f64,
             self.substeps >= 1,
             "at least 1",
+        )?;
+        check_range(
+            "residual saturation",
+            self.residual_saturation,
+            (0.0..1.0).contains(&self.residual_saturation),
+            "from 0 to 1 (exclusive)",
         )?;
         self.wicking.validate()?;
         self.irregularity.validate()?;
@@ -635,6 +659,29 @@ impl Simulator {
             (Some(g), Some(r)) => Some(g.iter().zip(&r).map(|(g, r)| g * r).collect()),
             (g, r) => g.or(r),
         };
+        // the fibres' liquid moves only between vertices above the residual saturation
+        // (a pinned edge, "Tide lines" in `diffuse`)
+        let held_scale = (p.carry_solute && p.residual_saturation > 0.0).then(|| {
+            let floor = p.residual_saturation * p.interaction.saturation;
+            let f = &loc.fields;
+            let mobile: Vec<bool> = (0..n)
+                .map(|j| {
+                    let a = geometry.vertex_area[j];
+                    a > 0.0 && f.absorbed_solvent[j] > floor * a
+                })
+                .collect();
+            topo.faces()
+                .iter()
+                .enumerate()
+                .map(|(t, c)| {
+                    if c.iter().all(|&v| mobile[v as usize]) {
+                        face_scale.as_ref().map_or(1.0, |g| g[t])
+                    } else {
+                        0.0
+                    }
+                })
+                .collect::<Vec<f64>>()
+        });
         let (fields, velocity) = (&mut loc.fields, &mut loc.velocity);
         let (densities, viscous) = match w.cg.as_mut() {
             None => (Ok(0), Ok(0)),
@@ -647,7 +694,13 @@ impl Simulator {
                         &geometry,
                         h,
                         face_scale.as_deref(),
-                        p.carry_solute,
+                        if p.carry_solute {
+                            SoluteMotion::Carried {
+                                held_scale: held_scale.as_deref(),
+                            }
+                        } else {
+                            SoluteMotion::Diffused
+                        },
                     )
                 },
                 || {
@@ -673,13 +726,24 @@ impl Simulator {
                 if a > 0.0 { m / a } else { 0.0 }
             })
             .collect();
-        let exposed = exposure(
-            topo,
-            &w.cloth.boundary,
-            &wet,
-            DRY_DENSITY,
-            p.interaction.evaporation_boundary,
-        );
+        let exposed = if p.vapour_limited {
+            vapour_exposure(
+                topo,
+                &geometry.edge_length,
+                &geometry.vertex_area,
+                &w.cloth.boundary,
+                &wet,
+                DRY_DENSITY,
+            )
+        } else {
+            exposure(
+                topo,
+                &w.cloth.boundary,
+                &wet,
+                DRY_DENSITY,
+                p.interaction.evaporation_boundary,
+            )
+        };
         let mut part = loc.fields.gather(&w.whole);
         let absorption_scale = irregular.map(|m| pick(&w.whole, m));
         loc.evaporated += interact_varied(

@@ -220,12 +220,15 @@ pub(super) fn pick<T: Copy>(index: &[u32], values: &[T]) -> Vec<T> {
 /// of that field's peak over `scan` — and the others holding absorbed solvent or solute
 /// above that fraction of its peak (held). What is left below the thresholds is *dust*
 /// (1e-12 of the peaks and less, the far tail of implicit diffusion): it stays where it
-/// is, untouched, until liquid comes near again. Loose vertices are neither.
+/// is, untouched, until liquid comes near again. Loose vertices are neither. Absorbed
+/// solvent above the density `mobile_held` (kg/m²) flows too (the fibres' liquid above
+/// the residual saturation, issue 13 §2; `INFINITY`: it never does).
 pub(super) fn find_liquid(
     scan: &[u32],
     loose: &[bool],
     fields: &Fields,
     area: &[f64],
+    mobile_held: f64,
 ) -> (Vec<u32>, Vec<u32>) {
     let floor = |m: &[f64]| {
         ACTIVE_THRESHOLD
@@ -244,7 +247,10 @@ pub(super) fn find_liquid(
         let i = v as usize;
         let above = |m: &[f64], floor: f64| m[i] > 0.0 && m[i] > floor * area[i];
         if loose[i] {
-        } else if above(&f.free_solvent, flowing_floor[0]) || above(&f.solute, flowing_floor[1]) {
+        } else if above(&f.free_solvent, flowing_floor[0])
+            || above(&f.solute, flowing_floor[1])
+            || f.absorbed_solvent[i] > mobile_held * area[i]
+        {
             flowing.push(v);
         } else if above(&f.absorbed_solvent, held_floor[0])
             || above(&f.absorbed_solute, held_floor[1])
@@ -307,7 +313,14 @@ impl Simulator {
             _ => (0..n as u32).collect(),
         };
         let st = &self.state;
-        let (flowing, held) = find_liquid(&scan, &self.loose, &st.fields, &st.vertex_area);
+        let p = &self.params;
+        let mobile_held = if p.carry_solute && p.residual_saturation > 0.0 {
+            p.residual_saturation * p.interaction.saturation
+        } else {
+            f64::INFINITY
+        };
+        let (flowing, held) =
+            find_liquid(&scan, &self.loose, &st.fields, &st.vertex_area, mobile_held);
         // liquid moves at most one ring per transport sub-cycle
         let reach = ACTIVE_RINGS + self.last_frame_cycles;
         let (_, needed) = grow(&self.cloth.adjacency, &self.loose, &flowing, reach);
