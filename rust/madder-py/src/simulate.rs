@@ -337,7 +337,7 @@ impl Simulator {
     #[pyo3(signature = (*, fine=false))]
     fn wetness<'py>(&self, py: Python<'py>, fine: bool) -> Bound<'py, PyArray1<f32>> {
         if fine {
-            out1(py, &self.inner.fine().wetness())
+            out1(py, &self.inner.fine_wetness())
         } else {
             out1(py, &self.inner.wetness())
         }
@@ -348,8 +348,10 @@ impl Simulator {
     #[pyo3(signature = (*, fine=false))]
     fn stain<'py>(&self, py: Python<'py>, fine: bool) -> PyResult<Bound<'py, PyArray2<f32>>> {
         let (s, c) = if fine {
-            let f = self.inner.fine();
-            (f.solute_density(), f.solute_color())
+            (
+                self.inner.fine_solute_density(),
+                self.inner.fine_solute_color(),
+            )
         } else {
             (self.inner.solute_density(), self.inner.solute_color())
         };
@@ -366,7 +368,7 @@ impl Simulator {
     #[pyo3(signature = (*, fine=false))]
     fn deposit<'py>(&self, py: Python<'py>, fine: bool) -> Bound<'py, PyArray1<f32>> {
         if fine {
-            out1(py, &self.inner.fine().deposit())
+            out1(py, &self.inner.fine_deposit())
         } else {
             out1(py, &self.inner.deposit())
         }
@@ -381,7 +383,7 @@ impl Simulator {
         fine: bool,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
         if fine {
-            out2(py, self.inner.fine().solute_color().into_iter())
+            out2(py, self.inner.fine_solute_color().into_iter())
         } else {
             out2(py, self.inner.solute_color().into_iter())
         }
@@ -399,7 +401,7 @@ impl Simulator {
     /// detail)` numbers them.
     #[getter]
     fn n_fine_vertices(&self) -> usize {
-        self.inner.fine().topology().n_vertices()
+        self.inner.n_fine_vertices()
     }
 
     /// Densities (kg/m², float64) of every field: a dict with `free_solvent`, `solute`,

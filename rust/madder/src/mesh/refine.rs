@@ -40,7 +40,7 @@
 //!   `A_i` the restriction of the fine areas.
 
 use crate::error::{Error, MeshError, ParamError};
-use crate::mesh::Topology;
+use crate::mesh::{EdgeKind, Topology};
 
 /// The finest Detail level: every triangle split into `4³ = 64`.
 pub const MAX_LEVEL: u32 = 3;
@@ -73,24 +73,8 @@ impl Refinement {
     /// mesh of more than [`MAX_FINE_VERTICES`] vertices (with the figure), before
     /// allocating it.
     pub fn new(coarse: &Topology, level: u32) -> Result<Self, Error> {
-        if level > MAX_LEVEL {
-            return Err(ParamError::OutOfRange {
-                name: "detail level",
-                requirement: "an integer from 0 to 3",
-                value: level as f64,
-            }
-            .into());
-        }
+        let n_fine = check_level(coarse, level)?;
         let (v, e, f) = (coarse.n_vertices(), coarse.n_edges(), coarse.n_faces());
-        let n_fine = fine_vertex_count(v, e, f, level);
-        if n_fine > MAX_FINE_VERTICES || n_fine > u32::MAX as usize {
-            return Err(MeshError::DetailTooLarge {
-                level,
-                vertices: n_fine,
-                max: MAX_FINE_VERTICES,
-            }
-            .into());
-        }
         let n = 1u32 << level;
         let template = lattice_triangles(n);
         let per_face = (n as usize - 1) * (n as usize).saturating_sub(2) / 2;
@@ -216,6 +200,362 @@ impl Refinement {
             .flat_map(|&x| std::iter::repeat_n(x, self.template.len()))
             .collect()
     }
+}
+
+/// Where a fine vertex lies on the coarse mesh: at a coarse vertex, inside a coarse edge,
+/// or inside a coarse face.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Site {
+    Vertex(u32),
+    Edge(u32),
+    Face(u32),
+}
+
+/// The part of a refined mesh over the coarse faces built so far (issue 12's lazy
+/// refinement): the same lattice, placement and transfers as [`Refinement`], built
+/// coarse face by coarse face as the liquid arrives. Fine vertices and faces are
+/// numbered in the order they were built (*local* numbering); [`Partial::global`] gives
+/// each vertex's index in [`Refinement`]'s numbering of the whole refined mesh. Memory is
+/// `O(coarse mesh)` for the maps plus `O(built fine vertices)`.
+#[derive(Debug, Clone)]
+pub(crate) struct Partial {
+    level: u32,
+    coarse: Topology,
+    /// Coarse faces around every coarse vertex (CSR) and on every coarse edge.
+    vertex_faces: (Vec<u32>, Vec<u32>),
+    edge_faces: (Vec<u32>, Vec<u32>),
+    template: Vec<[[u32; 2]; 3]>,
+    face_built: Vec<bool>,
+    /// Coarse face of every block of `4^L` local fine faces.
+    built: Vec<u32>,
+    vertex_id: Vec<u32>,
+    edge_base: Vec<u32>,
+    face_base: Vec<u32>,
+    /// Per local fine vertex: coarse vertices and hat weights (as [`Refinement`]'s), its
+    /// index in the whole refined mesh, and where it lies.
+    weights: Vec<([u32; 3], [f64; 3])>,
+    global: Vec<u32>,
+    site: Vec<Site>,
+    faces: Vec<[u32; 3]>,
+    n_full: usize,
+}
+
+/// Incidence lists `item → owners` as CSR from `(owner, items)` pairs.
+fn csr(n: usize, pairs: impl Iterator<Item = (u32, u32)> + Clone) -> (Vec<u32>, Vec<u32>) {
+    let mut ptr = vec![0u32; n + 1];
+    for (_, item) in pairs.clone() {
+        ptr[item as usize + 1] += 1;
+    }
+    for i in 0..n {
+        ptr[i + 1] += ptr[i];
+    }
+    let mut fill = ptr.clone();
+    let mut list = vec![0u32; ptr[n] as usize];
+    for (owner, item) in pairs {
+        list[fill[item as usize] as usize] = owner;
+        fill[item as usize] += 1;
+    }
+    (ptr, list)
+}
+
+fn row(c: &(Vec<u32>, Vec<u32>), i: usize) -> &[u32] {
+    &c.1[c.0[i] as usize..c.0[i + 1] as usize]
+}
+
+impl Partial {
+    /// Nothing built yet of `coarse` refined `4^level` times. The same refusals as
+    /// [`Refinement::new`] (level, and the whole refined mesh over
+    /// [`MAX_FINE_VERTICES`]), from the counts alone.
+    pub(crate) fn new(coarse: &Topology, level: u32) -> Result<Self, Error> {
+        let n_full = check_level(coarse, level)?;
+        let faces = coarse.faces();
+        let vertex_faces = csr(
+            coarse.n_vertices(),
+            faces
+                .iter()
+                .enumerate()
+                .flat_map(|(f, t)| t.iter().map(move |&v| (f as u32, v))),
+        );
+        let edge_faces = csr(
+            coarse.n_edges(),
+            coarse
+                .face_edges()
+                .iter()
+                .enumerate()
+                .flat_map(|(f, t)| t.iter().map(move |&e| (f as u32, e))),
+        );
+        Ok(Self {
+            level,
+            vertex_faces,
+            edge_faces,
+            template: lattice_triangles(1 << level),
+            face_built: vec![false; coarse.n_faces()],
+            built: Vec::new(),
+            vertex_id: vec![u32::MAX; coarse.n_vertices()],
+            edge_base: vec![u32::MAX; coarse.n_edges()],
+            face_base: vec![u32::MAX; coarse.n_faces()],
+            weights: Vec::new(),
+            global: Vec::new(),
+            site: Vec::new(),
+            faces: Vec::new(),
+            n_full,
+            coarse: coarse.clone(),
+        })
+    }
+
+    /// The Detail level `L`.
+    pub(crate) fn level(&self) -> u32 {
+        self.level
+    }
+    /// Vertices of the whole refined mesh.
+    pub(crate) fn n_full(&self) -> usize {
+        self.n_full
+    }
+    /// Fine vertices built.
+    pub(crate) fn n_vertices(&self) -> usize {
+        self.weights.len()
+    }
+    /// Coarse faces built.
+    pub(crate) fn n_built_faces(&self) -> usize {
+        self.built.len()
+    }
+    /// The coarse mesh.
+    pub(crate) fn coarse(&self) -> &Topology {
+        &self.coarse
+    }
+    /// Index in the whole refined mesh ([`Refinement`]'s numbering) of every local vertex.
+    pub(crate) fn global(&self) -> &[u32] {
+        &self.global
+    }
+    /// Local fine vertex at coarse vertex `v`, if built.
+    pub(crate) fn at_vertex(&self, v: usize) -> Option<usize> {
+        let j = self.vertex_id[v];
+        (j != u32::MAX).then_some(j as usize)
+    }
+    /// Coarse faces around coarse vertex `v`.
+    pub(crate) fn faces_around(&self, v: usize) -> &[u32] {
+        row(&self.vertex_faces, v)
+    }
+    /// The coarse corners of the smallest coarse element holding local vertex `j`.
+    pub(crate) fn corners(&self, j: usize) -> Vec<u32> {
+        match self.site[j] {
+            Site::Vertex(v) => vec![v],
+            Site::Edge(e) => self.coarse.edges()[e as usize].to_vec(),
+            Site::Face(f) => self.coarse.faces()[f as usize].to_vec(),
+        }
+    }
+    /// Whether every fine face around local vertex `j` is built (its one-ring is the
+    /// whole refined mesh's).
+    pub(crate) fn is_complete(&self, j: usize) -> bool {
+        let all = |faces: &[u32]| faces.iter().all(|&f| self.face_built[f as usize]);
+        match self.site[j] {
+            Site::Vertex(v) => all(row(&self.vertex_faces, v as usize)),
+            Site::Edge(e) => all(row(&self.edge_faces, e as usize)),
+            Site::Face(_) => true,
+        }
+    }
+
+    /// Builds the coarse faces `faces` not built yet (in increasing order), appending
+    /// their new fine vertices and faces. Returns how many coarse faces were new.
+    pub(crate) fn build(&mut self, faces: &[u32]) -> usize {
+        let mut new: Vec<u32> = faces
+            .iter()
+            .copied()
+            .filter(|&f| !self.face_built[f as usize])
+            .collect();
+        new.sort_unstable();
+        new.dedup();
+        let n = 1u32 << self.level;
+        let (v, e) = (self.coarse.n_vertices(), self.coarse.n_edges());
+        let per_face = (n as usize - 1) * (n as usize).saturating_sub(2) / 2;
+        let interior_base = v + e * (n as usize - 1);
+        for &f in &new {
+            let fi = f as usize;
+            let tri = self.coarse.faces()[fi];
+            let fe = self.coarse.face_edges()[fi];
+            for c in tri {
+                if self.vertex_id[c as usize] == u32::MAX {
+                    self.vertex_id[c as usize] = self.weights.len() as u32;
+                    self.weights.push(([c; 3], [1.0, 0.0, 0.0]));
+                    self.global.push(c);
+                    self.site.push(Site::Vertex(c));
+                }
+            }
+            for &ed in &fe {
+                if self.edge_base[ed as usize] == u32::MAX && n > 1 {
+                    self.edge_base[ed as usize] = self.weights.len() as u32;
+                    let [a, b] = self.coarse.edges()[ed as usize];
+                    for t in 1..n {
+                        let s = t as f64 / n as f64;
+                        self.weights.push(([a, b, b], [1.0 - s, s, 0.0]));
+                        self.global.push(v as u32 + ed * (n - 1) + (t - 1));
+                        self.site.push(Site::Edge(ed));
+                    }
+                }
+            }
+            self.face_base[fi] = self.weights.len() as u32;
+            for (k, (i, j)) in interior_points(n).enumerate() {
+                let (bi, bj) = (i as f64 / n as f64, j as f64 / n as f64);
+                self.weights.push((tri, [1.0 - bi - bj, bi, bj]));
+                self.global.push((interior_base + fi * per_face + k) as u32);
+                self.site.push(Site::Face(f));
+            }
+            for corners in &self.template {
+                let t = corners.map(|[i, j]| self.local(fi, n, i, j));
+                self.faces.push(t);
+            }
+            self.face_built[fi] = true;
+            self.built.push(f);
+        }
+        new.len()
+    }
+
+    /// Local fine vertex of lattice point `(i, j)` of built coarse face `fi`.
+    fn local(&self, fi: usize, n: u32, i: u32, j: u32) -> u32 {
+        let tri = self.coarse.faces()[fi];
+        let fe = self.coarse.face_edges()[fi];
+        let on_edge = |a: usize, b: usize, c: usize, t: u32| -> u32 {
+            if t == 0 {
+                return self.vertex_id[tri[a] as usize];
+            }
+            if t == n {
+                return self.vertex_id[tri[b] as usize];
+            }
+            let e = fe[c];
+            let [first, _] = self.coarse.edges()[e as usize];
+            let s = if first == tri[a] { t } else { n - t };
+            self.edge_base[e as usize] + (s - 1)
+        };
+        if j == 0 {
+            on_edge(0, 1, 2, i)
+        } else if i == 0 {
+            on_edge(0, 2, 1, j)
+        } else if i + j == n {
+            on_edge(1, 2, 0, j)
+        } else {
+            let before: u32 = (1..j).map(|r| n - r - 1).sum();
+            self.face_base[fi] + before + (i - 1)
+        }
+    }
+
+    /// The built part as a mesh of its own (local numbering; every fine face keeps its
+    /// coarse face's polygon).
+    pub(crate) fn topology(&self) -> Result<Topology, MeshError> {
+        let per = self.template.len();
+        let polygon = (0..self.faces.len())
+            .map(|t| self.coarse.face_polygon()[self.built[t / per] as usize])
+            .collect();
+        Topology::with_polygons(
+            self.weights.len(),
+            self.faces.clone(),
+            polygon,
+            self.coarse.n_polygons(),
+        )
+    }
+
+    /// Per local fine face, the value of its coarse face.
+    pub(crate) fn face_values<T: Copy>(&self, coarse: &[T]) -> Vec<T> {
+        self.built
+            .iter()
+            .flat_map(|&f| std::iter::repeat_n(coarse[f as usize], self.template.len()))
+            .collect()
+    }
+
+    /// Per local fine face, its corners' UVs from the coarse faces' (as
+    /// [`Refinement::face_uv`]).
+    pub(crate) fn face_uv(&self, coarse_uv: &[[[f64; 2]; 3]]) -> Vec<[[f64; 2]; 3]> {
+        let n = (1u32 << self.level) as f64;
+        self.built
+            .iter()
+            .flat_map(|&f| {
+                let c = coarse_uv[f as usize];
+                self.template.iter().map(move |corners| {
+                    corners.map(|[i, j]| {
+                        let (bi, bj) = (i as f64 / n, j as f64 / n);
+                        let b0 = 1.0 - bi - bj;
+                        [
+                            b0 * c[0][0] + bi * c[1][0] + bj * c[2][0],
+                            b0 * c[0][1] + bi * c[1][1] + bj * c[2][1],
+                        ]
+                    })
+                })
+            })
+            .collect()
+    }
+
+    /// Per local vertex, whether it lies on the coarse mesh's border (a border vertex of
+    /// the whole refined mesh: the built part's own edge is not the cloth's).
+    pub(crate) fn boundary(&self) -> Vec<bool> {
+        let on_vertex = self.coarse.boundary_vertices();
+        self.site
+            .iter()
+            .map(|s| match *s {
+                Site::Vertex(v) => on_vertex[v as usize],
+                Site::Edge(e) => self.coarse.edge_kind(e as usize) == EdgeKind::Boundary,
+                Site::Face(_) => false,
+            })
+            .collect()
+    }
+
+    /// [`Refinement::prolong`] on the built vertices.
+    pub(crate) fn prolong<T>(&self, coarse: &[T]) -> Vec<T>
+    where
+        T: Copy + Send + Sync + std::ops::Mul<f64, Output = T> + std::ops::Add<Output = T>,
+    {
+        use rayon::prelude::*;
+        assert_eq!(
+            coarse.len(),
+            self.coarse.n_vertices(),
+            "one coarse value per vertex"
+        );
+        self.weights
+            .par_iter()
+            .map(|(v, w)| {
+                let c = |k: usize| coarse[v[k] as usize];
+                c(0) * w[0] + c(1) * w[1] + c(2) * w[2]
+            })
+            .collect()
+    }
+
+    /// [`Refinement::restrict`] of the built vertices' masses (the others hold none), in
+    /// local order.
+    pub(crate) fn restrict(&self, fine: &[f64]) -> Vec<f64> {
+        assert_eq!(fine.len(), self.weights.len(), "one fine value per vertex");
+        let mut out = vec![0.0; self.coarse.n_vertices()];
+        for ((v, w), &m) in self.weights.iter().zip(fine) {
+            for k in 0..3 {
+                if w[k] != 0.0 {
+                    out[v[k] as usize] += w[k] * m;
+                }
+            }
+        }
+        out
+    }
+}
+
+/// Refuses a level above [`MAX_LEVEL`] and a refined mesh of more than
+/// [`MAX_FINE_VERTICES`] vertices (with the figure), from the counts alone. Returns the
+/// refined mesh's vertex count.
+fn check_level(coarse: &Topology, level: u32) -> Result<usize, Error> {
+    if level > MAX_LEVEL {
+        return Err(ParamError::OutOfRange {
+            name: "detail level",
+            requirement: "an integer from 0 to 3",
+            value: level as f64,
+        }
+        .into());
+    }
+    let (v, e, f) = (coarse.n_vertices(), coarse.n_edges(), coarse.n_faces());
+    let n_fine = fine_vertex_count(v, e, f, level);
+    if n_fine > MAX_FINE_VERTICES || n_fine > u32::MAX as usize {
+        return Err(MeshError::DetailTooLarge {
+            level,
+            vertices: n_fine,
+            max: MAX_FINE_VERTICES,
+        }
+        .into());
+    }
+    Ok(n_fine)
 }
 
 /// The `N²` lattice triangles of one face, up triangles row by row then down ones.

@@ -17,20 +17,54 @@
 //! either level, to rounding. Velocities are read where a fine vertex is a cloth vertex.
 //! At level 0 every call goes straight to the simulator: the results are the cloth
 //! simulator's, bit for bit.
+//!
+//! ## Built lazily, as the liquid arrives
+//! The refined cloth is never built in full ([`crate::mesh::refine::Partial`]): the
+//! simulator runs on the fine faces of the coarse faces built so far, numbered in the
+//! order they were built, and every per-vertex array it holds follows the built part.
+//! Coarse faces are built
+//!
+//! - around every cloth vertex that liquid is poured on or splashed from (the support of
+//!   its hat: every fine vertex the prolongation gives a positive value lies there, and
+//!   its one-ring is complete);
+//! - before every frame, when the frame's window ([`super::window`]) has an active or
+//!   held vertex whose fine one-ring is not complete: around the coarse corners of all
+//!   the window's active and held vertices, grown by [`GROWTH_RINGS`] coarse rings, and
+//!   the window is found again on the grown part.
+//!
+//! So every vertex a frame steps has its whole one-ring, the window is the one the whole
+//! refined cloth would give, and a fine vertex whose ring is incomplete holds nothing and
+//! was never stepped. Such a vertex (and every new one) is *reset* when faces are added:
+//! rest frame from its complete ring, and the state a never-stepped vertex of the whole
+//! refined cloth would have — frame at the first positions, velocity zero, stamped time
+//! 0, or, after [`Detailed::set_velocity_world`], the frame at that call's positions,
+//! that velocity, stamped then. The results are the whole refined cloth's up to the
+//! order of sums (vertices are numbered otherwise) and the choice of each vertex's
+//! tangent axes (a fan starts at another face), both rounding-level. Splash velocities
+//! are drawn per fine vertex index, so a splash is another draw of the same distribution.
+//!
+//! The simulator needs a mesh, so one coarse face (the first) is built from the start.
 
 use std::borrow::Cow;
+use std::time::Instant;
 
 use faer::Par;
-use glam::DVec3;
+use glam::{DMat3, DVec2, DVec3};
 
 use super::diffuse::{Conductivity, WovenFaces};
+use super::forces::{corotating_frames_with, rest_frames};
 use super::simulate::{Profile, Simulator, StainParams};
 use super::sources::{check_each_nonnegative, check_length};
 use super::state::{Fields, Totals};
 use crate::error::{Error, ParamError};
-use crate::mesh::Topology;
 use crate::mesh::geometry::{check_positions, vertex_areas};
-use crate::mesh::refine::Refinement;
+use crate::mesh::refine::Partial;
+use crate::mesh::{OneRings, RingAdjacency, Topology};
+
+/// Coarse rings of faces built beyond the corners of a window that reached the edge of
+/// the built part (module doc): room for the window to grow a few frames before the next
+/// build (each costs a rebuild of the simulator's mesh, about a window's cost).
+pub(crate) const GROWTH_RINGS: usize = 4;
 
 /// The stain simulator at a Detail level: the cloth's own simulator at level 0, or one on
 /// the refined cloth read and driven at the cloth's vertices (module doc).
@@ -40,13 +74,176 @@ pub struct Detailed {
     fine: Option<Fine>,
 }
 
-/// The refinement and the cloth's state the transfers need.
+/// The part of the refinement built so far and the cloth's state the transfers and the
+/// lazy building need (per cloth vertex or face: `O(cloth)`).
 #[derive(Debug)]
 struct Fine {
-    refinement: Refinement,
-    cloth: Topology,
+    partial: Partial,
+    /// Per cloth face: walked against its vertex order in the cloth's harmonized
+    /// orientation (fine faces take their cloth face's).
+    flipped: Vec<bool>,
+    /// The cloth's conductivity (per cloth face).
+    conductivity: Conductivity,
+    rest: Vec<DVec3>,
+    /// The cloth's positions at the start, now, and at the frame before.
+    first: Vec<DVec3>,
+    current: Vec<DVec3>,
+    previous: Option<Vec<DVec3>>,
+    /// The last [`Detailed::set_velocity_world`]: the cloth's positions then, the time,
+    /// and the world velocities (what vertices built later start from).
+    reference: Option<(Vec<DVec3>, f64, Vec<DVec3>)>,
     /// Lumped areas of the cloth's vertices at the current frame.
     area: Vec<f64>,
+}
+
+impl Fine {
+    fn conductivity(&self) -> Conductivity {
+        let p = &self.partial;
+        match &self.conductivity {
+            Conductivity::Isotropic(d) => Conductivity::Isotropic(*d),
+            Conductivity::Woven(w) => Conductivity::Woven(WovenFaces {
+                tensor: p.face_values(&w.tensor),
+                uv: p.face_uv(&w.uv),
+                angle: p.face_values(&w.angle),
+            }),
+        }
+    }
+
+    /// Builds the cloth faces `faces` and puts the simulator on the grown part (module
+    /// doc): the mesh and everything per vertex rebuilt or extended, the new vertices and
+    /// those whose one-ring was incomplete reset, the window dropped.
+    fn grow(&mut self, sim: &mut Simulator, faces: &[u32]) -> Result<(), Error> {
+        let p = &mut self.partial;
+        let old_n = p.n_vertices();
+        let mut reset: Vec<usize> = (0..old_n).filter(|&j| !p.is_complete(j)).collect();
+        if p.build(faces) == 0 {
+            return Ok(());
+        }
+        let p = &self.partial;
+        let n = p.n_vertices();
+        reset.extend(old_n..n);
+        let topology = p.topology()?;
+        let rings = OneRings::with_orientation(&topology, p.face_values(&self.flipped));
+        let adjacency = RingAdjacency::new(&topology);
+        let rest = p.prolong(&self.rest);
+        let rest_frames = rest_frames(&rings, &rest)?;
+        let positions = p.prolong(&self.current);
+        let (at, t_ref, world) = match &self.reference {
+            Some((at, t, u)) => (p.prolong(at), *t, Some(p.prolong(u))),
+            None => (p.prolong(&self.first), 0.0, None),
+        };
+        let frames = corotating_frames_with(&adjacency, &rest_frames, &rest, &at);
+        let area = vertex_areas(&topology, &positions);
+
+        let c = &mut sim.cloth;
+        c.irregular = sim
+            .params
+            .irregularity
+            .is_on()
+            .then(|| sim.params.irregularity.multiplier(&rest));
+        c.boundary = p.boundary();
+        c.conductivity = self.conductivity();
+        c.rest = rest;
+        c.rest_frames = rest_frames;
+        c.rings = rings;
+        c.adjacency = adjacency;
+        sim.loose = topology.loose_vertices();
+        c.topology = topology;
+
+        let st = &mut sim.state;
+        st.previous = self.previous.as_ref().map(|q| p.prolong(q));
+        st.positions = positions;
+        st.frames.frame.resize(n, DMat3::IDENTITY);
+        st.stamp.resize(n, t_ref);
+        st.vertex_area.resize(n, 0.0);
+        st.velocity.resize(n, DVec2::ZERO);
+        st.is_stained.resize(n, false);
+        let f = &mut st.fields;
+        for v in [
+            &mut f.free_solvent,
+            &mut f.solute,
+            &mut f.absorbed_solvent,
+            &mut f.absorbed_solute,
+            &mut f.adsorbed,
+        ] {
+            v.resize(n, 0.0);
+        }
+        for c in [&mut f.color_free, &mut f.color_held].into_iter().flatten() {
+            c.resize(n, [0.0; 3]);
+        }
+        for j in reset {
+            st.frames.frame[j] = frames.frame[j];
+            st.stamp[j] = t_ref;
+            st.velocity[j] = world
+                .as_ref()
+                .map_or(DVec2::ZERO, |u| frames.to_local(j, u[j]));
+            st.vertex_area[j] = area[j];
+        }
+        sim.window = None;
+        sim.rescan = true;
+        sim.prepared = false;
+        Ok(())
+    }
+
+    /// Builds the faces around the cloth vertices where `values` is positive.
+    fn grow_around(
+        &mut self,
+        sim: &mut Simulator,
+        positive: impl Fn(usize) -> bool,
+    ) -> Result<(), Error> {
+        let n = self.partial.coarse().n_vertices();
+        let faces: Vec<u32> = (0..n)
+            .filter(|&v| positive(v))
+            .flat_map(|v| self.partial.faces_around(v).to_vec())
+            .collect();
+        self.grow(sim, &faces)
+    }
+
+    /// Finds the window of the next frame, building faces until its active and held
+    /// vertices all have their whole one-rings (module doc).
+    fn prepare(&mut self, sim: &mut Simulator) -> Result<(), Error> {
+        let clock = Instant::now();
+        loop {
+            let rebuilt = sim.prepare_window()?;
+            sim.profile.window_rebuilds += usize::from(rebuilt);
+            let Some(w) = &sim.window else { break };
+            let p = &self.partial;
+            let whole = || w.whole.iter().map(|&j| w.vertices[j as usize] as usize);
+            if whole().all(|v| p.is_complete(v)) {
+                break;
+            }
+            let coarse = p.coarse();
+            let mut mark = vec![false; coarse.n_vertices()];
+            let mut seeds = Vec::new();
+            for v in whole() {
+                for c in p.corners(v) {
+                    if !std::mem::replace(&mut mark[c as usize], true) {
+                        seeds.push(c);
+                    }
+                }
+            }
+            for _ in 0..GROWTH_RINGS {
+                let mut next = Vec::new();
+                for &v in &seeds {
+                    for &e in coarse.vertex_edges(v as usize) {
+                        let u = coarse.other_end(e as usize, v as usize);
+                        if !std::mem::replace(&mut mark[u as usize], true) {
+                            next.push(u);
+                        }
+                    }
+                }
+                seeds.extend(next);
+            }
+            let faces: Vec<u32> = seeds
+                .iter()
+                .flat_map(|&v| p.faces_around(v as usize).to_vec())
+                .collect();
+            self.grow(sim, &faces)?;
+        }
+        sim.prepared = true;
+        sim.profile.window += clock.elapsed().as_secs_f64();
+        Ok(())
+    }
 }
 
 impl Detailed {
@@ -76,55 +273,73 @@ impl Detailed {
             return Ok(Self { sim, fine: None });
         }
         // the cloth's own checks first, so that errors name the cloth's elements
-        let refinement = Refinement::new(&topology, level)?;
+        let mut partial = Partial::new(&topology, level)?;
         params.validate()?;
         conductivity.validate(topology.n_faces())?;
         check_positions(&topology, rest)?;
         check_positions(&topology, positions)?;
-        let conductivity = match conductivity {
-            Conductivity::Isotropic(d) => Conductivity::Isotropic(d),
-            Conductivity::Woven(w) => Conductivity::Woven(WovenFaces {
-                tensor: refinement.face_values(&w.tensor),
-                uv: refinement.face_uv(&w.uv),
-                angle: refinement.face_values(&w.angle),
-            }),
-        };
-        let sim = Simulator::new(
-            refinement.fine().clone(),
-            &refinement.prolong(rest),
-            &refinement.prolong(positions),
+        // the simulator needs a mesh: the first cloth face until liquid comes (module doc)
+        partial.build(&[0]);
+        let mut fine = Fine {
+            flipped: OneRings::new(&topology).face_flipped().to_vec(),
             conductivity,
+            rest: rest.to_vec(),
+            first: positions.to_vec(),
+            current: positions.to_vec(),
+            previous: None,
+            reference: None,
+            area: vertex_areas(&topology, positions),
+            partial,
+        };
+        let p = &fine.partial;
+        let mut sim = Simulator::new(
+            p.topology()?,
+            &p.prolong(rest),
+            &p.prolong(positions),
+            fine.conductivity(),
             params,
             solute_color,
             par,
         )?;
-        let area = vertex_areas(&topology, positions);
+        // the fans in the cloth's orientation and the cloth's border: rebuilt on the same part
+        fine.partial = Partial::new(&topology, level)?;
+        fine.grow(&mut sim, &[0])?;
         Ok(Self {
             sim,
-            fine: Some(Fine {
-                refinement,
-                cloth: topology,
-                area,
-            }),
+            fine: Some(fine),
         })
     }
 
     /// The Detail level.
     pub fn level(&self) -> u32 {
-        self.fine.as_ref().map_or(0, |f| f.refinement.level())
+        self.fine.as_ref().map_or(0, |f| f.partial.level())
     }
-    /// The simulator doing the work (on the refined cloth above level 0).
+    /// The simulator doing the work (on the part of the refined cloth built so far above
+    /// level 0, its vertices numbered in the order they were built).
     pub fn fine(&self) -> &Simulator {
         &self.sim
     }
-    /// The refinement (`None` at level 0).
-    pub fn refinement(&self) -> Option<&Refinement> {
-        self.fine.as_ref().map(|f| &f.refinement)
+    /// Vertices of the whole refined cloth (the cloth's at level 0): the length of the
+    /// `fine_…` read-outs.
+    pub fn n_fine_vertices(&self) -> usize {
+        self.fine
+            .as_ref()
+            .map_or(self.sim.topology().n_vertices(), |f| f.partial.n_full())
+    }
+    /// Fine vertices built so far (all of the cloth's at level 0).
+    pub fn n_built_vertices(&self) -> usize {
+        self.sim.topology().n_vertices()
+    }
+    /// Cloth faces refined so far (all at level 0).
+    pub fn n_built_faces(&self) -> usize {
+        self.fine
+            .as_ref()
+            .map_or(self.sim.topology().n_faces(), |f| f.partial.n_built_faces())
     }
     /// The cloth's topology.
     pub fn topology(&self) -> &Topology {
         match &self.fine {
-            Some(f) => &f.cloth,
+            Some(f) => f.partial.coarse(),
             None => self.sim.topology(),
         }
     }
@@ -137,10 +352,6 @@ impl Detailed {
         self.sim.time()
     }
 
-    fn check_len(&self, name: &'static str, got: usize) -> Result<(), ParamError> {
-        check_length(name, self.topology().n_vertices(), got)
-    }
-
     /// [`Simulator::step`] to the cloth's `positions` (and `after`).
     pub fn step(
         &mut self,
@@ -151,14 +362,17 @@ impl Detailed {
         let Some(fine) = &mut self.fine else {
             return self.sim.step(positions, dt, after);
         };
-        check_positions(&fine.cloth, positions)?;
+        check_positions(fine.partial.coarse(), positions)?;
         if let Some(a) = after {
-            check_positions(&fine.cloth, a)?;
+            check_positions(fine.partial.coarse(), a)?;
         }
-        let r = &fine.refinement;
+        super::diffuse::check_range("time step", dt, dt > 0.0, "finite and > 0")?;
+        fine.prepare(&mut self.sim)?;
+        let r = &fine.partial;
         let after = after.map(|a| r.prolong(a));
         self.sim.step(&r.prolong(positions), dt, after.as_deref())?;
-        fine.area = vertex_areas(&fine.cloth, positions);
+        fine.previous = Some(std::mem::replace(&mut fine.current, positions.to_vec()));
+        fine.area = vertex_areas(fine.partial.coarse(), positions);
         Ok(())
     }
 
@@ -169,14 +383,15 @@ impl Detailed {
         solvent: &[f64],
         concentration: f64,
         color: Option<[f64; 3]>,
-    ) -> Result<(), ParamError> {
-        let Some(fine) = &self.fine else {
-            return self.sim.add_liquid(solvent, concentration, color);
+    ) -> Result<(), Error> {
+        let Some(fine) = &mut self.fine else {
+            return Ok(self.sim.add_liquid(solvent, concentration, color)?);
         };
-        self.check_len("added solvent", solvent.len())?;
+        check_length("added solvent", fine.area.len(), solvent.len())?;
         check_each_nonnegative("added solvent", solvent)?;
-        let spread = fine.refinement.prolong(solvent);
-        self.sim.add_liquid(&spread, concentration, color)
+        fine.grow_around(&mut self.sim, |v| solvent[v] > 0.0)?;
+        let spread = fine.partial.prolong(solvent);
+        Ok(self.sim.add_liquid(&spread, concentration, color)?)
     }
 
     /// [`Simulator::splash`] with `weight` per cloth vertex (interpolated).
@@ -186,31 +401,34 @@ impl Detailed {
         speed: f64,
         seed: u64,
         weight: &[f64],
-    ) -> Result<(), ParamError> {
-        let Some(fine) = &self.fine else {
-            return self.sim.splash(center, speed, seed, weight);
+    ) -> Result<(), Error> {
+        let Some(fine) = &mut self.fine else {
+            return Ok(self.sim.splash(center, speed, seed, weight)?);
         };
-        self.check_len("splash weights", weight.len())?;
+        check_length("splash weights", fine.area.len(), weight.len())?;
         check_each_nonnegative("splash weight", weight)?;
-        let spread = fine.refinement.prolong(weight);
-        self.sim.splash(center, speed, seed, &spread)
+        fine.grow_around(&mut self.sim, |v| weight[v] > 0.0)?;
+        let spread = fine.partial.prolong(weight);
+        Ok(self.sim.splash(center, speed, seed, &spread)?)
     }
 
     /// [`Simulator::set_velocity_world`] with one world vector per cloth vertex
-    /// (interpolated).
+    /// (interpolated; vertices built later start from it, module doc).
     pub fn set_velocity_world(&mut self, velocity: &[DVec3]) -> Result<(), ParamError> {
-        let Some(fine) = &self.fine else {
+        let Some(fine) = &mut self.fine else {
             return self.sim.set_velocity_world(velocity);
         };
-        self.check_len("velocity", velocity.len())?;
+        check_length("velocity", fine.area.len(), velocity.len())?;
         if let Some(index) = velocity.iter().position(|u| !u.is_finite()) {
             return Err(ParamError::NonFinite {
                 name: "velocity",
                 index,
             });
         }
-        let spread = fine.refinement.prolong(velocity);
-        self.sim.set_velocity_world(&spread)
+        let spread = fine.partial.prolong(velocity);
+        self.sim.set_velocity_world(&spread)?;
+        fine.reference = Some((fine.current.clone(), self.sim.time(), velocity.to_vec()));
+        Ok(())
     }
 
     /// Lumped areas of the cloth's vertices, m² (at level 0 [`Simulator::vertex_area`];
@@ -228,7 +446,7 @@ impl Detailed {
         let Some(fine) = &self.fine else {
             return Cow::Borrowed(f);
         };
-        let r = |m: &[f64]| fine.refinement.restrict(m);
+        let r = |m: &[f64]| fine.partial.restrict(m);
         let colors = |c: &Option<Vec<[f64; 3]>>| {
             c.as_ref().map(|c| {
                 let k: [Vec<f64>; 3] =
@@ -267,7 +485,7 @@ impl Detailed {
                 let wet: Vec<f64> = (0..f.free_solvent.len())
                     .map(|i| f.free_solvent[i] + f.absorbed_solvent[i])
                     .collect();
-                divide(&fine.refinement.restrict(&wet), &fine.area)
+                divide(&fine.partial.restrict(&wet), &fine.area)
             }
         }
     }
@@ -277,7 +495,7 @@ impl Detailed {
         match &self.fine {
             None => self.sim.solute_density(),
             Some(fine) => divide(
-                &fine.refinement.restrict(&total_solute(self.sim.fields())),
+                &fine.partial.restrict(&total_solute(self.sim.fields())),
                 &fine.area,
             ),
         }
@@ -288,7 +506,7 @@ impl Detailed {
         match &self.fine {
             None => self.sim.deposit(),
             Some(fine) => divide(
-                &fine.refinement.restrict(&self.sim.fields().adsorbed),
+                &fine.partial.restrict(&self.sim.fields().adsorbed),
                 &fine.area,
             ),
         }
@@ -303,9 +521,9 @@ impl Detailed {
         let f = self.sim.fields();
         let base = self.sim.solute_color;
         let (Some(cf), Some(ch)) = (&f.color_free, &f.color_held) else {
-            return vec![base; fine.cloth.n_vertices()];
+            return vec![base; fine.area.len()];
         };
-        let r = &fine.refinement;
+        let r = &fine.partial;
         let s = r.restrict(&total_solute(f));
         let c: [Vec<f64>; 3] = std::array::from_fn(|k| {
             r.restrict(
@@ -326,12 +544,50 @@ impl Detailed {
     }
 
     /// Velocities of the cloth's vertices as world vectors, m/s (a cloth vertex is a fine
-    /// vertex of the same index).
+    /// vertex; one not built yet has the velocity it was set, or none).
     pub fn velocity_world(&self) -> Vec<DVec3> {
         let st = &self.sim.state;
-        (0..self.topology().n_vertices())
-            .map(|i| st.frames.to_world(i, st.velocity[i]))
+        let Some(fine) = &self.fine else {
+            return self.sim.velocity_world();
+        };
+        let p = &fine.partial;
+        (0..fine.area.len())
+            .map(|i| match p.at_vertex(i).filter(|&j| p.is_complete(j)) {
+                Some(j) => st.frames.to_world(j, st.velocity[j]),
+                None => fine.reference.as_ref().map_or(DVec3::ZERO, |r| r.2[i]),
+            })
             .collect()
+    }
+
+    /// Per vertex of the whole refined cloth (numbered as [`crate::mesh::Refinement`]
+    /// numbers it), the fine simulator's `values` of the built vertices, `fill` elsewhere.
+    fn fine_values<T: Copy>(&self, values: Vec<T>, fill: T) -> Vec<T> {
+        let Some(fine) = &self.fine else {
+            return values;
+        };
+        let mut out = vec![fill; fine.partial.n_full()];
+        for (&g, v) in fine.partial.global().iter().zip(values) {
+            out[g as usize] = v;
+        }
+        out
+    }
+    /// Liquid density per vertex of the whole refined cloth, kg/m² (0 where nothing was
+    /// built).
+    pub fn fine_wetness(&self) -> Vec<f64> {
+        self.fine_values(self.sim.wetness(), 0.0)
+    }
+    /// Total solute density per vertex of the whole refined cloth, kg/m².
+    pub fn fine_solute_density(&self) -> Vec<f64> {
+        self.fine_values(self.sim.solute_density(), 0.0)
+    }
+    /// Deposit density per vertex of the whole refined cloth, kg/m².
+    pub fn fine_deposit(&self) -> Vec<f64> {
+        self.fine_values(self.sim.deposit(), 0.0)
+    }
+    /// Solute colour per vertex of the whole refined cloth (the liquid's where there is
+    /// none).
+    pub fn fine_solute_color(&self) -> Vec<[f64; 3]> {
+        self.fine_values(self.sim.solute_color(), self.sim.solute_color)
     }
 
     /// Totals over the cloth (the fine sums: the same at either level).

@@ -233,6 +233,9 @@ pub struct Simulator {
     /// Transport sub-cycles of the last frame, all its sub-steps together (widens the
     /// next region: liquid moves at most one ring per sub-cycle).
     pub(super) last_frame_cycles: usize,
+    /// The window for the next frame was already prepared (by [`super::detail`], which
+    /// checks it against the part of the refined cloth built so far).
+    pub(super) prepared: bool,
 }
 
 /// Wall-clock seconds spent in each phase since the simulator was built (for benchmarks).
@@ -334,6 +337,7 @@ impl Simulator {
             window: None,
             rescan: true,
             last_frame_cycles: 1,
+            prepared: false,
         })
     }
 
@@ -388,7 +392,7 @@ impl Simulator {
             check_positions(&self.cloth.topology, a)?;
         }
         let clock = Instant::now();
-        let rebuilt = self.prepare_window()?;
+        let rebuilt = !std::mem::take(&mut self.prepared) && self.prepare_window()?;
         let mut prof = self.profile;
         prof.window_rebuilds += usize::from(rebuilt);
         prof.window += clock.elapsed().as_secs_f64();
