@@ -95,7 +95,10 @@ def add_ridges(scene, obj, ridges, unit):
     verts, weights = lcs.binding(faces, ridges["triangles"], ridges["barycentric"])
     curves = bpy.data.hair_curves.new(f"{obj.name} Ridges")
     curves.add_curves([len(chain) for chain, _ in lines])
-    curves.set_types(type="POLY")
+    # poly curves; Blender 4.2 has no set_types (and creating its built-in curve_type
+    # attribute by hand corrupts memory there): the node group's Set Spline Type does it
+    if hasattr(curves, "set_types"):
+        curves.set_types(type="POLY")
     pos = (np.asarray(ridges["points"])[order] / unit).astype(np.float32)
     curves.position_data.foreach_set("vector", pos.ravel())
     cyclic = curves.attributes.new("cyclic", "BOOLEAN", "CURVE")
@@ -116,7 +119,7 @@ def add_ridges(scene, obj, ridges, unit):
 
 def _binding_group(cloth):
     """The node group that places each point at `Σ_k madder_bary[k] · position[madder_v{k}]`
-    of the evaluated `cloth` (in the curves object's space)."""
+    of the evaluated `cloth` (in the curves object's space), as poly curves."""
     g = bpy.data.node_groups.new(f"{NODE_GROUP} ({cloth.name})", "GeometryNodeTree")
     g.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
     g.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
@@ -157,5 +160,8 @@ def _binding_group(cloth):
     place = nodes.new("GeometryNodeSetPosition")
     links.new(gin.outputs[0], place.inputs["Geometry"])
     links.new(total.outputs["Vector"], place.inputs["Position"])
-    links.new(place.outputs["Geometry"], gout.inputs[0])
+    poly = nodes.new("GeometryNodeCurveSplineType")
+    poly.spline_type = "POLY"
+    links.new(place.outputs["Geometry"], poly.inputs["Curve"])
+    links.new(poly.outputs["Curve"], gout.inputs[0])
     return g
