@@ -175,21 +175,9 @@ impl Refinement {
     /// The UVs of every fine face's corners from the coarse faces' corner UVs (the same
     /// barycentric combination as the positions, module doc).
     pub fn face_uv(&self, coarse_uv: &[[[f64; 2]; 3]]) -> Vec<[[f64; 2]; 3]> {
-        let n = (1u32 << self.level) as f64;
         coarse_uv
             .iter()
-            .flat_map(|c| {
-                self.template.iter().map(move |corners| {
-                    corners.map(|[i, j]| {
-                        let (bi, bj) = (i as f64 / n, j as f64 / n);
-                        let b0 = 1.0 - bi - bj;
-                        [
-                            b0 * c[0][0] + bi * c[1][0] + bj * c[2][0],
-                            b0 * c[0][1] + bi * c[1][1] + bj * c[2][1],
-                        ]
-                    })
-                })
-            })
+            .flat_map(|&c| lattice_uv(&self.template, self.level, c))
             .collect()
     }
 
@@ -464,22 +452,9 @@ impl Partial {
     /// Per local fine face, its corners' UVs from the coarse faces' (as
     /// [`Refinement::face_uv`]).
     pub(crate) fn face_uv(&self, coarse_uv: &[[[f64; 2]; 3]]) -> Vec<[[f64; 2]; 3]> {
-        let n = (1u32 << self.level) as f64;
         self.built
             .iter()
-            .flat_map(|&f| {
-                let c = coarse_uv[f as usize];
-                self.template.iter().map(move |corners| {
-                    corners.map(|[i, j]| {
-                        let (bi, bj) = (i as f64 / n, j as f64 / n);
-                        let b0 = 1.0 - bi - bj;
-                        [
-                            b0 * c[0][0] + bi * c[1][0] + bj * c[2][0],
-                            b0 * c[0][1] + bi * c[1][1] + bj * c[2][1],
-                        ]
-                    })
-                })
-            })
+            .flat_map(|&f| lattice_uv(&self.template, self.level, coarse_uv[f as usize]))
             .collect()
     }
 
@@ -613,6 +588,26 @@ fn lattice_vertex(
         let before: u32 = (1..j).map(|r| n - r - 1).sum();
         (interior_base as u32) + before + (i - 1)
     }
+}
+
+/// The corner UVs of the lattice triangles `template` of one coarse face at `level`,
+/// from the coarse corners' UVs `c` (the positions' barycentric combination; module doc).
+fn lattice_uv(
+    template: &[[[u32; 2]; 3]],
+    level: u32,
+    c: [[f64; 2]; 3],
+) -> impl Iterator<Item = [[f64; 2]; 3]> + '_ {
+    let n = (1u32 << level) as f64;
+    template.iter().map(move |corners| {
+        corners.map(|[i, j]| {
+            let (bi, bj) = (i as f64 / n, j as f64 / n);
+            let b0 = 1.0 - bi - bj;
+            [
+                b0 * c[0][0] + bi * c[1][0] + bj * c[2][0],
+                b0 * c[0][1] + bi * c[1][1] + bj * c[2][1],
+            ]
+        })
+    })
 }
 
 #[cfg(test)]
