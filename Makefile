@@ -100,13 +100,14 @@ $(ZIP): $(WHEEL) $(ADDON_SRC)
 
 # Static checks (.ci/run runs them before `make test`): rustfmt and clippy (warnings are
 # errors; the lints are Cargo.toml's [workspace.lints]) on the workspace; rustfmt and a
-# compile check of the fuzz targets (their own workspace, rust/madder/fuzz); ruff on the
+# compile check of the fuzz targets; the core's docs (broken or ambiguous links are errors) (their own workspace, rust/madder/fuzz); ruff on the
 # Python (configured in pyproject.toml); the type stubs against the built binding.
 FUZZ := rust/madder/fuzz/Cargo.toml
 lint: rust-tools $(WHEELDIR)/.stamp
 	cargo fmt --all --check
 	cargo fmt --manifest-path $(FUZZ) --check
 	cargo clippy --workspace --all-targets -- -D warnings
+	RUSTDOCFLAGS="-D warnings" cargo doc -p madder --no-deps
 	CARGO_TARGET_DIR=$(abspath target/fuzz) cargo check --manifest-path $(FUZZ)
 	$(VENV)/bin/ruff check addon tests blend_fixtures rust/madder-py/python
 	PYTHONPATH=$(abspath $(WHEELDIR)) $(PY) -m pytest -q tests/python/test_stubs.py

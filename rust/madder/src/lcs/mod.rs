@@ -18,9 +18,9 @@
 //!   [`Velocity`] (the Python binding's callable); a fixed or deforming mesh ([`Motion`]).
 //! - `planar` (§5.5.1): the same flow map on a flat fixed mesh without walking, where a
 //!   bucket grid proves a segment stays inside (a fast path of `trace`).
-//! - [`ftle`] (§5.2, §5.5.1): the flow map's gradient by least squares over the one-ring
+//! - [`ftle`](mod@ftle) (§5.2, §5.5.1): the flow map's gradient by least squares over the one-ring
 //!   in the vertex's tangent frame, Cauchy–Green, `σ` ([`ftle()`](ftle::ftle)).
-//! - [`ridges`] (§5.4, §5.5.2–§5.5.5): threshold into `S` (eq. 5.3), implicit diffusion
+//! - [`ridges`](mod@ridges) (§5.4, §5.5.2–§5.5.5): threshold into `S` (eq. 5.3), implicit diffusion
 //!   smoothing, Hessian and `n_min`, the zero-crossing test with the orientation factor
 //!   (eq. 5.4), marching triangles, joining at local maxima, cleanup, spurious valleys
 //!   ([`ridges()`](ridges::ridges)).

@@ -35,7 +35,7 @@
 use glam::{DMat2, DVec2, DVec3};
 use rayon::prelude::*;
 
-use super::trace::{Charts, Located, Velocity, clamp};
+use super::trace::{Charts, Located, Velocity, clamp, eval_checked};
 use crate::error::LcsError;
 use crate::mesh::Topology;
 
@@ -469,16 +469,7 @@ pub(crate) fn flow_map_planar(
                     })
                     .collect();
             }
-            velocity.eval(ts, &stage_at, &points, &mut w)?;
-            if let Some(i) = w.iter().position(|u| !u.is_finite()) {
-                return Err(LcsError::NonFiniteVelocity {
-                    at: format!(
-                        "point ({}, {}, {}) (the particle from vertex {})",
-                        points[i].x, points[i].y, points[i].z, live[i]
-                    ),
-                    time: ts,
-                });
-            }
+            eval_checked(velocity, ts, &stage_at, &points, &live, &mut w)?;
             k[stage]
                 .par_iter_mut()
                 .zip(&w)

@@ -16,7 +16,7 @@
 //!
 //! ## Transverse direction and zero crossings (§5.4, §5.5.3, eq. 5.4)
 //! Gradients are least-squares fits over the one-ring in the vertex's tangent frame (as
-//! for the flow map, [`super::ftle`]); the Hessian `H = ∇∇ᵀS̃` is the fitted gradient of
+//! for the flow map, [`super::ftle`](mod@super::ftle)); the Hessian `H = ∇∇ᵀS̃` is the fitted gradient of
 //! the gradient field (3-D tangent vectors, so neighbours' frames need no alignment),
 //! symmetrized, then smoothed like `S` (its six 3-D components, `hessian_smoothing`).
 //! `n_i` is the eigenvector of the smallest eigenvalue of `H_i`: transverse to the ridge.

@@ -21,7 +21,7 @@
 //! `ḃ_1 c_1 + ḃ_2 c_2`. On a fixed mesh that is exactly the projected velocity; on a
 //! deforming one it is the velocity seen from the cloth at `t0`, so the flow map is a map
 //! of the surface at `t0` to itself, and the FTLE measures its stretching between the
-//! surfaces at `t0` and `t0 + T` ([`super::ftle`]). An isometric motion of the cloth
+//! surfaces at `t0` and `t0 + T` ([`super::ftle`](mod@super::ftle)). An isometric motion of the cloth
 //! (bending without stretching) changes nothing.
 //!
 //! ## Crossing edges: unfolding
@@ -239,6 +239,30 @@ pub trait Velocity {
     /// ([`super::planar`]).
     fn uses_location(&self) -> bool {
         true
+    }
+}
+
+/// [`Velocity::eval`] at the stage points of the particles from vertices `live`, refusing a
+/// non-finite value with an error naming the point and its vertex (shared by the walking
+/// and the planar tracer).
+pub(crate) fn eval_checked(
+    velocity: &mut dyn Velocity,
+    t: f64,
+    at: &[Located],
+    points: &[DVec3],
+    live: &[usize],
+    out: &mut [DVec3],
+) -> Result<(), LcsError> {
+    velocity.eval(t, at, points, out)?;
+    match out.iter().position(|u| !u.is_finite()) {
+        None => Ok(()),
+        Some(i) => Err(LcsError::NonFiniteVelocity {
+            at: format!(
+                "point ({}, {}, {}) (the particle from vertex {})",
+                points[i].x, points[i].y, points[i].z, live[i]
+            ),
+            time: t,
+        }),
     }
 }
 
@@ -759,16 +783,7 @@ pub fn flow_map(
                     };
                     *x = charts.world(motion, at, l);
                 });
-            velocity.eval(ts, &stage_at, &points, &mut w)?;
-            if let Some(i) = w.iter().position(|u| !u.is_finite()) {
-                return Err(LcsError::NonFiniteVelocity {
-                    at: format!(
-                        "point ({}, {}, {}) (the particle from vertex {})",
-                        points[i].x, points[i].y, points[i].z, live[i]
-                    ),
-                    time: ts,
-                });
-            }
+            eval_checked(velocity, ts, &stage_at, &points, &live, &mut w)?;
             k[stage]
                 .par_iter_mut()
                 .zip(&stage_at)

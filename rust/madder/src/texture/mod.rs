@@ -16,7 +16,7 @@
 //!    snapped to 1/256 texel); a centre inside two triangles that do not merely touch
 //!    (overlapping UV islands, a fold) is counted in [`Raster::overlapping`] so that the
 //!    add-on can warn.
-//! 2. [`pad`] (`pad.rs`): each UV island grows outward by a few texels, each new texel the
+//! 2. [`pad`](mod@pad) (`pad.rs`): each UV island grows outward by a few texels, each new texel the
 //!    mean of its covered 8-neighbours, so that bilinear filtering and mip-mapping read
 //!    the island's own values across its border and UV seams do not show.
 //! 3. [`write_exr`] (`exr.rs`): a half-float OpenEXR file, written atomically.
@@ -40,7 +40,7 @@
 //! corner): the rasterizer interpolates whatever the face's vertices hold.
 //!
 //! ## Parallelism
-//! [`rasterize`] and [`pad`] run on the current rayon pool (install a pool to cap the
+//! [`rasterize`] and [`pad`](fn@pad) run on the current rayon pool (install a pool to cap the
 //! threads) and give the same bits on any number of threads; see each module.
 
 pub mod exr;

@@ -65,7 +65,7 @@ pub const INSIDE: u8 = 1;
 /// texel holds the value of the first of them in index order.
 pub const OVERLAP: u8 = 2;
 /// Coverage mask value: the texel lies outside every triangle and took its value from
-/// [`pad`](super::pad).
+/// [`pad`](fn@super::pad).
 pub const PADDED: u8 = 3;
 
 /// Sub-texel steps per texel of the snapped coverage grid.
