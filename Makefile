@@ -100,8 +100,9 @@ $(ZIP): $(WHEEL) $(ADDON_SRC)
 
 # Static checks (.ci/run runs them before `make test`): rustfmt and clippy (warnings are
 # errors; the lints are Cargo.toml's [workspace.lints]) on the workspace; rustfmt and a
-# compile check of the fuzz targets; the core's docs (broken or ambiguous links are errors) (their own workspace, rust/madder/fuzz); ruff on the
-# Python (configured in pyproject.toml); the type stubs against the built binding.
+# compile check of the fuzz targets (their own workspace, rust/madder/fuzz); the core's
+# docs (broken or ambiguous links are errors); ruff on the Python (configured in
+# pyproject.toml); the type stubs against the built binding.
 FUZZ := rust/madder/fuzz/Cargo.toml
 lint: rust-tools $(WHEELDIR)/.stamp
 	cargo fmt --all --check
