@@ -14,7 +14,7 @@ import os
 import bpy
 import numpy as np
 
-from . import bridge, fabrics, handlers, images, motion, placement, pour, presets, schedule, shading, textures
+from . import bridge, carrier, fabrics, handlers, images, motion, placement, pour, presets, schedule, shading, textures
 from .errors import BakeError, ExportError, FabricSettingsError
 from .placement import check_transform as _check_transform, placed
 
@@ -340,6 +340,10 @@ class BakeJob(Stepper):
         except OSError as e:
             raise BakeError(f"'{obj.name}': cannot create the cache folder {os.path.dirname(self.path)}: {e}",
                             object=obj.name, filename=os.path.dirname(self.path)) from e
+        if settings.output_vertex_colors or self.images is None:
+            # before the frames are evaluated: adding the modifier is an edit of the cloth,
+            # which outdates an unbaked cloth cache that the bake then fills again
+            carrier.ensure(obj)
         if self.motion is not None:
             outside = self.motion.outside(self.first, self.last)
             if outside:
@@ -644,9 +648,10 @@ def free(obj):
         shading.sync_object(obj)
         images.remove_images(obj)
     if obj.type == "MESH":
-        for name in bridge.ATTRIBUTES:
-            attr = obj.data.attributes.get(name)
-            if attr is not None:
-                obj.data.attributes.remove(attr)
-        obj.data.update()
+        carrier.remove(obj)
+        present = [a for a in (obj.data.attributes.get(name) for name in bridge.ATTRIBUTES) if a is not None]
+        for attr in present:
+            obj.data.attributes.remove(attr)
+        if present:
+            obj.data.update()
     return removed

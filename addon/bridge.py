@@ -61,7 +61,12 @@ def write_face_weft(mesh, face_polygon, weft):
     np.add.at(per_poly, face_polygon, weft)
     norm = np.linalg.norm(per_poly, axis=1, keepdims=True)
     per_poly = np.divide(per_poly, norm, out=np.zeros_like(per_poly), where=norm > 0).astype(np.float32)
-    _attribute(mesh, WEFT_ATTR, "FLOAT_VECTOR", "FACE").data.foreach_set("vector", per_poly.ravel())
+    attr = _attribute(mesh, WEFT_ATTR, "FLOAT_VECTOR", "FACE")
+    now = np.empty(per_poly.size, dtype=np.float32)
+    attr.data.foreach_get("vector", now)
+    if np.array_equal(now, per_poly.ravel()):
+        return  # unchanged (a re-bake): an edit of the mesh would outdate an unbaked cloth cache
+    attr.data.foreach_set("vector", per_poly.ravel())
     mesh.update()
 
 
@@ -135,25 +140,12 @@ def write_stain(mesh, rgba, wetness, deposit):
       pooled on top reads 1 as well).
     - `madder_deposit` (FLOAT): adsorbed solute / capacity.
 
-    Then tags the mesh so the depsgraph re-evaluates it (foreach_set alone does not)."""
+    `mesh` is the object's carrier (`carrier`), never the cloth's own mesh. Then tags it so
+    the depsgraph re-evaluates the cloth (foreach_set alone does not)."""
     _attribute(mesh, STAIN_ATTR, "FLOAT_COLOR").data.foreach_set("color", rgba)
     _attribute(mesh, WETNESS_ATTR, "FLOAT").data.foreach_set("value", wetness)
     _attribute(mesh, DEPOSIT_ATTR, "FLOAT").data.foreach_set("value", deposit)
     mesh.update()
-
-
-def clear_stain(mesh):
-    """Zeros the stain attributes `mesh` has (renders as the bare cloth: no colour, no
-    coverage, dry, no deposit); creates none."""
-    zeros = None
-    for name, prop, width in ((STAIN_ATTR, "color", 4), (WETNESS_ATTR, "value", 1), (DEPOSIT_ATTR, "value", 1)):
-        attr = mesh.attributes.get(name)
-        if attr is not None and attr.domain == "POINT":
-            if zeros is None:
-                zeros = np.zeros(4 * len(mesh.vertices), dtype=np.float32)
-            attr.data.foreach_set(prop, zeros[: width * len(mesh.vertices)])
-    if zeros is not None:
-        mesh.update()
 
 
 def degenerate_uv_faces(uv):

@@ -1,6 +1,7 @@
 """Playback: after every frame change, each enabled object with a bake gets that frame's
-stain written into its mesh attributes (`madder_stain`, `madder_wetness`,
-`madder_deposit`; see `bridge.write_stain`).
+stain written into its attributes (`madder_stain`, `madder_wetness`, `madder_deposit`;
+see `bridge.write_stain`), by way of its carrier (`carrier`: never into the cloth's own
+mesh, which would throw away the Cloth modifier's cache).
 
 A stale stain is never shown. When the cache cannot give this frame for this mesh
 (`problem()`: the file is missing or unreadable, truncated or corrupt at the frame, made
@@ -32,7 +33,7 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
-from . import bridge, frames, images, playback, presets
+from . import bridge, carrier, frames, images, playback, presets
 from .errors import RelocateError
 
 _readers = {}  # absolute path -> (mtime_ns, size, CacheReader)
@@ -218,9 +219,13 @@ def apply_frame(obj, frame):
         buffers = bridge.stain_buffers(reader.n_vertices)
         why = _read(obj, reader, at, refs, tuple(settings.stain_color), buffers)
     if why is not None:
-        bridge.clear_stain(obj.data)
+        carrier.clear(obj)
         return why
-    bridge.write_stain(obj.data, *buffers)
+    # a render never adds data-blocks mid-frame (`carrier`): its carrier was made on load
+    mesh = carrier.ensure(obj) if _render is None else carrier.find(obj)
+    if mesh is None:
+        return f"no '{carrier.MODIFIER}' modifier to show the stain (play a frame in the viewport, then render)"
+    bridge.write_stain(mesh, *buffers)
     return images.frame_problem(obj, frame)
 
 
@@ -247,7 +252,7 @@ def on_frame_change(scene, depsgraph=None):
         except Exception as e:  # never break playback or a render; say what failed
             why = f"cannot show the stain: {e}"
             try:
-                bridge.clear_stain(obj.data)
+                carrier.clear(obj)
             except Exception:
                 pass
         # the console hears of each problem once (renders report every frame themselves)

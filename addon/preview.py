@@ -26,7 +26,7 @@ import sys
 import bpy
 from bpy.app.handlers import persistent
 
-from . import bake, bridge, handlers, images, live, shading, textures
+from . import bake, bridge, carrier, handlers, images, live, shading, textures
 from .errors import BakeError
 
 _sessions = {}  # object name -> Session
@@ -110,7 +110,7 @@ def drop(obj, clear=True):
     """Ends `obj`'s live session (its held frames are freed) and clears its stain."""
     _sessions.pop(obj.name, None)
     if clear and obj.type == "MESH" and obj.mode != "EDIT":
-        bridge.clear_stain(obj.data)
+        carrier.clear(obj)
 
 
 def status(obj):
@@ -129,7 +129,8 @@ def status(obj):
 def _show(obj, frame, fields, st):
     settings = obj.madder
     color = fields[3:6] if st.sources else tuple(settings.stain_color)
-    bridge.write_stain(obj.data, *live.stain_attributes(fields[0], fields[1], fields[2], st.references, color))
+    attributes = live.stain_attributes(fields[0], fields[1], fields[2], st.references, color)
+    bridge.write_stain(carrier.ensure(obj), *attributes)
 
 
 def frame_change(scene, obj, depsgraph):

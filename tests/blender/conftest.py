@@ -92,6 +92,12 @@ def make_active(obj):
     return obj
 
 
+def shown(obj):
+    """`obj`'s evaluated mesh: what the viewport and renders show, where playback's stain
+    attributes arrive (through the "Madder Stain" modifier, from the carrier)."""
+    return obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
+
+
 def lumped_areas(mesh, co=None):
     """Independent lumped vertex areas (a third of each incident triangle) of `mesh`'s
     triangles at positions `co` ((N, 3); default: the mesh's own vertex coordinates)."""

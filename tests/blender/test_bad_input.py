@@ -6,7 +6,7 @@ import os
 import bpy
 import numpy as np
 import pytest
-from conftest import make_active
+from conftest import make_active, shown
 
 
 def bake_error():
@@ -130,7 +130,7 @@ def test_ngons_loose_vertices_and_zero_area_faces_bake_finite():
     assert np.isfinite(d).all()
     assert (d[1:6] > 0).all()  # spread across the n-gon's triangles
     assert d[10] == 0.0  # the loose vertex carries nothing
-    assert "madder_stain" in obj.data.attributes
+    assert "madder_stain" in shown(obj).attributes
 
 
 def test_missing_cache_folder_is_created():

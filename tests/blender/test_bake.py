@@ -5,7 +5,7 @@ import os
 import bpy
 import numpy as np
 import pytest
-from conftest import lumped_areas, make_active
+from conftest import lumped_areas, make_active, shown
 
 import madder
 
@@ -62,9 +62,9 @@ def test_bake_writes_point_attributes_that_change_between_frames(open_fixture):
     for f in (1, 12, 30, 48):
         scene.frame_set(f)
         raw = {name: reader.read(f, name) for name in reader.fields}
-        attr, stain = point_attr(flag.data, "madder_stain", "color", 4)
-        wattr, wet = point_attr(flag.data, "madder_wetness", "value", 1)
-        dattr, deposit = point_attr(flag.data, "madder_deposit", "value", 1)
+        attr, stain = point_attr(shown(flag), "madder_stain", "color", 4)
+        wattr, wet = point_attr(shown(flag), "madder_wetness", "value", 1)
+        dattr, deposit = point_attr(shown(flag), "madder_deposit", "value", 1)
         assert attr.domain == "POINT" and attr.data_type == "FLOAT_COLOR"
         assert (wattr.domain, wattr.data_type) == (dattr.domain, dattr.data_type) == ("POINT", "FLOAT")
         for name, v in raw.items():
@@ -158,8 +158,7 @@ def test_settings_survive_save_and_reopen_and_play_back_from_the_cache(open_fixt
     s.splash_speed, s.splash_seed = 0.5, 7
     assert bpy.ops.madder.bake() == {"FINISHED"}
     expected = {f: cache(flag).read(30, f) for f in ("solute", "wetness", "deposit")}
-    for name in ("madder_stain", "madder_wetness", "madder_deposit"):  # playback must recreate them
-        flag.data.attributes.remove(flag.data.attributes[name])
+    bpy.data.objects.remove(bpy.data.objects[".madder_stain Flag"])  # playback must recreate it
     scene.frame_set(1)
     saved = str(tmp_path / "saved.blend")
     bpy.ops.wm.save_as_mainfile(filepath=saved)
@@ -174,13 +173,46 @@ def test_settings_survive_save_and_reopen_and_play_back_from_the_cache(open_fixt
     assert tuple(s.stain_color) == pytest.approx((0.04, 0.05, 0.15))
     assert s.cache_file == "//madder_cache/Flag.madder"
     bpy.context.scene.frame_set(30)
-    _, wet = point_attr(flag.data, "madder_wetness", "value", 1)
+    _, wet = point_attr(shown(flag), "madder_wetness", "value", 1)
     np.testing.assert_allclose(wet, np.clip(expected["wetness"] / s.saturation, 0, 1), atol=1e-6)
-    _, deposit = point_attr(flag.data, "madder_deposit", "value", 1)
+    _, deposit = point_attr(shown(flag), "madder_deposit", "value", 1)
     np.testing.assert_allclose(deposit, np.clip(expected["deposit"] / s.capacity, 0, 1), atol=1e-6)
-    _, stain = point_attr(flag.data, "madder_stain", "color", 4)
+    _, stain = point_attr(shown(flag), "madder_stain", "color", 4)
     coverage = np.clip(expected["solute"] / (s.concentration * s.saturation), 0, 1)
     np.testing.assert_allclose(stain[:, 2], coverage * 0.15, atol=1e-6)
+
+
+def test_playback_leaves_an_unbaked_cloth_where_it_is(open_fixture):
+    """Playback writes each frame's stain into the carrier, not the cloth's mesh. Written
+    into the cloth's own mesh (as before carriers), every frame's write was an edit that
+    freed the unbaked cloth cache's frames, and the cloth stopped moving: 0.54 m off its
+    simulated place by frame 20 on the flag."""
+    scene = open_fixture("flag.blend")
+    flag = setup_flag(scene)
+    cloth_cache = flag.modifiers["Cloth"].point_cache
+    with bpy.context.temp_override(point_cache=cloth_cache):
+        bpy.ops.ptcache.free_bake()  # simulated in memory, as while the artist works
+    assert not cloth_cache.is_baked
+    assert bpy.ops.madder.bake() == {"FINISHED"}
+    assert [m.name for m in flag.modifiers][:2] == ["Madder Stain", "Cloth"]
+    reader = madder.CacheReader(bpy.path.abspath(flag.madder.cache_file))
+
+    def play():
+        for f in range(1, 21):
+            scene.frame_set(f)
+        me = shown(flag)
+        co = np.empty(3 * len(me.vertices))
+        me.vertices.foreach_get("co", co)
+        return co, point_attr(me, "madder_wetness", "value", 1)[1]
+
+    co, wet = play()
+    np.testing.assert_allclose(wet, np.clip(reader.read(20, "wetness") / flag.madder.saturation, 0, 1), atol=1e-6)
+    assert wet.max() > 0.1
+    assert cloth_cache.info.startswith("20 "), cloth_cache.info  # every frame kept
+    flag.madder.enabled = False  # playback leaves it alone: the cloth as Blender simulates it
+    bare, _ = play()
+    assert np.abs(bare.reshape(-1, 3) - bare.reshape(-1, 3)[0]).max() > 0.1  # the cloth moved
+    np.testing.assert_array_equal(co, bare)
 
 
 def test_baking_twice_gives_an_identical_cache(open_fixture):
@@ -200,5 +232,6 @@ def test_free_bake_removes_cache_and_attributes(open_fixture):
     path = bpy.path.abspath(flag.madder.cache_file)
     assert bpy.ops.madder.free_bake() == {"FINISHED"}
     assert not os.path.exists(path) and flag.madder.cache_file == ""
+    assert "Madder Stain" not in flag.modifiers and ".madder_stain Flag" not in bpy.data.objects
     for name in ("madder_stain", "madder_wetness", "madder_deposit"):
-        assert name not in flag.data.attributes
+        assert name not in flag.data.attributes and name not in shown(flag).attributes

@@ -38,8 +38,9 @@ def expected(path, frame):
 
 
 def shown(obj):
-    """The stain attributes playback wrote: wetness and deposit (N,), stain RGBA (N, 4)."""
-    me = obj.data
+    """The stain attributes playback wrote, as the evaluated cloth shows them: wetness and
+    deposit (N,), stain RGBA (N, 4)."""
+    me = obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).data
     n = len(me.vertices)
     out = {}
     for name, prop, width in (("madder_wetness", "value", 1), ("madder_deposit", "value", 1),

@@ -6,7 +6,7 @@ import sys
 import bpy
 import numpy as np
 import pytest
-from conftest import ADDON, lumped_areas, make_active
+from conftest import ADDON, lumped_areas, make_active, shown
 
 import madder
 
@@ -123,9 +123,9 @@ def test_liquids_stain_differently(addon):
         solute[name] = r.read(r.last_frame, "solute").max()
         bpy.context.scene.frame_set(r.last_frame)
         stain = np.empty(4 * len(obj.data.vertices), dtype=np.float32)
-        obj.data.attributes["madder_stain"].data.foreach_get("color", stain)
+        shown(obj).attributes["madder_stain"].data.foreach_get("color", stain)
         wet = np.empty(len(obj.data.vertices), dtype=np.float32)
-        obj.data.attributes["madder_wetness"].data.foreach_get("value", wet)
+        shown(obj).attributes["madder_wetness"].data.foreach_get("value", wet)
         assert wet.max() == pytest.approx(1.0)  # the spill is above saturation: fully wet
         if name == "WATER":
             assert solute[name] == 0.0 and not stain.any()

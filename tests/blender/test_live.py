@@ -9,7 +9,7 @@ import sys
 import bpy
 import numpy as np
 import pytest
-from conftest import make_active
+from conftest import make_active, shown
 
 import madder
 
@@ -82,13 +82,13 @@ def test_frames_shown_in_order_give_a_bakes_fields(open_fixture, addon, tmp_path
         for k in range(3):  # the same fields as the bake, bit for bit
             np.testing.assert_array_equal(session.store.get(done)[k], baked[done][k], err_msg=f"frame {done}")
         # shown: the newest finished frame, as playback of the bake shows it
-        for got, want in zip(attributes(flag.data), baked_attributes(reader, done, flag), strict=True):
+        for got, want in zip(attributes(shown(flag)), baked_attributes(reader, done, flag), strict=True):
             np.testing.assert_allclose(got, want, rtol=0, atol=1e-7, err_msg=f"frame {f}")
     assert "8 frames held (1–8)" in preview.status(flag)
     session = preview.session(flag)
     scene.frame_set(1)  # looping back: a complete preview is kept and plays like the bake
     assert preview.session(flag) is session and len(session.store) == LAST
-    for got, want in zip(attributes(flag.data), baked_attributes(reader, 1, flag), strict=True):
+    for got, want in zip(attributes(shown(flag)), baked_attributes(reader, 1, flag), strict=True):
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-7)
 
 
@@ -103,11 +103,11 @@ def test_scrubbing_back_shows_held_frames_and_jumps_reset(open_fixture, addon, t
     session = preview.session(flag)
     scene.frame_set(3)  # scrubbing back: frame 3 as simulated, nothing stepped or dropped
     assert preview.session(flag) is session and session.expected == 7
-    for got, want in zip(attributes(flag.data), baked_attributes(reader, 3, flag), strict=True):
+    for got, want in zip(attributes(shown(flag)), baked_attributes(reader, 3, flag), strict=True):
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-7)
     play(scene, (4, 5, 6, 7))  # forward again: 4–6 shown from memory, 7 steps (finishes 6)
     assert session.store.frames() == list(range(1, 7))
-    for got, want in zip(attributes(flag.data), baked_attributes(reader, 6, flag), strict=True):
+    for got, want in zip(attributes(shown(flag)), baked_attributes(reader, 6, flag), strict=True):
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-7)
 
     scene.frame_set(1)  # jumping back to the start: a new simulation
@@ -115,7 +115,7 @@ def test_scrubbing_back_shows_held_frames_and_jumps_reset(open_fixture, addon, t
     assert fresh is not session and fresh.store.frames() == [1] and fresh.expected == 2
     scene.frame_set(5)  # a jump forward cannot be simulated: reset, no stain shown
     assert preview.session(flag) is None
-    assert not any(a.any() for a in attributes(flag.data))
+    assert not any(a.any() for a in attributes(shown(flag)))
 
     play(scene, (1, 2, 3))
     assert preview.session(flag).store.frames() == [1, 2]
@@ -131,7 +131,7 @@ def test_scrubbing_back_shows_held_frames_and_jumps_reset(open_fixture, addon, t
     play(scene, (1, 2))
     flag.madder.live = False  # off: the session ends, the bake plays again
     assert preview.session(flag) is None
-    for got, want in zip(attributes(flag.data), baked_attributes(reader, 2, flag), strict=True):
+    for got, want in zip(attributes(shown(flag)), baked_attributes(reader, 2, flag), strict=True):
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-7)
 
 
@@ -160,7 +160,7 @@ def test_bake_from_preview_writes_a_bakes_cache(open_fixture, addon, tmp_path):
             np.testing.assert_array_equal(a, b, err_msg=f"frame {f}")
     assert not flag.madder.live  # the cache plays now
     scene.frame_set(3)
-    for a, b in zip(attributes(flag.data), baked_attributes(got, 3, flag), strict=True):
+    for a, b in zip(attributes(shown(flag)), baked_attributes(got, 3, flag), strict=True):
         np.testing.assert_array_equal(a, b)
 
     flag.madder.live = True
@@ -193,7 +193,7 @@ def test_memory_limit_drops_the_oldest_frames(open_fixture, addon, tmp_path):
     # scrubbed back past what is held: the oldest held state
     scene.frame_set(2)
     _, baked = read_all(tmp_path / "bake.madder")
-    wet = attributes(flag.data)[1]
+    wet = attributes(shown(flag))[1]
     np.testing.assert_allclose(wet, np.clip(baked[last - kept + 1][1] / flag.madder.saturation, 0, 1), atol=1e-6)
     # Bake from Preview refuses (the preview no longer starts at the start frame), naming why
     with pytest.raises(RuntimeError, match=f"frames 1–{last - kept} of the preview were dropped by the Live Memory"):

@@ -4,7 +4,7 @@ active over a frame range, and colours that mix."""
 import bpy
 import numpy as np
 import pytest
-from conftest import lumped_areas, make_active
+from conftest import lumped_areas, make_active, shown
 
 import madder
 
@@ -102,7 +102,7 @@ def test_brush_stains_only_where_it_comes_near_and_colors_mix():
     # playback shows each liquid's own colour
     bpy.context.scene.frame_set(f)
     stain = np.empty(4 * len(co), dtype=np.float32)
-    cloth.data.attributes["madder_stain"].data.foreach_get("color", stain)
+    shown(cloth).attributes["madder_stain"].data.foreach_get("color", stain)
     stain = stain.reshape(-1, 4)
     assert (stain[under, 2] > stain[under, 0]).all() and (stain[left, 0] > stain[left, 2]).all()
 
