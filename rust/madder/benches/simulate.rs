@@ -3,6 +3,11 @@
 //! its phases. Prints figures; asserts nothing about time. `MADDER_BENCH_WHOLE=1` steps
 //! the whole mesh (no active region), `MADDER_BENCH_SMALL=1` only the 10k case,
 //! `MADDER_BENCH_PARTS=1` times the pieces one by one.
+//!
+//! **Cost follows the stain** (issue 16, target 3): the same pour on the 100k flag and on a
+//! 1M-vertex cloth with the same vertex spacing (the grid scaled by 3.17 in both
+//! directions, so the stain covers the same vertices and the rest of the cloth is dry):
+//! the ratio of the per-frame times and the 1M simulator's construction time.
 
 mod common;
 
@@ -12,8 +17,11 @@ use common::{grid, motion, pour, wave};
 use faer::Par;
 use madder::stain::{Conductivity, Simulator, StainParams};
 
-fn bench(nx: usize, ny: usize, frames: usize) {
-    let (topo, rest) = grid(nx, ny);
+/// Steps the pour on an `nx` × `ny` flag grid scaled by `scale`; prints the phases and
+/// returns (construction, per frame) in ms.
+fn bench(nx: usize, ny: usize, frames: usize, scale: f64) -> (f64, f64) {
+    let (topo, mut rest) = grid(nx, ny);
+    rest.iter_mut().for_each(|p| *p *= scale);
     let n = topo.n_vertices();
     let dt = 1.0 / 24.0;
     let t = Instant::now();
@@ -71,6 +79,7 @@ fn bench(nx: usize, ny: usize, frames: usize) {
         100.0 * p.active_vertices as f64 / (p.substeps * n) as f64,
         p.window_rebuilds,
     );
+    (setup, total)
 }
 
 fn main() {
@@ -82,10 +91,17 @@ fn main() {
         parts(127, 77, 50);
         return;
     }
-    bench(127, 77, 48); // ≈ 10k vertices
-    if std::env::var("MADDER_BENCH_SMALL").is_err() {
-        bench(407, 245, 12); // ≈ 100k vertices
+    bench(127, 77, 48, 1.0); // ≈ 10k vertices
+    if std::env::var("MADDER_BENCH_SMALL").is_ok() {
+        return;
     }
+    let (_, small) = bench(407, 245, 12, 1.0); // ≈ 100k vertices
+    // ≈ 1M vertices at the 100k grid's spacing: the same stain on a cloth 10× the area
+    let (setup, large) = bench(1290, 775, 12, 1290.0 / 407.0);
+    println!(
+        "cost follows the stain: the same pour on 1M vertices (same spacing) {large:.1} ms/frame = {:.2}× the 100k cloth's {small:.1} (target ≤ 2×); 1M construction {setup:.0} ms (target ≤ 1000)",
+        large / small
+    );
 }
 
 /// `MADDER_BENCH_PARTS=1`: the step's pieces timed one by one on the whole mesh.
