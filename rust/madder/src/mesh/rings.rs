@@ -89,11 +89,33 @@ pub struct OneRings {
     flipped: Vec<bool>,
 }
 
-/// The walk of one fan component: wedges (index into the vertex's corner list, forward)
-/// and whether it closed on itself.
-struct Walk {
+/// Working memory of [`order_fan`], reused from vertex to vertex (one per chunk of
+/// vertices: a million vertices would otherwise cost ten million small allocations).
+#[derive(Default)]
+struct FanScratch {
+    /// The two spokes of each wedge in its face's harmonized orientation.
+    ends: Vec<[u32; 2]>,
+    /// (spoke, wedge) for both spokes of every wedge, sorted.
+    touch: Vec<(u32, u32)>,
+    visited: Vec<bool>,
+    /// The walks of the fan's components, one after another: (wedge, forward).
     steps: Vec<(usize, bool)>,
-    closed: bool,
+    /// Per walk: its range in `steps` and whether it closed on itself.
+    walks: Vec<(usize, usize, bool)>,
+    /// The distinct spokes (sorted) and their local index, once met.
+    distinct: Vec<u32>,
+    local: Vec<u32>,
+}
+
+/// The fans of a run of vertices, laid end to end as in [`OneRings`].
+#[derive(Default)]
+struct FanChunk {
+    wedges: Vec<Wedge>,
+    spokes: Vec<u32>,
+    spoke_edges: Vec<u32>,
+    /// Per vertex: (wedges, spokes) it added.
+    counts: Vec<(u32, u32)>,
+    kind: Vec<FanKind>,
 }
 
 impl OneRings {
@@ -128,31 +150,49 @@ impl OneRings {
         let edge_end: Vec<u32> = edges.iter().map(|&[_, b]| b).collect();
         let lookup = |i: u32, j: u32| find_edge(&edge_ptr, &edge_end, i, j);
 
-        let fans: Vec<(Vec<Wedge>, Vec<u32>, FanKind)> = (0..n)
+        // in chunks of vertices, each laid out as the whole is; joined in vertex order
+        const CHUNK: usize = 4096;
+        let chunks: Vec<FanChunk> = (0..n.div_ceil(CHUNK))
             .into_par_iter()
-            .map(|v| {
-                let c = &corners[corner_ptr[v] as usize..corner_ptr[v + 1] as usize];
-                order_fan(faces, &flipped, c)
+            .map(|c| {
+                let mut scratch = FanScratch::default();
+                let mut out = FanChunk::default();
+                for v in c * CHUNK..n.min((c + 1) * CHUNK) {
+                    let cs = &corners[corner_ptr[v] as usize..corner_ptr[v + 1] as usize];
+                    let (w0, s0) = (out.wedges.len(), out.spokes.len());
+                    let kind = order_fan(faces, &flipped, cs, &mut scratch, &mut out);
+                    for &j in &out.spokes[s0..] {
+                        let e = lookup(v as u32, j).expect("a spoke is an edge");
+                        out.spoke_edges.push(e as u32);
+                    }
+                    out.counts.push((
+                        (out.wedges.len() - w0) as u32,
+                        (out.spokes.len() - s0) as u32,
+                    ));
+                    out.kind.push(kind);
+                }
+                out
             })
             .collect();
 
+        let n_spokes: usize = chunks.iter().map(|c| c.spokes.len()).sum();
         let mut wedge_ptr = Vec::with_capacity(n + 1);
         let mut spoke_ptr = Vec::with_capacity(n + 1);
         wedge_ptr.push(0u32);
         spoke_ptr.push(0u32);
         let mut wedges = Vec::with_capacity(corners.len());
-        let mut spoke_vertex = Vec::new();
-        let mut spoke_edge = Vec::new();
+        let mut spoke_vertex = Vec::with_capacity(n_spokes);
+        let mut spoke_edge = Vec::with_capacity(n_spokes);
         let mut kind = Vec::with_capacity(n);
-        for (v, (w, s, k)) in fans.into_iter().enumerate() {
-            wedges.extend_from_slice(&w);
-            for &j in &s {
-                spoke_edge.push(lookup(v as u32, j).expect("a spoke is an edge") as u32);
+        for c in chunks {
+            wedges.extend_from_slice(&c.wedges);
+            spoke_vertex.extend_from_slice(&c.spokes);
+            spoke_edge.extend_from_slice(&c.spoke_edges);
+            kind.extend_from_slice(&c.kind);
+            for (nw, ns) in c.counts {
+                wedge_ptr.push(wedge_ptr.last().unwrap() + nw);
+                spoke_ptr.push(spoke_ptr.last().unwrap() + ns);
             }
-            spoke_vertex.extend_from_slice(&s);
-            kind.push(k);
-            wedge_ptr.push(wedges.len() as u32);
-            spoke_ptr.push(spoke_vertex.len() as u32);
         }
 
         // sense in which each face corner is walked; an edge is orientation-reversing if a
@@ -328,32 +368,43 @@ fn harmonize_orientation(topology: &Topology) -> Vec<bool> {
 }
 
 /// Orders the fan of one vertex from its incident `(face, corner)` list, walking faces in
-/// their harmonized orientation (`flipped`).
+/// their harmonized orientation (`flipped`); appends its wedges and spokes to `out`.
 fn order_fan(
     faces: &[[u32; 3]],
     flipped: &[bool],
     corners: &[(u32, u8)],
-) -> (Vec<Wedge>, Vec<u32>, FanKind) {
+    scratch: &mut FanScratch,
+    out: &mut FanChunk,
+) -> FanKind {
     let m = corners.len();
     if m == 0 {
-        return (Vec::new(), Vec::new(), FanKind::Loose);
+        return FanKind::Loose;
     }
+    let FanScratch {
+        ends,
+        touch,
+        visited,
+        steps,
+        walks,
+        distinct,
+        local,
+    } = scratch;
     // the two spokes of each wedge in the face's harmonized orientation
-    let ends: Vec<[u32; 2]> = corners
-        .iter()
-        .map(|&(f, k)| {
-            let t = faces[f as usize];
-            let (p, q) = (t[(k as usize + 1) % 3], t[(k as usize + 2) % 3]);
-            if flipped[f as usize] { [q, p] } else { [p, q] }
-        })
-        .collect();
+    ends.clear();
+    ends.extend(corners.iter().map(|&(f, k)| {
+        let t = faces[f as usize];
+        let (p, q) = (t[(k as usize + 1) % 3], t[(k as usize + 2) % 3]);
+        if flipped[f as usize] { [q, p] } else { [p, q] }
+    }));
     // spoke → wedges touching it
-    let mut touch: Vec<(u32, u32)> = Vec::with_capacity(2 * m);
+    touch.clear();
     for (w, e) in ends.iter().enumerate() {
         touch.push((e[0], w as u32));
         touch.push((e[1], w as u32));
     }
     touch.sort_unstable();
+    let ends = &*ends;
+    let touch = &*touch;
     let touching = |s: u32| {
         let lo = touch.partition_point(|&(x, _)| x < s);
         let hi = touch.partition_point(|&(x, _)| x <= s);
@@ -361,8 +412,10 @@ fn order_fan(
     };
     let open = |s: u32| touching(s).len() != 2;
 
-    let mut visited = vec![false; m];
-    let mut walks: Vec<Walk> = Vec::new();
+    visited.clear();
+    visited.resize(m, false);
+    steps.clear();
+    walks.clear();
     let mut n_visited = 0;
     while n_visited < m {
         let start = (0..m)
@@ -377,7 +430,7 @@ fn order_fan(
             .expect("an unvisited wedge remains");
         let (mut w, mut fwd) = start;
         let first_spoke = ends[w][if fwd { 0 } else { 1 }];
-        let mut steps = Vec::new();
+        let begin = steps.len();
         let closed = loop {
             visited[w] = true;
             n_visited += 1;
@@ -395,53 +448,52 @@ fn order_fan(
             fwd = ends[w][0] == exit;
         };
         // give the walk the orientation of the majority of its faces
-        let n_fwd = steps.iter().filter(|s| s.1).count();
-        if 2 * n_fwd < steps.len() {
-            steps.reverse();
-            steps.iter_mut().for_each(|s| s.1 = !s.1);
+        let walk = &mut steps[begin..];
+        let n_fwd = walk.iter().filter(|s| s.1).count();
+        if 2 * n_fwd < walk.len() {
+            walk.reverse();
+            walk.iter_mut().for_each(|s| s.1 = !s.1);
         }
-        walks.push(Walk { steps, closed });
+        walks.push((begin, steps.len(), closed));
     }
 
     // spokes in order of first meeting; wedges refer to them by local index
-    let mut distinct: Vec<u32> = touch.iter().map(|t| t.0).collect();
+    distinct.clear();
+    distinct.extend(touch.iter().map(|t| t.0));
     distinct.dedup();
-    let mut local = vec![u32::MAX; distinct.len()];
-    let mut spokes: Vec<u32> = Vec::with_capacity(distinct.len());
+    local.clear();
+    local.resize(distinct.len(), u32::MAX);
+    let s0 = out.spokes.len();
     let mut slot = |s: u32, spokes: &mut Vec<u32>| {
         let k = distinct.binary_search(&s).expect("a wedge's spoke");
         if local[k] == u32::MAX {
-            local[k] = spokes.len() as u32;
+            local[k] = (spokes.len() - s0) as u32;
             spokes.push(s);
         }
         local[k]
     };
-    let mut wedges = Vec::with_capacity(m);
-    for walk in &walks {
-        for &(w, fwd) in &walk.steps {
-            let (a, b) = if fwd {
-                (ends[w][0], ends[w][1])
-            } else {
-                (ends[w][1], ends[w][0])
-            };
-            let from = slot(a, &mut spokes);
-            let to = slot(b, &mut spokes);
-            wedges.push(Wedge {
-                face: corners[w].0,
-                corner: corners[w].1,
-                forward: fwd != flipped[corners[w].0 as usize],
-                from,
-                to,
-            });
-        }
+    for &(w, fwd) in steps.iter() {
+        let (a, b) = if fwd {
+            (ends[w][0], ends[w][1])
+        } else {
+            (ends[w][1], ends[w][0])
+        };
+        let from = slot(a, &mut out.spokes);
+        let to = slot(b, &mut out.spokes);
+        out.wedges.push(Wedge {
+            face: corners[w].0,
+            corner: corners[w].1,
+            forward: fwd != flipped[corners[w].0 as usize],
+            from,
+            to,
+        });
     }
-    let manifold = spokes.iter().all(|&s| touching(s).len() <= 2);
-    let kind = match (walks.len(), manifold) {
-        (1, true) if walks[0].closed => FanKind::Interior,
+    let manifold = out.spokes[s0..].iter().all(|&s| touching(s).len() <= 2);
+    match (walks.len(), manifold) {
+        (1, true) if walks[0].2 => FanKind::Interior,
         (1, true) => FanKind::Boundary,
         _ => FanKind::Irregular,
-    };
-    (wedges, spokes, kind)
+    }
 }
 
 /// The neighbours of every vertex in the order the rotations sum over them (that of
