@@ -79,6 +79,16 @@ fn bench(level: u32, wet_fraction: f64, frames: usize) {
     let p = sim.profile();
     let (fine_n, built) = (sim.n_fine_vertices(), sim.n_built_vertices());
     let wet = sim.fine().wetness().iter().filter(|&&w| w > 1e-3).count();
+    // FNV-1a over the bits of the cloth-level read-outs: equal = bit-identical results
+    let (s, w, d) = (sim.solute_density(), sim.wetness(), sim.deposit());
+    let checksum = s
+        .iter()
+        .chain(&w)
+        .chain(&d)
+        .map(|x| x.to_bits())
+        .fold(0xcbf2_9ce4_8422_2325_u64, |h, b| {
+            (h ^ b).wrapping_mul(0x0100_0000_01b3)
+        });
     println!(
         "detail {level}, {:>3.0} % wet: {n} cloth vertices, {fine_n} refined, {built} built ({wet} wet above 1 g/m²); {total:7.2} ms/frame (read-outs {:.2}), {:.0} active vertices per sub-step, setup {setup:.0} ms ({:.1} MB)",
         100.0 * wet_fraction,
@@ -96,7 +106,7 @@ fn bench(level: u32, wet_fraction: f64, frames: usize) {
     );
     let per = |s: f64| s * 1e3 / frames as f64;
     println!(
-        "    per frame: window {:.1}, geometry {:.1}, forces {:.1}, advection {:.1}, diffusion {:.1}, interactions {:.1} ms; {:.1} sub-steps, {:.1} transport cycles, {} window rebuilds",
+        "    per frame: window {:.1}, geometry {:.1}, forces {:.1}, advection {:.1}, diffusion {:.1}, interactions {:.1} ms; {:.1} sub-steps, {:.1} transport cycles, {} window rebuilds; read-outs checksum {checksum:016x}",
         per(p.window),
         per(p.geometry),
         per(p.forces),

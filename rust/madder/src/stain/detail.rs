@@ -200,22 +200,24 @@ impl Fine {
     }
 
     /// Finds the window of the next frame, building faces until its active and held
-    /// vertices all have their whole one-rings (module doc).
+    /// vertices all have their whole one-rings (module doc); the window is built once,
+    /// on the grown part (a window kept from the last frame was built that way).
     fn prepare(&mut self, sim: &mut Simulator) -> Result<(), Error> {
         let clock = Instant::now();
         loop {
-            let rebuilt = sim.prepare_window()?;
-            sim.profile.window_rebuilds += usize::from(rebuilt);
-            let Some(w) = &sim.window else { break };
+            let plan = sim.plan_window();
             let p = &self.partial;
-            let whole = || w.whole.iter().map(|&j| w.vertices[j as usize] as usize);
-            if whole().all(|v| p.is_complete(v)) {
+            let complete = plan.whole().is_none_or(|mut w| w.all(|v| p.is_complete(v)));
+            if complete {
+                let rebuilt = sim.build_window(plan)?;
+                sim.profile.window_rebuilds += usize::from(rebuilt);
                 break;
             }
+            let whole: Vec<usize> = plan.whole().into_iter().flatten().collect();
             let coarse = p.coarse();
             let mut mark = vec![false; coarse.n_vertices()];
             let mut seeds = Vec::new();
-            for v in whole() {
+            for &v in &whole {
                 for c in p.corners(v) {
                     if !std::mem::replace(&mut mark[c as usize], true) {
                         seeds.push(c);

@@ -291,25 +291,67 @@ pub(super) fn grow(
     (mask, all)
 }
 
+/// What the next frame's window is to be ([`Simulator::plan_window`]).
+pub(super) enum WindowPlan {
+    /// The current window still serves.
+    Keep,
+    /// A new window: its active vertices (`mask`) and the held ones, per cloth vertex.
+    Build { mask: Vec<bool>, held: Vec<bool> },
+}
+
+impl WindowPlan {
+    /// The active and held vertices of a window to build (the window's `whole`), or
+    /// `None` to keep the current one.
+    pub(super) fn whole(&self) -> Option<impl Iterator<Item = usize> + '_> {
+        match self {
+            WindowPlan::Keep => None,
+            WindowPlan::Build { mask, held } => {
+                Some((0..mask.len()).filter(move |&v| mask[v] || held[v]))
+            }
+        }
+    }
+}
+
 impl Simulator {
     /// Finds the liquid and keeps or rebuilds the window for the next frame (module
     /// doc). Returns whether it was rebuilt.
     pub(super) fn prepare_window(&mut self) -> Result<bool, Error> {
+        let plan = self.plan_window();
+        self.build_window(plan)
+    }
+
+    /// Builds the window `plan` asks for (if any); returns whether it built one.
+    pub(super) fn build_window(&mut self, plan: WindowPlan) -> Result<bool, Error> {
+        match plan {
+            WindowPlan::Keep => Ok(false),
+            WindowPlan::Build { mask, held } => {
+                self.window = Window::new(&self.cloth, mask, &held)?;
+                Ok(true)
+            }
+        }
+    }
+
+    /// Finds the liquid and decides whether the current window still serves the next
+    /// frame or which one to build (module doc), without building it: [`super::detail`]
+    /// first makes sure the refined cloth is built around the new window's vertices.
+    pub(super) fn plan_window(&mut self) -> WindowPlan {
         let n = self.cloth.topology.n_vertices();
         if !self.params.active_region {
             // the whole mesh, every vertex with a face active, once
             if self.window.is_some() {
-                return Ok(false);
+                return WindowPlan::Keep;
             }
             let mask = self.loose.iter().map(|l| !l).collect();
-            self.window = Window::new(&self.cloth, mask, &vec![false; n])?;
-            return Ok(true);
+            return WindowPlan::Build {
+                mask,
+                held: vec![false; n],
+            };
         }
         // the liquid is inside the window's whole vertices, unless some was poured since
         // (no window and no pour: there is none but dust)
         let scan: Vec<u32> = match (&self.window, self.rescan) {
             (Some(w), false) => w.whole.iter().map(|&j| w.vertices[j as usize]).collect(),
-            (None, false) => return Ok(false),
+            (None, false) => return WindowPlan::Keep,
             _ => (0..n as u32).collect(),
         };
         let st = &self.state;
@@ -331,7 +373,7 @@ impl Simulator {
         });
         self.rescan = false;
         if fits {
-            return Ok(false);
+            return WindowPlan::Keep;
         }
         let (mask, _) = grow(
             &self.cloth.adjacency,
@@ -342,8 +384,10 @@ impl Simulator {
         );
         let mut is_held = vec![false; n];
         held.iter().for_each(|&v| is_held[v as usize] = true);
-        self.window = Window::new(&self.cloth, mask, &is_held)?;
-        Ok(true)
+        WindowPlan::Build {
+            mask,
+            held: is_held,
+        }
     }
 
     /// The velocity and frame of vertex `v` at the start of the frame: a vertex that was
