@@ -563,10 +563,11 @@ impl DiffusionStepper {
 /// Warm-started CG solvers of the two restricted systems, the densities' and the
 /// velocity's (none for an empty restriction).
 pub(super) fn solvers(region: &Restriction) -> Option<(WarmCg, WarmCg)> {
+    // the two analyses are independent (and the velocity's, on 2×2 blocks, the larger)
     (!region.vertices.is_empty()).then(|| {
-        (
-            WarmCg::new(region.scalar()).with_tolerance(DENSITY_TOLERANCE),
-            WarmCg::new(region.bochner()).with_tolerance(VELOCITY_TOLERANCE),
+        rayon::join(
+            || WarmCg::new(region.scalar()).with_tolerance(DENSITY_TOLERANCE),
+            || WarmCg::new(region.bochner()).with_tolerance(VELOCITY_TOLERANCE),
         )
     })
 }
