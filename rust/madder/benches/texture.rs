@@ -285,7 +285,6 @@ fn main() {
         .ok()
         .and_then(|s| s.parse::<usize>().ok())
     {
-        let mut r = Raster::empty(size, CHANNELS);
         let threads = std::env::var("MADDER_BENCH_THREADS")
             .ok()
             .and_then(|s| s.parse().ok())
@@ -306,28 +305,18 @@ fn main() {
         };
         pool.install(|| {
             for _ in 0..n {
-                match &detail {
-                    None => texture::rasterize_into(
-                        &mut r,
+                // into fresh memory, with or without the detail, as `bench` compares them
+                std::hint::black_box(
+                    texture::rasterize_with(
                         &fine.faces,
                         &fine.uv,
                         field,
                         CHANNELS,
                         size,
+                        detail.as_ref(),
                     )
                     .unwrap(),
-                    Some(d) => {
-                        r = texture::rasterize_with(
-                            &fine.faces,
-                            &fine.uv,
-                            field,
-                            CHANNELS,
-                            size,
-                            Some(d),
-                        )
-                        .unwrap();
-                    }
-                }
+                );
             }
         });
         return;
