@@ -114,6 +114,15 @@ impl std::fmt::Display for Timing {
     }
 }
 
+/// `", {r}× (cpu)"`: the ratio of the CPU times per run (steadier than the wall time on a
+/// shared machine), when known.
+fn cpu_ratio(a: &Timing, b: &Timing) -> String {
+    match (a.cpu, b.cpu) {
+        (Some(x), Some(y)) if y > 0.0 => format!(", {:.2}× (cpu)", x / y),
+        _ => String::new(),
+    }
+}
+
 fn time<T>(runs: usize, mut f: impl FnMut() -> T) -> (Timing, T) {
     let mut times = Vec::with_capacity(runs);
     let mut out = None;
@@ -199,9 +208,10 @@ fn bench(l: &Load, size: usize, threads: usize) {
             l.name,
         );
         println!(
-            "          with the weave's detail {woven}: {:.2}× the rasterization (best), {:.2}× (median)",
+            "          with the weave's detail {woven}: {:.2}× the rasterization (best), {:.2}× (median){}",
             woven.best / fresh.best,
             woven.median / fresh.median,
+            cpu_ratio(&woven, &fresh),
         );
         // the worst case: every texel stained (the detail is skipped where the field is 0)
         let (dense, _) = time(9, || {
@@ -212,9 +222,10 @@ fn bench(l: &Load, size: usize, threads: usize) {
                 .unwrap()
         });
         println!(
-            "          dense field: rasterize {dense}, with the detail {dense_woven}: {:.2}× (best), {:.2}× (median)",
+            "          dense field: rasterize {dense}, with the detail {dense_woven}: {:.2}× (best), {:.2}× (median){}",
             dense_woven.best / dense.best,
             dense_woven.median / dense.median,
+            cpu_ratio(&dense_woven, &dense),
         );
         if threads == 1 {
             println!(
