@@ -15,8 +15,9 @@
 //! time of the process per run: on a machine shared with other work the wall time grows
 //! much more than the CPU time); asserts nothing about time. `MADDER_BENCH_SIZE=1024`
 //! changes the size; `MADDER_BENCH_PROFILE=n` (with `MADDER_BENCH_THREADS=t`) only
-//! rasterizes the fine load n times, `MADDER_BENCH_PROFILE_EXR=n` only writes its EXR n
-//! times, for a profiler.
+//! rasterizes the fine load n times into fresh memory (`MADDER_BENCH_WEAVE=1`: with the
+//! weave's detail; `MADDER_BENCH_DENSE=1`: the dense field), `MADDER_BENCH_PROFILE_EXR=n`
+//! only writes its EXR n times, for a profiler (`perf stat` / `perf record`).
 
 use std::time::Instant;
 
