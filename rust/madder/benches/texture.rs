@@ -15,8 +15,9 @@
 //! time of the process per run: on a machine shared with other work the wall time grows
 //! much more than the CPU time); asserts nothing about time. `MADDER_BENCH_SIZE=1024`
 //! changes the size; `MADDER_BENCH_PROFILE=n` (with `MADDER_BENCH_THREADS=t`) only
-//! rasterizes the fine load n times, `MADDER_BENCH_PROFILE_EXR=n` only writes its EXR n
-//! times, for a profiler.
+//! rasterizes the fine load n times into fresh memory (`MADDER_BENCH_WEAVE=1`: with the
+//! weave's detail; `MADDER_BENCH_DENSE=1`: the dense field), `MADDER_BENCH_PROFILE_EXR=n`
+//! only writes its EXR n times, for a profiler (`perf stat` / `perf record`).
 
 use std::time::Instant;
 
@@ -114,6 +115,15 @@ impl std::fmt::Display for Timing {
     }
 }
 
+/// `", {r}× (cpu)"`: the ratio of the CPU times per run (steadier than the wall time on a
+/// shared machine), when known.
+fn cpu_ratio(a: &Timing, b: &Timing) -> String {
+    match (a.cpu, b.cpu) {
+        (Some(x), Some(y)) if y > 0.0 => format!(", {:.2}× (cpu)", x / y),
+        _ => String::new(),
+    }
+}
+
 fn time<T>(runs: usize, mut f: impl FnMut() -> T) -> (Timing, T) {
     let mut times = Vec::with_capacity(runs);
     let mut out = None;
@@ -199,9 +209,10 @@ fn bench(l: &Load, size: usize, threads: usize) {
             l.name,
         );
         println!(
-            "          with the weave's detail {woven}: {:.2}× the rasterization (best), {:.2}× (median)",
+            "          with the weave's detail {woven}: {:.2}× the rasterization (best), {:.2}× (median){}",
             woven.best / fresh.best,
             woven.median / fresh.median,
+            cpu_ratio(&woven, &fresh),
         );
         // the worst case: every texel stained (the detail is skipped where the field is 0)
         let (dense, _) = time(9, || {
@@ -212,9 +223,10 @@ fn bench(l: &Load, size: usize, threads: usize) {
                 .unwrap()
         });
         println!(
-            "          dense field: rasterize {dense}, with the detail {dense_woven}: {:.2}× (best), {:.2}× (median)",
+            "          dense field: rasterize {dense}, with the detail {dense_woven}: {:.2}× (best), {:.2}× (median){}",
             dense_woven.best / dense.best,
             dense_woven.median / dense.median,
+            cpu_ratio(&dense_woven, &dense),
         );
         if threads == 1 {
             println!(
@@ -285,7 +297,6 @@ fn main() {
         .ok()
         .and_then(|s| s.parse::<usize>().ok())
     {
-        let mut r = Raster::empty(size, CHANNELS);
         let threads = std::env::var("MADDER_BENCH_THREADS")
             .ok()
             .and_then(|s| s.parse().ok())
@@ -306,28 +317,18 @@ fn main() {
         };
         pool.install(|| {
             for _ in 0..n {
-                match &detail {
-                    None => texture::rasterize_into(
-                        &mut r,
+                // into fresh memory, with or without the detail, as `bench` compares them
+                std::hint::black_box(
+                    texture::rasterize_with(
                         &fine.faces,
                         &fine.uv,
                         field,
                         CHANNELS,
                         size,
+                        detail.as_ref(),
                     )
                     .unwrap(),
-                    Some(d) => {
-                        r = texture::rasterize_with(
-                            &fine.faces,
-                            &fine.uv,
-                            field,
-                            CHANNELS,
-                            size,
-                            Some(d),
-                        )
-                        .unwrap();
-                    }
-                }
+                );
             }
         });
         return;

@@ -10,7 +10,8 @@
 //!   the uptake contrast;
 //! - absent where the stain is flat with no uptake contrast (equal to the plain raster);
 //! - faces without a fabric are the plain raster bit for bit; the same bits on 1 and 2
-//!   threads; bad input names the face.
+//!   threads; a channel's texels the same bits whatever the channel count (the kernels
+//!   for 1–4 channels and for any count agree); bad input names the face.
 
 use madder::error::TextureError;
 use madder::texture::{NO_WEAVE, WeaveDetail, rasterize, rasterize_with};
@@ -279,6 +280,53 @@ fn faces_without_fabric_are_the_plain_raster_and_threads_do_not_matter() {
     let one = run(1);
     assert_eq!(one, run(2));
     assert_ne!(one, plain);
+}
+
+/// The texel pass has a kernel per channel count (1–4) and one for any count: a channel's
+/// texels must not depend on which ran, nor on the other channels. Five channels (the
+/// general kernel) against the same channels rasterized one at a time (the 1-channel
+/// kernel), uptake on some and off others: the same bits.
+#[test]
+fn a_channel_is_the_same_whatever_the_channel_count() {
+    let corr = plain_with_gaps();
+    let (faces, uv, pos) = square(10);
+    let field = |p: &[f64; 2], k: usize| -> f32 {
+        let (x, y) = (p[0] - 0.3 - 0.1 * k as f64, p[1] - 0.6);
+        ((1.0 + k as f64) * (-(x * x + y * y) / 0.04).exp()) as f32
+    };
+    const C: usize = 5;
+    let values: Vec<f32> = pos
+        .iter()
+        .flat_map(|p| (0..C).map(move |k| field(p, k)))
+        .collect();
+    let uptake: &'static [bool] = &[true, false, true, true, false];
+    let (c, s) = (25f64.to_radians().cos(), 25f64.to_radians().sin());
+    let k = 29.0;
+    let map = vec![[k * c, k * s, -k * s, k * c]; faces.len()];
+    let fabric = vec![0u32; faces.len()];
+    let cs = [&corr];
+    let detail = |uptake: &'static [bool]| WeaveDetail {
+        correctors: &cs,
+        face_fabric: &fabric,
+        face_map: &map,
+        uptake,
+    };
+    let size = 200;
+    let all = rasterize_with(&faces, &uv, &values, C, size, Some(&detail(uptake))).unwrap();
+    let plain = rasterize(&faces, &uv, &values, C, size).unwrap();
+    assert_ne!(all.pixels, plain.pixels, "the detail is on");
+    for (k, &up) in uptake.iter().enumerate() {
+        let one: Vec<f32> = pos.iter().map(|p| field(p, k)).collect();
+        let flags: &'static [bool] = if up { &[true] } else { &[false] };
+        let alone = rasterize_with(&faces, &uv, &one, 1, size, Some(&detail(flags))).unwrap();
+        for (i, &v) in alone.pixels.iter().enumerate() {
+            assert_eq!(
+                v.to_bits(),
+                all.pixels[i * C + k].to_bits(),
+                "channel {k}, texel {i}"
+            );
+        }
+    }
 }
 
 #[test]

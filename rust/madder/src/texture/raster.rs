@@ -48,7 +48,7 @@
 
 use rayon::prelude::*;
 
-use super::weave::{TriWeave, WeaveDetail};
+use super::weave::{Pending, TriWeave, WeaveDetail};
 use crate::error::TextureError;
 
 /// The largest image side accepted: 16384 texels (a 16384² RGBA float image is 4 GiB).
@@ -439,11 +439,11 @@ struct Context<'a> {
 }
 
 /// Rasterizes every band (clearing it first if `clear`); returns the overlapping count.
-fn fill(
+fn fill<'w>(
     pixels: &mut [f32],
     coverage: &mut [u8],
     bands: &[Vec<u32>],
-    ctx: &Context<'_>,
+    ctx: &Context<'w>,
     clear: bool,
 ) -> usize {
     let (size, c) = (ctx.size, ctx.channels);
@@ -469,6 +469,7 @@ fn fill(
                 gy: vec![0.0; c],
                 rowv: vec![0.0; c],
                 tw: TriWeave::default(),
+                pending: Vec::new(),
             };
             match c {
                 1 => band.triangles::<1>(ctx, list),
@@ -483,7 +484,7 @@ fn fill(
 }
 
 /// One band of rows being rasterized by one task.
-struct Band<'a> {
+struct Band<'a, 'w> {
     row0: usize,
     rows: usize,
     pixels: &'a mut [f32],
@@ -496,7 +497,10 @@ struct Band<'a> {
     gy: Vec<f64>,
     rowv: Vec<f64>,
     /// the weave detail of the triangle being scanned (module [`super::weave`])
-    tw: TriWeave,
+    tw: TriWeave<'w>,
+    /// the texels the woven triangle being scanned covers first, `[x, y]`, shaded after
+    /// its scan ([`super::weave::Texels::shade`])
+    pending: Vec<Pending>,
 }
 
 /// The arithmetic of the edge functions: `f64` on the fast path (exact, see the module
@@ -561,9 +565,9 @@ fn edges<T: Edge>(p: &[[f64; 2]; 3], s: [f64; 2]) -> ([T; 3], [T; 3], [T; 3]) {
     (e, dx, dy)
 }
 
-impl Band<'_> {
+impl<'w> Band<'_, 'w> {
     /// Rasterizes the listed triangles in order, for `C` channels (0: any number).
-    fn triangles<const C: usize>(&mut self, ctx: &Context<'_>, list: &[u32]) {
+    fn triangles<const C: usize>(&mut self, ctx: &Context<'w>, list: &[u32]) {
         let scale = (SUB_TEXEL as usize * ctx.size) as f64;
         let (band0, band1) = (self.row0, self.row0 + self.rows - 1);
         for &t in list {
@@ -709,9 +713,12 @@ impl Band<'_> {
             gy,
             rowv,
             tw,
+            pending,
             ..
         } = self;
         let (base, gx, gy, rowv) = (&base[..c], &gx[..c], &gy[..c], &mut rowv[..c]);
+        // the triangle's weave kernel, once (W: set up by `triangles`)
+        let woven = W.then(|| tw.texels(c));
         let mut over = 0;
         let mut row_e = e;
         let n = x1 + 1 - x0;
@@ -726,7 +733,7 @@ impl Band<'_> {
             let [mut e0, mut e1, mut e2] = row_e;
             let mut xf = x0 as f64;
             let mut entered = false;
-            for (m, out) in cov.iter_mut().zip(pix.chunks_exact_mut(c)) {
+            for (i, (m, out)) in cov.iter_mut().zip(pix.chunks_exact_mut(c)).enumerate() {
                 // one branch, not three (the outcome is hard to predict on small triangles)
                 let inside = (e0 > zero) & (e1 > zero) & (e2 > zero);
                 if inside {
@@ -734,8 +741,7 @@ impl Band<'_> {
                     if *m == EMPTY {
                         *m = INSIDE;
                         if W {
-                            let detail = ctx.weave.expect("a woven triangle has a weave");
-                            tw.texel(detail, xf, yf, |k| rowv[k] + gx[k] * xf, out);
+                            pending.push(Pending::at(x0 + i, y));
                         } else {
                             for k in 0..c {
                                 out[k] = (rowv[k] + gx[k] * xf) as f32;
@@ -755,6 +761,10 @@ impl Band<'_> {
                 xf += 1.0;
             }
             row_e = [row_e[0] + dy[0], row_e[1] + dy[1], row_e[2] + dy[2]];
+        }
+        if let Some(kernel) = &woven {
+            kernel.shade::<C>(pending, c, [base, gx, gy], pixels, *row0, size);
+            pending.clear();
         }
         *overlapping += over;
     }

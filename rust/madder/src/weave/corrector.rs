@@ -95,6 +95,8 @@ pub struct Corrector {
     /// of the cell holding it (8): one read per texel, in `f32` (the image's precision;
     /// half the cache of `f64`)
     patches: Vec<[f32; 9]>,
+    /// `1 / (w r)`, `1 / (h r)`: the sample grid's inverse sizes, for [`Sampler`]
+    grid_inv: [f64; 2],
 }
 
 /// `⌊x⌋` for `|x| < 2^63` without a library call (`f64::floor` is one on baseline x86-64).
@@ -102,6 +104,69 @@ pub struct Corrector {
 fn floor(x: f64) -> f64 {
     let t = x as i64 as f64;
     if t > x { t - 1.0 } else { t }
+}
+
+/// `1.5 · 2^52`: adding and removing it rounds an `f64` below `2^51` in magnitude to the
+/// nearest integer, and the sum's low bits are that integer plus `2^51`.
+const MAGIC: f64 = 6_755_399_441_055_744.0;
+
+/// `⌊x⌋` for `|x| < 2^51`, inline and without branches (the rounding of [`MAGIC`], one
+/// less where it rounded up). Beyond `2^51` samples the tile coordinate holds no fraction
+/// at all; the result is then an integer near `x`, and the caller's index clamp keeps
+/// the read in the table.
+#[inline(always)]
+fn floor_fast(x: f64) -> f64 {
+    let r = (x + MAGIC) - MAGIC;
+    r - f64::from(u8::from(r > x))
+}
+
+/// An integer-valued `x` in `[0, 2^51)` as an index, read off the bits of `x + MAGIC` (a
+/// float-to-integer `as` cast adds range and NaN checks per texel). The caller's clamp
+/// keeps `x` in the table: the index is always in range.
+#[inline(always)]
+fn index(x: f64) -> usize {
+    (x + MAGIC).to_bits().wrapping_sub(MAGIC.to_bits()) as usize
+}
+
+/// The texel pass's view of a [`Corrector`] (`Corrector::sampler`): the patch table and
+/// its grid, with the per-texel constants (sizes, their inverses) computed once per
+/// triangle instead of at every texel.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Sampler<'a> {
+    patches: &'a [[f32; 9]],
+    n: [f64; 2],
+    inv: [f64; 2],
+}
+
+impl Sampler<'_> {
+    /// The patch holding `g` (sample-grid units) and the offset in it: `g` is wrapped into
+    /// the tile, `q = g − n ⌊g / n⌋` (within `[0, n]` up to rounding: the patch index is
+    /// clamped into the grid), and split into the patch `⌊q⌋` (its index in the table,
+    /// always in range) and the offset `q − ⌊q⌋`, in `f32`. No branch: a batch of texels
+    /// runs through this back to back.
+    #[inline(always)]
+    pub(crate) fn locate(&self, g: [f64; 2]) -> (usize, f32, f32) {
+        let qx = g[0] - self.n[0] * floor_fast(g[0] * self.inv[0]);
+        let qy = g[1] - self.n[1] * floor_fast(g[1] * self.inv[1]);
+        // the patch, clamped into the grid in floating point (a q rounded a hair below 0
+        // reads patch 0, one rounded up to n the last patch; the offset is not clamped):
+        // ⌊clamp(q, 0, n − 1)⌋ = clamp(⌊q⌋, 0, n − 1), integers held exactly
+        let ix = floor_fast(qx.max(0.0).min(self.n[0] - 1.0));
+        let iy = floor_fast(qy.max(0.0).min(self.n[1] - 1.0));
+        let (tx, ty) = ((qx - ix) as f32, (qy - iy) as f32);
+        (index(iy * self.n[0] + ix), tx, ty)
+    }
+
+    /// `((χ_x, χ_y), U)` at offset `(tx, ty)` in patch `i` (from [`Sampler::locate`]): the
+    /// patch's bilinear coefficients, evaluated in `f32`.
+    #[inline(always)]
+    pub(crate) fn eval(&self, i: usize, tx: f32, ty: f32) -> ([f64; 2], f64) {
+        // `i` comes from `locate`, within the grid
+        let c = &self.patches[i];
+        let x = c[0] + tx * c[1] + ty * (c[2] + tx * c[3]);
+        let y = c[4] + tx * c[5] + ty * (c[6] + tx * c[7]);
+        ([f64::from(x), f64::from(y)], f64::from(c[8]))
+    }
 }
 
 impl Corrector {
@@ -177,6 +242,7 @@ impl Corrector {
             .collect();
         Ok(Corrector {
             patches,
+            grid_inv: [1.0 / gw as f64, 1.0 / gh as f64],
             width,
             height,
             refine: r,
@@ -253,25 +319,15 @@ impl Corrector {
         })
     }
 
-    /// `((χ_x, χ_y), U)` at `g`, in sample-grid units (tile cells × [`Corrector::refine`]):
-    /// the texel pass's one lookup.
-    #[inline(always)]
-    pub(crate) fn sample(&self, g: [f64; 2]) -> ([f64; 2], f64) {
+    /// The texel pass's view of the corrector ([`Sampler`]).
+    pub(crate) fn sampler(&self) -> Sampler<'_> {
         let (gw, gh) = (self.width * self.refine, self.height * self.refine);
-        let (nw, nh) = (gw as f64, gh as f64);
-        // wrap into [0, n): q = g − n ⌊g / n⌋, then the patch and the offset in it
-        let qx = g[0] - nw * floor(g[0] * (1.0 / nw));
-        let qy = g[1] - nh * floor(g[1] * (1.0 / nh));
-        // via i64: a float-to-unsigned conversion costs more on x86-64
-        let (ix, iy) = (
-            (qx as i64 as usize).min(gw - 1),
-            (qy as i64 as usize).min(gh - 1),
-        );
-        let (tx, ty) = ((qx - ix as f64) as f32, (qy - iy as f64) as f32);
-        let c = &self.patches[iy * gw + ix];
-        let x = c[0] + tx * c[1] + ty * (c[2] + tx * c[3]);
-        let y = c[4] + tx * c[5] + ty * (c[6] + tx * c[7]);
-        ([f64::from(x), f64::from(y)], f64::from(c[8]))
+        let n = [gw as f64, gh as f64];
+        Sampler {
+            patches: &self.patches,
+            n,
+            inv: self.grid_inv,
+        }
     }
 
     /// The uptake factor of the cell holding tile coordinate `y` (cells, periodic).
