@@ -97,68 +97,58 @@ impl<const N: usize> Element<N> {
     }
 }
 
-/// Eq. 3.3 for face `f`: unknowns `[x_p0, x_p1, x_p2, F0, F1]`.
-fn face_element(faces: &[[u32; 3]], nv: usize, f: usize) -> Element<5> {
-    let [p0, p1, p2] = faces[f];
-    let base = (nv + 3 * f) as u32;
-    Element {
-        idx: [p0, p1, p2, base, base + 1],
-        rows: [
-            [-1.0, 1.0, 0.0, -1.0, 0.0],
-            [0.0, -1.0, 1.0, 1.0, -1.0],
-            [1.0, 0.0, -1.0, 0.0, 1.0],
-        ],
-    }
-}
-
-/// Eq. 3.2 for an interior edge: `F₁[c] − Σ_d F₂[d] R[d][c] = 0`; unknowns `[F₁, F₂]`.
-fn edge_element(nv: usize, f1: u32, f2: u32, r: &DMat3) -> Element<6> {
-    let b1 = (nv + 3 * f1 as usize) as u32;
-    let b2 = (nv + 3 * f2 as usize) as u32;
-    let mut rows = [[0.0; 6]; 3];
+/// Eq. 3.2 for an interior edge with eq. 3.3 substituted (module docs): row `c` is
+/// `F₁[c] − Σ_d F₂[d] R[d][c] = 0` with `Fₜ = (x_{p₁} − x_{p₀}, x_{p₂} − x_{p₀}, mₜ)`;
+/// unknowns `[x_{f₁'s corners}, m₁, x_{f₂'s corners}, m₂]` (the two shared vertices appear
+/// twice: [`Element::for_each`] sums such repeats correctly).
+fn edge_element(faces: &[[u32; 3]], nv: usize, f1: u32, f2: u32, r: &DMat3) -> Element<8> {
+    let [a0, a1, a2] = faces[f1 as usize];
+    let [b0, b1, b2] = faces[f2 as usize];
+    let (m1, m2) = ((nv + f1 as usize) as u32, (nv + f2 as usize) as u32);
+    // column d of a frame as coefficients on [p₀, p₁, p₂, m]
+    const COLS: [[f64; 4]; 3] = [
+        [-1.0, 1.0, 0.0, 0.0],
+        [-1.0, 0.0, 1.0, 0.0],
+        [0.0, 0.0, 0.0, 1.0],
+    ];
+    let mut rows = [[0.0; 8]; 3];
     for (c, row) in rows.iter_mut().enumerate() {
-        row[c] = 1.0;
+        row[..4].copy_from_slice(&COLS[c]);
         let col = r.col(c);
-        row[3] = -col.x;
-        row[4] = -col.y;
-        row[5] = -col.z;
+        for (d, w) in [col.x, col.y, col.z].into_iter().enumerate() {
+            for k in 0..4 {
+                row[4 + k] -= w * COLS[d][k];
+            }
+        }
     }
     Element {
-        idx: [b1, b1 + 1, b1 + 2, b2, b2 + 1, b2 + 2],
+        idx: [a0, a1, a2, m1, b0, b1, b2, m2],
         rows,
     }
 }
 
-/// The elements of `A₁`: eq. 3.3 per face, eq. 3.2 per interior edge (with transitions `r`;
-/// `None`: identity placeholders, for the pattern only).
-fn elements(mesh: &AngleMesh, r: Option<&[DMat3]>) -> (Vec<Element<5>>, Vec<Element<6>>) {
+/// The elements of `A₁`, one per interior edge (with transitions `r`; `None`: identity
+/// placeholders, for the pattern only).
+fn elements(mesh: &AngleMesh, r: Option<&[DMat3]>) -> Vec<Element<8>> {
     let faces = mesh.faces();
     let nv = mesh.n_vertices();
-    let fe = (0..faces.len())
-        .map(|f| face_element(faces, nv, f))
-        .collect();
-    let ee = mesh
-        .interior()
+    mesh.interior()
         .iter()
         .enumerate()
         .map(|(i, e)| {
             let r = r.map_or(DMat3::IDENTITY, |r| r[i]);
-            edge_element(nv, e.f1, e.f2, &r)
+            edge_element(faces, nv, e.f1, e.f2, &r)
         })
-        .collect();
-    (fe, ee)
+        .collect()
 }
 
 /// The pattern of `A₁` (it depends on the connectivity only; every diagonal entry is in it).
 fn pattern_of(mesh: &AngleMesh) -> Pattern {
     let nv = mesh.n_vertices();
-    let n = nv + 3 * mesh.n_faces();
-    let (fe, ee) = elements(mesh, None);
-    let mut keys: Vec<u64> = Vec::with_capacity(15 * fe.len() + 21 * ee.len() + n);
+    let n = nv + mesh.n_faces();
+    let ee = elements(mesh, None);
+    let mut keys: Vec<u64> = Vec::with_capacity(36 * ee.len() + n);
     let mut push = |r: u32, c: u32, _v: f64| keys.push(((c as u64) << 32) | r as u64);
-    for el in &fe {
-        el.for_each(&mut push);
-    }
     for el in &ee {
         el.for_each(&mut push);
     }
@@ -186,7 +176,7 @@ fn pattern_of(mesh: &AngleMesh) -> Pattern {
 
 /// The values of `A₁` on `pattern` for the transitions `r` (sums in a fixed order).
 fn values_of(mesh: &AngleMesh, pattern: &Pattern, r: &[DMat3]) -> Vec<f64> {
-    let (fe, ee) = elements(mesh, Some(r));
+    let ee = elements(mesh, Some(r));
     let (col_ptr, row_idx) = (&pattern.col_ptr, &pattern.row_idx);
     let mut values = vec![0.0; row_idx.len()];
     let mut add = |r: u32, c: u32, v: f64| {
@@ -199,9 +189,6 @@ fn values_of(mesh: &AngleMesh, pattern: &Pattern, r: &[DMat3]) -> Vec<f64> {
             .expect("entry is in the pattern");
         values[s + at] += v;
     };
-    for el in &fe {
-        el.for_each(&mut add);
-    }
     for el in &ee {
         el.for_each(&mut add);
     }
@@ -530,12 +517,9 @@ impl AngleMesh {
         // G_t: row a = eigenvector a's entries of the frame of t
         let g: Vec<DMat3> = (0..self.n_faces())
             .map(|f| {
-                let b = nv + 3 * f;
-                DMat3::from_cols(
-                    DVec3::new(col(0, b), col(1, b), col(2, b)),
-                    DVec3::new(col(0, b + 1), col(1, b + 1), col(2, b + 1)),
-                    DVec3::new(col(0, b + 2), col(1, b + 2), col(2, b + 2)),
-                )
+                let [p0, p1, p2] = self.faces()[f].map(|v| v as usize);
+                let at = |i: usize| DVec3::new(col(0, i), col(1, i), col(2, i));
+                DMat3::from_cols(at(p1) - at(p0), at(p2) - at(p0), at(nv + f))
             })
             .collect();
         // orientation: most frames with a positive determinant
@@ -579,7 +563,7 @@ impl AngleMesh {
 /// positions `x` give (their `d`-th coordinates, and row `d` of every face's frame).
 fn start_block(mesh: &AngleMesh, x: &[DVec3]) -> Vec<f64> {
     let nv = mesh.n_vertices();
-    let n = nv + 3 * mesh.n_faces();
+    let n = nv + mesh.n_faces();
     let mut out = vec![0.0; n * WANTED];
     for (d, col) in out.chunks_mut(n).enumerate() {
         for (v, p) in x.iter().enumerate() {
@@ -592,9 +576,7 @@ fn start_block(mesh: &AngleMesh, x: &[DVec3]) -> Vec<f64> {
             if !fr.is_finite() {
                 continue;
             }
-            for c in 0..3 {
-                col[nv + 3 * f + c] = fr.col(c)[d];
-            }
+            col[nv + f] = fr.col(2)[d];
         }
     }
     out
