@@ -22,6 +22,8 @@ const SHIFT_REL: f64 = 1e-12;
 /// Wanted eigenvectors (after deflating the translation) and the guard vectors.
 const WANTED: usize = 3;
 const BLOCK: usize = 7;
+/// The warm start's block: 3 wanted + 1 guard (module docs, "Warm start").
+const WARM_BLOCK: usize = 4;
 /// Subspace iteration: converged below this change of the wanted subspace...
 const TOL: f64 = 1e-10;
 /// ... or when the change stops shrinking below this one (the rounding floor).
@@ -353,6 +355,8 @@ fn lowest(
     // a cheap copy (shared arrays), so the solver stays free to borrow mutably
     let pattern = &solver.pattern().clone();
     let n = pattern.n;
+    // cold: 3 wanted + 4 guards; warm: the start is already close, 1 guard suffices
+    let block = if start.is_some() { WARM_BLOCK } else { BLOCK };
     let diag_mean = (0..n)
         .map(|c| values[pattern.col_ptr[c] as usize])
         .sum::<f64>()
@@ -375,44 +379,44 @@ fn lowest(
         }
     }
     let mut rng = SplitMix64::new(0x5eed_a461e5);
-    let mut x: Vec<f64> = (0..n * BLOCK).map(|_| rng.unit() - 0.5).collect();
+    let mut x: Vec<f64> = (0..n * block).map(|_| rng.unit() - 0.5).collect();
     if let Some(start) = start {
         // the warm start's columns replace the first random ones (the rest stay guards)
         x[..start.len()].copy_from_slice(start);
     }
-    for j in 0..BLOCK {
+    for j in 0..block {
         deflate(&mut x[j * n..(j + 1) * n], nv);
     }
-    orthonormalize(&mut x, n, BLOCK);
-    let mut ax = vec![0.0; n * BLOCK];
+    orthonormalize(&mut x, n, block);
+    let mut ax = vec![0.0; n * block];
     let mut prev_change = f64::INFINITY;
-    let mut ritz = [0.0; BLOCK];
+    let mut ritz = vec![0.0; block];
     let mut rounds = 0;
     loop {
         rounds += 1;
         let mut y = x.clone();
         solver.solve_in_place(&mut y);
-        for j in 0..BLOCK {
+        for j in 0..block {
             deflate(&mut y[j * n..(j + 1) * n], nv);
         }
-        orthonormalize(&mut y, n, BLOCK);
+        orthonormalize(&mut y, n, block);
         y.par_chunks(n)
             .zip(ax.par_chunks_mut(n))
             .for_each(|(yj, axj)| sym_matvec(pattern, values, yj, axj));
-        let mut h = vec![0.0; BLOCK * BLOCK];
-        for i in 0..BLOCK {
-            for j in i..BLOCK {
+        let mut h = vec![0.0; block * block];
+        for i in 0..block {
+            for j in i..block {
                 let v = dot(&y[i * n..(i + 1) * n], &ax[j * n..(j + 1) * n]);
-                h[i * BLOCK + j] = v;
-                h[j * BLOCK + i] = v;
+                h[i * block + j] = v;
+                h[j * block + i] = v;
             }
         }
-        let (vals, vecs) = jacobi(h, BLOCK);
+        let (vals, vecs) = jacobi(h, block);
         ritz.copy_from_slice(&vals);
-        let mut xn = vec![0.0; n * BLOCK];
+        let mut xn = vec![0.0; n * block];
         xn.par_chunks_mut(n).enumerate().for_each(|(j, col)| {
-            for i in 0..BLOCK {
-                let w = vecs[i * BLOCK + j];
+            for i in 0..block {
+                let w = vecs[i * block + j];
                 col.iter_mut()
                     .zip(&y[i * n..(i + 1) * n])
                     .for_each(|(c, yi)| *c += w * yi);
