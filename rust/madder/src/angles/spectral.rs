@@ -1,5 +1,5 @@
 //! The spectral reconstruction (§3.3.1–§3.3.2, Algorithm 1): the scalar quadratic form
-//! `A₁` (eqs. 3.2–3.3), its lowest eigenvectors by shift-invert subspace iteration, the
+//! `A₁` (eq. 3.3 substituted into eq. 3.2), its lowest eigenvectors by shift-invert subspace iteration, the
 //! affine correction by voting, and the optional descent (§3.3.3). The math is in the
 //! module docs of [`crate::angles`].
 
