@@ -55,8 +55,8 @@ pub struct Reconstruction {
     pub rounds: usize,
 }
 
-/// `A₁`'s lower triangle in CSC: unknown `v` for vertex `v`, `V + 3f + c` for column `c` of
-/// face `f`'s frame (one coordinate).
+/// `A₁`'s lower triangle in CSC: unknown `v` for vertex `v`, `V + f` for face `f`'s frame
+/// column `m_f` (one coordinate). The arrays are shared, so a copy is cheap.
 #[derive(Clone)]
 struct Pattern {
     n: usize,
