@@ -7,6 +7,19 @@
 //! noisy) angles ([`AngleMesh::reconstruct`], the seed's spectral method, and
 //! [`AngleMesh::sequential`], the Angle-Analyzer-style baseline it is compared with).
 //!
+//! Decoding a sequence (the codec, issue 15), frame by frame, warm-started from the previous
+//! frame's reconstruction:
+//!
+//! ```text
+//! AngleMesh::reconstruct_warm(&self, angles: &Angles, previous: &[DVec3],
+//!                             options: &ReconstructOptions) -> Result<Reconstruction, AngleError>
+//! ```
+//!
+//! `previous` is the previous frame's decoded positions (any placement: only their shape is
+//! used); the result is the cold [`AngleMesh::reconstruct`] of the same angles to the
+//! iteration's tolerance (see "Warm start" below). Keep one [`AngleMesh`] for the whole
+//! sequence: it keeps the connectivity-only solver work between calls.
+//!
 //! ## Conventions (§3.3)
 //! Faces are counter-clockwise triples `(i, j, k)`; an interior edge `(a, b)`, `a < b`, runs
 //! `a → b` in one face `t₁ = (a, b, k)` (up to rotation) and `b → a` in the other
@@ -41,17 +54,28 @@
 //! `R = F̄₁ F̄₂⁻¹`, which belongs to the left-multiplied form; with eq. 3.2's right product
 //! the factors go the other way.)
 //!
-//! ## The quadratic form (eq. 3.3, §3.3.4)
+//! ## The quadratic form (eqs. 3.2–3.3 substituted, §3.3.4)
 //! Unknowns are the positions and the frames; eq. 3.3 ties the frame of `(i, j, k)` to its
-//! edges: `[x_j − x_i, x_k − x_j, x_i − x_k] − F [[1, −1, 0], [0, 1, −1], [0, 0, 0]] = 0`.
-//! The energy `Σ_edges ‖F₁ − F₂R‖² + Σ_faces ‖eq. 3.3‖²` is `x̃ᵀ A x̃`. Every equation is a
-//! row of a 3×n matrix equal to a row of another times a known matrix, so the three
-//! coordinates never mix: `A = I₃ ⊗ A₁` with `A₁` of size `|V| + 3|T|` (positions, then the
-//! frame's three entries per face, of one coordinate). The seed's 12 lowest eigenvectors of
-//! `A` are therefore exactly `{qₐ ⊗ axis_r}` for the 4 lowest eigenvectors `qₐ` of `A₁`:
-//! we solve the 27× smaller scalar problem. One of the four is known in closed form: the
-//! translation (all positions 1, frames 0) is in the kernel whatever the angles, so it is
-//! deflated and only the 3 lowest of the rest are computed.
+//! edges: `[x_j − x_i, x_k − x_j, x_i − x_k] − F [[1, −1, 0], [0, 1, −1], [0, 0, 0]] = 0`,
+//! that is, the frame's first two columns *are* the edge vectors `x_j − x_i`, `x_k − x_i`.
+//! The seed penalizes eq. 3.3 in least squares beside eq. 3.2; we impose it exactly
+//! instead, substituting `Fₜ = (x_{p₁} − x_{p₀}, x_{p₂} − x_{p₀}, mₜ)` into eq. 3.2: the
+//! unknowns are the positions and one column `mₜ` (the scaled normal `√A n`) per face, and
+//! the energy is `Σ_edges ‖F₁ − F₂R‖² = x̃ᵀ A x̃`. Why: the speed targets of issue 15. The
+//! seed's form has `|V| + 3|T| ≈ 7|V|` scalar unknowns; this one `|V| + |T| ≈ 3|V|`, and
+//! the Cholesky factorization (the cost) shrinks with it (ARCHITECTURE.md has the figures).
+//! There is no exact smaller form: the frame unknowns couple across edges, so eliminating
+//! them (a Schur complement onto the positions) gives a dense matrix. On consistent angles the kernel is the same (the true embedding satisfies
+//! both equations exactly), so exact angles still reconstruct exactly; on noisy angles the
+//! minimizer differs, and the noise study (seed Fig. 3.3) moves by −31 % to +9 % per
+//! level, the spectral method still far ahead of the baseline (figures before/after in
+//! ARCHITECTURE.md). Every equation is a row of a 3×n matrix equal to a row of another
+//! times a known matrix, so the three coordinates never mix: `A = I₃ ⊗ A₁` with `A₁` of
+//! size `|V| + |T|` (positions, then `mₜ` per face, of one coordinate). The 12 lowest
+//! eigenvectors of `A` are therefore exactly `{qₐ ⊗ axis_r}` for the 4 lowest eigenvectors
+//! `qₐ` of `A₁`: we solve the 9× smaller scalar problem. One of the four is known in
+//! closed form: the translation (all positions 1, `m` 0) is in the kernel whatever the
+//! angles, so it is deflated and only the 3 lowest of the rest are computed.
 //!
 //! ## Eigenvectors: shift-invert subspace iteration
 //! faer's partial eigensolver finds the largest eigenvalues, and `A₁` is singular (exactly,
@@ -70,9 +94,32 @@
 //! deterministic. Stopping: when the wanted subspace moves by less than `10⁻¹⁰`, or stops
 //! improving (rounding floor) once below `10⁻⁸`; else an error after 200 rounds.
 //!
+//! ## Warm start (a sequence of frames)
+//! [`AngleMesh::reconstruct_warm`] solves the same eigenproblem as the cold reconstruction,
+//! with two savings. (1) The pattern of `A₁` and its symbolic Cholesky analysis (AMD
+//! ordering, elimination tree, supernodes) depend on the connectivity only: the mesh keeps
+//! them (a `Mutex`-guarded cache, taken out during a call and put back after, so concurrent
+//! calls never share it) and each frame only assembles the values and refactorizes
+//! numerically. The cold path uses the same cache, so the two differ only in the start.
+//! (2) The iteration starts from the previous frame instead of random vectors: for each
+//! coordinate `d`, the vector of unknowns the previous positions give (their `d`-th
+//! coordinates and row `d` of each face's `mₜ`), which spans the previous frame's wanted
+//! subspace exactly; one random guard vector completes the block (4 instead of the cold
+//! path's 7: the start is close, so fewer guards cost fewer rounds than their triangular
+//! solves; measured 6 rounds × 4 columns against 5 × 7 at 1 % noise). Any linear image
+//! of the previous positions spans the same subspace, so their placement does not matter.
+//! The stopping rule is unchanged, so warm and cold agree to the iteration's tolerance
+//! (measured ≤ 10⁻¹² of the bounding box at 625 vertices, 2·10⁻⁹ at 100k). The numeric
+//! factorization is still redone every frame: a trial that kept an earlier frame's
+//! factorization as the preconditioner of a LOBPCG solve (not kept) converged only ~4× per
+//! iteration with a one-frame-old factor on a 625-vertex cloth, and worse as the mesh
+//! grows (the frame-to-frame change of `A₁` is fixed relative to its diagonal while `λ₄`
+//! falls like `1/|V|²`), and its result depended on the call history.
+//!
 //! ## Affine correction by voting (§3.3.2, Algorithm 1)
 //! The eigenvectors give an embedding `x_v = L q_v`, `F_t = L G_t` for an unknown linear
-//! `L` (`q_v`, `G_t` the eigenvectors' position and frame entries). First `L₀ = ±I`, the sign
+//! `L` (`q_v` the eigenvectors' position entries, `G_t` the frames they give:
+//! `(q_{p₁} − q_{p₀}, q_{p₂} − q_{p₀}, m_t)`). First `L₀ = ±I`, the sign
 //! that gives most frames a positive determinant (a mirrored embedding would flip every
 //! dihedral). Then each interior edge votes: `T_e = [F̄₁ F̄₂][F₁ F₂]ᵀ([F₁ F₂][F₁ F₂]ᵀ)⁻¹`,
 //! the least-squares map of the embedding's two frames onto the local construction; its
