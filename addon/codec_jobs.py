@@ -139,8 +139,8 @@ class DecompressJob:
         self.decompression = codec.Decompression(bake.core(), self.source, self.target, obj.name)
         n = self.decompression.codec.n_points
         if obj.madder.motion.add_mesh_cache and (obj.type != "MESH" or len(obj.data.vertices) != n):
-            have = f"{len(obj.data.vertices)} vertices" if obj.type == "MESH" else f"a {obj.type.lower()}"
-            raise MotionCodecError(f"'{obj.name}' is {have} but {self.source} holds {n} points: a Mesh Cache "
+            have = f"has {len(obj.data.vertices)} vertices" if obj.type == "MESH" else f"is a {obj.type.lower()}"
+            raise MotionCodecError(f"'{obj.name}' {have} but {self.source} holds {n} points: a Mesh Cache "
                                    "modifier could not play it (untick Mesh Cache Modifier to write the PC2 only)",
                                    object=obj.name, filename=self.source)
         self.modifier = None
