@@ -84,7 +84,7 @@ pub mod texture;
 pub mod weave;
 
 pub use error::{
-    AngleError, CacheError, Error, LcsError, MeshError, ParamError, SolveError, TextureError,
-    WeaveError,
+    AngleError, CacheError, CodecError, Error, LcsError, MeshError, ParamError, SolveError,
+    TextureError, WeaveError,
 };
 pub use io::point_cache::PointCacheError;
