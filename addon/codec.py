@@ -93,6 +93,7 @@ class Compression:
         self.encoder = None
         self.faces = None
         self.frame = None  # the last frame added
+        self.aborted = False  # by abort() or an error: no frame is taken after
 
     @property
     def total(self):
@@ -109,10 +110,13 @@ class Compression:
     def add(self, frame, positions, faces):
         """Adds scene `frame`'s object-space `positions` (N, 3) of the mesh with triangles
         `faces` (F, 3); returns whether frames are left to add."""
-        if frame != self.next_frame():
-            raise MotionCodecError(f"'{self.name}': frame {frame} given where frame {self.next_frame()} was "
-                                   "expected (the frames are compressed in order)", object=self.name, frame=frame)
         try:
+            if self.aborted:
+                raise MotionCodecError(f"'{self.name}': the compression to {self.path} was cancelled",
+                                       object=self.name, frame=frame)
+            if frame != self.next_frame():
+                raise MotionCodecError(f"'{self.name}': frame {frame} given where frame {self.next_frame()} was "
+                                       "expected (the frames are compressed in order)", object=self.name, frame=frame)
             self._add(frame, np.asarray(positions), np.asarray(faces, dtype=np.uint32))
         except BaseException:
             self.abort()
@@ -159,7 +163,8 @@ class Compression:
 
     def finish(self):
         """Puts the file in place once every frame is in; returns the encoder's stats."""
-        if self.frame != self.last:
+        if self.frame != self.last or self.encoder is None:
+            self.abort()
             raise MotionCodecError(f"'{self.name}': compression finished at frame {self.frame} before its last "
                                    f"frame {self.last}", object=self.name)
         encoder, self.encoder = self.encoder, None
@@ -171,6 +176,7 @@ class Compression:
 
     def abort(self):
         """Discards the partial file; `path` keeps what it held."""
+        self.aborted = True
         if self.encoder is not None:
             encoder, self.encoder = self.encoder, None
             encoder.abort()

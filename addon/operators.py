@@ -426,8 +426,9 @@ class MADDER_OT_decompress_motion(_StepwiseOperator, bpy.types.Operator):
             above = [x.name for x in stack[:stack.index(m)]
                      if x.type in {"CLOTH", "SOFT_BODY"} and x.show_viewport]
             if above:
-                self.report({"INFO"}, f"Madder: '{job.obj.name}': {', '.join(above)} above '{m.name}' still "
-                                      "simulate (the file overwrites their result): disable them to play the "
+                them = "it" if len(above) == 1 else "them"
+                self.report({"INFO"}, f"Madder: '{job.obj.name}': '{', '.join(above)}' above '{m.name}' still "
+                                      f"computed (the file overwrites the result): disable {them} to play the "
                                       "file alone")
 
 

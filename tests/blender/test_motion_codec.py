@@ -50,6 +50,19 @@ def files(folder):
     return sorted(os.listdir(folder))
 
 
+def damaged(data, k):
+    """The .madm file `data` with a byte of frame `k`'s payload flipped (the layout of
+    rust/madder/src/angles/codec/mod.rs: a 48-byte header, 12 bytes per face, then per
+    frame its length, its checksum and its payload)."""
+    n_faces = int.from_bytes(data[16:20], "little")
+    at = 48 + 12 * n_faces
+    for _ in range(k):
+        at += 8 + int.from_bytes(data[at:at + 4], "little")
+    out = bytearray(data)
+    out[at + 8 + 3] ^= 0xFF
+    return bytes(out)
+
+
 @pytest.fixture
 def flag(open_fixture, tmp_path):
     scene = open_fixture("flag.blend")
@@ -256,18 +269,27 @@ def test_bad_madm_files_are_named_and_keep_earlier_files(flag, tmp_path):
     pc2 = path.with_suffix(".pc2")
     pc2.write_bytes(b"an earlier pc2")
     data = path.read_bytes()
+    n = scene.frame_end - scene.frame_start + 1
     path.write_bytes(data[: len(data) - 50])  # the last frame is cut short
-    with pytest.raises(RuntimeError, match="flag.madm") as e:
+    with pytest.raises(RuntimeError, match="'Flag': .*flag.madm") as e:
         bpy.ops.madder.decompress_motion()
-    assert f"frame {scene.frame_end - scene.frame_start}" in str(e.value)  # names the last frame (0-based)
+    assert f"frame {n - 1}" in str(e.value)  # names the last sample (0-based)
     assert pc2.read_bytes() == b"an earlier pc2" and files(path.parent) == ["flag.madm", "flag.pc2"]
-    # baking from it: the bake fails naming the object, the file and the frame; the
-    # previous bake stays
+    # baking from it fails before the first frame, naming the object, the file and the
+    # sample; the previous bake stays
     obj.madder.motion_file = str(path)
-    with pytest.raises(RuntimeError) as e:
+    with pytest.raises(RuntimeError, match=f"'Flag': motion file: .*flag.madm: .*sample {n - 1}"):
         bpy.ops.madder.bake()
-    assert "'Flag'" in str(e.value) and "flag.madm" in str(e.value) and f"frame {scene.frame_end}" in str(e.value)
     assert open(bpy.path.abspath(obj.madder.cache_file), "rb").read() == baked
+    # a damaged frame in the middle: found when the bake reaches it, named with the scene
+    # frame it plays at and the sample
+    path.write_bytes(damaged(data, 10))
+    with pytest.raises(RuntimeError, match=f"'Flag' at frame {scene.frame_start + 10}: .*flag.madm: sample 10 "):
+        bpy.ops.madder.bake()
+    assert open(bpy.path.abspath(obj.madder.cache_file), "rb").read() == baked
+    with pytest.raises(RuntimeError, match="'Flag': .*flag.madm: frame 10 is corrupt"):
+        bpy.ops.madder.decompress_motion()
+    assert pc2.read_bytes() == b"an earlier pc2" and files(path.parent) == ["flag.madm", "flag.pc2"]
     # not a codec file at all
     path.write_bytes(b"not a motion file at all, but long enough to hold a header" * 4)
     with pytest.raises(RuntimeError, match="flag.madm"):
