@@ -7,7 +7,7 @@ bake) and blocking when executed from a script or in background mode."""
 import bpy
 from bpy.props import BoolProperty, StringProperty
 
-from . import bake, bridge, codec_jobs, handlers, images, preview, structures
+from . import bake, bridge, codec, codec_jobs, handlers, images, preview, structures
 from .errors import ExportError, LcsError, MotionCodecError, RelocateError
 
 
@@ -399,6 +399,9 @@ class MADDER_OT_compress_motion(_StepwiseOperator, bpy.types.Operator):
     def _done(self, job, stats):
         self.report({"INFO"}, f"Madder: compressed the motion of '{job.obj.name}' to {job.path}: "
                               f"{job.obj.madder.motion.report}")
+        if stats["max_error"] > codec.ERROR_WARNING:
+            self.report({"WARNING"}, f"Madder: '{job.obj.name}': the compressed motion is off by up to "
+                                     f"{100 * stats['max_error']:.3g} % of its size: compress with more Bits")
 
 
 class MADDER_OT_decompress_motion(_StepwiseOperator, bpy.types.Operator):

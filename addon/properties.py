@@ -214,11 +214,12 @@ class MadderMotionSettings(bpy.types.PropertyGroup):
     bits: IntProperty(
         name="Bits",
         description="Quantization of the angles: 2^Bits steps per turn. More bits: a smaller error and a "
-        "bigger file (each bit halves the angles' rounding; the panel shows both after Compress Motion)",
+        "bigger file (each bit halves the angles' rounding); below about 10 the surface rebuilt from "
+        "coarse angles can break down. The panel shows both after Compress Motion",
         default=12,
         min=4,
         max=20,
-        soft_min=6,
+        soft_min=8,
         soft_max=16,
     )
     pc2_path: StringProperty(
