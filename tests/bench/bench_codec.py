@@ -90,13 +90,18 @@ def main():
                 )
             )
         once = angle_codec(faces, frames, 12, corners="once")
-        rows.append(("angles 12-bit, corners once", once["bits_per_vertex_frame"], once["max_error"], once["rms_error"]))
+        rows.append(
+            ("angles 12-bit, corners once", once["bits_per_vertex_frame"], once["max_error"], once["rms_error"])
+        )
         print(f"\n{key}: {n} vertices, {t} frames, diagonal {diag:.3f}")
         print(f"{'coder':<48} {'b/v/f':>7} {'max/diag':>10} {'rms/diag':>10}")
         for name, bpvf, mx, rms in rows:
             print(f"{name:<48} {bpvf:7.2f} {mx:10.2e} {rms:10.2e}")
         results[key] = (pos, ang, raw16, once)
-    print("\nDynapack (published): " + ", ".join(f"{b}-bit {v} b/v/f" + (f" at {e:.1e}" if e else "") for b, v, e in DYNAPACK))
+    print(
+        "\nDynapack (published): "
+        + ", ".join(f"{b}-bit {v} b/v/f" + (f" at {e:.1e}" if e else "") for b, v, e in DYNAPACK)
+    )
     plot(results, args.png)
 
 
@@ -110,17 +115,55 @@ def plot(results, png):
         print("matplotlib missing: no plot")
         return
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2), sharey=True)
-    for ax, (key, (pos, ang, raw16, once)) in zip(axes, results.items()):
-        ax.plot([s["max_error"] for _, s in ang], [s["bits_per_vertex_frame"] for _, s in ang], "o-", c="C3", label="angles, max error")
-        ax.plot([s["rms_error"] for _, s in ang], [s["bits_per_vertex_frame"] for _, s in ang], "o--", c="C3", alpha=0.5, label="angles, RMS error")
+    for ax, (key, (pos, ang, raw16, once)) in zip(axes, results.items(), strict=True):
+        ax.plot(
+            [s["max_error"] for _, s in ang],
+            [s["bits_per_vertex_frame"] for _, s in ang],
+            "o-",
+            c="C3",
+            label="angles, max error",
+        )
+        ax.plot(
+            [s["rms_error"] for _, s in ang],
+            [s["bits_per_vertex_frame"] for _, s in ang],
+            "o--",
+            c="C3",
+            alpha=0.5,
+            label="angles, RMS error",
+        )
         for b, s in ang:
-            ax.annotate(str(b), (s["max_error"], s["bits_per_vertex_frame"]), fontsize=7, xytext=(3, 3), textcoords="offset points")
-        ax.plot([s["max_error"] for _, s in pos], [s["bits_per_vertex_frame"] for _, s in pos], "s-", c="C0", label="positions + temporal, max")
+            ax.annotate(
+                str(b),
+                (s["max_error"], s["bits_per_vertex_frame"]),
+                fontsize=7,
+                xytext=(3, 3),
+                textcoords="offset points",
+            )
+        ax.plot(
+            [s["max_error"] for _, s in pos],
+            [s["bits_per_vertex_frame"] for _, s in pos],
+            "s-",
+            c="C0",
+            label="positions + temporal, max",
+        )
         for b, s in pos:
-            ax.annotate(str(b), (s["max_error"], s["bits_per_vertex_frame"]), fontsize=7, xytext=(3, -9), textcoords="offset points")
+            ax.annotate(
+                str(b),
+                (s["max_error"], s["bits_per_vertex_frame"]),
+                fontsize=7,
+                xytext=(3, -9),
+                textcoords="offset points",
+            )
         ax.plot([raw16["max_error"]], [48], "^", c="C2", label="positions 16-bit raw")
         ax.plot([once["max_error"]], [once["bits_per_vertex_frame"]], "x", c="C4", label="angles 12-bit, corners once")
-        ax.plot([e for _, _, e in DYNAPACK if e], [v for _, v, e in DYNAPACK if e], "*", ms=11, c="k", label="Dynapack (published)")
+        ax.plot(
+            [e for _, _, e in DYNAPACK if e],
+            [v for _, v, e in DYNAPACK if e],
+            "*",
+            ms=11,
+            c="k",
+            label="Dynapack (published)",
+        )
         ax.set_xscale("log")
         ax.set_title(key)
         ax.set_xlabel("error / bounding-box diagonal")

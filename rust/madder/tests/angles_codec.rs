@@ -89,7 +89,7 @@ fn round_trip_error_follows_the_quantization_step() {
         );
         assert!((stats.rms_error - rms).abs() <= 1e-3 * rms);
         // the stated bound: each angle within Δ/2 = π/2^bits; on this 41×25 cloth the
-        // position error stays below 4 Δ/2 of the diagonal (measured 0.4–1.5 Δ/2)
+        // position error stays below 4 Δ/2 of the diagonal (the fixtures measure 0.5–1 Δ/2)
         let half_step = std::f64::consts::PI / (1u64 << bits) as f64;
         assert!(
             max < 4.0 * half_step,

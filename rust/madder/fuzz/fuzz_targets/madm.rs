@@ -58,7 +58,8 @@ fuzz_target!(|data: &[u8]| {
                 let again = d.read_frame(k);
                 match (r, &again) {
                     (Ok(a), Ok(b)) => assert_eq!(a, b, "frame {k} read twice differs"),
-                    (Err(CodecError::Truncated { .. }), _) | (_, Err(CodecError::Truncated { .. })) => {
+                    (Err(CodecError::Truncated { .. }), _)
+                    | (_, Err(CodecError::Truncated { .. })) => {
                         panic!("a file that opened reported a truncated frame {k}")
                     }
                     _ => {}
