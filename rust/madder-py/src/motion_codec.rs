@@ -4,11 +4,14 @@
 use std::path::PathBuf;
 
 use glam::DVec3;
-use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
+use numpy::{
+    PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use madder::CodecError;
+use madder::angles::codec::position_baseline;
 use madder::angles::{CodecOptions, MotionDecoder, MotionEncoder as CoreEncoder};
 
 use crate::errors::{ParameterError, to_py};
@@ -267,7 +270,48 @@ impl MotionCodec {
     }
 }
 
+/// The position baseline the codec is compared with: `frames` `(T, N, 3)` float64
+/// quantized with `bits` bits per coordinate on the bounding cube; `predict=True`: temporal
+/// prediction and the codec's range coder, else raw. Returns a dict like
+/// `MotionEncoder.finish()`'s: `bits_per_vertex_frame`, `max_error`, `rms_error` (over the
+/// bounding-box diagonal).
+#[pyfunction]
+#[pyo3(signature = (frames, bits, predict=true))]
+pub fn position_baseline_stats<'py>(
+    py: Python<'py>,
+    frames: PyReadonlyArray3<'py, f64>,
+    bits: u32,
+    predict: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let shape = frames.shape();
+    if shape[0] == 0 || shape[1] == 0 || shape[2] != 3 || !(1..=24).contains(&bits) {
+        return Err(ParameterError::new_err(format!(
+            "frames must be (T, N, 3) with T, N > 0 and bits in 1..=24, got {shape:?} and {bits}"
+        )));
+    }
+    let a = frames.as_array();
+    if a.iter().any(|v| !v.is_finite()) {
+        return Err(ParameterError::new_err("frames must be finite"));
+    }
+    let f: Vec<Vec<DVec3>> = a
+        .outer_iter()
+        .map(|fr| {
+            fr.rows()
+                .into_iter()
+                .map(|r| DVec3::new(r[0], r[1], r[2]))
+                .collect()
+        })
+        .collect();
+    let s = py.detach(|| position_baseline(&f, bits, predict));
+    let d = PyDict::new(py);
+    d.set_item("bits_per_vertex_frame", s.bits_per_vertex_frame)?;
+    d.set_item("max_error", s.max_error)?;
+    d.set_item("rms_error", s.rms_error)?;
+    Ok(d)
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(position_baseline_stats, m)?)?;
     m.add_class::<MotionEncoder>()?;
     m.add_class::<MotionCodec>()?;
     Ok(())

@@ -4,12 +4,19 @@
 //! Spectral reconstruction of a closed mesh (a wavy torus, 10k and 100k vertices) from its
 //! exact angles and from angles with ±10 % dihedral noise, and the sequential baseline on the
 //! same input. Targets (issue 15): 10k ≤ 1 s, 100k ≤ 15 s on 2 cores.
+//!
+//! Warm-started decoding of a deforming cloth (`AngleMesh::reconstruct_warm`): a square
+//! sheet (10k and 100k vertices) rolled about a turning axis with a breathing curvature and
+//! a small ripple (smooth, near-isometric), 25 frames a second; frame 0 is decoded cold,
+//! each next frame warm from the previous decode; printed: the time per warm frame (min and
+//! max over the frames), the cold time of the same frames, and the largest warm − cold gap
+//! over the bounding box. Target (issue 15): 100k warm frame ≤ 100 ms on 2 cores.
 
 use std::f64::consts::PI;
 use std::time::Instant;
 
 use glam::DVec3;
-use madder::angles::{AngleMesh, Angles, ReconstructOptions};
+use madder::angles::{AngleMesh, Angles, Placement, ReconstructOptions};
 use madder::rng::SplitMix64;
 
 fn torus(nu: usize, nv: usize) -> (Vec<[u32; 3]>, Vec<DVec3>) {
@@ -77,13 +84,102 @@ fn case(nu: usize, nv: usize) {
     }
 }
 
+/// The deforming cloth of the module docs at time `t`: `(n + 1)²` vertices.
+fn cloth(n: usize, t: f64) -> (Vec<[u32; 3]>, Vec<DVec3>) {
+    let idx = |i: usize, j: usize| (i * (n + 1) + j) as u32;
+    let phi = 0.3 + 0.5 * t;
+    let kappa = 2.0 * PI * 0.5 * (0.6 + 0.4 * (2.0 * t).sin());
+    let (sp, cp) = phi.sin_cos();
+    let mut x = Vec::with_capacity((n + 1) * (n + 1));
+    for i in 0..=n {
+        for j in 0..=n {
+            let (u, v) = (i as f64 / n as f64 - 0.5, j as f64 / n as f64 - 0.5);
+            let (s, w) = (cp * u + sp * v, -sp * u + cp * v);
+            let (ks, kc) = (kappa * s).sin_cos();
+            let ripple = 0.01 * (6.0 * u + 4.0 * v - 3.0 * t).sin();
+            let (a, h) = (ks / kappa, (1.0 - kc) / kappa + ripple);
+            x.push(DVec3::new(cp * a - sp * w, sp * a + cp * w, h));
+        }
+    }
+    let mut f = Vec::with_capacity(2 * n * n);
+    for i in 0..n {
+        for j in 0..n {
+            let (a, b, c, d) = (idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1));
+            if (i + j) % 2 == 0 {
+                f.extend([[a, b, c], [a, c, d]]);
+            } else {
+                f.extend([[a, b, d], [b, c, d]]);
+            }
+        }
+    }
+    (f, x)
+}
+
+fn bbox_diagonal(x: &[DVec3]) -> f64 {
+    let lo = x.iter().copied().fold(DVec3::INFINITY, DVec3::min);
+    let hi = x.iter().copied().fold(DVec3::NEG_INFINITY, DVec3::max);
+    (hi - lo).length()
+}
+
+fn warm_case(n: usize, frames: usize) {
+    let (f, x0) = cloth(n, 0.0);
+    let mesh = AngleMesh::new(x0.len(), f.clone()).unwrap();
+    // cold decodes on a clone, which has its own solver cache
+    let other = mesh.clone();
+    let opts = |x: &[DVec3]| ReconstructOptions {
+        placement: Some(Placement::of_face(&f, x, f.len() / 2).unwrap()),
+        ..Default::default()
+    };
+    let t = Instant::now();
+    let mut previous = mesh
+        .reconstruct(&mesh.encode(&x0).unwrap(), &opts(&x0))
+        .unwrap()
+        .positions;
+    let t_first = t.elapsed().as_secs_f64();
+    let (mut warm, mut cold, mut gap) = (Vec::new(), Vec::new(), 0.0f64);
+    let mut rounds = Vec::new();
+    for k in 1..=frames {
+        let (_, x) = cloth(n, k as f64 / 25.0);
+        let a = mesh.encode(&x).unwrap();
+        let t = Instant::now();
+        let w = mesh.reconstruct_warm(&a, &previous, &opts(&x)).unwrap();
+        warm.push(t.elapsed().as_secs_f64());
+        rounds.push(w.rounds);
+        let t = Instant::now();
+        let c = other.reconstruct(&a, &opts(&x)).unwrap();
+        cold.push(t.elapsed().as_secs_f64());
+        let d = w
+            .positions
+            .iter()
+            .zip(&c.positions)
+            .map(|(p, q)| (*p - *q).length())
+            .fold(0.0, f64::max);
+        gap = gap.max(d / bbox_diagonal(&x));
+        previous = w.positions;
+    }
+    let range = |v: &[f64]| {
+        let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = v.iter().copied().fold(0.0, f64::max);
+        format!("{lo:.3}–{hi:.3} s")
+    };
+    println!(
+        "cloth {} vertices, {frames} frames: first (cold) {t_first:.3} s; warm {} per frame \
+         (rounds {rounds:?}), cold {}; max |warm − cold| / diagonal {gap:.1e}",
+        x0.len(),
+        range(&warm),
+        range(&cold),
+    );
+}
+
 fn main() {
     println!(
         "angles bench, {} rayon threads",
         rayon::current_num_threads()
     );
     case(125, 80);
+    warm_case(99, 4);
     if std::env::var_os("MADDER_BENCH_QUICK").is_none() {
         case(400, 250);
+        warm_case(316, 3);
     }
 }

@@ -5,6 +5,7 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
+use super::spectral::SolverCache;
 use crate::error::AngleError;
 use crate::mesh::Topology;
 use crate::mesh::geometry::check_positions;
@@ -35,6 +36,8 @@ pub struct AngleMesh {
     face_interior: Vec<[u32; 3]>,
     /// The first face not reachable from face 0 across interior edges, if any.
     unreached: Option<usize>,
+    /// Connectivity-only solver state kept between reconstructions.
+    solver: SolverCache,
 }
 
 /// The angles of a mesh: corner angles `corners[f][c]` (radians, at vertex `faces[f][c]`) and
@@ -124,6 +127,7 @@ impl AngleMesh {
             interior,
             face_interior,
             unreached,
+            solver: SolverCache::default(),
         })
     }
 
@@ -152,6 +156,9 @@ impl AngleMesh {
         self.topo.edges()
     }
 
+    pub(crate) fn solver_cache(&self) -> &SolverCache {
+        &self.solver
+    }
     pub(crate) fn topology(&self) -> &Topology {
         &self.topo
     }

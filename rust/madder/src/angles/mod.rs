@@ -7,6 +7,19 @@
 //! noisy) angles ([`AngleMesh::reconstruct`], the seed's spectral method, and
 //! [`AngleMesh::sequential`], the Angle-Analyzer-style baseline it is compared with).
 //!
+//! Decoding a sequence (the codec, issue 15), frame by frame, warm-started from the previous
+//! frame's reconstruction:
+//!
+//! ```text
+//! AngleMesh::reconstruct_warm(&self, angles: &Angles, previous: &[DVec3],
+//!                             options: &ReconstructOptions) -> Result<Reconstruction, AngleError>
+//! ```
+//!
+//! `previous` is the previous frame's decoded positions (any placement: only their shape is
+//! used); the result is the cold [`AngleMesh::reconstruct`] of the same angles to the
+//! iteration's tolerance (see "Warm start" below). Keep one [`AngleMesh`] for the whole
+//! sequence: it keeps the connectivity-only solver work between calls.
+//!
 //! ## Conventions (§3.3)
 //! Faces are counter-clockwise triples `(i, j, k)`; an interior edge `(a, b)`, `a < b`, runs
 //! `a → b` in one face `t₁ = (a, b, k)` (up to rotation) and `b → a` in the other
@@ -69,6 +82,20 @@
 //! breakdown handling; with the shift this good, the plain iteration is simpler and
 //! deterministic. Stopping: when the wanted subspace moves by less than `10⁻¹⁰`, or stops
 //! improving (rounding floor) once below `10⁻⁸`; else an error after 200 rounds.
+//!
+//! ## Warm start (a sequence of frames)
+//! [`AngleMesh::reconstruct_warm`] solves the same eigenproblem as the cold reconstruction,
+//! with two savings. (1) The pattern of `A₁` and its symbolic Cholesky analysis (AMD
+//! ordering, elimination tree, supernodes) depend on the connectivity only: the mesh keeps
+//! them (a `Mutex`-guarded cache, taken out during a call and put back after, so concurrent
+//! calls never share it) and each frame only assembles the values and refactorizes
+//! numerically. The cold path uses the same cache, so the two differ only in the start.
+//! (2) The iteration starts from the previous frame instead of random vectors: for each
+//! coordinate `d`, the vector of unknowns the previous positions give (their `d`-th
+//! coordinates and row `d` of each face's frame `Fₜ`), which spans the previous frame's
+//! wanted subspace exactly; 4 random guard vectors complete the block. Any linear image
+//! of the previous positions spans the same subspace, so their placement does not matter.
+//! The stopping rule is unchanged, so warm and cold agree to the iteration's tolerance.
 //!
 //! ## Affine correction by voting (§3.3.2, Algorithm 1)
 //! The eigenvectors give an embedding `x_v = L q_v`, `F_t = L G_t` for an unknown linear

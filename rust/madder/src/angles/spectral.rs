@@ -3,11 +3,13 @@
 //! affine correction by voting, and the optional descent (§3.3.3). The math is in the
 //! module docs of [`crate::angles`].
 
+use std::sync::{Arc, Mutex};
+
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 
 use super::encode::{AngleMesh, Angles};
-use super::local::{preprocess, transitions};
+use super::local::{frame, preprocess, transitions};
 use super::place::Placement;
 use super::refine::{descend, embed, residual};
 use crate::error::{AngleError, SolveError};
@@ -56,8 +58,8 @@ pub struct Reconstruction {
 #[derive(Clone)]
 struct Pattern {
     n: usize,
-    col_ptr: Vec<u32>,
-    row_idx: Vec<u32>,
+    col_ptr: Arc<[u32]>,
+    row_idx: Arc<[u32]>,
 }
 
 impl LowerCsc for Pattern {
@@ -95,57 +97,58 @@ impl<const N: usize> Element<N> {
     }
 }
 
-/// Eq. 3.3 for face `f`: unknowns `[x_p0, x_p1, x_p2, F0, F1]`.
-fn face_element(faces: &[[u32; 3]], nv: usize, f: usize) -> Element<5> {
-    let [p0, p1, p2] = faces[f];
-    let base = (nv + 3 * f) as u32;
-    Element {
-        idx: [p0, p1, p2, base, base + 1],
-        rows: [
-            [-1.0, 1.0, 0.0, -1.0, 0.0],
-            [0.0, -1.0, 1.0, 1.0, -1.0],
-            [1.0, 0.0, -1.0, 0.0, 1.0],
-        ],
-    }
-}
-
-/// Eq. 3.2 for an interior edge: `F₁[c] − Σ_d F₂[d] R[d][c] = 0`; unknowns `[F₁, F₂]`.
-fn edge_element(nv: usize, f1: u32, f2: u32, r: &DMat3) -> Element<6> {
-    let b1 = (nv + 3 * f1 as usize) as u32;
-    let b2 = (nv + 3 * f2 as usize) as u32;
-    let mut rows = [[0.0; 6]; 3];
+/// Eq. 3.2 for an interior edge with eq. 3.3 substituted (module docs): row `c` is
+/// `F₁[c] − Σ_d F₂[d] R[d][c] = 0` with `Fₜ = (x_{p₁} − x_{p₀}, x_{p₂} − x_{p₀}, mₜ)`;
+/// unknowns `[x_{f₁'s corners}, m₁, x_{f₂'s corners}, m₂]` (the two shared vertices appear
+/// twice: [`Element::for_each`] sums such repeats correctly).
+fn edge_element(faces: &[[u32; 3]], nv: usize, f1: u32, f2: u32, r: &DMat3) -> Element<8> {
+    let [a0, a1, a2] = faces[f1 as usize];
+    let [b0, b1, b2] = faces[f2 as usize];
+    let (m1, m2) = ((nv + f1 as usize) as u32, (nv + f2 as usize) as u32);
+    // column d of a frame as coefficients on [p₀, p₁, p₂, m]
+    const COLS: [[f64; 4]; 3] = [
+        [-1.0, 1.0, 0.0, 0.0],
+        [-1.0, 0.0, 1.0, 0.0],
+        [0.0, 0.0, 0.0, 1.0],
+    ];
+    let mut rows = [[0.0; 8]; 3];
     for (c, row) in rows.iter_mut().enumerate() {
-        row[c] = 1.0;
+        row[..4].copy_from_slice(&COLS[c]);
         let col = r.col(c);
-        row[3] = -col.x;
-        row[4] = -col.y;
-        row[5] = -col.z;
+        for (d, w) in [col.x, col.y, col.z].into_iter().enumerate() {
+            for k in 0..4 {
+                row[4 + k] -= w * COLS[d][k];
+            }
+        }
     }
     Element {
-        idx: [b1, b1 + 1, b1 + 2, b2, b2 + 1, b2 + 2],
+        idx: [a0, a1, a2, m1, b0, b1, b2, m2],
         rows,
     }
 }
 
-/// Assembles `A₁` (pattern and values) from the transitions.
-fn assemble(mesh: &AngleMesh, r: &[DMat3]) -> (Pattern, Vec<f64>) {
+/// The elements of `A₁`, one per interior edge (with transitions `r`; `None`: identity
+/// placeholders, for the pattern only).
+fn elements(mesh: &AngleMesh, r: Option<&[DMat3]>) -> Vec<Element<8>> {
     let faces = mesh.faces();
     let nv = mesh.n_vertices();
-    let n = nv + 3 * faces.len();
-    let fe: Vec<Element<5>> = (0..faces.len())
-        .map(|f| face_element(faces, nv, f))
-        .collect();
-    let ee: Vec<Element<6>> = mesh
-        .interior()
+    mesh.interior()
         .iter()
-        .zip(r)
-        .map(|(e, r)| edge_element(nv, e.f1, e.f2, r))
-        .collect();
-    let mut keys: Vec<u64> = Vec::with_capacity(15 * fe.len() + 21 * ee.len() + n);
+        .enumerate()
+        .map(|(i, e)| {
+            let r = r.map_or(DMat3::IDENTITY, |r| r[i]);
+            edge_element(faces, nv, e.f1, e.f2, &r)
+        })
+        .collect()
+}
+
+/// The pattern of `A₁` (it depends on the connectivity only; every diagonal entry is in it).
+fn pattern_of(mesh: &AngleMesh) -> Pattern {
+    let nv = mesh.n_vertices();
+    let n = nv + mesh.n_faces();
+    let ee = elements(mesh, None);
+    let mut keys: Vec<u64> = Vec::with_capacity(36 * ee.len() + n);
     let mut push = |r: u32, c: u32, _v: f64| keys.push(((c as u64) << 32) | r as u64);
-    for el in &fe {
-        el.for_each(&mut push);
-    }
     for el in &ee {
         el.for_each(&mut push);
     }
@@ -164,6 +167,17 @@ fn assemble(mesh: &AngleMesh, r: &[DMat3]) -> (Pattern, Vec<f64>) {
     for c in 0..n {
         col_ptr[c + 1] += col_ptr[c];
     }
+    Pattern {
+        n,
+        col_ptr: col_ptr.into(),
+        row_idx: row_idx.into(),
+    }
+}
+
+/// The values of `A₁` on `pattern` for the transitions `r` (sums in a fixed order).
+fn values_of(mesh: &AngleMesh, pattern: &Pattern, r: &[DMat3]) -> Vec<f64> {
+    let ee = elements(mesh, Some(r));
+    let (col_ptr, row_idx) = (&pattern.col_ptr, &pattern.row_idx);
     let mut values = vec![0.0; row_idx.len()];
     let mut add = |r: u32, c: u32, v: f64| {
         let (s, e) = (
@@ -175,20 +189,50 @@ fn assemble(mesh: &AngleMesh, r: &[DMat3]) -> (Pattern, Vec<f64>) {
             .expect("entry is in the pattern");
         values[s + at] += v;
     };
-    for el in &fe {
-        el.for_each(&mut add);
-    }
     for el in &ee {
         el.for_each(&mut add);
     }
-    (
-        Pattern {
-            n,
-            col_ptr,
-            row_idx,
-        },
-        values,
-    )
+    values
+}
+
+/// What a reconstruction of one mesh can keep for the next (module docs, "Warm start"): the
+/// pattern of `A₁` with its symbolic Cholesky analysis and factor buffers, which depend on
+/// the connectivity only. Taken out while a reconstruction runs and put back after, so
+/// concurrent reconstructions of one mesh never share it (a second one builds its own).
+/// The cache changes no result: the numeric factorization is redone for every matrix.
+#[derive(Default)]
+pub(crate) struct SolverCache(Mutex<Option<PrefactoredSpd<Pattern>>>);
+
+impl SolverCache {
+    fn take(&self, mesh: &AngleMesh) -> Result<PrefactoredSpd<Pattern>, SolveError> {
+        let cached = self.0.lock().map(|mut g| g.take()).unwrap_or(None);
+        match cached {
+            Some(s) => Ok(s),
+            None => PrefactoredSpd::new(pattern_of(mesh), faer::Par::Seq),
+        }
+    }
+
+    fn put(&self, solver: PrefactoredSpd<Pattern>) {
+        if let Ok(mut g) = self.0.lock() {
+            *g = Some(solver);
+        }
+    }
+}
+
+impl Clone for SolverCache {
+    /// A clone starts empty (the analysis is rebuilt on its first use).
+    fn clone(&self) -> Self {
+        Self::default()
+    }
+}
+
+impl std::fmt::Debug for SolverCache {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let filled = self.0.lock().map(|g| g.is_some()).unwrap_or(false);
+        f.debug_struct("SolverCache")
+            .field("filled", &filled)
+            .finish()
+    }
 }
 
 /// `y = A x` for the symmetric matrix whose lower triangle is `values` on `p`.
@@ -301,17 +345,19 @@ fn jacobi(mut a: Vec<f64>, k: usize) -> (Vec<f64>, Vec<f64>) {
 /// The 3 lowest eigenvectors of `A₁` orthogonal to the translation (column-major, `n` each),
 /// the 4 lowest Ritz values (relative to the mean diagonal) and the rounds taken.
 fn lowest(
-    pattern: &Pattern,
+    solver: &mut PrefactoredSpd<Pattern>,
     values: &[f64],
     nv: usize,
+    start: Option<&[f64]>,
 ) -> Result<(Vec<f64>, [f64; 4], usize), SolveError> {
+    // a cheap copy (shared arrays), so the solver stays free to borrow mutably
+    let pattern = &solver.pattern().clone();
     let n = pattern.n;
     let diag_mean = (0..n)
         .map(|c| values[pattern.col_ptr[c] as usize])
         .sum::<f64>()
         / n as f64;
     let mut shift = SHIFT_REL * diag_mean;
-    let mut solver = PrefactoredSpd::new(pattern.clone(), faer::Par::Seq)?;
     // A₁ is positive semi-definite: the shift makes it definite in exact arithmetic; if
     // rounding still meets a non-positive pivot, retry with a larger shift.
     let mut shifted = values.to_vec();
@@ -330,6 +376,10 @@ fn lowest(
     }
     let mut rng = SplitMix64::new(0x5eed_a461e5);
     let mut x: Vec<f64> = (0..n * BLOCK).map(|_| rng.unit() - 0.5).collect();
+    if let Some(start) = start {
+        // the warm start's columns replace the first random ones (the rest stay guards)
+        x[..start.len()].copy_from_slice(start);
+    }
     for j in 0..BLOCK {
         deflate(&mut x[j * n..(j + 1) * n], nv);
     }
@@ -412,6 +462,38 @@ impl AngleMesh {
         angles: &Angles,
         options: &ReconstructOptions,
     ) -> Result<Reconstruction, AngleError> {
+        self.spectral(angles, options, None)
+    }
+
+    /// Reconstructs one frame of a sequence warm-started from the previous frame's
+    /// positions `previous` (module docs, "Warm start"): the same spectral method as
+    /// [`Self::reconstruct`] and the same stopping rule, but the subspace iteration starts
+    /// from `previous` (its coordinates and face frames) instead of random vectors, and
+    /// the connectivity-only work (the pattern of `A₁`, its symbolic Cholesky analysis) is
+    /// kept in the mesh between calls. `previous` may be anywhere (any similarity of the
+    /// previous frame: the placement does not matter) and need not be exact; a poor
+    /// `previous` costs rounds, not accuracy. The result agrees with the cold
+    /// reconstruction of the same angles to the iteration's tolerance (the wanted subspace
+    /// converged to `10⁻¹⁰`).
+    ///
+    /// Errors: those of [`Self::reconstruct`], and `previous` of the wrong length or with a
+    /// non-finite position (naming the vertex).
+    pub fn reconstruct_warm(
+        &self,
+        angles: &Angles,
+        previous: &[DVec3],
+        options: &ReconstructOptions,
+    ) -> Result<Reconstruction, AngleError> {
+        crate::mesh::geometry::check_positions(self.topology(), previous)?;
+        self.spectral(angles, options, Some(previous))
+    }
+
+    fn spectral(
+        &self,
+        angles: &Angles,
+        options: &ReconstructOptions,
+        previous: Option<&[DVec3]>,
+    ) -> Result<Reconstruction, AngleError> {
         self.check_angles(angles)?;
         self.check_connected()?;
         if let Some(p) = &options.placement {
@@ -419,10 +501,15 @@ impl AngleMesh {
         }
         let target = preprocess(angles);
         let tr = transitions(self, &target);
-        let (pattern, values) = assemble(self, &tr.r);
         let nv = self.n_vertices();
-        let (q, eigenvalues, rounds) = lowest(&pattern, &values, nv)?;
-        let n = pattern.n;
+        let cache = self.solver_cache();
+        let mut solver = cache.take(self)?;
+        let values = values_of(self, solver.pattern(), &tr.r);
+        let start = previous.map(|x| start_block(self, x));
+        let found = lowest(&mut solver, &values, nv, start.as_deref());
+        let n = solver.pattern().n;
+        cache.put(solver);
+        let (q, eigenvalues, rounds) = found?;
         let col = |a: usize, i: usize| q[a * n + i];
         let qv: Vec<DVec3> = (0..nv)
             .map(|v| DVec3::new(col(0, v), col(1, v), col(2, v)))
@@ -430,12 +517,9 @@ impl AngleMesh {
         // G_t: row a = eigenvector a's entries of the frame of t
         let g: Vec<DMat3> = (0..self.n_faces())
             .map(|f| {
-                let b = nv + 3 * f;
-                DMat3::from_cols(
-                    DVec3::new(col(0, b), col(1, b), col(2, b)),
-                    DVec3::new(col(0, b + 1), col(1, b + 1), col(2, b + 1)),
-                    DVec3::new(col(0, b + 2), col(1, b + 2), col(2, b + 2)),
-                )
+                let [p0, p1, p2] = self.faces()[f].map(|v| v as usize);
+                let at = |i: usize| DVec3::new(col(0, i), col(1, i), col(2, i));
+                DMat3::from_cols(at(p1) - at(p0), at(p2) - at(p0), at(nv + f))
             })
             .collect();
         // orientation: most frames with a positive determinant
@@ -473,6 +557,29 @@ impl AngleMesh {
         crate::mesh::geometry::check_positions(self.topology(), positions)?;
         Ok(residual(self, &preprocess(angles), positions))
     }
+}
+
+/// The warm start's block: for each coordinate `d`, the vector of `A₁`'s unknowns that the
+/// positions `x` give (their `d`-th coordinates, and row `d` of every face's frame).
+fn start_block(mesh: &AngleMesh, x: &[DVec3]) -> Vec<f64> {
+    let nv = mesh.n_vertices();
+    let n = nv + mesh.n_faces();
+    let mut out = vec![0.0; n * WANTED];
+    for (d, col) in out.chunks_mut(n).enumerate() {
+        for (v, p) in x.iter().enumerate() {
+            col[v] = p[d];
+        }
+        for (f, t) in mesh.faces().iter().enumerate() {
+            let fr = frame(t.map(|v| x[v as usize]));
+            // a degenerate face of the start has no normal: leave its frame at 0 (only
+            // the start is poorer for it)
+            if !fr.is_finite() {
+                continue;
+            }
+            col[nv + f] = fr.col(2)[d];
+        }
+    }
+    out
 }
 
 /// The voting of §3.3.2: `T = S/‖S‖_F`, `S = Σ_e S_e/‖S_e‖_F` with `S_e` the symmetric

@@ -345,3 +345,37 @@ pub fn euler(f: &[[u32; 3]], nv: usize) -> i64 {
     }
     nv as i64 - edges.len() as i64 + f.len() as i64
 }
+
+/// A deforming cloth at time `t` (s): an `n × n` square sheet (side 1, `(n + 1)²` vertices)
+/// rolled about an axis that turns with time, with a curvature that breathes (a
+/// developable, hence isometric, bend), plus a small travelling ripple that stretches it
+/// slightly: a smooth near-isometric motion.
+pub fn cloth(n: usize, t: f64) -> Mesh {
+    let idx = |i: usize, j: usize| (i * (n + 1) + j) as u32;
+    let phi = 0.3 + 0.5 * t;
+    let kappa = 2.0 * PI * 0.5 * (0.6 + 0.4 * (2.0 * t).sin());
+    let (sp, cp) = phi.sin_cos();
+    let mut x = Vec::with_capacity((n + 1) * (n + 1));
+    for i in 0..=n {
+        for j in 0..=n {
+            let (u, v) = (i as f64 / n as f64 - 0.5, j as f64 / n as f64 - 0.5);
+            let (s, w) = (cp * u + sp * v, -sp * u + cp * v);
+            let (ks, kc) = (kappa * s).sin_cos();
+            let ripple = 0.01 * (6.0 * u + 4.0 * v - 3.0 * t).sin();
+            let (a, h) = (ks / kappa, (1.0 - kc) / kappa + ripple);
+            x.push(DVec3::new(cp * a - sp * w, sp * a + cp * w, h));
+        }
+    }
+    let mut f = Vec::with_capacity(2 * n * n);
+    for i in 0..n {
+        for j in 0..n {
+            let (a, b, c, d) = (idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1));
+            if (i + j) % 2 == 0 {
+                f.extend([[a, b, c], [a, c, d]]);
+            } else {
+                f.extend([[a, b, d], [b, c, d]]);
+            }
+        }
+    }
+    (f, x)
+}

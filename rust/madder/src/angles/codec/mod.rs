@@ -55,7 +55,10 @@
 //! The encoder writes to a temporary file next to the target and renames it into place
 //! only in [`MotionEncoder::finish`]; an aborted or dropped encoder removes it.
 
+mod baseline;
 mod entropy;
+
+pub use baseline::{BaselineStats, position_baseline};
 
 use std::fs::File;
 use std::io::{BufWriter, Read, Seek, SeekFrom, Write};
