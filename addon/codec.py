@@ -33,7 +33,7 @@ EXT = ".madm"
 PC2_EXT = ".pc2"
 # Compress Motion warns above this largest error (over the bounding box diagonal): 1 %
 # is visible on a cloth; the flag fixture at the default 12 bits is at 0.05 %, at 8 bits
-# (where the reconstruction from coarse angles breaks down) at 35 % (ARCHITECTURE.md)
+# (where the reconstruction from coarse angles breaks down) at 36 % (ARCHITECTURE.md)
 ERROR_WARNING = 0.01
 
 
