@@ -308,3 +308,56 @@ def test_bad_madm_files_are_named_and_keep_earlier_files(flag, tmp_path):
                                            f"{len(grid.data.vertices)} points"):
         bpy.ops.madder.decompress_motion()
     assert pc2.read_bytes() == b"an earlier pc2"
+
+
+class _Recorder:
+    """The window manager, workspace and operator `self` a modal run touches, recording."""
+
+    def __init__(self, job):
+        self._running, self._timer, self._what = job, "timer", "compression"
+        self.calls, self.reports = [], []
+
+    def __getattr__(self, name):  # event_timer_remove, progress_update, status_text_set, …
+        return lambda *args: self.calls.append((name, args))
+
+    def report(self, kind, message):
+        self.reports.append((set(kind), message))
+
+
+def run_modal(job, events):
+    """Feeds `events` (event types) to the operators' modal driver with `job` running, as
+    Blender's event loop does (the UI is not there in background mode); returns the
+    results and the recorder."""
+    operators = sys.modules[ADDON + ".operators"]
+    op = _Recorder(job)
+    op._stop = lambda context, result: operators._StepwiseOperator._stop(op, context, result)
+    op._done = lambda job, result: operators.MADDER_OT_compress_motion._done(op, job, result)
+    context = type("Context", (), {"window_manager": op, "workspace": op})()
+    out = []
+    for kind in events:
+        out.append(operators._StepwiseOperator.modal(op, context, type("Event", (), {"type": kind})()))
+        if out[-1] != {"RUNNING_MODAL"} and out[-1] != {"PASS_THROUGH"}:
+            break
+    return out, op
+
+
+def test_modal_compression_steps_on_timer_and_esc_cancels(flag, tmp_path):
+    scene, obj = flag
+    path = tmp_path / "motion" / "flag.madm"
+    os.makedirs(path.parent)
+    path.write_bytes(b"an earlier compression")
+    scene.frame_set(4)
+    out, op = run_modal(jobs.CompressJob(scene, obj), ["TIMER"] * 5 + ["MOUSEMOVE", "TIMER", "ESC"])
+    assert out == [{"RUNNING_MODAL"}] * 5 + [{"PASS_THROUGH"}, {"RUNNING_MODAL"}, {"CANCELLED"}]
+    assert op._running.done == 6  # a frame per timer tick
+    assert ("progress_update", (int(100 * 6 / 48),)) in op.calls and ("progress_end", ()) in op.calls
+    assert op.reports == [({"WARNING"}, "Madder: compression of 'Flag' cancelled; nothing was written")]
+    assert path.read_bytes() == b"an earlier compression" and files(path.parent) == ["flag.madm"]
+    assert scene.frame_current == 4
+    # run to the end: the file replaces the earlier one, and the figures are reported
+    n = scene.frame_end - scene.frame_start + 1
+    out, op = run_modal(jobs.CompressJob(scene, obj), ["TIMER"] * (n + 1))
+    assert out == [{"RUNNING_MODAL"}] * (n - 1) + [{"FINISHED"}]
+    assert madder.MotionCodec(str(path)).n_frames == n and files(path.parent) == ["flag.madm"]
+    assert op.reports[0][0] == {"INFO"} and "bits/vertex/frame" in op.reports[0][1]
+    assert scene.frame_current == 4
