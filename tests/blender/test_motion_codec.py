@@ -361,3 +361,43 @@ def test_modal_compression_steps_on_timer_and_esc_cancels(flag, tmp_path):
     assert madder.MotionCodec(str(path)).n_frames == n and files(path.parent) == ["flag.madm"]
     assert op.reports[0][0] == {"INFO"} and "bits/vertex/frame" in op.reports[0][1]
     assert scene.frame_current == 4
+
+
+class _Layout:
+    """A panel layout that checks what it is asked to show: existing settings, registered
+    operators; records the labels."""
+
+    def __init__(self, shown):
+        self.shown = shown
+
+    def prop(self, data, name, **kw):
+        assert name in data.bl_rna.properties, name
+        self.shown.append(name)
+
+    def operator(self, idname, **kw):
+        category, name = idname.split(".")
+        assert hasattr(getattr(bpy.ops, category), name), idname
+        self.shown.append(idname)
+
+    def label(self, text="", **kw):
+        self.shown.append(text)
+
+    def column(self, **kw):
+        return self
+
+
+def test_the_panel_shows_the_settings_and_the_figures(flag):
+    scene, obj = flag
+    panels = sys.modules[ADDON + ".panels"]
+    panel = panels.MADDER_PT_stain_motion
+    assert panel.bl_parent_id == "MADDER_PT_stain_cache"  # under Cache, with Motion File
+    shown = []
+    fake = type("Panel", (), {"layout": _Layout(shown)})()
+    panel.draw(fake, bpy.context)
+    assert shown == ["path", "bits", "madder.compress_motion", "pc2_path", "add_mesh_cache",
+                     "madder.decompress_motion"]
+    assert bpy.ops.madder.compress_motion() == {"FINISHED"}
+    shown.clear()
+    panel.draw(fake, bpy.context)
+    figures = " ".join(shown[3:-3])
+    assert "bits/vertex/frame" in figures and "bounding box" in figures
