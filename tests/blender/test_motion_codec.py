@@ -401,3 +401,18 @@ def test_the_panel_shows_the_settings_and_the_figures(flag):
     panel.draw(fake, bpy.context)
     figures = " ".join(shown[3:-3])
     assert "bits/vertex/frame" in figures and "bounding box" in figures
+
+
+def test_settings_and_figures_are_saved_in_the_blend(flag, tmp_path):
+    scene, obj = flag
+    m = obj.madder.motion
+    m.bits, m.pc2_path, m.add_mesh_cache = 14, "//out/flag.pc2", False
+    assert bpy.ops.madder.compress_motion() == {"FINISHED"}
+    figures, report = tuple(m.figures), m.report
+    bpy.ops.wm.save_mainfile(filepath=str(tmp_path / "saved.blend"))
+    bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "saved.blend"))
+    m = bpy.data.objects["Flag"].madder.motion
+    assert (m.path, m.bits, m.pc2_path, m.add_mesh_cache) == (str(tmp_path / "motion" / "flag.madm"), 14,
+                                                             "//out/flag.pc2", False)
+    assert tuple(m.figures) == pytest.approx(figures) and m.report == report
+    assert madder.MotionCodec(m.path).bits[0] == 14
