@@ -43,7 +43,10 @@ fn warm_matches_cold_along_a_sequence() {
                 "{label} frame {k}: warm − cold {gap:.1e}, warm rel. RMS {err:.1e}, rounds {} (cold {})",
                 warm.rounds, cold.rounds
             );
-            assert!(gap <= 1e-7, "{label} frame {k}: warm differs from cold by {gap:e}");
+            assert!(
+                gap <= 1e-7,
+                "{label} frame {k}: warm differs from cold by {gap:e}"
+            );
             if noise == 0.0 {
                 assert!(err <= 1e-8, "frame {k}: relative RMS error {err:e}");
             }
