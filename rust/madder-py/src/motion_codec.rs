@@ -26,7 +26,8 @@ fn usage(path: &std::path::Path, reason: String) -> PyErr {
 /// Writes a `.madm` motion file frame by frame: corner and dihedral angles quantized with
 /// closed-loop temporal prediction and range coding, plus a per-frame similarity. Nothing
 /// appears at `path` until `finish()`; `abort()` (or dropping the encoder) removes the
-/// temporary file next to it.
+/// temporary file next to it. Decoding is warm-started from the previous frame, cold every
+/// `keyframe_interval` frames (0: always cold).
 #[pyclass(module = "madder")]
 pub struct MotionEncoder {
     path: PathBuf,
@@ -36,7 +37,7 @@ pub struct MotionEncoder {
 #[pymethods]
 impl MotionEncoder {
     #[new]
-    #[pyo3(signature = (path, faces, *, start=1.0, rate=1.0, bits=12, corner_bits=None, corners="every"))]
+    #[pyo3(signature = (path, faces, *, start=1.0, rate=1.0, bits=12, corner_bits=None, corners="every", keyframe_interval=16))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -47,6 +48,7 @@ impl MotionEncoder {
         bits: u32,
         corner_bits: Option<u32>,
         corners: &str,
+        keyframe_interval: u32,
     ) -> PyResult<Self> {
         let shape = faces.shape();
         if shape[1] != 3 || shape[0] == 0 {
@@ -76,6 +78,7 @@ impl MotionEncoder {
             bits,
             corner_bits: corner_bits.unwrap_or(bits),
             corners_once,
+            keyframe_interval,
         };
         let p = path.clone();
         let inner = py

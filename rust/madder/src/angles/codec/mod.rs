@@ -33,6 +33,16 @@
 //! angle error grow with the distance from it; the fit spreads it instead and lowers both
 //! RMS and maximum error. Stored as 8 `f32` (scale, unit quaternion, translation).
 //!
+//! ## Warm-started decoding, keyframes
+//! Frame `k` is reconstructed cold ([`AngleMesh::reconstruct`]) when `k` is a multiple of
+//! the keyframe interval `K` (stored in the header; 0 = every frame cold), else warm-started
+//! from frame `k − 1`'s normalized reconstruction ([`AngleMesh::reconstruct_warm`]). Warm
+//! and cold agree only to the solver's tolerance, not bit for bit, so the encoder runs the
+//! very same chain as the decoder (its placement fit and its error figures are then those
+//! of the decoder's output, bit for bit). A sequential read costs one warm reconstruction;
+//! a jump to frame `k` replays the entropy streams and reconstructs from the keyframe
+//! `K⌊k/K⌋` on (at most `K` reconstructions).
+//!
 //! ## How angle errors become position errors
 //! An angle error is a local bend or shear; the spectral solve spreads its inconsistency
 //! over the whole mesh in least squares (that is why it beats the sequential walk), but a
@@ -46,7 +56,7 @@
 //! ```text
 //! header  magic "MADDERMO" | version u32 | n_points u32 | n_faces u32 | n_frames u32
 //!         | start f64 | rate f64 | bits u8 | corner_bits u8 | flags u8 (1: corners once)
-//!         | reserved u8 | crc32 u32 (of the 44 bytes before it and the faces)
+//!         | keyframe interval u8 | crc32 u32 (of the 44 bytes before it and the faces)
 //! faces   n_faces × 3 u32
 //! frame*  payload length u32 | crc32 u32 of the payload | payload
 //! payload placement 8 f32 | [corner stream] | dihedral stream
@@ -90,6 +100,9 @@ pub struct CodecOptions {
     pub corner_bits: u32,
     /// Corner angles only in frame 0 (else every frame).
     pub corners_once: bool,
+    /// Keyframe interval `K` of the warm-started decoding (module docs), 0..=255; 0: every
+    /// frame reconstructed cold.
+    pub keyframe_interval: u32,
 }
 
 impl Default for CodecOptions {
@@ -100,6 +113,7 @@ impl Default for CodecOptions {
             bits: 12,
             corner_bits: 12,
             corners_once: false,
+            keyframe_interval: 16,
         }
     }
 }
@@ -244,13 +258,19 @@ impl Similarity {
     }
 }
 
-/// The decoding shared by encoder and reader: dequantize, reconstruct (normalized).
+/// Whether frame `k` is reconstructed cold under keyframe interval `key`.
+fn is_key(k: usize, key: u32) -> bool {
+    key == 0 || k % key as usize == 0
+}
+
+/// The decoding shared by encoder and reader: dequantize, reconstruct (normalized), warm
+/// from `previous` when given.
 fn reconstruct(
     mesh: &AngleMesh,
     corners: &[i64],
     dihedrals: &[i64],
-    bits: u32,
-    corner_bits: u32,
+    (bits, corner_bits): (u32, u32),
+    previous: Option<&[DVec3]>,
 ) -> Result<Vec<DVec3>, AngleError> {
     let (dc, dd) = (step(corner_bits), step(bits));
     let angles = Angles {
@@ -260,9 +280,12 @@ fn reconstruct(
             .collect(),
         dihedrals: dihedrals.iter().map(|&d| d as f64 * dd).collect(),
     };
-    Ok(mesh
-        .reconstruct(&angles, &ReconstructOptions::default())?
-        .positions)
+    let options = ReconstructOptions::default();
+    Ok(match previous {
+        Some(prev) => mesh.reconstruct_warm(&angles, prev, &options)?,
+        None => mesh.reconstruct(&angles, &options)?,
+    }
+    .positions)
 }
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> CodecError + '_ {
@@ -282,6 +305,8 @@ pub struct MotionEncoder {
     options: CodecOptions,
     corners: History,
     dihedrals: History,
+    /// The previous frame's normalized reconstruction (the warm start).
+    prev_y: Option<Vec<DVec3>>,
     frames: usize,
     bytes: u64,
     max_abs: f64,
@@ -317,6 +342,12 @@ impl MotionEncoder {
         if options.rate <= 0.0 {
             return Err(usage(format!("rate must be > 0, got {}", options.rate)));
         }
+        if options.keyframe_interval > 255 {
+            return Err(usage(format!(
+                "keyframe_interval must be in 0..=255, got {}",
+                options.keyframe_interval
+            )));
+        }
         let n = faces
             .iter()
             .flatten()
@@ -345,6 +376,7 @@ impl MotionEncoder {
             options,
             corners: History::default(),
             dihedrals: History::default(),
+            prev_y: None,
             frames: 0,
             bytes: 0,
             max_abs: 0.0,
@@ -368,7 +400,12 @@ impl MotionEncoder {
         h.extend_from_slice(&o.start.to_le_bytes());
         h.extend_from_slice(&o.rate.to_le_bytes());
         let flags = if o.corners_once { FLAG_CORNERS_ONCE } else { 0 };
-        h.extend_from_slice(&[o.bits as u8, o.corner_bits as u8, flags, 0]);
+        h.extend_from_slice(&[
+            o.bits as u8,
+            o.corner_bits as u8,
+            flags,
+            o.keyframe_interval as u8,
+        ]);
         let mut faces = Vec::with_capacity(12 * self.mesh.n_faces());
         for f in self.mesh.faces() {
             for v in f {
@@ -432,13 +469,17 @@ impl MotionEncoder {
         } else {
             self.corners.prev.clone().unwrap_or_default()
         };
-        let y = reconstruct(&self.mesh, &qc, &qd, o.bits, o.corner_bits).map_err(|source| {
-            CodecError::Reconstruct {
+        let previous = match (&self.prev_y, is_key(frame, o.keyframe_interval)) {
+            (Some(p), false) => Some(p.as_slice()),
+            _ => None,
+        };
+        let y = reconstruct(&self.mesh, &qc, &qd, (o.bits, o.corner_bits), previous).map_err(
+            |source| CodecError::Reconstruct {
                 path: self.path.clone(),
                 frame,
                 source,
-            }
-        })?;
+            },
+        )?;
         let sim = Similarity::fit(&y, positions);
         let out = sim.apply(&y);
         let mut payload = Vec::new();
@@ -458,6 +499,7 @@ impl MotionEncoder {
         block.extend_from_slice(&crc32fast::hash(&payload).to_le_bytes());
         block.extend(payload);
         self.write(&block)?;
+        self.prev_y = Some(y);
         for (p, q) in positions.iter().zip(&out) {
             let d = (*p - DVec3::new(q[0] as f64, q[1] as f64, q[2] as f64)).length();
             self.max_abs = self.max_abs.max(d);
@@ -537,6 +579,7 @@ pub struct MotionDecoder {
     bits: u32,
     corner_bits: u32,
     corners_once: bool,
+    keyframe_interval: u32,
     /// Byte range of every frame's payload and its checksum.
     blocks: Vec<(u64, u32, u32)>,
     file: File,
@@ -546,6 +589,8 @@ pub struct MotionDecoder {
     dihedrals: History,
     /// The placement of frame `next − 1`.
     last: Option<Similarity>,
+    /// The normalized reconstruction of frame `next − 1`, when it was reconstructed.
+    last_y: Option<Vec<DVec3>>,
 }
 
 impl MotionDecoder {
@@ -583,7 +628,7 @@ impl MotionDecoder {
             u32_at(20) as usize,
         );
         let (start, rate) = (f64_at(24), f64_at(32));
-        let (bits, corner_bits, flags) = (h[40] as u32, h[41] as u32, h[42]);
+        let (bits, corner_bits, flags, key) = (h[40] as u32, h[41] as u32, h[42], h[43] as u32);
         let faces_len = 12 * n_faces as u64;
         if (HEADER as u64) + faces_len > len {
             return Err(header(&format!(
@@ -662,12 +707,14 @@ impl MotionDecoder {
             bits,
             corner_bits,
             corners_once: flags & FLAG_CORNERS_ONCE != 0,
+            keyframe_interval: key,
             blocks,
             file,
             next: 0,
             corners: History::default(),
             dihedrals: History::default(),
             last: None,
+            last_y: None,
         })
     }
 
@@ -771,36 +818,67 @@ impl MotionDecoder {
                 n_frames: self.n_frames(),
             });
         }
-        if k + 1 < self.next || (k + 1 == self.next && self.last.is_none()) {
-            self.next = 0;
-            self.corners = History::default();
-            self.dihedrals = History::default();
-            self.last = None;
+        let result = self.read_frame_inner(k);
+        if result.is_err() {
+            // the state may be mid-way: start over on the next read
+            self.reset();
         }
-        while self.next <= k {
-            match self.step_streams() {
-                Ok(s) => self.last = Some(s),
-                Err(e) => {
-                    // the state is mid-way: start over on the next read
-                    self.next = usize::MAX;
-                    self.last = None;
-                    return Err(e);
-                }
-            }
+        result
+    }
+
+    fn reset(&mut self) {
+        self.next = 0;
+        self.corners = History::default();
+        self.dihedrals = History::default();
+        self.last = None;
+        self.last_y = None;
+    }
+
+    fn read_frame_inner(&mut self, k: usize) -> Result<Vec<[f32; 3]>, CodecError> {
+        let key = self.keyframe_interval;
+        if k + 1 == self.next
+            && let (Some(sim), Some(y)) = (&self.last, &self.last_y)
+        {
+            return Ok(sim.apply(y));
         }
-        let sim = self
-            .last
-            .ok_or_else(|| self.corrupt(k, "no frame decoded".into()))?;
-        let qc = self.corners.prev.as_deref().unwrap_or_default();
-        let qd = self.dihedrals.prev.as_deref().unwrap_or_default();
-        let y = reconstruct(&self.mesh, qc, qd, self.bits, self.corner_bits).map_err(|source| {
-            CodecError::Reconstruct {
-                path: self.path.clone(),
-                frame: k,
-                source,
-            }
-        })?;
-        Ok(sim.apply(&y))
+        // the first frame to reconstruct: k itself when it is cold or follows the last
+        // reconstructed frame, else its keyframe
+        let sequential = k == self.next && self.last_y.is_some();
+        let from = if is_key(k, key) || sequential {
+            k
+        } else {
+            k - k % key as usize
+        };
+        if from < self.next {
+            // replay the entropy streams from frame 0 (the prediction needs them)
+            self.reset();
+        }
+        while self.next < from {
+            self.last = Some(self.step_streams()?);
+            self.last_y = None;
+        }
+        let mut y = None;
+        for j in from..=k {
+            let sim = self.step_streams()?;
+            let previous = match (&self.last_y, is_key(j, key)) {
+                (Some(p), false) => Some(p.as_slice()),
+                _ => None,
+            };
+            let qc = self.corners.prev.as_deref().unwrap_or_default();
+            let qd = self.dihedrals.prev.as_deref().unwrap_or_default();
+            let yj = reconstruct(&self.mesh, qc, qd, (self.bits, self.corner_bits), previous)
+                .map_err(|source| CodecError::Reconstruct {
+                    path: self.path.clone(),
+                    frame: j,
+                    source,
+                })?;
+            self.last = Some(sim);
+            self.last_y = Some(yj);
+            y = Some(sim);
+        }
+        let sim = y.ok_or_else(|| self.corrupt(k, "no frame decoded".into()))?;
+        let yk = self.last_y.as_deref().unwrap_or_default();
+        Ok(sim.apply(yk))
     }
 }
 
