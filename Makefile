@@ -150,6 +150,8 @@ bench: $(ZIP) $(WHEELDIR)/.stamp
 	MADDER_ZIP=$(abspath $(ZIP)) $(PY) tests/bench/bench_playback.py
 	PYTHONPATH=$(abspath $(WHEELDIR)) $(PY) tests/bench/bench_dynamic_paint.py --size 316 --frames 12
 	PYTHONPATH=$(abspath $(WHEELDIR)) $(PY) tests/bench/bench_dynamic_paint.py --size 100 --frames 12
+	@# the angle codec against position coding (full run: drop --quick; it redraws docs/codec-curve.png)
+	PYTHONPATH=$(abspath $(WHEELDIR)) $(PY) tests/bench/bench_codec.py --quick --png $(abspath target/codec-curve-quick.png)
 	@# FTLE against numbacs: NUMBACS_PY=<a python with numbacs> make bench (tests/bench/bench_numbacs.py)
 	if [ -n "$(NUMBACS_PY)" ]; then PYTHONPATH=$(abspath $(WHEELDIR)) $(NUMBACS_PY) tests/bench/bench_numbacs.py; fi
 

@@ -2,8 +2,8 @@
 
 The parts that use bpy are imported when the add-on registers (or when one is asked for,
 e.g. `madder.addon.cli`), not on import: the package's bpy-free modules (`presets`,
-`placement`, `motion`, `pour`, `schedule`, `live`, `textures`, `errors`) can then be imported, and tested,
-without Blender."""
+`placement`, `motion`, `codec`, `pour`, `schedule`, `live`, `textures`, `errors`) can then be
+imported, and tested, without Blender."""
 
 import importlib
 

@@ -14,8 +14,22 @@ import os
 import bpy
 import numpy as np
 
-from . import bridge, carrier, fabrics, handlers, images, motion, placement, pour, presets, schedule, shading, textures
-from .errors import BakeError, ExportError, FabricSettingsError
+from . import (
+    bridge,
+    carrier,
+    codec,
+    fabrics,
+    handlers,
+    images,
+    motion,
+    placement,
+    pour,
+    presets,
+    schedule,
+    shading,
+    textures,
+)
+from .errors import BakeError, ExportError, FabricSettingsError, MotionCodecError
 from .placement import check_transform as _check_transform, placed
 
 CACHE_EXT = ".madder"
@@ -109,15 +123,19 @@ def frame_positions(obj, depsgraph, n_vertices, frame, faces, unit):
 
 
 class MotionFile(motion.MotionSamples):
-    """Cloth positions from the object's Motion File (PC2/MDD, object space, placed by the
-    object's current transform), sampled at scene frames as the object's Mesh Cache
-    modifier that reads the same file shows them (`motion.MotionSamples`; Frame Start 0
-    and Frame Scale 1 without one)."""
+    """Cloth positions from the object's Motion File (PC2/MDD, or Madder's compressed
+    `.madm`; object space, placed by the object's current transform), sampled at scene
+    frames. A PC2/MDD file is read as the object's Mesh Cache modifier that reads the same
+    file shows it (`motion.MotionSamples`; Frame Start 0 and Frame Scale 1 without one). A
+    `.madm` file, which no modifier reads, plays sample k at scene frame start + k·rate of
+    its header, through the Frame Start and Frame Scale that the Mesh Cache modifier of its
+    decompressed PC2 gets (`codec.modifier_timing`)."""
 
     def __init__(self, madder, obj):
         path = bpy.path.abspath(obj.madder.motion_file)
+        compressed = codec.is_compressed(path)
         try:
-            cache = madder.PointCache(path)
+            cache = madder.MotionCodec(path) if compressed else madder.PointCache(path)
         except madder.MadderError as e:
             raise BakeError(f"'{obj.name}': motion file: {motion.sample_message(e)}", object=obj.name) from e
         if cache.n_points != len(obj.data.vertices):
@@ -127,7 +145,12 @@ class MotionFile(motion.MotionSamples):
                 object=obj.name,
             )
         offset, scale = 0.0, 1.0
-        for m in obj.modifiers:
+        if compressed:
+            try:
+                offset, scale = codec.modifier_timing(cache.start, cache.rate, path)
+            except MotionCodecError as e:
+                raise BakeError(f"'{obj.name}': motion file: {e}", object=obj.name) from e
+        for m in () if compressed else obj.modifiers:
             if m.type != "MESH_CACHE" or not m.filepath:
                 continue
             if os.path.normpath(bpy.path.abspath(m.filepath)) != os.path.normpath(path):

@@ -37,3 +37,8 @@ class ExportError(AddonError):
 class LcsError(AddonError):
     """Coherent structures cannot be computed from a bake (`object`, `frame`, `filename`:
     the cache)."""
+
+
+class MotionCodecError(AddonError):
+    """A cloth's motion cannot be compressed into a .madm file or decompressed from one
+    (`object`, `frame`, `vertex`, `filename`: the file at fault)."""

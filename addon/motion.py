@@ -1,5 +1,6 @@
-"""Cloth motion from a PC2/MDD file, sampled at scene frames, bpy-free (tested without
-Blender in tests/python; `bake.MotionFile` opens the file and finds the modifier).
+"""Cloth motion from a PC2/MDD file (or a compressed `.madm` file, see `codec`), sampled
+at scene frames, bpy-free (tested without Blender in tests/python; `bake.MotionFile` opens
+the file and finds the modifier).
 
 Blender's Mesh Cache modifier, in its Time Mode *Frame* and Play Mode *Scene*, shows at
 scene frame `f` the file's sample `f · frame_scale − frame_start` (0-based), whatever
@@ -61,6 +62,18 @@ class MotionSamples:
     def __init__(self, cache, name, path, offset=0.0, scale=1.0):
         self.cache, self.name, self.path = cache, name, path
         self.offset, self.scale = offset, scale
+        self._last = {}  # the last two samples read, by index
+
+    def _read(self, k):
+        """Sample `k`, (N, 3) float32. The last two reads are kept: between samples every
+        frame reads two, one of which the frame before read too, and a compressed file
+        (`.madm`) decodes each sample anew otherwise."""
+        co = self._last.get(k)
+        if co is None:
+            co = self.cache.read_frame(k)
+            self._last = {j: v for j, v in self._last.items() if j in (k - 1, k + 1)}
+            self._last[k] = co
+        return co
 
     def sample(self, frame):
         """The (fractional) sample the Mesh Cache modifier shows at scene `frame`."""
@@ -84,9 +97,9 @@ class MotionSamples:
         t = min(max(t, 0.0), float(last))  # the modifier holds the first or last sample
         k = int(min(np.floor(t + 1e-6), last))
         try:
-            co = self.cache.read_frame(k).astype(np.float64)
+            co = self._read(k).astype(np.float64)
             if k < last and t - k > 1e-6:
-                co += (t - k) * (self.cache.read_frame(k + 1) - co)
+                co += (t - k) * (self._read(k + 1) - co)
         except Exception as e:
             message = f"'{self.name}' at frame {frame}: {sample_message(e)}"
             raise BakeError(message, object=self.name, frame=frame) from e

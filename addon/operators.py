@@ -7,8 +7,8 @@ bake) and blocking when executed from a script or in background mode."""
 import bpy
 from bpy.props import BoolProperty, StringProperty
 
-from . import bake, bridge, handlers, images, preview, structures
-from .errors import ExportError, LcsError, RelocateError
+from . import bake, bridge, codec, codec_jobs, handlers, images, preview, structures
+from .errors import ExportError, LcsError, MotionCodecError, RelocateError
 
 
 def _targets(context, all_objects):
@@ -312,8 +312,132 @@ class MADDER_OT_bake_from_preview(bpy.types.Operator):
         return {"FINISHED"}
 
 
+class _StepwiseOperator:
+    """An operator driving a stepwise job (`step()` → more to do, `finish()`, `cancel()`,
+    `done`/`total`/`status`, `obj`): blocking from a script or in background mode; modal
+    from the UI, one step per timer tick with the progress bar and status text, Esc
+    cancelling. Subclasses give `_job(context)`, `_done(job, result)` and `_what`."""
+
+    _what = ""
+
+    def execute(self, context):
+        try:
+            job = self._job(context)
+            try:
+                while job.step():
+                    pass
+                result = job.finish()
+            except BaseException:
+                job.cancel()
+                raise
+        except MotionCodecError as e:
+            self.report({"ERROR"}, f"Madder: {e}")
+            return {"CANCELLED"}
+        self._done(job, result)
+        return {"FINISHED"}
+
+    def invoke(self, context, event):
+        if context.window_manager is None or not context.window:
+            return self.execute(context)
+        try:
+            self._running = self._job(context)
+        except MotionCodecError as e:
+            self.report({"ERROR"}, f"Madder: {e}")
+            return {"CANCELLED"}
+        wm = context.window_manager
+        wm.progress_begin(0, 100)
+        self._timer = wm.event_timer_add(0.0, window=context.window)
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def modal(self, context, event):
+        job = self._running
+        if event.type == "ESC":
+            job.cancel()
+            self.report({"WARNING"}, f"Madder: {self._what} of '{job.obj.name}' cancelled; nothing was written")
+            return self._stop(context, {"CANCELLED"})
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        try:
+            if not job.step():
+                result = job.finish()
+                self._done(job, result)
+                return self._stop(context, {"FINISHED"})
+        except Exception as e:  # any failure ends the modal run, with nothing written
+            job.cancel()
+            self.report({"ERROR"}, f"Madder: {e}")
+            return self._stop(context, {"CANCELLED"})
+        context.window_manager.progress_update(int(100 * job.done / max(job.total, 1)))
+        context.workspace.status_text_set(
+            f"Madder: '{job.obj.name}': {job.status} ({job.done}/{job.total}) — Esc to cancel")
+        return {"RUNNING_MODAL"}
+
+    def _stop(self, context, result):
+        wm = context.window_manager
+        wm.event_timer_remove(self._timer)
+        wm.progress_end()
+        context.workspace.status_text_set(None)
+        return result
+
+
+class MADDER_OT_compress_motion(_StepwiseOperator, bpy.types.Operator):
+    """Compress the active object's evaluated motion over the scene's frame range into a .madm file
+    (Compressed Motion), which Motion File bakes from and Decompress turns into a PC2 (Esc cancels)"""
+
+    bl_idname = "madder.compress_motion"
+    bl_label = "Compress Motion"
+    bl_options = {"REGISTER", "UNDO"}
+    _what = "compression"
+
+    @classmethod
+    def poll(cls, context):
+        return context.object is not None and context.object.type == "MESH"
+
+    def _job(self, context):
+        return codec_jobs.CompressJob(context.scene, context.object)
+
+    def _done(self, job, stats):
+        self.report({"INFO"}, f"Madder: compressed the motion of '{job.obj.name}' to {job.path}: "
+                              f"{job.obj.madder.motion.report}")
+        if stats["max_error"] > codec.ERROR_WARNING:
+            self.report({"WARNING"}, f"Madder: '{job.obj.name}': the compressed motion is off by up to "
+                                     f"{100 * stats['max_error']:.3g} % of its size: compress with more Bits")
+
+
+class MADDER_OT_decompress_motion(_StepwiseOperator, bpy.types.Operator):
+    """Decompress the active object's Compressed Motion (.madm) to a PC2 file (PC2 File) and, with
+    Mesh Cache Modifier on, point a Mesh Cache modifier at it (Esc cancels)"""
+
+    bl_idname = "madder.decompress_motion"
+    bl_label = "Decompress to PC2"
+    bl_options = {"REGISTER", "UNDO"}
+    _what = "decompression"
+
+    @classmethod
+    def poll(cls, context):
+        return context.object is not None
+
+    def _job(self, context):
+        return codec_jobs.DecompressJob(context.scene, context.object)
+
+    def _done(self, job, path):
+        m = job.modifier
+        shown = f"; its Mesh Cache modifier '{m.name}' plays it" if m is not None else ""
+        self.report({"INFO"}, f"Madder: decompressed {job.source} to {path} ({job.total} samples){shown}")
+        if m is not None:
+            stack = list(job.obj.modifiers)
+            above = [x.name for x in stack[:stack.index(m)]
+                     if x.type in {"CLOTH", "SOFT_BODY"} and x.show_viewport]
+            if above:
+                them = "it" if len(above) == 1 else "them"
+                self.report({"INFO"}, f"Madder: '{job.obj.name}': '{', '.join(above)}' above '{m.name}' still "
+                                      f"computed (the file overwrites the result): disable {them} to play the "
+                                      "file alone")
+
+
 classes = (MADDER_OT_bake, MADDER_OT_free_bake, MADDER_OT_bake_from_preview, MADDER_OT_export_textures,
-           MADDER_OT_relocate_cache, MADDER_OT_coherent_structures)
+           MADDER_OT_relocate_cache, MADDER_OT_coherent_structures, MADDER_OT_compress_motion,
+           MADDER_OT_decompress_motion)
 
 
 def register():

@@ -195,6 +195,30 @@ class MADDER_PT_stain_cache(_StainSubPanel, bpy.types.Panel):
         layout.prop(s, "cache_dir")
 
 
+class MADDER_PT_stain_motion(_PhysicsPanel, bpy.types.Panel):
+    """Compress Motion and Decompress, under the Motion File they feed: the cloth's motion
+    as a .madm file, and that file as a PC2 for the Mesh Cache modifier."""
+
+    bl_label = "Compressed Motion"
+    bl_parent_id = "MADDER_PT_stain_cache"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        m = context.object.madder.motion
+        layout.prop(m, "path")
+        layout.prop(m, "bits")
+        layout.operator("madder.compress_motion", icon="FILE_CACHE")
+        if m.report:
+            col = layout.column(align=True)
+            for i, line in enumerate(textwrap.wrap(m.report, 48)):
+                col.label(text=line, icon="INFO" if i == 0 else "BLANK1")
+        layout.prop(m, "pc2_path")
+        layout.prop(m, "add_mesh_cache")
+        layout.operator("madder.decompress_motion", icon="MOD_MESHDEFORM")
+
+
 class MADDER_PT_stain_lcs(_StainSubPanel, bpy.types.Panel):
     bl_label = "Coherent Structures"
     bl_options = {"DEFAULT_CLOSED"}
@@ -311,6 +335,7 @@ classes = (
     MADDER_PT_stain_interactions,
     MADDER_PT_stain_look,
     MADDER_PT_stain_cache,
+    MADDER_PT_stain_motion,
     MADDER_PT_stain_lcs,
     MADDER_PT_source,
     MADDER_PT_fabric,

@@ -199,6 +199,59 @@ class MadderLcsSettings(bpy.types.PropertyGroup):
     )
 
 
+class MadderMotionSettings(bpy.types.PropertyGroup):
+    """Compressed motion (issue 15, seed ch. 3): the cloth's evaluated motion written as
+    Madder's motion codec (`.madm`), and that file decompressed to PC2 (`codec`)."""
+
+    path: StringProperty(
+        name="Compressed Motion",
+        description="The .madm file Compress Motion writes and Decompress reads (empty: the object's name "
+        "in the Cache Folder). Set it as the Motion File to bake from it",
+        subtype="FILE_PATH",
+        default="",
+        **_BLEND_RELATIVE,
+    )
+    bits: IntProperty(
+        name="Bits",
+        description="Quantization of the angles: 2^Bits steps per turn. More bits: a smaller error and a "
+        "bigger file (each bit halves the angles' rounding); below about 10 the surface rebuilt from "
+        "coarse angles can break down. The panel shows both after Compress Motion",
+        default=12,
+        min=4,
+        max=20,
+        soft_min=8,
+        soft_max=16,
+    )
+    pc2_path: StringProperty(
+        name="PC2 File",
+        description="The PC2 file Decompress writes (empty: beside the .madm file, with the extension .pc2); "
+        "an existing file there is replaced only once the new one is complete",
+        subtype="FILE_PATH",
+        default="",
+        **_BLEND_RELATIVE,
+    )
+    add_mesh_cache: BoolProperty(
+        name="Mesh Cache Modifier",
+        description="Decompress also points a Mesh Cache modifier at the PC2 (adding one at the bottom of the "
+        "stack if none reads it), timed so that each frame shows the motion that was compressed there",
+        default=True,
+    )
+    figures: FloatVectorProperty(
+        name="Compression Figures",
+        description="Of the last Compress Motion: bits per vertex per frame, and the largest and RMS vertex "
+        "error over the bounding box diagonal (as measured by the encoder decoding its own file)",
+        size=3,
+        default=(0.0, 0.0, 0.0),
+        options={"HIDDEN"},
+    )
+    report: StringProperty(
+        name="Compression Report",
+        description="What the last Compress Motion wrote (frames, vertices, size, bits and errors)",
+        default="",
+        options={"HIDDEN"},
+    )
+
+
 class MadderObjectSettings(bpy.types.PropertyGroup):
     enabled: BoolProperty(
         name="Madder Stain",
@@ -473,10 +526,16 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
     motion_file: StringProperty(
         name="Motion File",
         description="Take the cloth's motion from a PC2 or MDD file (object-space positions, "
-        "as the Mesh Cache modifier reads them) instead of evaluating the scene",
+        "as the Mesh Cache modifier reads them) or a compressed .madm file (Compressed Motion) "
+        "instead of evaluating the scene",
         subtype="FILE_PATH",
         default="",
         **_BLEND_RELATIVE,
+    )
+    motion: PointerProperty(
+        type=MadderMotionSettings,
+        name="Compressed Motion",
+        description="Settings of Compress Motion and Decompress (the cloth's motion as a .madm file)",
     )
     cache_dir: StringProperty(
         name="Cache Folder",
@@ -615,6 +674,7 @@ class MadderSourceSettings(bpy.types.PropertyGroup):
 
 def register():
     bpy.utils.register_class(MadderLcsSettings)
+    bpy.utils.register_class(MadderMotionSettings)
     bpy.utils.register_class(MadderObjectSettings)
     bpy.utils.register_class(MadderSourceSettings)
     bpy.types.Object.madder = PointerProperty(type=MadderObjectSettings)
@@ -626,4 +686,5 @@ def unregister():
     del bpy.types.Object.madder
     bpy.utils.unregister_class(MadderSourceSettings)
     bpy.utils.unregister_class(MadderObjectSettings)
+    bpy.utils.unregister_class(MadderMotionSettings)
     bpy.utils.unregister_class(MadderLcsSettings)

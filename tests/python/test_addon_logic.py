@@ -12,8 +12,8 @@ import pytest
 
 from madder.addon import errors, frames, motion, placement, playback, pour, presets, schedule
 
-BPY_FREE = ("errors", "frames", "lcs", "live", "motion", "placement", "playback", "pour", "presets", "schedule",
-            "textures")
+BPY_FREE = ("codec", "errors", "frames", "lcs", "live", "motion", "placement", "playback", "pour", "presets",
+            "schedule", "textures")
 
 
 def test_the_logic_modules_import_without_bpy():

@@ -104,6 +104,7 @@ fn build(py: Python<'_>, e: &madder::Error) -> PyResult<PyErr> {
         Error::Mesh(m) => (py.get_type::<MeshError>(), mesh_fields(f, m)),
         Error::Lcs(l) => lcs_class_fields(py, f, l),
         Error::Angles(a) => angle_class_fields(py, f, a),
+        Error::Codec(c) => codec_class_fields(py, f, c),
         Error::Param(p) => (
             py.get_type::<ParameterError>(),
             match p {
@@ -436,6 +437,70 @@ fn angle_class_fields<'py>(
                 .set("got", got),
         ),
         A::Solve(s) => (py.get_type::<SolveError>(), solve_fields(f, s)),
+    }
+}
+
+/// Motion files of the angle codec (`madder.MotionEncoder`, `madder.MotionCodec`): file
+/// problems are `CacheError`s naming the file (and frame); bad connectivity or positions
+/// `MeshError`s naming the file, frame and vertex/face/edge; bad options `ParameterError`s.
+fn codec_class_fields<'py>(
+    py: Python<'py>,
+    f: Fields<'py>,
+    c: &madder::CodecError,
+) -> (Bound<'py, pyo3::types::PyType>, Fields<'py>) {
+    use madder::CodecError as K;
+    let cache = py.get_type::<CacheError>();
+    match c {
+        K::Io { path, source } => (cache, f.io(path, source)),
+        K::BadMagic { path } => (cache, f.path(path)),
+        K::Version {
+            path,
+            found,
+            supported,
+        } => (
+            cache,
+            f.path(path).set("found", found).set("supported", supported),
+        ),
+        K::Header { path, reason } => (cache, f.path(path).set("reason", reason)),
+        K::Truncated {
+            path,
+            frame,
+            n_frames,
+        } => (
+            cache,
+            f.path(path).set("frame", frame).set("n_frames", n_frames),
+        ),
+        K::Corrupt {
+            path,
+            frame,
+            reason,
+        } => (
+            cache,
+            f.path(path).set("frame", frame).set("reason", reason),
+        ),
+        K::FrameOutOfRange {
+            path,
+            frame,
+            n_frames,
+        } => (
+            cache,
+            f.path(path).set("frame", frame).set("n_frames", n_frames),
+        ),
+        K::Mesh { path, source } => angle_class_fields(py, f.path(path), source),
+        K::Input {
+            path,
+            frame,
+            source,
+        }
+        | K::Reconstruct {
+            path,
+            frame,
+            source,
+        } => angle_class_fields(py, f.path(path).set("frame", frame), source),
+        K::Usage { path, reason } => (
+            py.get_type::<ParameterError>(),
+            f.path(path).set("reason", reason),
+        ),
     }
 }
 

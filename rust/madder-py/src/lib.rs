@@ -12,6 +12,7 @@ mod errors;
 mod io;
 mod lcs;
 mod mesh;
+mod motion_codec;
 mod point_cache;
 mod simulate;
 mod stain;
@@ -43,5 +44,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     weave::register(m)?;
     point_cache::register(m)?;
     texture::register(m)?;
+    motion_codec::register(m)?;
     Ok(())
 }

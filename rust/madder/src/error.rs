@@ -677,6 +677,110 @@ pub enum AngleError {
     Solve(#[from] SolveError),
 }
 
+/// Writing or reading a motion file of the angle codec (module [`crate::angles::codec`]).
+/// Every variant names the file; frame-level ones the frame (0-based sample index).
+#[derive(Debug, thiserror::Error)]
+pub enum CodecError {
+    /// The operating system refused a read or a write.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The operating system's error.
+        source: std::io::Error,
+    },
+    /// The file does not start with the motion file's magic bytes.
+    #[error("{path}: not a Madder motion file (bad magic)")]
+    BadMagic {
+        /// The file.
+        path: PathBuf,
+    },
+    /// A format version this build cannot read.
+    #[error("{path}: motion file version {found} is not supported (this build reads {supported})")]
+    Version {
+        /// The file.
+        path: PathBuf,
+        /// The version in the file.
+        found: u32,
+        /// The version this build reads.
+        supported: u32,
+    },
+    /// A header (or connectivity) that is damaged or contradicts itself.
+    #[error("{path}: corrupt header: {reason}")]
+    Header {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+    /// The connectivity stored in (or given for) the file cannot carry angles.
+    #[error("{path}: connectivity: {source}")]
+    Mesh {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with it (names the edge, face or vertex).
+        source: AngleError,
+    },
+    /// The file ends inside (or before) a frame the header declares.
+    #[error("{path}: file is truncated at frame {frame} (the header declares {n_frames} frames)")]
+    Truncated {
+        /// The file.
+        path: PathBuf,
+        /// The first frame that is cut off or missing.
+        frame: usize,
+        /// Frames the header declares.
+        n_frames: usize,
+    },
+    /// A frame whose block fails its checksum or does not decode.
+    #[error("{path}: frame {frame} is corrupt: {reason}")]
+    Corrupt {
+        /// The file.
+        path: PathBuf,
+        /// The frame.
+        frame: usize,
+        /// What is wrong.
+        reason: String,
+    },
+    /// A frame index outside the file.
+    #[error("{path}: frame {frame} is not in the file (it holds frames 0..{n_frames})")]
+    FrameOutOfRange {
+        /// The file.
+        path: PathBuf,
+        /// The frame asked for.
+        frame: i64,
+        /// Frames in the file.
+        n_frames: usize,
+    },
+    /// Positions given to the encoder that cannot be encoded (count, NaN, a degenerate face).
+    #[error("{path}: frame {frame}: {source}")]
+    Input {
+        /// The file being written.
+        path: PathBuf,
+        /// The frame (0-based, in the order given).
+        frame: usize,
+        /// What is wrong (names the vertex or face).
+        source: AngleError,
+    },
+    /// The reconstruction of a frame failed (an eigen-solve).
+    #[error("{path}: frame {frame}: {source}")]
+    Reconstruct {
+        /// The file.
+        path: PathBuf,
+        /// The frame.
+        frame: usize,
+        /// The failure.
+        source: AngleError,
+    },
+    /// An encoder option out of range, or the encoder used out of order.
+    #[error("{path}: {reason}")]
+    Usage {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
 /// Any core error. The binding crate maps each variant to a typed Python exception.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
@@ -707,6 +811,9 @@ pub enum Error {
     /// Bad input to the angle representation.
     #[error(transparent)]
     Angles(#[from] AngleError),
+    /// A motion file of the angle codec that cannot be written or read.
+    #[error(transparent)]
+    Codec(#[from] CodecError),
 }
 
 #[cfg(test)]

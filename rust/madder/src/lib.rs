@@ -22,6 +22,7 @@
 //! | §3.3.3 | descent in the 12-D space with analytic angle derivatives | `angles/refine.rs` |
 //! | §3.3, §3.4 | the sequential breadth-first construction (baseline) | [`angles::AngleMesh::sequential`] (`angles/sequential.rs`) |
 //! | — | rigid placement and scale kept apart: a reference triangle | [`angles::Placement`] (`angles/place.rs`) |
+//! | §3.1 (the proposed use) | a motion codec: quantized angles, closed-loop temporal prediction, range coding, `.madm` files | [`angles::MotionEncoder`], [`angles::MotionDecoder`] (`angles/codec/`) |
 //!
 //! ## Chapter 4: fluid simulation on a deforming surface — [`mesh`], [`ops`], [`stain`]
 //! | seed | what | where |
@@ -84,7 +85,7 @@ pub mod texture;
 pub mod weave;
 
 pub use error::{
-    AngleError, CacheError, Error, LcsError, MeshError, ParamError, SolveError, TextureError,
-    WeaveError,
+    AngleError, CacheError, CodecError, Error, LcsError, MeshError, ParamError, SolveError,
+    TextureError, WeaveError,
 };
 pub use io::point_cache::PointCacheError;

@@ -156,6 +156,7 @@
 //! the Cholesky factorization and solves run sequentially, so the result is bit-identical
 //! whatever the number of threads.
 
+pub mod codec;
 mod encode;
 mod local;
 mod place;
@@ -163,6 +164,7 @@ mod refine;
 mod sequential;
 mod spectral;
 
+pub use codec::{CodecOptions, CodecStats, MotionDecoder, MotionEncoder};
 pub use encode::{AngleMesh, Angles};
 pub use local::EPS;
 pub use place::Placement;
