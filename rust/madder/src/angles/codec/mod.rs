@@ -67,9 +67,9 @@
 //!
 //! ## Fuzzing
 //! `rust/madder/fuzz`, target `madm` (seeds in `seeds/madm`: two small files, checksums
-//! repaired or raw). First run (2026-11-26, 2 shared cores): the sanitizer build of the crate
-//! had not finished after 40 minutes when this was committed, so no run is recorded yet;
-//! the reader's bad-file paths are covered by `tests/angles_codec.rs`.
+//! repaired or raw). Not run yet: the one attempt (2026-11-26, 2 shared cores) was stopped
+//! by its 25-minute time limit while the sanitizer build was still compiling the crate; the
+//! reader's bad-file paths are covered by `tests/angles_codec.rs`.
 
 mod baseline;
 mod entropy;
