@@ -64,6 +64,12 @@
 //! ```
 //! The encoder writes to a temporary file next to the target and renames it into place
 //! only in [`MotionEncoder::finish`]; an aborted or dropped encoder removes it.
+//!
+//! ## Fuzzing
+//! `rust/madder/fuzz`, target `madm` (seeds in `seeds/madm`: two small files, checksums
+//! repaired or raw). Not run yet: the one attempt (2026-11-26, 2 shared cores) was stopped
+//! by its 25-minute time limit while the sanitizer build was still compiling the crate; the
+//! reader's bad-file paths are covered by `tests/angles_codec.rs`.
 
 mod baseline;
 mod entropy;
