@@ -40,7 +40,7 @@ def _group():
     """The node group the modifiers share: the carrier's three fields stored on the
     modified geometry's points, sampled by index."""
     ng = bpy.data.node_groups.get(GROUP)
-    if ng is not None and ng.get("madder_version") == _VERSION:
+    if ng is not None and ng.get("madder_version") == _VERSION and _socket(ng) is not None:
         return ng
     if ng is None:
         ng = bpy.data.node_groups.new(GROUP, "GeometryNodeTree")
@@ -76,8 +76,10 @@ def _group():
 
 
 def _socket(ng):
-    return next(s.identifier for s in ng.interface.items_tree
-                if getattr(s, "in_out", None) == "INPUT" and s.socket_type == "NodeSocketObject")
+    """The identifier of the group's Object input (None if someone removed it)."""
+    return next((s.identifier for s in ng.interface.items_tree
+                 if getattr(s, "in_out", None) == "INPUT" and getattr(s, "socket_type", "") == "NodeSocketObject"),
+                None)
 
 
 def modifier(obj):
@@ -91,7 +93,8 @@ def find(obj):
     m = modifier(obj)
     if m is None or m.node_group is None:
         return None
-    carrier = m.get(_socket(m.node_group)) if m.node_group.get("madder_version") == _VERSION else None
+    socket = _socket(m.node_group) if m.node_group.get("madder_version") == _VERSION else None
+    carrier = m.get(socket) if socket is not None else None
     if (carrier is None or carrier.name != PREFIX + obj.name or carrier.type != "MESH"
             or len(carrier.data.vertices) != len(obj.data.vertices)):
         return None
@@ -159,7 +162,8 @@ def remove(obj):
     carrier = None
     if m is not None:
         if m.node_group is not None and m.node_group.get("madder_version") == _VERSION:
-            carrier = m.get(_socket(m.node_group))
+            socket = _socket(m.node_group)
+            carrier = m.get(socket) if socket is not None else None
         obj.modifiers.remove(m)
     carrier = carrier or bpy.data.objects.get(PREFIX + obj.name)
     if carrier is not None and carrier.name.startswith(PREFIX):
