@@ -208,7 +208,9 @@ def test_playback_leaves_an_unbaked_cloth_where_it_is(open_fixture):
     co, wet = play()
     np.testing.assert_allclose(wet, np.clip(reader.read(20, "wetness") / flag.madder.saturation, 0, 1), atol=1e-6)
     assert wet.max() > 0.1
-    assert cloth_cache.info.startswith("20 "), cloth_cache.info  # every frame kept
+    # every played frame kept (the old writes left 2); the count depends on whether this
+    # bpy resimulates from the start frame after the bake's own edits (5.0: 20) or not (48)
+    assert int(cloth_cache.info.split()[0]) >= 20, cloth_cache.info
     flag.madder.enabled = False  # playback leaves it alone: the cloth as Blender simulates it
     bare, _ = play()
     assert np.abs(bare.reshape(-1, 3) - bare.reshape(-1, 3)[0]).max() > 0.1  # the cloth moved
