@@ -9,8 +9,9 @@ before playback, 2 after, and the cloth re-simulated per frame). A stain played 
 Madder bake must not throw away the cloth it was baked on.
 
 So each stained object gets a carrier: an object (not linked to any scene, named
-`.madder_stain <object>`; the leading dot hides it from Blender's ID lists) whose mesh has
-the cloth's vertex count and nothing else. Playback writes `madder_stain`,
+`.madder_stain <object>`; the leading dot hides it from Blender's ID lists; the object it
+serves is recorded in its `madder_cloth` property, so a renamed or duplicated cloth gets
+its own) whose mesh has the cloth's vertex count and nothing else. Playback writes `madder_stain`,
 `madder_wetness` and `madder_deposit` there. The cloth's modifier "Madder Stain", first
 in its stack, copies them by vertex index onto the cloth (Object Info → Sample Index →
 Store Named Attribute, one per field), so they flow through the Cloth modifier and any
@@ -30,6 +31,7 @@ from .bridge import DEPOSIT_ATTR, STAIN_ATTR, WETNESS_ATTR
 MODIFIER = "Madder Stain"
 GROUP = ".Madder Stain Attributes"
 PREFIX = ".madder_stain "
+OWNER = "madder_cloth"  # custom property of a carrier: the name of the object it serves
 _VERSION = 1  # of the node group's layout; an older group is rebuilt
 # (name, data type, foreach property, floats per vertex)
 FIELDS = ((STAIN_ATTR, "FLOAT_COLOR", "color", 4), (WETNESS_ATTR, "FLOAT", "value", 1),
@@ -91,11 +93,8 @@ def modifier(obj):
 def find(obj):
     """`obj`'s carrier mesh if it has a valid one (its own, with its vertex count), else None."""
     m = modifier(obj)
-    if m is None or m.node_group is None:
-        return None
-    socket = _socket(m.node_group) if m.node_group.get("madder_version") == _VERSION else None
-    carrier = m.get(socket) if socket is not None else None
-    if (carrier is None or carrier.name != PREFIX + obj.name or carrier.type != "MESH"
+    carrier = _carrier_of(m) if m is not None else None
+    if (carrier is None or carrier.get(OWNER) != obj.name or carrier.type != "MESH"
             or len(carrier.data.vertices) != len(obj.data.vertices)):
         return None
     return carrier.data
@@ -108,30 +107,43 @@ def ensure(obj):
     if mesh is not None:
         return mesh
     _drop_legacy(obj)
-    n = len(obj.data.vertices)
-    name = PREFIX + obj.name
-    carrier = bpy.data.objects.get(name)
+    name = PREFIX + obj.name  # Blender may shorten it: the owner is recorded on the carrier
     new_mesh = bpy.data.meshes.new(name)
-    new_mesh.vertices.add(n)
+    new_mesh.vertices.add(len(obj.data.vertices))
     for attr_name, data_type, _, _ in FIELDS:
         owner = new_mesh.color_attributes if data_type == "FLOAT_COLOR" else new_mesh.attributes
         owner.new(attr_name, data_type, "POINT")
-    if carrier is None or carrier.type != "MESH":
-        carrier = bpy.data.objects.new(name, new_mesh)
-    else:
-        old, carrier.data = carrier.data, new_mesh
-        if old.users == 0:
-            bpy.data.meshes.remove(old)
+    carrier = bpy.data.objects.new(name, new_mesh)
+    carrier[OWNER] = obj.name
     ng = _group()
     m = modifier(obj)
     if m is None:
         m = obj.modifiers.new(MODIFIER, "NODES")
+    old = _carrier_of(m)
     m.node_group = ng
     m[_socket(ng)] = carrier
     at = list(obj.modifiers).index(m)
     if at != 0:
         obj.modifiers.move(at, 0)
+    if old is not None and old.get(OWNER) == obj.name and old.users == 0:
+        _delete(old)  # this object's stale carrier (another vertex count)
     return new_mesh
+
+
+def _carrier_of(m):
+    """The carrier object modifier `m` reads, if its group is ours."""
+    ng = m.node_group
+    if ng is None or ng.get("madder_version") != _VERSION:
+        return None
+    socket = _socket(ng)
+    return m.get(socket) if socket is not None else None
+
+
+def _delete(carrier):
+    mesh = carrier.data
+    bpy.data.objects.remove(carrier)
+    if mesh is not None and mesh.users == 0:
+        bpy.data.meshes.remove(mesh)
 
 
 def _drop_legacy(obj):
@@ -159,15 +171,9 @@ def clear(obj):
 def remove(obj):
     """Removes `obj`'s modifier and its carrier (Free Bake)."""
     m = modifier(obj)
-    carrier = None
-    if m is not None:
-        if m.node_group is not None and m.node_group.get("madder_version") == _VERSION:
-            socket = _socket(m.node_group)
-            carrier = m.get(socket) if socket is not None else None
-        obj.modifiers.remove(m)
-    carrier = carrier or bpy.data.objects.get(PREFIX + obj.name)
-    if carrier is not None and carrier.name.startswith(PREFIX):
-        mesh = carrier.data
-        bpy.data.objects.remove(carrier)
-        if mesh is not None and mesh.users == 0:
-            bpy.data.meshes.remove(mesh)
+    if m is None:
+        return
+    carrier = _carrier_of(m)
+    obj.modifiers.remove(m)
+    if carrier is not None and carrier.get(OWNER) == obj.name and carrier.users == 0:
+        _delete(carrier)

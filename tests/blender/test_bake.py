@@ -217,6 +217,23 @@ def test_playback_leaves_an_unbaked_cloth_where_it_is(open_fixture):
     np.testing.assert_array_equal(co, bare)
 
 
+def test_a_renamed_cloth_gets_one_carrier_of_its_own(open_fixture):
+    """The carrier records the object it serves: a cloth renamed after the bake (here to a
+    name too long for Blender to keep the carrier's whole name) gets one new carrier, not
+    one per frame, and shows the cache."""
+    scene = open_fixture("flag.blend")
+    flag = setup_flag(scene)
+    assert bpy.ops.madder.bake() == {"FINISHED"}
+    reader = madder.CacheReader(bpy.path.abspath(flag.madder.cache_file))
+    flag.name = "F" * 60
+    for f in range(1, 8):
+        scene.frame_set(f)
+    owners = [o.get("madder_cloth") for o in bpy.data.objects if o.get("madder_cloth") is not None]
+    assert owners.count(flag.name) == 1, owners
+    wet = point_attr(shown(flag), "madder_wetness", "value", 1)[1]
+    np.testing.assert_allclose(wet, np.clip(reader.read(7, "wetness") / flag.madder.saturation, 0, 1), atol=1e-6)
+
+
 def test_baking_twice_gives_an_identical_cache(open_fixture):
     open_fixture("flag.blend")
     flag = setup_flag(bpy.context.scene)
