@@ -52,3 +52,23 @@ def install_extension(zip_path, repo=REPO):
     if result != {"FINISHED"} or module not in bpy.context.preferences.addons:
         raise RuntimeError(f"installing {zip_path} failed: {result}")
     return module
+
+
+def frame_mesh(obj):
+    """(F, 3) uint32 triangles and (N, 3) float64 positions of `obj` as evaluated at the
+    current frame (its whole modifier stack), for tests and benchmarks that read a cloth's
+    motion."""
+    import bpy
+    import numpy as np
+
+    ev = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    mesh = ev.to_mesh()
+    try:
+        mesh.calc_loop_triangles()
+        tri = np.empty(3 * len(mesh.loop_triangles), dtype=np.int64)
+        mesh.loop_triangles.foreach_get("vertices", tri)
+        co = np.empty(3 * len(mesh.vertices))
+        mesh.vertices.foreach_get("co", co)
+    finally:
+        ev.to_mesh_clear()
+    return tri.reshape(-1, 3).astype(np.uint32), co.reshape(-1, 3)

@@ -13,6 +13,9 @@ import bpy
 import numpy as np
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "blend_fixtures"))
+from harness import frame_mesh  # noqa: E402
+
 FIXTURES = {"flag": ("flag.blend", "Flag"), "tablecloth": ("tablecloth.blend", None)}
 
 
@@ -23,20 +26,6 @@ def cloth_object(name):
         if obj.type == "MESH" and any(m.type == "CLOTH" for m in obj.modifiers):
             return obj
     raise SystemExit("no object with a cloth modifier")
-
-
-def frame_mesh(obj):
-    ev = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
-    mesh = ev.to_mesh()
-    try:
-        mesh.calc_loop_triangles()
-        tri = np.empty(3 * len(mesh.loop_triangles), dtype=np.int64)
-        mesh.loop_triangles.foreach_get("vertices", tri)
-        co = np.empty(3 * len(mesh.vertices))
-        mesh.vertices.foreach_get("co", co)
-    finally:
-        ev.to_mesh_clear()
-    return tri.reshape(-1, 3).astype(np.uint32), co.reshape(-1, 3)
 
 
 def main():

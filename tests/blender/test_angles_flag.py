@@ -5,23 +5,9 @@ bounding-box diagonal, after the reference triangle puts the result in place).""
 import bpy
 import numpy as np
 import pytest
+from harness import frame_mesh
 
 import madder
-
-
-def frame_mesh(obj):
-    """(F, 3) uint32 triangles and (N, 3) float64 positions of the evaluated object."""
-    ev = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
-    mesh = ev.to_mesh()
-    try:
-        mesh.calc_loop_triangles()
-        tri = np.empty(3 * len(mesh.loop_triangles), dtype=np.int64)
-        mesh.loop_triangles.foreach_get("vertices", tri)
-        co = np.empty(3 * len(mesh.vertices))
-        mesh.vertices.foreach_get("co", co)
-    finally:
-        ev.to_mesh_clear()
-    return tri.reshape(-1, 3).astype(np.uint32), co.reshape(-1, 3)
 
 
 @pytest.mark.parametrize("frame", [1, 20, 48])

@@ -19,6 +19,11 @@ use glam::DVec3;
 use madder::angles::{AngleMesh, Angles, Placement, ReconstructOptions};
 use madder::rng::SplitMix64;
 
+// the deforming cloth of the module doc and the bounding-box diagonal, shared with the tests
+#[path = "../tests/angles_common/mod.rs"]
+mod angles_common;
+use angles_common::{bbox_diagonal, cloth};
+
 fn torus(nu: usize, nv: usize) -> (Vec<[u32; 3]>, Vec<DVec3>) {
     let idx = |i: usize, j: usize| ((i % nu) * nv + (j % nv)) as u32;
     let mut f = Vec::with_capacity(2 * nu * nv);
@@ -82,43 +87,6 @@ fn case(nu: usize, nv: usize) {
             r.rounds, r.eigenvalues[0], r.eigenvalues[1], r.eigenvalues[2], r.eigenvalues[3]
         );
     }
-}
-
-/// The deforming cloth of the module docs at time `t`: `(n + 1)²` vertices.
-fn cloth(n: usize, t: f64) -> (Vec<[u32; 3]>, Vec<DVec3>) {
-    let idx = |i: usize, j: usize| (i * (n + 1) + j) as u32;
-    let phi = 0.3 + 0.5 * t;
-    let kappa = 2.0 * PI * 0.5 * (0.6 + 0.4 * (2.0 * t).sin());
-    let (sp, cp) = phi.sin_cos();
-    let mut x = Vec::with_capacity((n + 1) * (n + 1));
-    for i in 0..=n {
-        for j in 0..=n {
-            let (u, v) = (i as f64 / n as f64 - 0.5, j as f64 / n as f64 - 0.5);
-            let (s, w) = (cp * u + sp * v, -sp * u + cp * v);
-            let (ks, kc) = (kappa * s).sin_cos();
-            let ripple = 0.01 * (6.0 * u + 4.0 * v - 3.0 * t).sin();
-            let (a, h) = (ks / kappa, (1.0 - kc) / kappa + ripple);
-            x.push(DVec3::new(cp * a - sp * w, sp * a + cp * w, h));
-        }
-    }
-    let mut f = Vec::with_capacity(2 * n * n);
-    for i in 0..n {
-        for j in 0..n {
-            let (a, b, c, d) = (idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1));
-            if (i + j) % 2 == 0 {
-                f.extend([[a, b, c], [a, c, d]]);
-            } else {
-                f.extend([[a, b, d], [b, c, d]]);
-            }
-        }
-    }
-    (f, x)
-}
-
-fn bbox_diagonal(x: &[DVec3]) -> f64 {
-    let lo = x.iter().copied().fold(DVec3::INFINITY, DVec3::min);
-    let hi = x.iter().copied().fold(DVec3::NEG_INFINITY, DVec3::max);
-    (hi - lo).length()
 }
 
 fn warm_case(n: usize, frames: usize) {

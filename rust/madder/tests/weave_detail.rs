@@ -16,8 +16,8 @@
 use madder::error::TextureError;
 use madder::texture::{NO_WEAVE, WeaveDetail, rasterize, rasterize_with};
 use madder::weave::{
-    Corrector, Grid, HomogenizeOptions, PairCoefficients, Tile, Weave, cell_tensors,
-    homogenize_report,
+    COVER_FACTOR, Cell, Corrector, Grid, HomogenizeOptions, PairCoefficients, Tile, Weave,
+    cell_tensors, homogenize_report,
 };
 
 /// Faces, their corner UVs and the vertices' UVs.
@@ -127,13 +127,38 @@ fn corrector_energy_reproduces_the_effective_tensor() {
             hom.tensor
         );
     }
-    // zero mean, uptake of mean 1 with contrast (gaps take less)
+    // zero mean, uptake of mean 1 with contrast: relative to a yarn on the face, a yarn on
+    // the back keeps 0.9 and a gap 1 − (1 − C)/¼ (a quarter of the twill's cells are gaps)
     for i in 0..2 {
         assert!(c.samples(i).iter().sum::<f64>().abs() < 1e-12 * c.samples(i).len() as f64);
     }
     let u = c.uptake();
     assert!((u.iter().sum::<f64>() / u.len() as f64 - 1.0).abs() < 1e-15);
-    assert!(u.iter().cloned().fold(0.0, f64::max) > 2.0 * u.iter().cloned().fold(9.0, f64::min));
+    let cells = tile.cells();
+    assert_eq!(
+        cells.iter().filter(|&&k| k == Cell::Gap).count() * 4,
+        cells.len()
+    );
+    let face = u[cells
+        .iter()
+        .position(|&k| k == Cell::Weft { up: true })
+        .unwrap()];
+    for (k, &cell) in cells.iter().enumerate() {
+        let want = match cell {
+            Cell::Gap => 1.0 - 4.0 * (1.0 - COVER_FACTOR),
+            Cell::Warp { up } | Cell::Weft { up } => [0.9, 1.0][up as usize],
+        };
+        assert!(
+            (u[k] / face - want).abs() < 1e-12,
+            "cell {k} ({cell:?}): {}",
+            u[k] / face
+        );
+    }
+    assert!(
+        cells
+            .iter()
+            .any(|&k| matches!(k, Cell::Warp { up: false } | Cell::Weft { up: false }))
+    );
 }
 
 /// The plain-with-gaps tile laid at 8 texels a cell on a 256² image: 16 threads per UV

@@ -42,7 +42,8 @@ pub mod tensor;
 pub use cache::{HomogenizationCache, homogenize_cached};
 pub use cell_problem::{Bounds, Grid};
 pub use corrector::{
-    CORRECTOR_SAMPLES, Corrector, MAX_CORRECTOR_REFINE, corrector_cached, default_uptake,
+    CORRECTOR_SAMPLES, COVER_FACTOR, Corrector, MAX_CORRECTOR_REFINE, corrector_cached,
+    default_uptake,
 };
 pub use homogenize::{
     HomogenizeOptions, Homogenized, Level, MAX_CONTRAST, Method, homogenize, homogenize_report,
