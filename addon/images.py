@@ -114,35 +114,43 @@ def rest_positions(obj, unit):
 
 def weave_detail(madder, obj, faces, face_polygon, uv, level, size, unit):
     """`(details, warnings)`: per image kind the `madder.WeaveDetail` of `obj`'s fabrics
-    with a Thread Count, over the cloth refined at Detail `level` (None when no fabric has
-    one), and a warning per fabric whose threads are finer than a texel at `size` (those
-    faces keep the smooth stain: `textures.drop_unresolved`).
+    with a Thread Count, over the cloth refined at Detail `level` (None when no face keeps
+    a weave), and a warning per fabric whose threads are finer than a texel at `size` (those
+    faces keep the smooth stain: `textures.drop_unresolved`). Each face's corrector is
+    prefiltered to what its texels can hold (`textures.prefilter_cells`).
     Raises ExportError naming the material whose fabric is invalid."""
     spec = fabrics.face_weave(obj, face_polygon)
     if spec is None:
         return None, []
     slots, slot = spec
-    correctors, index = [], np.full(len(slots), madder.NO_WEAVE, dtype=np.uint32)
-    for i, sl in enumerate(slots):
-        if sl is None:
-            continue
-        try:
-            correctors.append(madder.fabric_corrector(**sl[1]))
-        except madder.MadderError as e:
-            raise ExportError(f"'{obj.name}': material '{sl[0]}': {e}", object=obj.name) from e
-        index[i] = len(correctors) - 1
     threads = np.array([sl[2] if sl else 0.0 for sl in slots])[slot]
     angle = np.array([sl[3] if sl else 0.0 for sl in slots])[slot]
     maps = textures.weave_maps(rest_positions(obj, unit), faces, uv, threads, angle)
-    warnings = []
+    resolved = textures.drop_unresolved(maps, size)
+    # per woven slot, its corrector at each prefilter its faces need (a face's texel
+    # footprint sets it: textures.prefilter_cells); faces index into that list
+    correctors, face_index, warnings = [], np.full(len(slot), madder.NO_WEAVE, dtype=np.uint32), []
     for i, sl in enumerate(slots):
-        if sl is not None and (slot == i).any():
-            why = textures.thread_problem(obj.name, sl[0], maps[slot == i], size)
-            if why:
-                warnings.append(why)
+        mine = slot == i
+        if sl is None or not mine.any():
+            continue
+        try:
+            base = madder.fabric_corrector(**sl[1])
+            width, _ = base.cells
+            sigma = textures.prefilter_cells(resolved[mine], width / base.threads[0], size)
+            for s in np.unique(sigma):
+                correctors.append(madder.fabric_corrector(**sl[1], filter=float(s)))
+                face_index[np.flatnonzero(mine)[sigma == s]] = len(correctors) - 1
+        except madder.MadderError as e:
+            raise ExportError(f"'{obj.name}': material '{sl[0]}': {e}", object=obj.name) from e
+        why = textures.thread_problem(obj.name, sl[0], maps[mine], size)
+        if why:
+            warnings.append(why)
+    if not np.any((face_index != madder.NO_WEAVE) & np.any(resolved != 0.0, axis=(1, 2))):
+        return None, warnings  # no face keeps a weave: the plain images, bit for bit
     n = 4 ** level
-    face_fabric = np.repeat(index[slot], n)
-    face_map = np.ascontiguousarray(np.repeat(textures.drop_unresolved(maps, size), n, axis=0))
+    face_fabric = np.repeat(face_index, n)
+    face_map = np.ascontiguousarray(np.repeat(resolved, n, axis=0))
     details = {kind: madder.WeaveDetail(correctors, face_fabric, face_map, list(textures.UPTAKE[kind]))
                for kind in KINDS}
     return details, warnings

@@ -17,7 +17,11 @@ every path derived from the cache's (so Save As and Relocate Cache carry them al
 
 With a fabric's Thread Count, the images carry the weave's fine scale (`weave_maps`,
 `madder.WeaveDetail`: the homogenization's corrector and the threads' uptake), laid along
-each face's weft at its physical size; Vertex Colors never do.
+each face's weft at its physical size and prefiltered to what a texel can hold
+(`prefilter_cells`); Vertex Colors never do. The detail multiplies the deposit by the
+threads' uptake, so those images start from the values *before* their clamp to 1 and clip
+each finished texel (`CLIP`): where the dye saturates the fibres every thread shows it,
+and the weave shows where the stain is faint.
 
 `####` is the scene frame (4 digits, more when needed). The values are exactly the
 playback attributes (`CacheReader.read_stain`, core `io::attributes`), rasterized over
@@ -207,6 +211,10 @@ def _reason(e):
 
 # -- the weave's detail (issue 13 part 4)
 
+CLIP = {"stain": "premultiplied", "wet": "unit"}
+"""How `madder.rasterize` clips each image kind when the values were read unclamped (with
+the weave's detail, core `texture::clip`)."""
+
 UPTAKE = {"stain": (True, True, True, True), "wet": (False, True)}
 """Per image kind and channel, whether the threads' uptake applies (the deposit: the stain's
 colour and coverage, the wet image's deposit) or only the corrector (wetness)."""
@@ -254,6 +262,29 @@ def drop_unresolved(maps, size):
     that coarsely the weave would alias into a moiré, so those faces keep the smooth stain."""
     out = np.array(maps, dtype=np.float64)
     out[threads_per_texel(out, size) > 1.0] = 0.0
+    return out
+
+
+PREFILTER_TEXELS = 0.5
+"""The weave's prefilter: a Gaussian of this standard deviation in texels (a texture's usual
+antialiasing width: the thread's repeat at 2.5 texels keeps half its contrast, the cell
+edges' harmonics that a texel grid would alias into a crosshatch are gone)."""
+
+PREFILTER_STEPS = 2
+"""Prefilter widths per octave: faces share a few correctors (core `Corrector::filtered`)."""
+
+
+def prefilter_cells(maps, cells_per_thread, size):
+    """Per face, the standard deviation in tile cells of the Gaussian that prefilters the
+    weave's detail for its texels at `size` px (`maps`: the faces' `weave_maps`;
+    `cells_per_thread`: the tile's cells per thread, 2 with gaps): `PREFILTER_TEXELS` times
+    the texel's footprint in cells, rounded to `PREFILTER_STEPS` per octave in log scale;
+    0 (no filter) below 1/16 of a cell, where point samples already resolve the cells, and
+    on faces without detail (zero map)."""
+    s = PREFILTER_TEXELS * threads_per_texel(maps, size) * cells_per_thread
+    out = np.zeros(len(s))
+    on = s >= 1.0 / 16.0
+    out[on] = 2.0 ** (np.round(np.log2(s[on]) * PREFILTER_STEPS) / PREFILTER_STEPS)
     return out
 
 
@@ -307,8 +338,12 @@ class Exporter:
 
     def values(self, frame):
         """Frame `frame`'s per-vertex image values: (RGBA (N, 4), wet (N, 2): wetness and
-        deposit), exactly the playback attributes."""
-        self.reader.read_stain(frame, self.references, self.color, self._rgba, self._wet, self._deposit)
+        deposit), exactly the playback attributes (without their clamp to 1 when the
+        weave's detail is added: `export` clips the finished texels instead)."""
+        # with the weave's detail the fractions are read unclamped and each finished texel
+        # is clipped (`export`): a saturated stain stays saturated on every thread
+        self.reader.read_stain(frame, self.references, self.color, self._rgba, self._wet, self._deposit,
+                               clamp=not self.weave)
         self._wet_values[:, 0] = self._wet
         self._wet_values[:, 1] = self._deposit
         self._read = frame
@@ -324,7 +359,11 @@ class Exporter:
         for kind in kinds:
             values, channels = ((self._rgba.reshape(-1, 4), STAIN_CHANNELS) if kind == "stain"
                                 else (self._wet_values, WET_CHANNELS))
-            extra = {"weave": self.weave[kind]} if kind in self.weave else {}  # none: as without fabrics
+            extra = {}  # none: as without fabrics
+            if self.weave:
+                extra["clip"] = CLIP[kind]
+                if kind in self.weave:
+                    extra["weave"] = self.weave[kind]
             image, overlapping = self.madder.rasterize(self.faces, self.uv, values, self.size, self.padding,
                                                        **extra)
             if self.overlapping is None:  # the same on every frame: the UV layout's

@@ -249,3 +249,44 @@ def test_real_images_hold_the_values_at_texel_centres(tmp_path):
     # wetness 0.15 kg/m² over the reference 0.1 reads as full; deposit 2e-4 / 2e-4 too
     np.testing.assert_allclose(wet[..., 0], 1.0)
     np.testing.assert_allclose(wet[..., 1], 1.0)
+
+
+def test_with_the_weave_a_saturated_stain_shows_every_thread_full_and_a_faint_one_the_weave(tmp_path):
+    """With the weave's detail the exporter reads the fractions unclamped and clips each
+    finished texel (premultiplied: a texel over 1 keeps its colour at coverage 1). A stain
+    at 3–12× its reference is saturated on every thread, gaps included (the uptake's
+    0.74 × 3 is still over 1), in the stain's own colour; one at a tenth of it shows the
+    weave (coverage varying by the uptake's contrast) and stays within [0, 1]."""
+    path = tmp_path / "Flag.fine.madder"
+    writer = madder.CacheWriter(str(path), 4, ["solute", "wetness", "deposit"], 1, 2)
+    for s in (np.array([3.0, 6.0, 9.0, 12.0]), np.array([0.1, 0.1, 0.1, 0.1])):
+        writer.push_frame([(s * 1e-3).astype(np.float32), np.full(4, 0.05, np.float32), np.zeros(4, np.float32)])
+    writer.finish()
+    refs, color = (1e-3, 0.1, 2e-4), (0.5, 0.25, 1.0)
+    corr = madder.fabric_corrector("PLAIN", gaps=True)
+    maps = np.ascontiguousarray(np.repeat((16.0 * np.eye(2))[None], 2, axis=0))
+    weave = {kind: madder.WeaveDetail([corr], np.zeros(2, np.uint32), maps, list(textures.UPTAKE[kind]))
+             for kind in textures.KINDS}
+    out = tmp_path / "images"
+    out.mkdir()
+    ex = textures.Exporter(madder, madder.CacheReader(str(path)), FACES, UV, refs, color, "512", str(out), "Flag",
+                           padding=0, weave=weave)
+    rgba, _ = ex.values(1)
+    assert rgba[:, 3].min() == 3.0  # unclamped
+    # what the exporter writes, rasterized the same way, read back through the binding
+    for frame in (1, 2):
+        ex.values(frame)
+        image, _ = madder.rasterize(FACES, UV, ex._rgba.reshape(-1, 4), 512, 0, weave=weave["stain"],
+                                    clip="premultiplied")
+        a = image[..., 3]
+        if frame == 1:
+            assert a.min() == 1.0 == a.max()
+            np.testing.assert_allclose(image[..., :3], np.broadcast_to(color, image[..., :3].shape), rtol=1e-6)
+        else:
+            assert 0.0 <= a.min() and a.max() <= 1.0
+            assert a.max() / a.min() > 1.3  # the weave: yarn over gap
+    unclipped, _ = madder.rasterize(FACES, UV, np.tile([0.5, 0.25, 1.0, 1.0], (4, 1)).astype(np.float32) * 3, 64, 0,
+                                    weave=weave["stain"])
+    assert unclipped[..., 3].min() > 1.0  # without the clip the values run over 1
+    with pytest.raises(madder.ParameterError, match="clip"):
+        madder.rasterize(FACES, UV, ex._rgba.reshape(-1, 4), 64, 0, clip="over")

@@ -134,3 +134,53 @@ def test_more_than_one_thread_per_texel_is_a_warning_naming_object_and_fabric():
     # the unresolved face is left smooth (zero map), the other kept
     kept = textures.drop_unresolved(maps, 1024)
     assert not kept[0].any() and np.array_equal(kept[1], maps[1])
+
+
+def test_prefiltered_texels_are_close_to_what_a_texel_sees():
+    """At 0.8 cells a texel (a real thread count on a cloth-sized image) a point sample of
+    the weave aliases; the prefiltered corrector's sample must be close to the texel's
+    area mean, computed independently as the 8 × 8 block mean of the same stain rasterized
+    8 times finer (10 texels a cell: resolved). Both measured on the detail alone."""
+    coarse, fine, k = 128, 1024, 50.0  # 50 threads per UV unit: 100 cells, 0.78 a texel
+    faces, uv, pos = square(8)
+    values = stain(pos)
+    positions = np.c_[pos, np.zeros(len(pos))]
+    n = len(faces)
+    maps = np.ascontiguousarray(textures.weave_maps(positions, faces.astype(np.int64), uv, np.full(n, k),
+                                                    np.full(n, 0.3)))
+    base = madder.fabric_corrector("PLAIN", gaps=True)
+    sigma = textures.prefilter_cells(maps, base.cells[0] / base.threads[0], coarse)
+    assert np.all(sigma == sigma[0]) and 0.25 < sigma[0] < 0.6, sigma[:3]
+    filtered = madder.fabric_corrector("PLAIN", gaps=True, filter=float(sigma[0]))
+    assert filtered.filter == sigma[0]
+
+    def image(size, corr):
+        d = madder.WeaveDetail([corr], np.zeros(n, np.uint32), maps, [True] * 4)
+        plain, _ = madder.rasterize(faces, uv, values, size, 0)
+        woven, _ = madder.rasterize(faces, uv, values, size, 0, weave=d)
+        return (woven - plain)[..., 3]
+
+    f = image(fine, base)
+    truth = f.reshape(coarse, 8, coarse, 8).mean(axis=(1, 3))
+    inner = (slice(2, -2), slice(2, -2))  # away from the square's border
+    raw = image(coarse, base)
+    pre = image(coarse, filtered)
+    err_raw = np.sqrt(np.mean((raw - truth)[inner] ** 2))
+    err_pre = np.sqrt(np.mean((pre - truth)[inner] ** 2))
+    spread = np.sqrt(np.mean(truth[inner] ** 2))
+    print(f"detail RMS {spread:.4f}; error against the texel mean: point {err_raw:.4f}, prefiltered {err_pre:.4f}")
+    assert err_pre < 0.5 * err_raw
+    assert err_pre < spread  # and not by flattening everything: the detail stays
+
+
+def test_prefilter_widths_follow_the_texel_footprint():
+    """`prefilter_cells`: half a texel's footprint in cells, two steps per octave, none on
+    faces finer than 1/16 of a cell or without detail."""
+    scale = np.array([0.0, 4.0, 40.0, 400.0, 1000.0])  # threads per UV unit
+    maps = scale[:, None, None] * np.eye(2)
+    s = textures.prefilter_cells(maps, 2.0, 100)
+    want = 0.5 * scale / 100 * 2.0  # cells per texel / 2
+    assert s[0] == 0.0 and s[1] == 0.0  # no map; 0.04 cells, under 1/16
+    for got, w in zip(s[2:], want[2:]):
+        assert abs(np.log2(got) - np.log2(w)) <= 0.25 + 1e-12, (got, w)
+        assert abs(2 * np.log2(got) - round(2 * np.log2(got))) < 1e-12  # on the half-octave grid

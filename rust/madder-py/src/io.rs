@@ -111,9 +111,11 @@ impl CacheReader {
     /// Reads `frame` and fills the playback attributes in place (core `io::attributes`):
     /// `rgba` (4 float32 per vertex: colour × coverage, coverage), `wetness` and `deposit`
     /// (float32 per vertex), each density over its reference (solute, liquid, deposit)
-    /// clamped to [0, 1]. The colour is the cache's `color_r/g/b` fields when it has them,
+    /// clamped to [0, 1] (with `clamp=False` only to ≥ 0: for `rasterize` with the weave's
+    /// detail and `clip`). The colour is the cache's `color_r/g/b` fields when it has them,
     /// else `color`. The buffers must be contiguous float32 of the right lengths.
     #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (frame, references, color, rgba, wetness, deposit, clamp=true))]
     fn read_stain(
         &mut self,
         py: Python<'_>,
@@ -123,6 +125,7 @@ impl CacheReader {
         mut rgba: PyReadwriteArray1<'_, f32>,
         mut wetness: PyReadwriteArray1<'_, f32>,
         mut deposit: PyReadwriteArray1<'_, f32>,
+        clamp: bool,
     ) -> PyResult<()> {
         let n = self.inner.n_vertices();
         let (rgba, wetness, deposit) = (
@@ -145,7 +148,7 @@ impl CacheReader {
             )));
         }
         let inner = &mut self.inner;
-        py.detach(|| inner.read_stain(frame, references, color, rgba, wetness, deposit))
+        py.detach(|| inner.read_stain(frame, references, color, clamp, rgba, wetness, deposit))
             .map_err(to_py)
     }
 

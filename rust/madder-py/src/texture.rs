@@ -149,11 +149,14 @@ impl WeaveDetail {
 /// instead of a new array: a sequence of frames then reuses one buffer (a fresh 2048²
 /// RGBA image is 64 MB of new memory per frame). `weave`, a `WeaveDetail`, adds the
 /// weave's fine scale back on its woven triangles (issue 13 part 4); `None` changes no bit.
+/// `clip`, `"unit"` (each channel into [0, 1]) or `"premultiplied"` (premultiplied colour,
+/// coverage last: a texel over 1 is scaled by its coverage), limits the finished image
+/// (core `texture::clip`): values read unclamped, the detail added, then clipped.
 ///
 /// Raises `ParameterError` for a size out of 1..=16384 or mismatched lengths, `MeshError`
 /// naming the face (and corner) for a vertex index past the values or a non-finite UV.
 #[pyfunction]
-#[pyo3(signature = (faces, uv, values, size, padding=4, *, out=None, threads=None, weave=None))]
+#[pyo3(signature = (faces, uv, values, size, padding=4, *, out=None, threads=None, weave=None, clip=None))]
 #[allow(clippy::type_complexity, clippy::too_many_arguments)]
 pub fn rasterize<'py>(
     py: Python<'py>,
@@ -165,7 +168,18 @@ pub fn rasterize<'py>(
     out: Option<Bound<'py, PyArrayDyn<f32>>>,
     threads: Option<usize>,
     weave: Option<PyRef<'py, WeaveDetail>>,
+    clip: Option<&str>,
 ) -> PyResult<(Bound<'py, PyArrayDyn<f32>>, usize)> {
+    let clip = match clip {
+        None => None,
+        Some("unit") => Some(core::Clip::Unit),
+        Some("premultiplied") => Some(core::Clip::Premultiplied),
+        Some(other) => {
+            return Err(ParameterError::new_err(format!(
+                "clip must be None, 'unit' or 'premultiplied', got {other:?}"
+            )));
+        }
+    };
     let refs: Vec<&madder::weave::Corrector> = weave.as_ref().map_or(Vec::new(), |w| {
         w.correctors.iter().map(|c| c.as_ref()).collect()
     });
@@ -226,6 +240,9 @@ pub fn rasterize<'py>(
                     detail,
                 )?;
                 core::pad_to(pixels, &mut coverage, size, channels, padding);
+                if let Some(mode) = clip {
+                    core::clip(pixels, channels, mode);
+                }
                 Ok::<_, madder::error::TextureError>(n)
             })
             .map_err(to_py)?
@@ -236,6 +253,9 @@ pub fn rasterize<'py>(
         .run(py, || {
             let mut r = core::rasterize_with(&faces, &uv, &values, channels, size, detail)?;
             core::pad(&mut r, padding);
+            if let Some(mode) = clip {
+                core::clip(&mut r.pixels, channels, mode);
+            }
             Ok::<_, madder::error::TextureError>(r)
         })
         .map_err(to_py)?;

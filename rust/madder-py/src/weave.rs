@@ -145,6 +145,11 @@ impl Corrector {
     fn refine(&self) -> usize {
         self.inner.refine()
     }
+    /// The prefilter's standard deviation in cells (0: none).
+    #[getter]
+    fn filter(&self) -> f64 {
+        self.inner.filter()
+    }
     /// `χ_x` (`i = 0`) or `χ_y` (`i = 1`) in tile cells, `(height·refine, width·refine)`
     /// float64, row 0 at the bottom (zero mean).
     fn samples<'py>(&self, py: Python<'py>, i: usize) -> PyResult<Bound<'py, PyArray2<f64>>> {
@@ -178,15 +183,18 @@ impl Corrector {
 
 /// The corrector of a weave (arguments as `fabric_tensor`); cached in the core. A
 /// built-in weave's tile holds its repeat of threads each way (a cell per thread, two
-/// with gaps); a custom grid a thread per cell.
+/// with gaps); a custom grid a thread per cell. `filter` > 0 prefilters it with a
+/// Gaussian of that standard deviation in cells (core `Corrector::filtered`: what a
+/// texel of a given footprint can hold).
 #[pyfunction]
-#[pyo3(signature = (weave, grid=None, coefficients=None, gaps=true))]
+#[pyo3(signature = (weave, grid=None, coefficients=None, gaps=true, filter=0.0))]
 pub fn fabric_corrector(
     py: Python<'_>,
     weave: &str,
     grid: Option<&str>,
     coefficients: Option<[f64; 6]>,
     gaps: bool,
+    filter: f64,
 ) -> PyResult<Corrector> {
     let t = tile(weave, grid, gaps)?;
     let per = if weave_kind(weave)?.is_some() && gaps {
@@ -197,7 +205,14 @@ pub fn fabric_corrector(
     let threads = [t.width() as f64 / per, t.height() as f64 / per];
     let c = self::coefficients(coefficients);
     let inner = py
-        .detach(|| madder::weave::corrector_cached(&t, &c, threads))
+        .detach(|| {
+            let base = madder::weave::corrector_cached(&t, &c, threads)?;
+            if filter == 0.0 {
+                Ok(base)
+            } else {
+                base.filtered(filter).map(Arc::new)
+            }
+        })
         .map_err(to_py)?;
     Ok(Corrector { inner })
 }

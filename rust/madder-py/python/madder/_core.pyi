@@ -213,6 +213,7 @@ def rasterize(
     out: _F32 | None = None,
     threads: int | None = None,
     weave: WeaveDetail | None = None,
+    clip: str | None = None,
 ) -> tuple[_F32, int]: ...
 
 class WeaveDetail:
@@ -249,6 +250,7 @@ class CacheReader:
         rgba: _F32,
         wetness: _F32,
         deposit: _F32,
+        clamp: bool = True,
     ) -> None: ...
     def read(self, frame: int, field: str) -> _F32: ...
     @property
@@ -280,6 +282,7 @@ def fabric_corrector(
     grid: str | None = None,
     coefficients: tuple[float, float, float, float, float, float] | None = None,
     gaps: bool = True,
+    filter: float = 0.0,
 ) -> Corrector: ...
 
 class Corrector:
@@ -289,6 +292,8 @@ class Corrector:
     def threads(self) -> tuple[float, float]: ...
     @property
     def refine(self) -> int: ...
+    @property
+    def filter(self) -> float: ...
     def samples(self, i: int) -> _F64: ...
     def uptake(self) -> _F64: ...
     @property

@@ -419,8 +419,9 @@ impl CacheReader {
     /// The playback attributes of `frame` ([`crate::io::attributes`]) into `rgba` (4 per
     /// vertex), `wetness` and `deposit`, from the fields a bake writes: `solute`,
     /// `wetness`, `deposit`, and `color_r`/`color_g`/`color_b` when it tracked colours
-    /// (else the stain is `colour`). One read and one checksum; no allocation once the
-    /// reader has read a frame.
+    /// (else the stain is `colour`); `clamp` false keeps fractions over 1 (for the weave's
+    /// detail, [`crate::io::attributes`]). One read and one checksum; no allocation once
+    /// the reader has read a frame.
     ///
     /// # Panics
     /// When the buffers' lengths are not `4 × n_vertices`, `n_vertices`, `n_vertices`.
@@ -429,6 +430,7 @@ impl CacheReader {
         frame: i32,
         references: [f32; 3],
         colour: [f32; 3],
+        clamp: bool,
         rgba: &mut [f32],
         wetness: &mut [f32],
         deposit: &mut [f32],
@@ -452,7 +454,17 @@ impl CacheReader {
             Some([r, g, b]) => StainColour::PerVertex([f(r), f(g), f(b)]),
             None => StainColour::Uniform(colour),
         };
-        stain_attributes(f(s), f(w), f(d), colour, references, rgba, wetness, deposit);
+        stain_attributes(
+            f(s),
+            f(w),
+            f(d),
+            colour,
+            references,
+            clamp,
+            rgba,
+            wetness,
+            deposit,
+        );
         self.values = values;
         Ok(())
     }

@@ -23,7 +23,8 @@
 //!
 //! Optionally, [`rasterize_with`] adds the weave's fine scale back while it writes each
 //! texel (`weave.rs`: the two-scale expansion `σ0 + ε χ(x/ε)·∇σ0` and the threads' uptake,
-//! issue 13 part 4; see [`weave`] for the math and why it runs inside the rasterizer).
+//! issue 13 part 4; see [`weave`] for the math and why it runs inside the rasterizer),
+//! and [`clip()`] (`clip.rs`) limits the finished image to what the shader reads.
 //!
 //! ## Image layout
 //! `size × size × C` `f32`, row-major, **row 0 at the bottom** (`v ∈ [0, 1/size)`), as
@@ -43,11 +44,13 @@
 //! [`rasterize`] and [`pad`](fn@pad) run on the current rayon pool (install a pool to cap the
 //! threads) and give the same bits on any number of threads; see each module.
 
+pub mod clip;
 pub mod exr;
 pub mod pad;
 pub mod raster;
 pub mod weave;
 
+pub use self::clip::{Clip, clip};
 pub use self::exr::{Compression, ExrImage, read_exr, write_exr, write_exr_with};
 pub use crate::error::TextureError;
 pub use pad::{DEFAULT_PADDING, pad, pad_to};
