@@ -181,6 +181,6 @@ def test_prefilter_widths_follow_the_texel_footprint():
     s = textures.prefilter_cells(maps, 2.0, 100)
     want = 0.5 * scale / 100 * 2.0  # cells per texel / 2
     assert s[0] == 0.0 and s[1] == 0.0  # no map; 0.04 cells, under 1/16
-    for got, w in zip(s[2:], want[2:]):
+    for got, w in zip(s[2:], want[2:], strict=True):
         assert abs(np.log2(got) - np.log2(w)) <= 0.25 + 1e-12, (got, w)
         assert abs(2 * np.log2(got) - round(2 * np.log2(got))) < 1e-12  # on the half-octave grid

@@ -425,6 +425,7 @@ impl CacheReader {
     ///
     /// # Panics
     /// When the buffers' lengths are not `4 × n_vertices`, `n_vertices`, `n_vertices`.
+    #[allow(clippy::too_many_arguments)]
     pub fn read_stain(
         &mut self,
         frame: i32,
