@@ -11,6 +11,17 @@ from . import bake, bridge, codec, codec_jobs, handlers, images, preview, struct
 from .errors import ExportError, LcsError, MotionCodecError, RelocateError
 
 
+def _undo_during_job(op, event):
+    """True (and a warning) for an undo or redo shortcut while a modal job runs: undo
+    reloads the file's data under the job, whose objects then raise ReferenceError
+    mid-write (other add-ons' modal operators block it the same way). The job's own
+    changes are one undo step once it ends."""
+    if event.type == "Z" and event.value == "PRESS" and (event.ctrl or event.oskey):
+        op.report({"WARNING"}, "Madder: undo waits until the job ends (Esc cancels it)")
+        return True
+    return False
+
+
 def _targets(context, all_objects):
     if all_objects:
         objs = [o for o in context.scene.objects if o.type == "MESH" and o.madder.enabled]
@@ -68,6 +79,8 @@ class MADDER_OT_bake(bpy.types.Operator):
     def modal(self, context, event):
         if event.type == "ESC":
             return self._stop(context, cancelled=True)
+        if _undo_during_job(self, event):
+            return {"RUNNING_MODAL"}
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
         try:
@@ -180,6 +193,8 @@ class MADDER_OT_export_textures(bpy.types.Operator):
             self.report({"WARNING"}, f"Madder: re-export of '{self._job.obj.name}' cancelled; the previous "
                         "images are kept")
             return self._stop(context, {"CANCELLED"})
+        if _undo_during_job(self, event):
+            return {"RUNNING_MODAL"}
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
         job = self._job
@@ -356,6 +371,8 @@ class _StepwiseOperator:
             job.cancel()
             self.report({"WARNING"}, f"Madder: {self._what} of '{job.obj.name}' cancelled; nothing was written")
             return self._stop(context, {"CANCELLED"})
+        if _undo_during_job(self, event):
+            return {"RUNNING_MODAL"}
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
         try:

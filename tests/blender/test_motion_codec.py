@@ -335,7 +335,8 @@ def run_modal(job, events):
     context = type("Context", (), {"window_manager": op, "workspace": op})()
     out = []
     for kind in events:
-        out.append(operators._StepwiseOperator.modal(op, context, type("Event", (), {"type": kind})()))
+        event = type("Event", (), {"type": kind})() if isinstance(kind, str) else kind
+        out.append(operators._StepwiseOperator.modal(op, context, event))
         if out[-1] != {"RUNNING_MODAL"} and out[-1] != {"PASS_THROUGH"}:
             break
     return out, op
@@ -361,6 +362,22 @@ def test_modal_compression_steps_on_timer_and_esc_cancels(flag, tmp_path):
     assert madder.MotionCodec(str(path)).n_frames == n and files(path.parent) == ["flag.madm"]
     assert op.reports[0][0] == {"INFO"} and "bits/vertex/frame" in op.reports[0][1]
     assert scene.frame_current == 4
+
+
+def test_undo_is_held_while_a_modal_job_runs(flag, tmp_path):
+    """Ctrl+Z (Cmd+Z) during a modal run would reload the data under the job: it is
+    swallowed with a warning, the job goes on, and other keys still pass through."""
+    scene, obj = flag
+    path = tmp_path / "flag.madm"
+    obj.madder.motion.path = str(path)
+    undo = type("Event", (), {"type": "Z", "value": "PRESS", "ctrl": True, "oskey": False})()
+    undo_mac = type("Event", (), {"type": "Z", "value": "PRESS", "ctrl": False, "oskey": True})()
+    plain_z = type("Event", (), {"type": "Z", "value": "PRESS", "ctrl": False, "oskey": False})()
+    out, op = run_modal(jobs.CompressJob(scene, obj), ["TIMER", undo, "TIMER", undo_mac, plain_z, "ESC"])
+    assert out == [{"RUNNING_MODAL"}] * 4 + [{"PASS_THROUGH"}, {"CANCELLED"}]
+    assert op._running.done == 2
+    held = ({"WARNING"}, "Madder: undo waits until the job ends (Esc cancels it)")
+    assert op.reports[:2] == [held, held]
 
 
 class _Layout:
