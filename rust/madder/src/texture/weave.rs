@@ -55,6 +55,7 @@
 //!
 //! Measured in `benches/texture.rs` (ARCHITECTURE.md has the figures).
 
+use super::raster::{CLAIMED, INSIDE, MAX_CHANNELS};
 use crate::error::TextureError;
 use crate::weave::Corrector;
 use crate::weave::corrector::Sampler;
@@ -117,18 +118,80 @@ impl WeaveDetail<'_> {
     }
 }
 
-/// One triangle's detail, set up once per triangle: the tile coordinate at texel `(x, y)`
-/// is `base + dx·x + dy·y` (in sample-grid units, cells × the corrector's refinement),
-/// and channel `k`'s gradient in tile cells is `grad[k]`.
-#[derive(Debug, Default)]
-pub(crate) struct TriWeave<'a> {
-    sampler: Option<Sampler<'a>>,
-    uptake: &'a [bool],
+/// `2^64` as an `f64`: tile fractions to 64-bit fixed point.
+const TWO_64: f64 = 18_446_744_073_709_551_616.0;
+
+/// `v` (in tiles) as a 64-bit fixed-point fraction of the tile, wrapped: `frac(v) · 2^64`.
+/// `v − ⌊v⌋` is exact in `f64`; a fraction that rounds up to 1 saturates to `2^64 − 1`, one
+/// unit (`2^-64` tile) from the wrapped 0. Per fabric and map, not per texel.
+fn fixed(v: f64) -> u64 {
+    ((v - v.floor()) * TWO_64) as u64
+}
+
+/// The part of a triangle's detail that depends only on its fabric and map, kept while the
+/// next triangle has the same (most do: one fabric, one map per island or object).
+#[derive(Debug, Clone, Copy)]
+struct MapSetup<'a> {
+    key: (u32, [u64; 4]),
+    sampler: Sampler<'a>,
+    /// `A` (UV → cells), row-major, and `size / det A`
+    a: [f64; 4],
+    inv: f64,
     moment: [f64; 2],
-    base: [f64; 2],
-    dx: [f64; 2],
-    dy: [f64; 2],
-    grad: Vec<[f64; 2]>,
+    /// the tile position of texel `(x, y)`'s centre is `phase + x · step_x + y · step_y`
+    /// (wrapping: the tile repeats), fixed point
+    phase: [u64; 2],
+    step_x: [u64; 2],
+    step_y: [u64; 2],
+}
+
+impl<'a> MapSetup<'a> {
+    fn new(corr: &'a Corrector, key: (u32, [u64; 4]), m: [f64; 4], size: usize) -> Self {
+        let (w, h) = corr.cells();
+        let [tx, ty] = corr.threads();
+        // A = diag(cells per thread) · J: UV → cells; over the tile's cells: UV → tiles
+        let (cx, cy) = (w as f64 / tx, h as f64 / ty);
+        let a = [m[0] * cx, m[1] * cx, m[2] * cy, m[3] * cy];
+        let s = size as f64;
+        // per texel, in tiles: x → (a11, a21) / (w size), y → (a12, a22) / (h size)
+        let dx = [m[0] / tx / s, m[2] / ty / s];
+        let dy = [m[1] / tx / s, m[3] / ty / s];
+        MapSetup {
+            key,
+            sampler: corr.sampler(),
+            a,
+            inv: s / (a[0] * a[3] - a[1] * a[2]),
+            moment: corr.moment(),
+            phase: [0, 1].map(|i| fixed(0.5 * (dx[i] + dy[i]))),
+            step_x: dx.map(fixed),
+            step_y: dy.map(fixed),
+        }
+    }
+}
+
+/// One triangle's detail, set up once per triangle (its map's part once per run of
+/// triangles sharing fabric and map, [`MapSetup`]): the tile position of each texel
+/// centre, and per channel the gradient in tile cells, `g`, and the uptake's offset
+/// `−m·g`, in `f32`.
+#[derive(Debug)]
+pub(crate) struct TriWeave<'a> {
+    map: Option<MapSetup<'a>>,
+    uptake: &'a [bool],
+    g0: [f32; MAX_CHANNELS],
+    g1: [f32; MAX_CHANNELS],
+    offset: [f32; MAX_CHANNELS],
+}
+
+impl Default for TriWeave<'_> {
+    fn default() -> Self {
+        TriWeave {
+            map: None,
+            uptake: &[],
+            g0: [0.0; MAX_CHANNELS],
+            g1: [0.0; MAX_CHANNELS],
+            offset: [0.0; MAX_CHANNELS],
+        }
+    }
 }
 
 impl<'a> TriWeave<'a> {
@@ -149,33 +212,43 @@ impl<'a> TriWeave<'a> {
         if f == NO_WEAVE || zero(&m) || (zero(base) && zero(gx) && zero(gy)) {
             return false;
         }
-        let corr: &'a Corrector = detail.correctors[f as usize];
-        let (w, h) = corr.cells();
-        let [tx, ty] = corr.threads();
-        // A = diag(cells per thread) · J: UV → cells
-        // in sample-grid units: × samples per cell
-        let r = corr.refine() as f64;
-        let (sx, sy) = (r * w as f64 / tx, r * h as f64 / ty);
-        let a = [m[0] * sx, m[1] * sx, m[2] * sy, m[3] * sy];
-        let s = size as f64;
-        self.sampler = Some(corr.sampler());
+        // compared element by element: a whole-array compare spilled `m` to the stack and
+        // read it back in wider words (a store-forwarding stall per triangle)
+        let same = |k: &(u32, [u64; 4])| {
+            k.0 == f
+                && k.1[0] == m[0].to_bits()
+                && k.1[1] == m[1].to_bits()
+                && k.1[2] == m[2].to_bits()
+                && k.1[3] == m[3].to_bits()
+        };
+        let map = match self.map {
+            Some(map) if same(&map.key) => map,
+            _ => {
+                let key = (f, m.map(f64::to_bits));
+                let map = MapSetup::new(detail.correctors[f as usize], key, m, size);
+                self.map = Some(map);
+                map
+            }
+        };
         self.uptake = detail.uptake;
-        self.moment = corr.moment();
-        self.dx = [a[0] / s, a[2] / s];
-        self.dy = [a[1] / s, a[3] / s];
-        self.base = [
-            0.5 * (self.dx[0] + self.dy[0]),
-            0.5 * (self.dx[1] + self.dy[1]),
-        ];
-        // ∇_y = A⁻ᵀ ∇_uv, ∇_uv = size · (g_x, g_y) (A in cells: the grid's A over r)
-        let inv = r * s / (a[0] * a[3] - a[1] * a[2]);
-        self.grad.clear();
-        self.grad.extend(gx.iter().zip(gy).map(|(&gu, &gv)| {
-            [
+        // ∇_y σ0 = A⁻ᵀ ∇_uv σ0, ∇_uv σ0 = size · (g_x, g_y)
+        let (a, inv) = (map.a, map.inv);
+        let it = gx.iter().zip(gy).zip(self.uptake);
+        for (k, ((&gu, &gv), &up)) in it.enumerate() {
+            let g = [
                 (a[3] * gu - a[2] * gv) * inv,
                 (-a[1] * gu + a[0] * gv) * inv,
-            ]
-        }));
+            ];
+            self.g0[k] = g[0] as f32;
+            self.g1[k] = g[1] as f32;
+            // `U σ0 + (χ − m)·g = U σ0 + χ·g − m·g`; without uptake `σ0 + χ·g`
+            let offset = if up {
+                -(map.moment[0] * g[0] + map.moment[1] * g[1])
+            } else {
+                0.0
+            };
+            self.offset[k] = offset as f32;
+        }
         true
     }
 
@@ -183,14 +256,16 @@ impl<'a> TriWeave<'a> {
     /// triangle so that the scan's inner loop holds only per-texel work.
     #[inline(always)]
     pub(crate) fn texels(&self, c: usize) -> Texels<'_> {
+        let map = self.map.expect("texels() after a successful setup()");
         Texels {
-            sampler: self.sampler.expect("texels() after a successful setup()"),
+            sampler: map.sampler,
             uptake: &self.uptake[..c],
-            grad: &self.grad[..c],
-            moment: self.moment,
-            base: self.base,
-            dx: self.dx,
-            dy: self.dy,
+            g0: &self.g0[..c],
+            g1: &self.g1[..c],
+            offset: &self.offset[..c],
+            phase: map.phase,
+            step_x: map.step_x,
+            step_y: map.step_y,
         }
     }
 }
@@ -200,138 +275,141 @@ impl<'a> TriWeave<'a> {
 pub(crate) struct Texels<'s> {
     sampler: Sampler<'s>,
     uptake: &'s [bool],
-    grad: &'s [[f64; 2]],
-    moment: [f64; 2],
-    base: [f64; 2],
-    dx: [f64; 2],
-    dy: [f64; 2],
+    g0: &'s [f32],
+    g1: &'s [f32],
+    offset: &'s [f32],
+    phase: [u64; 2],
+    step_x: [u64; 2],
+    step_y: [u64; 2],
 }
 
-/// A texel a woven triangle covers first, waiting for [`Texels::shade`]: its position
-/// (image coordinates), then its patch and offset in it ([`Sampler::locate`]).
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct Pending {
-    x: u32,
+/// The texels of one row a woven triangle covers first, waiting for [`Texels::shade`]:
+/// row `y`, texels `x0..=x1` (image coordinates), those among them marked
+/// [`CLAIMED`] (the others, if any, belong to an earlier triangle).
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Run {
     y: u32,
-    patch: u32,
-    tx: f32,
-    ty: f32,
+    x0: u32,
+    x1: u32,
 }
 
-impl Pending {
-    /// Texel `(x, y)`, not located yet.
+impl Run {
+    /// Row `y`, texels `x0..=x1`.
     #[inline(always)]
-    pub(crate) fn at(x: usize, y: usize) -> Pending {
-        Pending {
-            x: x as u32,
+    pub(crate) fn new(y: usize, x0: usize, x1: usize) -> Run {
+        Run {
             y: y as u32,
-            patch: 0,
-            tx: 0.0,
-            ty: 0.0,
+            x0: x0 as u32,
+            x1: x1 as u32,
         }
     }
 }
 
 impl Texels<'_> {
-    /// Writes the texels `pending` (image coordinates; `pixels` holds rows from `row0` on,
-    /// `size` texels a row, `c` channels a texel; `C` is `c` when fixed, 0 for any).
-    /// `field` is the rasterizer's `[base, gx, gy]` per channel: `σ0 = (base + gy·y) +
-    /// gx·x`, the same expression (the same bits) as the plain scan.
+    /// The tile position of texel `(x, y)`'s centre, fixed point (wrapped by the integer
+    /// arithmetic itself).
+    #[inline(always)]
+    fn position(&self, x: u32, y: u32) -> [u64; 2] {
+        let (x, y) = (u64::from(x), u64::from(y));
+        [0, 1].map(|i| {
+            self.phase[i]
+                .wrapping_add(self.step_x[i].wrapping_mul(x))
+                .wrapping_add(self.step_y[i].wrapping_mul(y))
+        })
+    }
+
+    /// Writes the claimed texels of `runs` and marks them [`INSIDE`] (image coordinates;
+    /// `pixels` and `coverage` hold rows from `row0` on, `size` texels a row, `c` channels
+    /// a texel; `C` is `c` when fixed, 0 for any). `field` is the rasterizer's `[base,
+    /// gx, gy]` per channel: `σ0 = (base + gy·y) + gx·x`, the same expression (the same
+    /// bits) as the plain scan, rounded to `f32`; the rest in `f32`:
+    /// `U σ0 + χ_x g_x + χ_y g_y − m·g`. Along a run the tile position steps by
+    /// `step_x`, exactly (integers).
     ///
-    /// Separate from the coverage scan on purpose (module doc, "Cost"): first every
-    /// texel's patch, back to back and branch-free, then the reads and the channels.
+    /// Separate from the coverage scan on purpose (module doc, "Cost").
+    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     pub(crate) fn shade<const C: usize>(
         &self,
-        pending: &mut [Pending],
+        runs: &[Run],
         c: usize,
         [base, gx, gy]: [&[f64]; 3],
         pixels: &mut [f32],
+        coverage: &mut [u8],
         row0: usize,
         size: usize,
     ) {
         if C == 0 {
-            return self.shade_any(pending, c, [base, gx, gy], pixels, row0, size);
+            return self.shade_any(runs, c, [base, gx, gy], pixels, coverage, row0, size);
         }
-        // per channel, in registers: the field, the gradient in cells, and the uptake's
-        // part (`U` and `m` on the deposit's channels; 1 and 0 elsewhere, which gives
-        // `σ0 + χ·∇σ0` with the same bits: `1 · s = s`, `χ − 0 = χ`)
+        // per channel, in registers: the field, the gradient in cells, the offset, and
+        // whether the uptake applies (`U` on the deposit's channels; 1 elsewhere)
         let lanes = |v: &[f64]| -> [f64; C] { std::array::from_fn(|k| v[k]) };
         let (base, gx, gy) = (lanes(base), lanes(gx), lanes(gy));
-        let g0: [f64; C] = std::array::from_fn(|k| self.grad[k][0]);
-        let g1: [f64; C] = std::array::from_fn(|k| self.grad[k][1]);
+        let g0: [f32; C] = std::array::from_fn(|k| self.g0[k]);
+        let g1: [f32; C] = std::array::from_fn(|k| self.g1[k]);
+        let offset: [f32; C] = std::array::from_fn(|k| self.offset[k]);
         let up: [bool; C] = std::array::from_fn(|k| self.uptake[k]);
-        let mx: [f64; C] = std::array::from_fn(|k| if up[k] { self.moment[0] } else { 0.0 });
-        let my: [f64; C] = std::array::from_fn(|k| if up[k] { self.moment[1] } else { 0.0 });
-        self.locate_all(pending);
-        for &Pending {
-            x,
-            y,
-            patch,
-            tx,
-            ty,
-        } in pending.iter()
-        {
-            let (chi, u) = self.sampler.eval(patch as usize, tx, ty);
-            let o = ((y as usize - row0) * size + x as usize) * C;
-            let (xf, yf) = (f64::from(x), f64::from(y));
-            let out: &mut [f32; C] = (&mut pixels[o..o + C]).try_into().expect("C values");
-            for k in 0..C {
-                let s = (base[k] + gy[k] * yf) + gx[k] * xf;
-                let uk = if up[k] { u } else { 1.0 };
-                out[k] = (uk * s + (chi[0] - mx[k]) * g0[k] + (chi[1] - my[k]) * g1[k]) as f32;
+        for &Run { y, x0, x1 } in runs {
+            let yf = f64::from(y);
+            let row: [f64; C] = std::array::from_fn(|k| base[k] + gy[k] * yf);
+            let o = (y as usize - row0) * size;
+            let (x0, x1) = (x0 as usize, x1 as usize);
+            let cov = &mut coverage[o + x0..=o + x1];
+            let pix = &mut pixels[(o + x0) * C..(o + x1 + 1) * C];
+            let mut p = self.position(x0 as u32, y);
+            let mut xf = x0 as f64;
+            for (m, out) in cov.iter_mut().zip(pix.chunks_exact_mut(C)) {
+                if *m == CLAIMED {
+                    *m = INSIDE;
+                    let (i, tx, ty) = self.sampler.locate(p);
+                    let (chi, u) = self.sampler.eval(i, tx, ty);
+                    for k in 0..C {
+                        let s = (row[k] + gx[k] * xf) as f32;
+                        let uk = if up[k] { u } else { 1.0 };
+                        out[k] = uk * s + chi[0] * g0[k] + chi[1] * g1[k] + offset[k];
+                    }
+                }
+                p = [
+                    p[0].wrapping_add(self.step_x[0]),
+                    p[1].wrapping_add(self.step_x[1]),
+                ];
+                xf += 1.0;
             }
         }
     }
 
-    /// Finds every pending texel's patch and offset ([`Sampler::locate`]), in place, back
-    /// to back: independent, branch-free iterations.
-    #[inline(always)]
-    fn locate_all(&self, pending: &mut [Pending]) {
-        for t in pending {
-            let (x, y) = (f64::from(t.x), f64::from(t.y));
-            let p = [
-                self.base[0] + self.dx[0] * x + self.dy[0] * y,
-                self.base[1] + self.dx[1] * x + self.dy[1] * y,
-            ];
-            let (i, tx, ty) = self.sampler.locate(p);
-            (t.patch, t.tx, t.ty) = (i as u32, tx, ty);
-        }
-    }
-
-    /// [`Texels::shade`] for any number of channels.
+    /// [`Texels::shade`] for any number of channels (the same arithmetic per channel).
+    #[allow(clippy::too_many_arguments)]
     fn shade_any(
         &self,
-        pending: &mut [Pending],
+        runs: &[Run],
         c: usize,
         [base, gx, gy]: [&[f64]; 3],
         pixels: &mut [f32],
+        coverage: &mut [u8],
         row0: usize,
         size: usize,
     ) {
         let (base, gx, gy) = (&base[..c], &gx[..c], &gy[..c]);
-        let m = self.moment;
-        self.locate_all(pending);
-        for &Pending {
-            x,
-            y,
-            patch,
-            tx,
-            ty,
-        } in pending.iter()
-        {
-            let (chi, u) = self.sampler.eval(patch as usize, tx, ty);
-            let o = ((y as usize - row0) * size + x as usize) * c;
-            let (xf, yf) = (f64::from(x), f64::from(y));
-            let out = &mut pixels[o..o + c];
-            for k in 0..c {
-                let s = (base[k] + gy[k] * yf) + gx[k] * xf;
-                let g = self.grad[k];
-                out[k] = if self.uptake[k] {
-                    u * s + (chi[0] - m[0]) * g[0] + (chi[1] - m[1]) * g[1]
-                } else {
-                    s + chi[0] * g[0] + chi[1] * g[1]
-                } as f32;
+        for &Run { y, x0, x1 } in runs {
+            let yf = f64::from(y);
+            let o = (y as usize - row0) * size;
+            for x in x0..=x1 {
+                let m = &mut coverage[o + x as usize];
+                if *m != CLAIMED {
+                    continue;
+                }
+                *m = INSIDE;
+                let (i, tx, ty) = self.sampler.locate(self.position(x, y));
+                let (chi, u) = self.sampler.eval(i, tx, ty);
+                let xf = f64::from(x);
+                let out = &mut pixels[(o + x as usize) * c..][..c];
+                for k in 0..c {
+                    let s = ((base[k] + gy[k] * yf) + gx[k] * xf) as f32;
+                    let uk = if self.uptake[k] { u } else { 1.0 };
+                    out[k] = uk * s + chi[0] * self.g0[k] + chi[1] * self.g1[k] + self.offset[k];
+                }
             }
         }
     }
