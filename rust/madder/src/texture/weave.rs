@@ -134,10 +134,11 @@ fn fixed(v: f64) -> u64 {
 struct MapSetup<'a> {
     key: (u32, [u64; 4]),
     sampler: Sampler<'a>,
-    /// `A` (UV → cells), row-major, and `size / det A`
-    a: [f64; 4],
-    inv: f64,
-    moment: [f64; 2],
+    /// `size · A⁻ᵀ` (A: UV → cells), row-major: the rasterizer's per-texel gradient to
+    /// the gradient in tile cells; and `−mᵀ size A⁻ᵀ`, the uptake's offset `−m·g` from
+    /// the same per-texel gradient
+    grad: [f64; 4],
+    offset: [f64; 2],
     /// the tile position of texel `(x, y)`'s centre is `phase + x · step_x + y · step_y`
     /// (wrapping: the tile repeats), fixed point
     phase: [u64; 2],
@@ -146,6 +147,8 @@ struct MapSetup<'a> {
 }
 
 impl<'a> MapSetup<'a> {
+    #[cold]
+    #[inline(never)]
     fn new(corr: &'a Corrector, key: (u32, [u64; 4]), m: [f64; 4], size: usize) -> Self {
         let (w, h) = corr.cells();
         let [tx, ty] = corr.threads();
@@ -156,12 +159,18 @@ impl<'a> MapSetup<'a> {
         // per texel, in tiles: x → (a11, a21) / (w size), y → (a12, a22) / (h size)
         let dx = [m[0] / tx / s, m[2] / ty / s];
         let dy = [m[1] / tx / s, m[3] / ty / s];
+        // size · A⁻ᵀ = size / det A · [[a22, −a21], [−a12, a11]]
+        let inv = s / (a[0] * a[3] - a[1] * a[2]);
+        let grad = [a[3] * inv, -a[2] * inv, -a[1] * inv, a[0] * inv];
+        let m = corr.moment();
         MapSetup {
             key,
             sampler: corr.sampler(),
-            a,
-            inv: s / (a[0] * a[3] - a[1] * a[2]),
-            moment: corr.moment(),
+            grad,
+            offset: [
+                -(m[0] * grad[0] + m[1] * grad[2]),
+                -(m[0] * grad[1] + m[1] * grad[3]),
+            ],
             phase: [0, 1].map(|i| fixed(0.5 * (dx[i] + dy[i]))),
             step_x: dx.map(fixed),
             step_y: dy.map(fixed),
@@ -170,35 +179,20 @@ impl<'a> MapSetup<'a> {
 }
 
 /// One triangle's detail, set up once per triangle (its map's part once per run of
-/// triangles sharing fabric and map, [`MapSetup`]): the tile position of each texel
-/// centre, and per channel the gradient in tile cells, `g`, and the uptake's offset
-/// `−m·g`, in `f32`.
-#[derive(Debug)]
+/// triangles sharing fabric and map, [`MapSetup`]).
+#[derive(Debug, Default)]
 pub(crate) struct TriWeave<'a> {
     map: Option<MapSetup<'a>>,
     uptake: &'a [bool],
-    g0: [f32; MAX_CHANNELS],
-    g1: [f32; MAX_CHANNELS],
-    offset: [f32; MAX_CHANNELS],
-}
-
-impl Default for TriWeave<'_> {
-    fn default() -> Self {
-        TriWeave {
-            map: None,
-            uptake: &[],
-            g0: [0.0; MAX_CHANNELS],
-            g1: [0.0; MAX_CHANNELS],
-            offset: [0.0; MAX_CHANNELS],
-        }
-    }
 }
 
 impl<'a> TriWeave<'a> {
     /// Sets up triangle `t` from the rasterizer's per-texel field `base + gx·x + gy·y`
     /// (one of each per channel); false when the face has no detail, or when its field is
     /// zero in every channel (the detail of 0 is exactly 0: most of a frame is unstained).
-    #[inline]
+    /// The per-channel part (the gradient in cells) is left to [`Texels::shade`], where
+    /// the channel count is a constant and the values stay in registers.
+    #[inline(always)]
     pub(crate) fn setup(
         &mut self,
         detail: &WeaveDetail<'a>,
@@ -221,34 +215,11 @@ impl<'a> TriWeave<'a> {
                 && k.1[2] == m[2].to_bits()
                 && k.1[3] == m[3].to_bits()
         };
-        let map = match self.map {
-            Some(map) if same(&map.key) => map,
-            _ => {
-                let key = (f, m.map(f64::to_bits));
-                let map = MapSetup::new(detail.correctors[f as usize], key, m, size);
-                self.map = Some(map);
-                map
-            }
-        };
-        self.uptake = detail.uptake;
-        // ∇_y σ0 = A⁻ᵀ ∇_uv σ0, ∇_uv σ0 = size · (g_x, g_y)
-        let (a, inv) = (map.a, map.inv);
-        let it = gx.iter().zip(gy).zip(self.uptake);
-        for (k, ((&gu, &gv), &up)) in it.enumerate() {
-            let g = [
-                (a[3] * gu - a[2] * gv) * inv,
-                (-a[1] * gu + a[0] * gv) * inv,
-            ];
-            self.g0[k] = g[0] as f32;
-            self.g1[k] = g[1] as f32;
-            // `U σ0 + (χ − m)·g = U σ0 + χ·g − m·g`; without uptake `σ0 + χ·g`
-            let offset = if up {
-                -(map.moment[0] * g[0] + map.moment[1] * g[1])
-            } else {
-                0.0
-            };
-            self.offset[k] = offset as f32;
+        if !self.map.as_ref().is_some_and(|map| same(&map.key)) {
+            let key = (f, m.map(f64::to_bits));
+            self.map = Some(MapSetup::new(detail.correctors[f as usize], key, m, size));
         }
+        self.uptake = detail.uptake;
         true
     }
 
@@ -260,9 +231,8 @@ impl<'a> TriWeave<'a> {
         Texels {
             sampler: map.sampler,
             uptake: &self.uptake[..c],
-            g0: &self.g0[..c],
-            g1: &self.g1[..c],
-            offset: &self.offset[..c],
+            grad: map.grad,
+            offset: map.offset,
             phase: map.phase,
             step_x: map.step_x,
             step_y: map.step_y,
@@ -275,9 +245,8 @@ impl<'a> TriWeave<'a> {
 pub(crate) struct Texels<'s> {
     sampler: Sampler<'s>,
     uptake: &'s [bool],
-    g0: &'s [f32],
-    g1: &'s [f32],
-    offset: &'s [f32],
+    grad: [f64; 4],
+    offset: [f64; 2],
     phase: [u64; 2],
     step_x: [u64; 2],
     step_y: [u64; 2],
@@ -306,6 +275,31 @@ impl Run {
 }
 
 impl Texels<'_> {
+    /// Per channel, the gradient in tile cells, `g = A⁻ᵀ ∇_uv σ0` (`∇_uv σ0 = size ·
+    /// (g_x, g_y)`), and the uptake's offset `−m·g` (0 without uptake: `U σ0 + (χ − m)·g
+    /// = U σ0 + χ·g − m·g`), rounded to `f32`: `[g_x, g_y, offset]`, each one lane a
+    /// channel (so that `C` channels are a few vector operations).
+    #[inline(always)]
+    fn gradients<const C: usize>(
+        &self,
+        gu: [f64; C],
+        gv: [f64; C],
+        up: [bool; C],
+    ) -> [[f32; C]; 3] {
+        let (g, o) = (self.grad, self.offset);
+        let mut out = [[0.0f32; C]; 3];
+        for k in 0..C {
+            out[0][k] = (g[0] * gu[k] + g[1] * gv[k]) as f32;
+            out[1][k] = (g[2] * gu[k] + g[3] * gv[k]) as f32;
+            out[2][k] = if up[k] {
+                (o[0] * gu[k] + o[1] * gv[k]) as f32
+            } else {
+                0.0
+            };
+        }
+        out
+    }
+
     /// The tile position of texel `(x, y)`'s centre, fixed point (wrapped by the integer
     /// arithmetic itself).
     #[inline(always)]
@@ -344,28 +338,42 @@ impl Texels<'_> {
         }
         // per channel, in registers: the field, the gradient in cells, the offset, and
         // whether the uptake applies (`U` on the deposit's channels; 1 elsewhere)
-        let lanes = |v: &[f64]| -> [f64; C] { std::array::from_fn(|k| v[k]) };
-        let (base, gx, gy) = (lanes(base), lanes(gx), lanes(gy));
-        let g0: [f32; C] = std::array::from_fn(|k| self.g0[k]);
-        let g1: [f32; C] = std::array::from_fn(|k| self.g1[k]);
-        let offset: [f32; C] = std::array::from_fn(|k| self.offset[k]);
-        let up: [bool; C] = std::array::from_fn(|k| self.uptake[k]);
+        // (plain loops: `array::from_fn` over a closure was left a call per triangle)
+        let (mut b, mut x, mut y) = ([0.0f64; C], [0.0f64; C], [0.0f64; C]);
+        let mut up = [false; C];
+        for k in 0..C {
+            (b[k], x[k], y[k], up[k]) = (base[k], gx[k], gy[k], self.uptake[k]);
+        }
+        let (base, gx, gy) = (b, x, y);
+        let [g0, g1, offset] = self.gradients(gx, gy, up);
+        let mut gx32 = [0.0f32; C];
+        for k in 0..C {
+            gx32[k] = gx[k] as f32;
+        }
         for &Run { y, x0, x1 } in runs {
             let yf = f64::from(y);
-            let row: [f64; C] = std::array::from_fn(|k| base[k] + gy[k] * yf);
+            let mut row = [0.0f64; C];
+            for k in 0..C {
+                row[k] = base[k] + gy[k] * yf;
+            }
             let o = (y as usize - row0) * size;
             let (x0, x1) = (x0 as usize, x1 as usize);
             let cov = &mut coverage[o + x0..=o + x1];
             let pix = &mut pixels[(o + x0) * C..(o + x1 + 1) * C];
             let mut p = self.position(x0 as u32, y);
-            let mut xf = x0 as f64;
+            // σ0 at the run's first texel as the plain scan has it, then along the run
+            let mut s0 = [0.0f32; C];
+            for k in 0..C {
+                s0[k] = (row[k] + gx[k] * x0 as f64) as f32;
+            }
+            let mut d = 0.0f32;
             for (m, out) in cov.iter_mut().zip(pix.chunks_exact_mut(C)) {
                 if *m == CLAIMED {
                     *m = INSIDE;
                     let (i, tx, ty) = self.sampler.locate(p);
                     let (chi, u) = self.sampler.eval(i, tx, ty);
                     for k in 0..C {
-                        let s = (row[k] + gx[k] * xf) as f32;
+                        let s = s0[k] + gx32[k] * d;
                         let uk = if up[k] { u } else { 1.0 };
                         out[k] = uk * s + chi[0] * g0[k] + chi[1] * g1[k] + offset[k];
                     }
@@ -374,7 +382,7 @@ impl Texels<'_> {
                     p[0].wrapping_add(self.step_x[0]),
                     p[1].wrapping_add(self.step_x[1]),
                 ];
-                xf += 1.0;
+                d += 1.0;
             }
         }
     }
@@ -392,6 +400,11 @@ impl Texels<'_> {
         size: usize,
     ) {
         let (base, gx, gy) = (&base[..c], &gx[..c], &gy[..c]);
+        let mut g = [[0.0f32; 3]; MAX_CHANNELS];
+        for k in 0..c {
+            let [g0, g1, offset] = self.gradients([gx[k]], [gy[k]], [self.uptake[k]]);
+            g[k] = [g0[0], g1[0], offset[0]];
+        }
         for &Run { y, x0, x1 } in runs {
             let yf = f64::from(y);
             let o = (y as usize - row0) * size;
@@ -403,12 +416,13 @@ impl Texels<'_> {
                 *m = INSIDE;
                 let (i, tx, ty) = self.sampler.locate(self.position(x, y));
                 let (chi, u) = self.sampler.eval(i, tx, ty);
-                let xf = f64::from(x);
+                let d = (x - x0) as f32;
                 let out = &mut pixels[(o + x as usize) * c..][..c];
                 for k in 0..c {
-                    let s = ((base[k] + gy[k] * yf) + gx[k] * xf) as f32;
+                    let s0 = ((base[k] + gy[k] * yf) + gx[k] * f64::from(x0)) as f32;
+                    let s = s0 + gx[k] as f32 * d;
                     let uk = if self.uptake[k] { u } else { 1.0 };
-                    out[k] = uk * s + chi[0] * self.g0[k] + chi[1] * self.g1[k] + self.offset[k];
+                    out[k] = uk * s + chi[0] * g[k][0] + chi[1] * g[k][1] + g[k][2];
                 }
             }
         }

@@ -91,9 +91,10 @@ pub struct Corrector {
     threads: [f64; 2],
     upper: Tensor2,
     /// per patch `(p, q)` of the sample grid (row-major): the bilinear coefficients
-    /// `c0 + c1 t_x + c2 t_y + c3 t_x t_y` of `χ_x` (0..4) and `χ_y` (4..8), and the uptake
-    /// of the cell holding it (8): one read per texel, in `f32` (the image's precision;
-    /// half the cache of `f64`)
+    /// `(c0 + c1 t_x) + t_y (c2 + c3 t_x)` of `χ_x` and `χ_y`, interleaved as `[c0x, c0y,
+    /// c2x, c2y, c1x, c1y, c3x, c3y]` (so that [`Sampler::eval`] is two 4-lane steps), and
+    /// the uptake of the cell holding it (8): one read per texel, in `f32` (the image's
+    /// precision; half the cache of `f64`)
     patches: Vec<[f32; 9]>,
 }
 
@@ -142,9 +143,12 @@ impl Sampler<'_> {
     pub(crate) fn eval(&self, i: usize, tx: f32, ty: f32) -> ([f32; 2], f32) {
         // `i` comes from `locate`, within the grid
         let c = &self.patches[i];
-        let x = c[0] + tx * c[1] + ty * (c[2] + tx * c[3]);
-        let y = c[4] + tx * c[5] + ty * (c[6] + tx * c[7]);
-        ([x, y], c[8])
+        // [c0 + c1 t_x, c2 + c3 t_x] for χ_x and χ_y at once, then along t_y
+        let mut w = [0.0f32; 4];
+        for l in 0..4 {
+            w[l] = c[l] + tx * c[4 + l];
+        }
+        ([w[0] + ty * w[2], w[1] + ty * w[3]], c[8])
     }
 }
 
@@ -211,8 +215,9 @@ impl Corrector {
                     let [v00, v10, v01, v11] =
                         [q * gw + p, q * gw + p1, q1 * gw + p, q1 * gw + p1].map(|k| x[k]);
                     let b = [v00, v10 - v00, v01 - v00, v11 - v10 - v01 + v00];
-                    for (o, v) in c[4 * i..4 * i + 4].iter_mut().zip(b) {
-                        *o = v as f32;
+                    // c0 → 0, c1 → 4, c2 → 2, c3 → 6; χ_x, χ_y side by side
+                    for (slot, v) in [0, 4, 2, 6].into_iter().zip(b) {
+                        c[slot + i] = v as f32;
                     }
                 }
                 c[8] = uptake[(q / r) * width + p / r] as f32;
