@@ -192,7 +192,23 @@ impl Woven {
     }
 }
 
-fn bench(l: &Load, size: usize, threads: usize) {
+/// The detail's cost on one load and thread count: with / without, best wall and CPU
+/// time, for the typical frame and the dense one.
+struct Ratios {
+    typical: (f64, Option<f64>),
+    dense: (f64, Option<f64>),
+}
+
+fn ratio(a: &Timing, b: &Timing) -> (f64, Option<f64>) {
+    let cpu = a
+        .cpu
+        .zip(b.cpu)
+        .filter(|(_, y)| *y > 0.0)
+        .map(|(x, y)| x / y);
+    (a.best / b.best, cpu)
+}
+
+fn bench(l: &Load, size: usize, threads: usize) -> Ratios {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
@@ -251,7 +267,11 @@ fn bench(l: &Load, size: usize, threads: usize) {
                 r.overlapping
             );
         }
-    });
+        Ratios {
+            typical: ratio(&woven, &fresh),
+            dense: ratio(&dense_woven, &dense),
+        }
+    })
 }
 
 fn bench_exr(l: &Load, size: usize) {
@@ -426,6 +446,7 @@ fn main() {
         return;
     }
     let coarse = load("coarse", 140);
+    let mut summary = Vec::new();
     for l in [&fine, &coarse] {
         println!(
             "{}: {} triangles, {} vertices",
@@ -434,8 +455,21 @@ fn main() {
             l.stain.len() / CHANNELS
         );
         for threads in [1, cores] {
-            bench(l, size, threads);
+            summary.push((l.name, threads, bench(l, size, threads)));
         }
+    }
+    // issue 13's budget: the detail at most 1.5× the rasterization without it
+    println!("weave detail / plain rasterization, {size}², best wall (CPU time):");
+    let show = |(w, c): (f64, Option<f64>)| match c {
+        Some(c) => format!("{w:.2}× ({c:.2}×)"),
+        None => format!("{w:.2}×"),
+    };
+    for (name, threads, r) in &summary {
+        println!(
+            "  {name:>6}, {threads} thread(s): typical frame {}, every texel stained {}",
+            show(r.typical),
+            show(r.dense)
+        );
     }
     println!("EXR (fine load, padded; {cores} cores):");
     bench_exr(&fine, size);

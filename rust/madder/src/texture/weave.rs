@@ -30,28 +30,46 @@
 //!
 //! # Cost
 //!
-//! Per covered texel of a woven face: the tile coordinate (affine, 4 multiply-adds), one
-//! bilinear read of both correctors and the uptake (one 36-byte `f32` entry of a table of
-//! at most 4096 patches, 37 kB for a plain weave with gaps), and 2 multiply-adds per
-//! channel. Triangles whose field is zero in every channel skip it (the detail of 0 is 0).
+//! Per covered texel of a woven face: the tile position (two integer adds), the patch
+//! and the offset in it (one integer product per axis), one bilinear read of both
+//! correctors and the uptake (one 36-byte `f32` entry of a table of at most 4096
+//! patches, 37 kB for a plain weave with gaps), and a multiply-add per channel and term,
+//! in `f32`. Triangles whose field is zero in every channel skip it (the detail of 0 is
+//! 0).
 //!
-//! How the texel pass is laid out for speed (same arithmetic, same bits as the first,
-//! per-texel version; checked on 2048² frames):
+//! How the texel pass is laid out for speed:
 //!
-//! - **Two phases per triangle.** The coverage scan only records the texels the triangle
-//!   writes first ([`Pending`]); [`Texels::shade`] then runs through them: first every
-//!   texel's patch and offset ([`Sampler::locate`], branch-free), then the reads and the
-//!   channels. Interleaved, each texel's dependent chain (coordinate → wrap → index →
-//!   table read → channels) sat between the scan's unpredictable branches; as a batch,
-//!   the texels overlap.
-//! - **Per-triangle constants hoisted** ([`TriWeave::texels`], [`Sampler`]): the table,
-//!   the grid sizes and their inverses (a division per texel before), the uptake's `U`
-//!   and `m` per channel as values (1 and 0 on non-deposit channels: `1 · s = s` and
-//!   `χ − 0 = χ` exactly, so no per-channel branch and no change of bits).
-//! - **No float-to-integer casts** in the loop: Rust's `as` saturates (NaN and range
-//!   checks per conversion); the floor and the index come from adding `1.5 · 2^52`
-//!   (exact for the `|x| < 2^51` that arise) and the patch is clamped into the grid in
-//!   floating point, so the table index is in range by construction.
+//! - **Two phases per triangle.** The coverage scan only marks the texels the triangle
+//!   covers first ([`super::raster::CLAIMED`]) and keeps, per row, the span between the
+//!   first and the last ([`Run`]); [`Texels::shade`] then walks the spans. (Shading
+//!   inside the scan, on each texel as it is claimed, measured no faster.)
+//! - **The tile position in 64-bit fixed point**, as the fraction of the tile along each
+//!   axis (`p / 2^64`): the texel centre `(x, y)` is `phase + x · step_x + y · step_y`
+//!   with wrapping integer arithmetic, so the tile's periodic wrap is the integers' own
+//!   overflow (no floor, no modulo) and along a span the position steps by one add,
+//!   exactly (the same bits as the product). The patch is the high word of `p · n` (`n`
+//!   samples along the axis: always inside the grid) and the offset in it the low word's
+//!   24 high bits, exact in `f32`. The steps are the per-texel map `A / size` in tiles,
+//!   wrapped, from the `f64` they are computed in (relative error 2⁻⁵³): over 16384
+//!   texels the position is off by at most ~2⁻⁴⁰ of a tile, the order of the `f64`
+//!   arithmetic it replaces (a texel lands on the other side of a cell edge, and takes
+//!   the other cell's uptake, only if its centre lies within ~10⁻¹⁰ samples of it).
+//! - **The channels in `f32`**: `σ0` as the plain scan has it (the same `f64` expression)
+//!   at the span's first texel, rounded once, then `σ0 + g_x d` in `f32` along the
+//!   span; `U σ0 + χ_x g_x + χ_y g_y − m·g` with the gradient in cells `g` and the
+//!   offset `−m·g` per channel rounded to `f32` per triangle (from a per-map matrix
+//!   `size · A⁻ᵀ`). Four channels are then one 4-lane SSE2 vector per operation (the
+//!   compiler vectorizes the fixed-count kernel; the any-count one does the same
+//!   arithmetic channel by channel, the same bits). Against the `f64` arithmetic this
+//!   moves a value by a few `f32` roundings: at most 2.4·10⁻⁷ on 2048² frames of three
+//!   meshes × three fabrics (`MADDER_BENCH_BITS` in the bench), 10³ times below a
+//!   half-float step at 1 (the EXR output) and 10⁴ below an 8-bit step.
+//! - **Per-map constants kept** ([`MapSetup`]): the fixed-point steps, the gradient
+//!   matrix and the uptake's offset depend only on the fabric and the face's map, and
+//!   are recomputed only when they change from one triangle to the next.
+//! - **The table** interleaves `χ_x` and `χ_y` (`[c0x, c0y, c2x, c2y, c1x, c1y, c3x,
+//!   c3y, U]`): both bilinear forms are the same 4-lane expression (the compiler
+//!   currently still evaluates it lane by lane; the loads are contiguous either way).
 //!
 //! Measured in `benches/texture.rs` (ARCHITECTURE.md has the figures).
 

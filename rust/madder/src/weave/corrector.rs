@@ -92,7 +92,7 @@ pub struct Corrector {
     upper: Tensor2,
     /// per patch `(p, q)` of the sample grid (row-major): the bilinear coefficients
     /// `(c0 + c1 t_x) + t_y (c2 + c3 t_x)` of `χ_x` and `χ_y`, interleaved as `[c0x, c0y,
-    /// c2x, c2y, c1x, c1y, c3x, c3y]` (so that [`Sampler::eval`] is two 4-lane steps), and
+    /// c2x, c2y, c1x, c1y, c3x, c3y]` ([`Sampler::eval`]: one 4-lane expression), and
     /// the uptake of the cell holding it (8): one read per texel, in `f32` (the image's
     /// precision; half the cache of `f64`)
     patches: Vec<[f32; 9]>,
