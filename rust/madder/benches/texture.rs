@@ -36,10 +36,25 @@ struct Load {
 }
 
 fn load(name: &'static str, n: usize) -> Load {
+    load_jittered(name, n, 0.0)
+}
+
+/// [`load`] with the interior vertices moved by a smooth displacement of up to `jitter`
+/// grid steps (irregular triangles of every orientation; none flips for `jitter < ½`).
+fn load_jittered(name: &'static str, n: usize, jitter: f64) -> Load {
     let idx = |i: usize, j: usize| (i * (n + 1) + j) as u32;
     let pos = |v: u32| {
         let (i, j) = (v as usize / (n + 1), v as usize % (n + 1));
-        [j as f64 / n as f64, i as f64 / n as f64]
+        let (x, y) = (j as f64 / n as f64, i as f64 / n as f64);
+        let inner = if i == 0 || j == 0 || i == n || j == n || 2 * j == n {
+            0.0
+        } else {
+            jitter / n as f64
+        };
+        [
+            x + inner * (7.3 * x + 3.1 * y).sin(),
+            y + inner * (5.9 * x - 8.7 * y).cos(),
+        ]
     };
     let mut faces = Vec::with_capacity(2 * n * n);
     for i in 0..n {
@@ -177,7 +192,23 @@ impl Woven {
     }
 }
 
-fn bench(l: &Load, size: usize, threads: usize) {
+/// The detail's cost on one load and thread count: with / without, best wall and CPU
+/// time, for the typical frame and the dense one.
+struct Ratios {
+    typical: (f64, Option<f64>),
+    dense: (f64, Option<f64>),
+}
+
+fn ratio(a: &Timing, b: &Timing) -> (f64, Option<f64>) {
+    let cpu = a
+        .cpu
+        .zip(b.cpu)
+        .filter(|(_, y)| *y > 0.0)
+        .map(|(x, y)| x / y);
+    (a.best / b.best, cpu)
+}
+
+fn bench(l: &Load, size: usize, threads: usize) -> Ratios {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
@@ -236,7 +267,11 @@ fn bench(l: &Load, size: usize, threads: usize) {
                 r.overlapping
             );
         }
-    });
+        Ratios {
+            typical: ratio(&woven, &fresh),
+            dense: ratio(&dense_woven, &dense),
+        }
+    })
 }
 
 fn bench_exr(l: &Load, size: usize) {
@@ -267,6 +302,77 @@ fn bench_exr(l: &Load, size: usize) {
         }
     }
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `MADDER_BENCH_BITS=dir`: rasterizes with the weave's detail the fine, coarse and a
+/// jittered mesh, each with three fabrics (plain with gaps at 30°, twill 2/1 with gaps at
+/// −73°, satin without gaps at 11°, about half a thread per texel) and both fields (4
+/// channels, uptake on RGB, off on A), on 2 threads. Writes each image's `f32`s to `dir`
+/// when the file is absent; otherwise compares with it and prints the largest absolute
+/// difference (and the largest relative to the value), for checking that a change of the
+/// texel pass moves the bits by no more than it says.
+fn bits(dir: &std::path::Path, fine: &Load, size: usize) {
+    std::fs::create_dir_all(dir).unwrap();
+    let coarse = load("coarse", 140);
+    let jitter = load_jittered("jitter", 300, 0.35);
+    let fabrics = [
+        (Weave::Plain, true, 2.0, 30.0, 1000.0),
+        (Weave::Twill21, true, 3.0, -73.0, 900.0),
+        (Weave::Satin5, false, 5.0, 11.0, 1100.0),
+    ];
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap();
+    let mut worst = (0.0f64, 0.0f64);
+    for l in [fine, &coarse, &jitter] {
+        for (weave, gaps, threads, angle, k) in fabrics {
+            let corr = Corrector::of_tile(
+                &Tile::builtin(weave, gaps),
+                &PairCoefficients::default(),
+                [threads; 2],
+            )
+            .unwrap();
+            let (c, s) = (f64::to_radians(angle).cos(), f64::to_radians(angle).sin());
+            let map = vec![[k * c, k * s, -k * s, k * c]; l.faces.len()];
+            let fabric = vec![0u32; l.faces.len()];
+            let cs = [&corr];
+            let detail = WeaveDetail {
+                correctors: &cs,
+                face_fabric: &fabric,
+                face_map: &map,
+                uptake: &[true, true, true, false],
+            };
+            for (what, values) in [("stain", &l.stain), ("dense", &l.dense)] {
+                let r = pool.install(|| {
+                    texture::rasterize_with(&l.faces, &l.uv, values, CHANNELS, size, Some(&detail))
+                        .unwrap()
+                });
+                let name = format!("{}-{weave:?}-{what}-{size}.f32", l.name);
+                let path = dir.join(&name);
+                let bytes: Vec<u8> = r.pixels.iter().flat_map(|x| x.to_le_bytes()).collect();
+                let Ok(old) = std::fs::read(&path) else {
+                    std::fs::write(&path, bytes).unwrap();
+                    println!("  {name}: written");
+                    continue;
+                };
+                let (mut abs, mut rel, mut differ) = (0.0f64, 0.0f64, 0usize);
+                for (a, b) in old.chunks_exact(4).zip(bytes.chunks_exact(4)) {
+                    let a = f32::from_le_bytes(a.try_into().unwrap()) as f64;
+                    let b = f32::from_le_bytes(b.try_into().unwrap()) as f64;
+                    let d = (a - b).abs();
+                    differ += usize::from(d > 0.0);
+                    abs = abs.max(d);
+                    rel = rel.max(d / a.abs().max(1e-30));
+                }
+                println!(
+                    "  {name}: {differ} values differ, max |Δ| {abs:.3e}, max |Δ|/|value| {rel:.3e}"
+                );
+                worst = (worst.0.max(abs), worst.1.max(rel));
+            }
+        }
+    }
+    println!("largest |Δ| {:.3e}, relative {:.3e}", worst.0, worst.1);
 }
 
 fn main() {
@@ -333,7 +439,14 @@ fn main() {
         });
         return;
     }
+    // MADDER_BENCH_BITS=dir: the detail's images for three meshes × three fabrics × two
+    // fields, written to dir the first time, compared with what dir holds after
+    if let Some(dir) = std::env::var_os("MADDER_BENCH_BITS") {
+        bits(std::path::Path::new(&dir), &fine, size);
+        return;
+    }
     let coarse = load("coarse", 140);
+    let mut summary = Vec::new();
     for l in [&fine, &coarse] {
         println!(
             "{}: {} triangles, {} vertices",
@@ -342,8 +455,21 @@ fn main() {
             l.stain.len() / CHANNELS
         );
         for threads in [1, cores] {
-            bench(l, size, threads);
+            summary.push((l.name, threads, bench(l, size, threads)));
         }
+    }
+    // issue 13's budget: the detail at most 1.5× the rasterization without it
+    println!("weave detail / plain rasterization, {size}², best wall (CPU time):");
+    let show = |(w, c): (f64, Option<f64>)| match c {
+        Some(c) => format!("{w:.2}× ({c:.2}×)"),
+        None => format!("{w:.2}×"),
+    };
+    for (name, threads, r) in &summary {
+        println!(
+            "  {name:>6}, {threads} thread(s): typical frame {}, every texel stained {}",
+            show(r.typical),
+            show(r.dense)
+        );
     }
     println!("EXR (fine load, padded; {cores} cores):");
     bench_exr(&fine, size);

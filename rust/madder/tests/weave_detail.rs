@@ -6,6 +6,9 @@
 //!   the harmonic / arithmetic means;
 //! - `⟨(e_i + ∇χ_i)ᵀ a (e_j + ∇χ_j)⟩` from the stored corrector equals the primal bound of
 //!   the same discretization, and lies in the homogenization's bracket;
+//! - every texel is the two-scale formula `U σ0 + (χ − m)·∇_y σ0` (and `σ0 + χ·∇_y σ0`
+//!   without uptake) evaluated in `f64` from the corrector's own `chi` and `uptake_at`
+//!   at the texel centre's tile coordinate (a turned map, negative tile coordinates);
 //! - the detail integrates to zero over whole tiles (mass within 1e-6) with a gradient and
 //!   the uptake contrast;
 //! - absent where the stain is flat with no uptake contrast (equal to the plain raster);
@@ -235,6 +238,84 @@ fn detail_integrates_to_zero(corr: &Corrector) {
         };
         assert!(diff > least, "channel {k}: {diff}");
     }
+}
+
+/// The texel pass (fixed-point tile position, `f32` table and channels) against the formula
+/// evaluated independently in `f64` at each texel centre: `y = A uv` with `A = diag(w /
+/// t_x, h / t_y) J` in cells, `∇_y σ0 = A⁻ᵀ ∇_uv σ0` for a field linear in UV, `χ(y)` by
+/// [`Corrector::chi`], `U(y)` by [`Corrector::uptake_at`]. A turned weave at a thread count
+/// that puts no texel centre on a cell edge; tile coordinates of both signs.
+#[test]
+fn texels_are_the_two_scale_formula() {
+    let corr = Corrector::of_tile(
+        &Tile::builtin(Weave::Twill21, true),
+        &PairCoefficients::default(),
+        [3.0, 3.0],
+    )
+    .unwrap();
+    let (faces, uv, pos) = square(6);
+    // σ0 = a + b u + c v per channel
+    let lin = [[0.4, 0.3, -0.2], [0.7, -0.25, 0.15]];
+    let values: Vec<f32> = pos
+        .iter()
+        .flat_map(|p| lin.map(|[a, b, c]| (a + b * p[0] + c * p[1]) as f32))
+        .collect();
+    let (cs, sn) = (37f64.to_radians().cos(), 37f64.to_radians().sin());
+    let k = 23.7;
+    let j = [k * cs, k * sn, -k * sn, k * cs];
+    let map = vec![j; faces.len()];
+    let fabric = vec![0u32; faces.len()];
+    let corrs = [&corr];
+    let detail = WeaveDetail {
+        correctors: &corrs,
+        face_fabric: &fabric,
+        face_map: &map,
+        uptake: &[true, false],
+    };
+    let size = 160;
+    let r = rasterize_with(&faces, &uv, &values, 2, size, Some(&detail)).unwrap();
+    let (w, h) = corr.cells();
+    let [tx, ty] = corr.threads();
+    let a = [
+        j[0] * w as f64 / tx,
+        j[1] * w as f64 / tx,
+        j[2] * h as f64 / ty,
+        j[3] * h as f64 / ty,
+    ];
+    let det = a[0] * a[3] - a[1] * a[2];
+    let m = corr.moment();
+    let (mut worst, mut texels, mut negative) = (0.0f64, 0, 0);
+    for y in 0..size {
+        for x in 0..size {
+            if r.coverage[y * size + x] == 0 {
+                continue;
+            }
+            texels += 1;
+            let u = [
+                (x as f64 + 0.5) / size as f64,
+                (y as f64 + 0.5) / size as f64,
+            ];
+            let t = [a[0] * u[0] + a[1] * u[1], a[2] * u[0] + a[3] * u[1]];
+            negative += usize::from(t[0] < 0.0 || t[1] < 0.0);
+            let chi = corr.chi(t);
+            let big_u = corr.uptake_at(t);
+            for (ch, [a0, b, c]) in lin.into_iter().enumerate() {
+                let s0 = a0 + b * u[0] + c * u[1];
+                // A⁻ᵀ (b, c)
+                let g = [(a[3] * b - a[2] * c) / det, (-a[1] * b + a[0] * c) / det];
+                let want = if ch == 0 {
+                    big_u * s0 + (chi[0] - m[0]) * g[0] + (chi[1] - m[1]) * g[1]
+                } else {
+                    s0 + chi[0] * g[0] + chi[1] * g[1]
+                };
+                let got = f64::from(r.texel(x, y)[ch]);
+                worst = worst.max((got - want).abs());
+            }
+        }
+    }
+    println!("{texels} texels ({negative} at negative tile coordinates): max |Δ| {worst:e}");
+    assert!(texels > 20_000 && negative > 5_000, "{texels}, {negative}");
+    assert!(worst < 2e-6, "max |Δ| {worst:e}");
 }
 
 #[test]

@@ -48,7 +48,7 @@
 
 use rayon::prelude::*;
 
-use super::weave::{Pending, TriWeave, WeaveDetail};
+use super::weave::{Run, TriWeave, WeaveDetail};
 use crate::error::TextureError;
 
 /// The largest image side accepted: 16384 texels (a 16384² RGBA float image is 4 GiB).
@@ -67,6 +67,11 @@ pub const OVERLAP: u8 = 2;
 /// Coverage mask value: the texel lies outside every triangle and took its value from
 /// [`pad`](fn@super::pad).
 pub const PADDED: u8 = 3;
+
+/// Coverage mask value while a woven triangle is being scanned: the texels it covers first,
+/// waiting for [`super::weave::Texels::shade`], which makes them [`INSIDE`]. Never left in
+/// a finished raster.
+pub(crate) const CLAIMED: u8 = u8::MAX;
 
 /// Sub-texel steps per texel of the snapped coverage grid.
 pub const SUB_TEXEL: i64 = 256;
@@ -469,7 +474,6 @@ fn fill<'w>(
                 gy: vec![0.0; c],
                 rowv: vec![0.0; c],
                 tw: TriWeave::default(),
-                pending: Vec::new(),
             };
             match c {
                 1 => band.triangles::<1>(ctx, list),
@@ -498,9 +502,6 @@ struct Band<'a, 'w> {
     rowv: Vec<f64>,
     /// the weave detail of the triangle being scanned (module [`super::weave`])
     tw: TriWeave<'w>,
-    /// the texels the woven triangle being scanned covers first, `[x, y]`, shaded after
-    /// its scan ([`super::weave::Texels::shade`])
-    pending: Vec<Pending>,
 }
 
 /// The arithmetic of the edge functions: `f64` on the fast path (exact, see the module
@@ -713,12 +714,15 @@ impl<'w> Band<'_, 'w> {
             gy,
             rowv,
             tw,
-            pending,
             ..
         } = self;
         let (base, gx, gy, rowv) = (&base[..c], &gx[..c], &gy[..c], &mut rowv[..c]);
         // the triangle's weave kernel, once (W: set up by `triangles`)
         let woven = W.then(|| tw.texels(c));
+        // woven: per row, the span of the texels it covers first (marked CLAIMED), shaded
+        // after the scan; a triangle meets at most BAND_ROWS rows of the band
+        let mut runs = [Run::default(); BAND_ROWS];
+        let mut n_runs = 0;
         let mut over = 0;
         let mut row_e = e;
         let n = x1 + 1 - x0;
@@ -733,16 +737,20 @@ impl<'w> Band<'_, 'w> {
             let [mut e0, mut e1, mut e2] = row_e;
             let mut xf = x0 as f64;
             let mut entered = false;
+            // woven: the first and last texel of the row claimed (none while first > last)
+            let (mut first, mut last) = (n, 0);
             for (i, (m, out)) in cov.iter_mut().zip(pix.chunks_exact_mut(c)).enumerate() {
                 // one branch, not three (the outcome is hard to predict on small triangles)
                 let inside = (e0 > zero) & (e1 > zero) & (e2 > zero);
                 if inside {
                     entered = true;
                     if *m == EMPTY {
-                        *m = INSIDE;
                         if W {
-                            pending.push(Pending::at(x0 + i, y));
+                            *m = CLAIMED;
+                            first = first.min(i);
+                            last = i;
                         } else {
+                            *m = INSIDE;
                             for k in 0..c {
                                 out[k] = (rowv[k] + gx[k] * xf) as f32;
                             }
@@ -760,11 +768,15 @@ impl<'w> Band<'_, 'w> {
                 e2 = e2 + dx[2];
                 xf += 1.0;
             }
+            if W && first <= last {
+                runs[n_runs] = Run::new(y, x0 + first, x0 + last);
+                n_runs += 1;
+            }
             row_e = [row_e[0] + dy[0], row_e[1] + dy[1], row_e[2] + dy[2]];
         }
         if let Some(kernel) = &woven {
-            kernel.shade::<C>(pending, c, [base, gx, gy], pixels, *row0, size);
-            pending.clear();
+            let runs = &runs[..n_runs];
+            kernel.shade::<C>(runs, c, [base, gx, gy], pixels, coverage, *row0, size);
         }
         *overlapping += over;
     }

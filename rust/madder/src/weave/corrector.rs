@@ -130,12 +130,11 @@ pub struct Corrector {
     /// the prefilter's standard deviation in cells (0: none; [`Corrector::filtered`])
     filter: f64,
     /// per patch `(p, q)` of the sample grid (row-major): the bilinear coefficients
-    /// `c0 + c1 t_x + c2 t_y + c3 t_x t_y` of `χ_x` (0..4) and `χ_y` (4..8), and the uptake
-    /// of the cell holding it (8): one read per texel, in `f32` (the image's precision;
-    /// half the cache of `f64`)
+    /// `(c0 + c1 t_x) + t_y (c2 + c3 t_x)` of `χ_x` and `χ_y`, interleaved as `[c0x, c0y,
+    /// c2x, c2y, c1x, c1y, c3x, c3y]` ([`Sampler::eval`]: one 4-lane expression), and
+    /// the uptake of the cell holding it (8): one read per texel, in `f32` (the image's
+    /// precision; half the cache of `f64`)
     patches: Vec<[f32; 9]>,
-    /// `1 / (w r)`, `1 / (h r)`: the sample grid's inverse sizes, for [`Sampler`]
-    grid_inv: [f64; 2],
 }
 
 /// `⌊x⌋` for `|x| < 2^63` without a library call (`f64::floor` is one on baseline x86-64).
@@ -145,66 +144,50 @@ fn floor(x: f64) -> f64 {
     if t > x { t - 1.0 } else { t }
 }
 
-/// `1.5 · 2^52`: adding and removing it rounds an `f64` below `2^51` in magnitude to the
-/// nearest integer, and the sum's low bits are that integer plus `2^51`.
-const MAGIC: f64 = 6_755_399_441_055_744.0;
-
-/// `⌊x⌋` for `|x| < 2^51`, inline and without branches (the rounding of [`MAGIC`], one
-/// less where it rounded up). Beyond `2^51` samples the tile coordinate holds no fraction
-/// at all; the result is then an integer near `x`, and the caller's index clamp keeps
-/// the read in the table.
-#[inline(always)]
-fn floor_fast(x: f64) -> f64 {
-    let r = (x + MAGIC) - MAGIC;
-    r - f64::from(u8::from(r > x))
-}
-
-/// An integer-valued `x` in `[0, 2^51)` as an index, read off the bits of `x + MAGIC` (a
-/// float-to-integer `as` cast adds range and NaN checks per texel). The caller's clamp
-/// keeps `x` in the table: the index is always in range.
-#[inline(always)]
-fn index(x: f64) -> usize {
-    (x + MAGIC).to_bits().wrapping_sub(MAGIC.to_bits()) as usize
-}
-
 /// The texel pass's view of a [`Corrector`] (`Corrector::sampler`): the patch table and
-/// its grid, with the per-texel constants (sizes, their inverses) computed once per
-/// triangle instead of at every texel.
+/// its grid. The texel pass gives tile coordinates in 64-bit fixed point, as the
+/// fraction of the tile (`p / 2^64` along each axis): the tile's periodic wrap is then the
+/// integers' own, and the patch and the offset in it are the high and low words of one
+/// product by the grid size.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Sampler<'a> {
     patches: &'a [[f32; 9]],
-    n: [f64; 2],
-    inv: [f64; 2],
+    n: [u64; 2],
+    width: usize,
 }
 
+/// `2^-24`: the offset in a patch keeps the 24 high bits of its fraction (an `f32`'s
+/// precision near 1).
+const OFFSET_UNIT: f32 = 1.0 / 16_777_216.0;
+
 impl Sampler<'_> {
-    /// The patch holding `g` (sample-grid units) and the offset in it: `g` is wrapped into
-    /// the tile, `q = g − n ⌊g / n⌋` (within `[0, n]` up to rounding: the patch index is
-    /// clamped into the grid), and split into the patch `⌊q⌋` (its index in the table,
-    /// always in range) and the offset `q − ⌊q⌋`, in `f32`. No branch: a batch of texels
-    /// runs through this back to back.
+    /// The patch holding the tile position `p` (fixed point: `p[i] / 2^64` of the tile
+    /// along axis `i`, already wrapped into `[0, 1)` by construction) and the offset in
+    /// it: `p · n / 2^64` is the position in samples, its integer part the patch (always
+    /// inside the grid: `p < 2^64`) and its fraction the offset, rounded down to a multiple
+    /// of `2^-24` (exact in `f32`). No branch, no float-to-integer conversion.
     #[inline(always)]
-    pub(crate) fn locate(&self, g: [f64; 2]) -> (usize, f32, f32) {
-        let qx = g[0] - self.n[0] * floor_fast(g[0] * self.inv[0]);
-        let qy = g[1] - self.n[1] * floor_fast(g[1] * self.inv[1]);
-        // the patch, clamped into the grid in floating point (a q rounded a hair below 0
-        // reads patch 0, one rounded up to n the last patch; the offset is not clamped):
-        // ⌊clamp(q, 0, n − 1)⌋ = clamp(⌊q⌋, 0, n − 1), integers held exactly
-        let ix = floor_fast(qx.max(0.0).min(self.n[0] - 1.0));
-        let iy = floor_fast(qy.max(0.0).min(self.n[1] - 1.0));
-        let (tx, ty) = ((qx - ix) as f32, (qy - iy) as f32);
-        (index(iy * self.n[0] + ix), tx, ty)
+    pub(crate) fn locate(&self, p: [u64; 2]) -> (usize, f32, f32) {
+        let wx = u128::from(p[0]) * u128::from(self.n[0]);
+        let wy = u128::from(p[1]) * u128::from(self.n[1]);
+        let (ix, iy) = ((wx >> 64) as usize, (wy >> 64) as usize);
+        // the offset's top 24 bits: below 2^24, exact through i32 to f32
+        let off = |w: u128| ((w as u64) >> 40) as i32 as f32 * OFFSET_UNIT;
+        (iy * self.width + ix, off(wx), off(wy))
     }
 
     /// `((χ_x, χ_y), U)` at offset `(tx, ty)` in patch `i` (from [`Sampler::locate`]): the
     /// patch's bilinear coefficients, evaluated in `f32`.
     #[inline(always)]
-    pub(crate) fn eval(&self, i: usize, tx: f32, ty: f32) -> ([f64; 2], f64) {
+    pub(crate) fn eval(&self, i: usize, tx: f32, ty: f32) -> ([f32; 2], f32) {
         // `i` comes from `locate`, within the grid
         let c = &self.patches[i];
-        let x = c[0] + tx * c[1] + ty * (c[2] + tx * c[3]);
-        let y = c[4] + tx * c[5] + ty * (c[6] + tx * c[7]);
-        ([f64::from(x), f64::from(y)], f64::from(c[8]))
+        // [c0 + c1 t_x, c2 + c3 t_x] for χ_x and χ_y at once, then along t_y
+        let mut w = [0.0f32; 4];
+        for l in 0..4 {
+            w[l] = c[l] + tx * c[4 + l];
+        }
+        ([w[0] + ty * w[2], w[1] + ty * w[3]], c[8])
     }
 }
 
@@ -267,7 +250,6 @@ impl Corrector {
         });
         Ok(Corrector {
             patches,
-            grid_inv: [1.0 / gw as f64, 1.0 / gh as f64],
             width,
             height,
             refine: r,
@@ -403,11 +385,10 @@ impl Corrector {
     /// The texel pass's view of the corrector ([`Sampler`]).
     pub(crate) fn sampler(&self) -> Sampler<'_> {
         let (gw, gh) = (self.width * self.refine, self.height * self.refine);
-        let n = [gw as f64, gh as f64];
         Sampler {
             patches: &self.patches,
-            n,
-            inv: self.grid_inv,
+            n: [gw as u64, gh as u64],
+            width: gw,
         }
     }
 
@@ -439,8 +420,8 @@ impl Corrector {
 }
 
 /// The texel pass's table: per patch `v = q gw + p` of the periodic `gw × gh` sample grid,
-/// the bilinear coefficients of `χ_x` (0..4) and `χ_y` (4..8) between its four corners
-/// and its uptake `uptake(v)` (8), in `f32`.
+/// the bilinear coefficients of `χ_x` and `χ_y` between its four corners, interleaved as
+/// [`Corrector`]'s `patches` says, and its uptake `uptake(v)` (8), in `f32`.
 fn patch_table(
     chi: &[Vec<f64>; 2],
     gw: usize,
@@ -456,8 +437,9 @@ fn patch_table(
                 let [v00, v10, v01, v11] =
                     [q * gw + p, q * gw + p1, q1 * gw + p, q1 * gw + p1].map(|k| x[k]);
                 let b = [v00, v10 - v00, v01 - v00, v11 - v10 - v01 + v00];
-                for (o, v) in c[4 * i..4 * i + 4].iter_mut().zip(b) {
-                    *o = v as f32;
+                // c0 → 0, c1 → 4, c2 → 2, c3 → 6; χ_x, χ_y side by side
+                for (slot, v) in [0, 4, 2, 6].into_iter().zip(b) {
+                    c[slot + i] = v as f32;
                 }
             }
             c[8] = uptake(v) as f32;
