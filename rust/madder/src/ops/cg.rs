@@ -86,11 +86,12 @@
 //! scaling; a colour read as colour mass over solute is then exactly the poured one, which
 //! `tests/detail.rs` checks to 1e-9; the Galerkin `α` alone is `c` only to the tolerance).
 //! It costs two sparse products and a few dot products (about one iteration), and it is CG
-//! with another start, so each column still stops at its own tolerance. On the flag the density iterations fell from 35.5 to 11.4
-//! per sub-step at 1e-9 (solvent 6–10, solute 4–6, colours 0), and the results moved by
-//! 7.5e-8 of the stain's peak (f32 read-out). The columns then run one after the other (the
-//! velocity's solve runs beside them, `rayon::join` in the stepper); sequential, so the
-//! result does not depend on the thread count.
+//! with another start, so each column still stops at its own tolerance. On the flag the
+//! density iterations fell from 35.5 to 11.4 per sub-step at 1e-9 (solvent 6–10, solute
+//! 4–6, colours 0), and the results moved by 7.5e-8 of the stain's peak (f32 read-out).
+//! The columns then run one after the other (the velocity's solve runs beside them,
+//! `rayon::join` in the stepper); sequential, so the result does not depend on the thread
+//! count.
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::matrix_free::conjugate_gradient::{
@@ -329,11 +330,6 @@ impl WarmCg {
     /// Sets the relative residual tolerance (clamped as in [`Self::with_tolerance`]).
     pub fn set_tolerance(&mut self, tolerance: f64) {
         self.tolerance = tolerance.clamp(1e-14, 1e-4);
-    }
-
-    /// The relative residual tolerance.
-    pub fn tolerance(&self) -> f64 {
-        self.tolerance
     }
 
     /// The same solver with another preconditioner: for benchmarks and tests that compare
