@@ -8,6 +8,9 @@
 //! 1M-vertex cloth with the same vertex spacing (the grid scaled by 3.17 in both
 //! directions, so the stain covers the same vertices and the rest of the cloth is dry):
 //! the ratio of the per-frame times and the 1M simulator's construction time.
+//!
+//! On the 100k flag it also steps the default CG tolerances beside the former tight ones
+//! and prints the largest difference of the outputs (`against_tight_solves`).
 
 mod common;
 
@@ -96,11 +99,74 @@ fn main() {
         return;
     }
     let (_, small) = bench(407, 245, 12, 1.0); // ≈ 100k vertices
+    against_tight_solves(407, 245, 12);
     // ≈ 1M vertices at the 100k grid's spacing: the same stain on a cloth 10× the area
     let (setup, large) = bench(1290, 775, 12, 1290.0 / 407.0);
     println!(
         "cost follows the stain: the same pour on 1M vertices (same spacing) {large:.1} ms/frame = {:.2}× the 100k cloth's {small:.1} (target ≤ 2×); 1M construction {setup:.0} ms (target ≤ 1000)",
         large / small
+    );
+}
+
+/// What the CG tolerances change (issue 16): the same run with the default tolerances and
+/// with the former 1e-9 (densities) / 1e-8 (velocity), stepped side by side; prints the
+/// largest difference of any vertex's wetness and solute density over the frames,
+/// relative to the field's peak (an 8-bit channel resolves 3.9e-3), and the iterations.
+fn against_tight_solves(nx: usize, ny: usize, frames: usize) {
+    let (topo, rest) = grid(nx, ny);
+    let dt = 1.0 / 24.0;
+    let make = || {
+        let mut sim = Simulator::new(
+            topo.clone(),
+            &rest,
+            &wave(&rest, 0.0),
+            Conductivity::default(),
+            StainParams::default(),
+            [0.4, 0.05, 0.1],
+            Par::Seq,
+        )
+        .unwrap();
+        sim.add_liquid(&pour(&rest), 0.05, None).unwrap();
+        sim
+    };
+    let (mut loose, mut tight) = (make(), make());
+    tight.set_solver_tolerances(1e-9, 1e-8);
+    let cloth = motion(&rest, frames, dt);
+    let (mut dw, mut ds, mut pw, mut ps) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    for f in 1..=frames {
+        for sim in [&mut loose, &mut tight] {
+            sim.step(&cloth[f], dt, Some(&cloth[f + 1])).unwrap();
+        }
+        let pairs = [
+            (loose.wetness(), tight.wetness(), &mut dw, &mut pw),
+            (
+                loose.solute_density(),
+                tight.solute_density(),
+                &mut ds,
+                &mut ps,
+            ),
+        ];
+        for (a, b, d, peak) in pairs {
+            for (x, y) in a.iter().zip(&b) {
+                *d = d.max((x - y).abs());
+                *peak = peak.max(y.abs());
+            }
+        }
+    }
+    let it = |sim: &Simulator| {
+        let p = sim.profile();
+        let k = p.substeps as f64;
+        (
+            p.density_iterations as f64 / k,
+            p.velocity_iterations as f64 / k,
+        )
+    };
+    let ((ld, lv), (td, tv)) = (it(&loose), it(&tight));
+    println!(
+        "{:>7} vertices, {frames} frames, default CG tolerances against 1e-9/1e-8: largest difference over the frames {:.1e} of the peak wetness, {:.1e} of the peak solute density (8-bit step 3.9e-3); CG iterations per sub-step, densities {ld:.1} vs {td:.1}, velocity {lv:.1} vs {tv:.1}",
+        topo.n_vertices(),
+        dw / pw,
+        ds / ps,
     );
 }
 
