@@ -384,12 +384,74 @@ struct Link {
     corners: [u8; 2],
 }
 
+/// What a walk reads of a face it crosses into, in one 128-byte record (module doc,
+/// "The walk in barycentric coordinates"): per edge `k` (opposite corner `k`) the
+/// neighbour's far corner in this face's barycentric coordinates, the orthogonal map of
+/// the neighbour's chart into this one, the neighbour and how its corners line up.
+#[derive(Debug, Clone, Copy)]
+#[repr(C, align(128))]
+struct Hop {
+    /// `(1/γ_k, γ_{k+1}/γ_k)` for the neighbour's far corner `G = Σ_m γ_m c_m` (`γ_k < 0`;
+    /// `γ_{k+2}/γ_k = 1/γ_k − 1 − γ_{k+1}/γ_k`).
+    far: [[f64; 2]; 3],
+    /// The first column `(a, b)` of the orthogonal map of the neighbour's chart into this
+    /// face's; the second is `σ (−b, a)`, `σ = −1` for a reflection (bit 4 of `code`).
+    rot: [[f64; 2]; 3],
+    /// The neighbour across edge `k` (`NONE`: border, non-manifold edge, or a degenerate
+    /// neighbour, where a walk stops).
+    nbr: [u32; 3],
+    /// Bits 0–1: the edge's index `l` in the neighbour (its far corner); bits 2–3: the
+    /// neighbour's corner at this face's corner `k + 1`; bit 4: the map is a reflection.
+    code: [u8; 3],
+}
+
+/// An orthogonal map of the plane `[[a, −σb], [b, σa]]` (a rotation, or a reflection for
+/// `σ = −1`), as a walk composes them.
+#[derive(Debug, Clone, Copy)]
+struct Orth {
+    a: f64,
+    b: f64,
+    sigma: f64,
+}
+
+impl Orth {
+    const IDENTITY: Self = Self {
+        a: 1.0,
+        b: 0.0,
+        sigma: 1.0,
+    };
+
+    /// `self ∘ (a, b, σ)`.
+    fn then(self, [a, b]: [f64; 2], sigma: f64) -> Self {
+        Self {
+            a: self.a * a - self.sigma * self.b * b,
+            b: self.b * a + self.sigma * self.a * b,
+            sigma: self.sigma * sigma,
+        }
+    }
+
+    fn mat(self) -> DMat2 {
+        DMat2::from_cols(
+            DVec2::new(self.a, self.b),
+            self.sigma * DVec2::new(-self.b, self.a),
+        )
+    }
+}
+
+/// `(k + 1) % 3`, `(k + 2) % 3`.
+const NEXT: [usize; 3] = [1, 2, 0];
+const PREV: [usize; 3] = [2, 0, 1];
+
 /// The triangles' charts at `t0` and their neighbours: what the walks need.
 #[derive(Debug, Clone)]
 pub struct Charts {
     face: Vec<FaceChart>,
-    /// Per face and edge (opposite corner `k`), the neighbour's unfolding.
-    link: Vec<[Link; 3]>,
+    /// The input's face of each face here (the faces are stored in a space-filling order,
+    /// module doc, "Memory"), and the inverse permutation.
+    order: Vec<u32>,
+    rank: Vec<u32>,
+    /// Per face, what a walk crossing into it reads.
+    hop: Vec<Hop>,
     /// A face at every vertex and the vertex's corner in it (`u32::MAX` for a loose vertex).
     vertex_face: Vec<(u32, u8)>,
     /// The flat mesh's plane and buckets, if the mesh is flat ([`super::planar`]).
@@ -412,6 +474,30 @@ struct FaceFrame {
     v: DVec3,
 }
 
+impl FaceFrame {
+    /// The map of a displacement `d` in a chart that `rot` maps this face's chart into, to
+    /// barycentric rates `(ḃ_1, ḃ_2)` here: `ḃ_2 = d'_y / c_{2,y}`,
+    /// `ḃ_1 = (d'_x − ḃ_2 c_{2,x}) / c_{1,x}` of `d' = rotᵀ d` (zero on a degenerate face,
+    /// where a walk does not move).
+    fn to_bary(&self, rot: DMat2) -> DMat2 {
+        let c1x = self.e1.dot(self.u);
+        if c1x == 0.0 {
+            return DMat2::ZERO;
+        }
+        let (c2x, c2y) = (self.e2.dot(self.u), self.e2.dot(self.v));
+        let (i1, i2) = (1.0 / c1x, 1.0 / c2y);
+        // rows (ḃ_1, ḃ_2) of [[1/c1x, −c2x/(c1x c2y)], [0, 1/c2y]]
+        let local = DMat2::from_cols(DVec2::new(i1, 0.0), DVec2::new(-c2x * i1 * i2, i2));
+        local * rot.transpose()
+    }
+}
+
+/// The barycentric displacement `(−ḃ_1 − ḃ_2, ḃ_1, ḃ_2)` of `d` by the map `to_bary`.
+fn bary_step(to_bary: DMat2, d: DVec2) -> DVec3 {
+    let b = to_bary * d;
+    DVec3::new(-b.x - b.y, b.x, b.y)
+}
+
 /// No neighbour (border or non-manifold edge) / no face (loose vertex).
 const NONE: u32 = u32::MAX;
 
@@ -419,7 +505,14 @@ impl Charts {
     /// Charts of `topology` at `positions` (the shape at `t0`).
     pub fn new(topology: &Topology, positions: &[DVec3]) -> Result<Self, MeshError> {
         check_positions(topology, positions)?;
-        let faces = topology.faces();
+        let order = space_filling_order(topology.faces(), positions);
+        let mut rank = vec![0u32; order.len()];
+        for (i, &f) in order.iter().enumerate() {
+            rank[f as usize] = i as u32;
+        }
+        // the faces in the walks' order (module doc, "Memory")
+        let faces: Vec<[u32; 3]> = order.iter().map(|&f| topology.faces()[f as usize]).collect();
+        let faces = &faces[..];
         let chart: Vec<[f64; 3]> = faces
             .par_iter()
             .map(|tri| {
@@ -437,7 +530,7 @@ impl Charts {
         let mut edge_faces: Vec<Vec<(u32, u8)>> = vec![Vec::new(); topology.n_edges()];
         for (f, fe) in topology.face_edges().iter().enumerate() {
             for (k, &e) in fe.iter().enumerate() {
-                edge_faces[e as usize].push((f as u32, k as u8));
+                edge_faces[e as usize].push((rank[f], k as u8));
             }
         }
         let mut neighbour = vec![[(NONE, 0u8); 3]; faces.len()];
@@ -446,10 +539,11 @@ impl Charts {
             neighbour[f as usize][k as usize] = (g, l);
             neighbour[g as usize][l as usize] = (f, k);
         }
+        // at each vertex its first face in the input's order (the order changes no result)
         let mut vertex_face = vec![(NONE, 0u8); topology.n_vertices()];
-        for (f, tri) in faces.iter().enumerate().rev() {
+        for (f, tri) in topology.faces().iter().enumerate().rev() {
             for (c, &v) in tri.iter().enumerate() {
-                vertex_face[v as usize] = (f as u32, c as u8);
+                vertex_face[v as usize] = (rank[f], c as u8);
             }
         }
         let face = (0..faces.len())
@@ -462,7 +556,9 @@ impl Charts {
             .collect();
         let mut charts = Self {
             face,
-            link: Vec::new(),
+            order,
+            rank,
+            hop: Vec::new(),
             vertex_face,
             planar: None,
             frame: faces
@@ -481,9 +577,9 @@ impl Charts {
                 })
                 .collect(),
         };
-        charts.link = (0..faces.len())
+        charts.hop = (0..faces.len())
             .into_par_iter()
-            .map(|f| std::array::from_fn(|k| charts.link_across(f, k)))
+            .map(|f| charts.hop_of(f))
             .collect();
         if charts.face.iter().all(|f| f.chart[0] != 0.0) {
             charts.planar = Planar::new(topology, positions);
@@ -505,7 +601,7 @@ impl Charts {
 
     /// The vertices of face `f`.
     pub(crate) fn face_verts(&self, f: usize) -> [u32; 3] {
-        self.face[f].verts
+        self.face[self.rank[f] as usize].verts
     }
 
     /// The unfolding of the neighbour across edge `k` of face `f` into `f`'s chart.
@@ -540,6 +636,39 @@ impl Charts {
         }
     }
 
+    /// The record [`Hop`] of face `f`, from the unfoldings of its neighbours.
+    fn hop_of(&self, f: usize) -> Hop {
+        let mut hop = Hop {
+            far: [[0.0; 2]; 3],
+            rot: [[1.0, 0.0]; 3],
+            nbr: [NONE; 3],
+            code: [0; 3],
+        };
+        for k in 0..3 {
+            let here = &self.face[f];
+            let (g, l) = (here.nbr[k], here.nbr_edge[k] as usize);
+            if g == NONE || here.chart[0] == 0.0 || self.face[g as usize].chart[0] == 0.0 {
+                continue;
+            }
+            let link = self.link_across(f, k);
+            let far = link.rot * self.corners(g as usize)[l] + link.shift;
+            let Some(gamma) = self.bary(f, far) else {
+                continue;
+            };
+            if gamma[k] >= 0.0 || !gamma.is_finite() {
+                // the neighbour folded onto this face: no unfolding to walk through
+                continue;
+            }
+            let r = 1.0 / gamma[k];
+            hop.far[k] = [r, gamma[NEXT[k]] * r];
+            hop.rot[k] = [link.rot.x_axis.x, link.rot.x_axis.y];
+            let reflect = link.rot.determinant() < 0.0;
+            hop.nbr[k] = g;
+            hop.code[k] = l as u8 | (link.corners[0] << 2) | (u8::from(reflect) << 4);
+        }
+        hop
+    }
+
     /// The corners of face `f` in its chart.
     fn corners(&self, f: usize) -> [DVec2; 3] {
         let [a, b, c] = self.face[f].chart;
@@ -557,15 +686,13 @@ impl Charts {
         Some(DVec3::new(1.0 - b1 - b2, b1, b2))
     }
 
-    /// [`Self::walk`] from a point `l` whose chart maps into the base chart by `rot`, with `d`
-    /// in the base chart; returns the end and its map into the base chart.
-    pub(crate) fn walk_on(&self, l: &Located, rot: DMat2, d: DVec2) -> (Located, DMat2) {
-        let (end, r) = self.walk(l, rot.transpose() * d);
-        (end, rot * r)
-    }
-
     /// The particle that starts at vertex `v` (`None` for a loose vertex).
     pub fn at_vertex(&self, v: usize) -> Option<Located> {
+        self.at_vertex_here(v).map(|l| self.outside(&l))
+    }
+
+    /// [`Self::at_vertex`] with the face's index here.
+    fn at_vertex_here(&self, v: usize) -> Option<Located> {
         let (f, c) = self.vertex_face[v];
         (f != NONE).then(|| {
             let mut bary = DVec3::ZERO;
@@ -576,6 +703,11 @@ impl Charts {
 
     /// The world position of `l` at `at`.
     pub(crate) fn world(&self, motion: &Motion, at: Lerp, l: &Located) -> DVec3 {
+        self.world_here(motion, at, &self.here(l))
+    }
+
+    /// [`Self::world`] with the face's index here.
+    fn world_here(&self, motion: &Motion, at: Lerp, l: &Located) -> DVec3 {
         if motion.is_fixed() {
             let f = &self.frame[l.face as usize];
             return f.x0 + l.bary.y * f.e1 + l.bary.z * f.e2;
@@ -612,62 +744,163 @@ impl Charts {
     /// edges (module doc). Returns where it ends and the orthogonal map from the end face's
     /// chart to the start face's chart.
     pub(crate) fn walk(&self, start: &Located, d: DVec2) -> (Located, DMat2) {
+        let (end, rot) = self.walk_here(&self.here(start), d);
+        (self.outside(&end), rot)
+    }
+
+    /// `l` (a face of the input) with the face's index here.
+    fn here(&self, l: &Located) -> Located {
+        Located {
+            face: self.rank[l.face as usize],
+            bary: l.bary,
+        }
+    }
+
+    /// `l` with the input's face index.
+    fn outside(&self, l: &Located) -> Located {
+        Located {
+            face: self.order[l.face as usize],
+            bary: l.bary,
+        }
+    }
+
+    /// [`Self::walk`] with faces indexed here.
+    fn walk_here(&self, start: &Located, d: DVec2) -> (Located, DMat2) {
+        let [a, b, c] = self.face[start.face as usize].chart;
+        if a == 0.0 {
+            return (
+                Located {
+                    face: start.face,
+                    bary: clamp(start.bary),
+                },
+                DMat2::IDENTITY,
+            );
+        }
+        let d2 = d.y / c;
+        let d1 = (d.x - d2 * b) / a;
+        let (end, rot) = self.walk_bary(start, DVec3::new(-d1 - d2, d1, d2));
+        (end, rot.mat())
+    }
+
+    /// The walk from `start` by the barycentric displacement `delta` (summing to 0), in
+    /// barycentric coordinates (module doc): returns where it ends and the orthogonal map
+    /// from the end face's chart to the start face's.
+    fn walk_bary(&self, start: &Located, delta: DVec3) -> (Located, Orth) {
         let mut face = start.face as usize;
-        let (mut rot, mut shift) = (DMat2::IDENTITY, DVec2::ZERO);
-        let c = self.corners(face);
-        let q = start.bary.x * c[0] + start.bary.y * c[1] + start.bary.z * c[2] + d;
-        let mut s = start.bary;
-        let mut entry = 3usize;
+        let (p, q) = (start.bary, start.bary + delta);
+        if q.min_element() >= -BARY_TOLERANCE {
+            return (
+                Located {
+                    face: start.face,
+                    bary: clamp(q),
+                },
+                Orth::IDENTITY,
+            );
+        }
+        // exit edge: the first one the line p → q crosses outward, the least
+        // `p_k / (p_k − q_k)` over `q_k < 0`, compared without dividing
+        let mut k = 3usize;
+        for c in 0..3 {
+            if q[c] < -BARY_TOLERANCE
+                && (k == 3 || p[c] * (p[k] - q[k]) < p[k] * (p[c] - q[c]))
+            {
+                k = c;
+            }
+        }
+        // the points' coordinates at corners k, k + 1, k + 2 of the face
+        let (k1, k2) = (NEXT[k], PREV[k]);
+        let mut pk = [p[k], p[k1], p[k2]];
+        let mut qk = [q[k], q[k1], q[k2]];
+        let mut rot = Orth::IDENTITY;
+        // after the first crossing, the coordinates at corners l, l + 1, l + 2 of the face
+        // entered by its edge l
+        let (mut px, mut qx, mut entry) = ([0.0; 3], [0.0; 3], 3usize);
         for _ in 0..MAX_CROSSINGS {
-            let Some(bq) = self.bary(face, rot.transpose() * (q - shift)) else {
-                break;
-            };
-            if bq.min_element() >= -BARY_TOLERANCE {
+            let hop = &self.hop[face];
+            let g = hop.nbr[k];
+            if g == NONE {
+                // a border: stop where the segment meets it
+                let t = pk[0] / (pk[0] - qk[0]);
+                let cross = [0.0, pk[1] + t * (qk[1] - pk[1]), pk[2] + t * (qk[2] - pk[2])];
                 return (
                     Located {
                         face: face as u32,
-                        bary: clamp(bq),
+                        bary: clamp(unrotate(cross, k)),
                     },
                     rot,
                 );
             }
-            // exit edge: the first one the segment s → q crosses (never the entry edge)
-            let exit = (0..3)
-                .filter(|&k| k != entry && bq[k] < -BARY_TOLERANCE)
-                .map(|k| {
-                    let sk = s[k].max(0.0);
-                    (sk / (sk - bq[k]), k)
-                })
-                .min_by(|a, b| a.0.total_cmp(&b.0));
-            let Some((tau, k)) = exit else { break };
-            let mut cross = s + tau * (bq - s);
-            cross[k] = 0.0;
-            let cross = clamp(cross);
-            let here = &self.face[face];
-            let (g, l) = (here.nbr[k], here.nbr_edge[k]);
-            if g == NONE || self.face[g as usize].chart[0] == 0.0 {
-                s = cross;
-                break;
-            }
-            let (g, l) = (g as usize, l as usize);
-            // the neighbour's chart in this one's, composed into the base chart
-            let link = &self.link[face][k];
-            let (ga, gb) = (link.corners[0] as usize, link.corners[1] as usize);
-            shift += rot * link.shift;
-            rot *= link.rot;
-            s = DVec3::ZERO;
-            s[ga] = cross[(k + 1) % 3];
-            s[gb] = cross[(k + 2) % 3];
-            face = g;
+            let code = hop.code[k];
+            let l = (code & 3) as usize;
+            let [r, ra] = hop.far[k];
+            let rb = r - 1.0 - ra;
+            let (pa, pb) = (pk[1] - pk[0] * ra, pk[2] - pk[0] * rb);
+            let (qa, qb) = (qk[1] - qk[0] * ra, qk[2] - qk[0] * rb);
+            // corner k + 1 here is corner l + 1 there if the windings disagree
+            (px, qx) = if (code >> 2) & 3 == NEXT[l] as u8 {
+                ([pk[0] * r, pa, pb], [qk[0] * r, qa, qb])
+            } else {
+                ([pk[0] * r, pb, pa], [qk[0] * r, qb, qa])
+            };
+            rot = rot.then(hop.rot[k], if code & 16 != 0 { -1.0 } else { 1.0 });
+            face = g as usize;
             entry = l;
+            let (in1, in2) = (qx[1] >= -BARY_TOLERANCE, qx[2] >= -BARY_TOLERANCE);
+            // the next exit, never the entry edge (0 in this order)
+            let j = match (in1, in2) {
+                (true, true) if qx[0] >= -BARY_TOLERANCE => {
+                    return (
+                        Located {
+                            face: face as u32,
+                            bary: clamp(unrotate(qx, l)),
+                        },
+                        rot,
+                    );
+                }
+                (true, true) => break,
+                (false, true) => 1,
+                (true, false) => 2,
+                (false, false) => {
+                    if px[2] * (px[1] - qx[1]) < px[1] * (px[2] - qx[2]) {
+                        2
+                    } else {
+                        1
+                    }
+                }
+            };
+            k = (l + j) % 3;
+            (pk, qk) = if j == 1 {
+                ([px[1], px[2], px[0]], [qx[1], qx[2], qx[0]])
+            } else {
+                ([px[2], px[0], px[1]], [qx[2], qx[0], qx[1]])
+            };
         }
+        // stopped: at the point where the segment entered the last face
+        let at = if entry == 3 {
+            start.bary
+        } else {
+            let t = px[0] / (px[0] - qx[0]);
+            unrotate(
+                [0.0, px[1] + t * (qx[1] - px[1]), px[2] + t * (qx[2] - px[2])],
+                entry,
+            )
+        };
         (
             Located {
                 face: face as u32,
-                bary: clamp(s),
+                bary: clamp(at),
             },
             rot,
         )
+    }
+}
+
+/// Barycentric coordinates from those at corners `l, l + 1, l + 2`.
+fn unrotate(x: [f64; 3], l: usize) -> DVec3 {
+    match l {
+        0 => DVec3::new(x[0], x[1], x[2]),
+        1 => DVec3::new(x[2], x[0], x[1]),
+        _ => DVec3::new(x[1], x[2], x[0]),
     }
 }
 
@@ -742,14 +975,25 @@ pub fn flow_map(
         return flow_map_planar(charts, planar, velocity, t0, span, steps);
     }
     let n = charts.vertex_face.len();
-    let start: Vec<Option<Located>> = (0..n).map(|v| charts.at_vertex(v)).collect();
+    let start: Vec<Option<Located>> = (0..n).map(|v| charts.at_vertex_here(v)).collect();
     let mut live: Vec<usize> = (0..n).filter(|&v| start[v].is_some()).collect();
     let mut state: Vec<Located> = live.iter().filter_map(|&v| start[v]).collect();
     let m = state.len();
     let h = span / steps.max(1) as f64;
+    let fixed = motion.is_fixed();
     let mut stage_at = vec![state[0]; m];
-    let mut stage_rot = vec![DMat2::IDENTITY; m];
+    let mut stage_rot = vec![Orth::IDENTITY; m];
+    // per particle, at its stage point: the map of a displacement in the particle's chart
+    // to barycentric rates there (for the next walk), and on a fixed mesh the rows of
+    // `R (u, n̂ × u)ᵀ`, which give the stage velocity in the particle's chart from `w`
+    let mut to_bary = vec![DMat2::ZERO; m];
+    let mut axes = vec![[DVec3::ZERO; 2]; m];
     let mut points = vec![DVec3::ZERO; m];
+    let mut outside_at = if velocity.uses_location() {
+        vec![state[0]; m]
+    } else {
+        Vec::new()
+    };
     let mut w = vec![DVec3::ZERO; m];
     let mut k: [Vec<DVec2>; 4] = std::array::from_fn(|_| vec![DVec2::ZERO; m]);
     for step in 0..steps.max(1) {
@@ -765,11 +1009,17 @@ pub fn flow_map(
             };
             let at = motion.at(ts)?;
             let k_ref = &k;
-            (&mut stage_at, &mut stage_rot, &mut points)
+            (
+                &mut stage_at,
+                &mut stage_rot,
+                &mut points,
+                &mut to_bary,
+                &mut axes,
+            )
                 .into_par_iter()
                 .zip(&state)
                 .enumerate()
-                .for_each(|(i, ((l, r, x), p))| {
+                .for_each(|(i, ((l, r, x, tb, ax), p))| {
                     // each stage point walked on from the previous one (module doc)
                     let step_from_prev = match stage {
                         0 => None,
@@ -778,33 +1028,97 @@ pub fn flow_map(
                         _ => Some(h * k_ref[2][i] - 0.5 * h * k_ref[1][i]),
                     };
                     (*l, *r) = match step_from_prev {
-                        None => (*p, DMat2::IDENTITY),
-                        Some(d) => charts.walk_on(l, *r, d),
+                        None => (*p, Orth::IDENTITY),
+                        Some(d) => {
+                            let (end, rw) = charts.walk_bary(l, bary_step(*tb, d));
+                            (end, r.then([rw.a, rw.b], rw.sigma))
+                        }
                     };
-                    *x = charts.world(motion, at, l);
+                    let fr = &charts.frame[l.face as usize];
+                    *x = if fixed {
+                        fr.x0 + l.bary.y * fr.e1 + l.bary.z * fr.e2
+                    } else {
+                        charts.world_here(motion, at, l)
+                    };
+                    let rm = r.mat();
+                    *tb = fr.to_bary(rm);
+                    // rows of R [u v]ᵀ: k = R (u·w, v·w)
+                    *ax = [
+                        rm.x_axis.x * fr.u + rm.y_axis.x * fr.v,
+                        rm.x_axis.y * fr.u + rm.y_axis.y * fr.v,
+                    ];
                 });
-            eval_checked(velocity, ts, &stage_at, &points, &live, &mut w)?;
-            k[stage]
-                .par_iter_mut()
-                .zip(&stage_at)
-                .zip(&stage_rot)
-                .zip(&w)
-                .for_each(|(((ki, l), r), &wi)| {
-                    *ki = *r * charts.chart_velocity(motion, at, l, wi);
-                });
+            if velocity.uses_location() {
+                // the velocity reads the input's faces
+                outside_at
+                    .par_iter_mut()
+                    .zip(&stage_at)
+                    .for_each(|(o, l)| *o = charts.outside(l));
+            }
+            eval_checked(velocity, ts, &outside_at, &points, &live, &mut w)?;
+            if fixed {
+                k[stage]
+                    .par_iter_mut()
+                    .zip(&axes)
+                    .zip(&w)
+                    .for_each(|((ki, ax), wi)| *ki = DVec2::new(ax[0].dot(*wi), ax[1].dot(*wi)));
+            } else {
+                k[stage]
+                    .par_iter_mut()
+                    .zip(&stage_at)
+                    .zip(&stage_rot)
+                    .zip(&w)
+                    .for_each(|(((ki, l), r), &wi)| {
+                        *ki = r.mat() * charts.chart_velocity(motion, at, l, wi);
+                    });
+            }
         }
         let [k1, k2, k3, k4] = &k;
-        (&mut state, &stage_at, &stage_rot)
+        (&mut state, &stage_at, &to_bary)
             .into_par_iter()
             .enumerate()
-            .for_each(|(i, (p, l, r))| {
+            .for_each(|(i, (p, l, tb))| {
                 let d = h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-                *p = charts.walk_on(l, *r, d - h * k3[i]).0;
+                *p = charts.walk_bary(l, bary_step(*tb, d - h * k3[i])).0;
             });
     }
     let mut out = vec![None; n];
     for (i, &v) in live.iter().enumerate() {
-        out[v] = Some(state[i]);
+        out[v] = Some(charts.outside(&state[i]));
     }
     Ok(out)
+}
+
+/// The faces in the order of their centroids along a Morton (Z-order) curve through the
+/// bounding box (ties by index): faces near each other in space are near in memory, so
+/// that a walk's faces, and those of particles walked one after the other, share cache
+/// lines (module doc, "Memory"). Any order gives the same results.
+fn space_filling_order(faces: &[[u32; 3]], positions: &[DVec3]) -> Vec<u32> {
+    let (lo, hi) = positions
+        .iter()
+        .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(l, h), &p| {
+            (l.min(p), h.max(p))
+        });
+    let scale = ((1u64 << 21) - 1) as f64 / (hi - lo).max_element().max(1e-300);
+    // 21 bits per axis, interleaved
+    let spread = |x: u64| {
+        let mut x = x & 0x1f_ffff;
+        x = (x | (x << 32)) & 0x1f00000000ffff;
+        x = (x | (x << 16)) & 0x1f0000ff0000ff;
+        x = (x | (x << 8)) & 0x100f00f00f00f00f;
+        x = (x | (x << 4)) & 0x10c30c30c30c30c3;
+        (x | (x << 2)) & 0x1249249249249249
+    };
+    let mut keyed: Vec<(u64, u32)> = faces
+        .par_iter()
+        .enumerate()
+        .map(|(f, tri)| {
+            let c = tri.iter().map(|&v| positions[v as usize]).sum::<DVec3>() / 3.0;
+            let q = ((c - lo) * scale).max(DVec3::ZERO);
+            let key = spread(q.x as u64) | (spread(q.y as u64) << 1) | (spread(q.z as u64) << 2);
+            (key, f as u32)
+        })
+        .collect();
+    keyed.par_sort_unstable();
+    keyed.into_iter().map(|(_, f)| f).collect()
 }
