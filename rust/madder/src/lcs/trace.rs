@@ -403,6 +403,10 @@ struct Hop {
     /// Bits 0–1: the edge's index `l` in the neighbour (its far corner); bits 2–3: the
     /// neighbour's corner at this face's corner `k + 1`; bit 4: the map is a reflection.
     code: [u8; 3],
+    /// The face's vertices, and whether it is degenerate (no chart): what the stage point
+    /// where a walk ends needs ([`Charts::frame`]), in the lines the walk just read.
+    verts: [u32; 3],
+    degenerate: bool,
 }
 
 /// An orthogonal map of the plane `[[a, −σb], [b, σa]]` (a rotation, or a reflection for
@@ -456,8 +460,8 @@ pub struct Charts {
     vertex_face: Vec<(u32, u8)>,
     /// The flat mesh's plane and buckets, if the mesh is flat ([`super::planar`]).
     planar: Option<Planar>,
-    /// Per face, its shape at `t0` in space: what a fixed mesh needs per stage.
-    frame: Vec<FaceFrame>,
+    /// The vertices at `t0`: a fixed mesh's faces in space ([`Self::frame`]).
+    start: Vec<DVec3>,
 }
 
 /// A face at `t0` in space: corner 0, the edges `E_1`, `E_2`, and the chart's axes `u`,
@@ -561,21 +565,7 @@ impl Charts {
             hop: Vec::new(),
             vertex_face,
             planar: None,
-            frame: faces
-                .par_iter()
-                .zip(&chart)
-                .map(|(tri, c)| {
-                    let [x0, x1, x2] = tri.map(|v| positions[v as usize]);
-                    let (e1, e2) = (x1 - x0, x2 - x0);
-                    let (u, v) = if c[0] == 0.0 {
-                        (DVec3::ZERO, DVec3::ZERO)
-                    } else {
-                        let u = e1 / c[0];
-                        (u, e1.cross(e2).normalize().cross(u))
-                    };
-                    FaceFrame { x0, e1, e2, u, v }
-                })
-                .collect(),
+            start: positions.to_vec(),
         };
         charts.hop = (0..faces.len())
             .into_par_iter()
@@ -643,6 +633,8 @@ impl Charts {
             rot: [[1.0, 0.0]; 3],
             nbr: [NONE; 3],
             code: [0; 3],
+            verts: self.face[f].verts,
+            degenerate: self.face[f].chart[0] == 0.0,
         };
         for k in 0..3 {
             let here = &self.face[f];
@@ -667,6 +659,22 @@ impl Charts {
             hop.code[k] = l as u8 | (link.corners[0] << 2) | (u8::from(reflect) << 4);
         }
         hop
+    }
+
+    /// Face `f` at `t0` in space ([`FaceFrame`]), from its vertices: computed where it is
+    /// needed rather than stored, since a stored frame per face is a cache miss per stage
+    /// point while the vertices are few and the walk has just read the face's [`Hop`].
+    fn frame(&self, f: usize) -> FaceFrame {
+        let hop = &self.hop[f];
+        let [x0, x1, x2] = hop.verts.map(|v| self.start[v as usize]);
+        let (e1, e2) = (x1 - x0, x2 - x0);
+        let (u, v) = if hop.degenerate {
+            (DVec3::ZERO, DVec3::ZERO)
+        } else {
+            let u = e1 / e1.length();
+            (u, e1.cross(e2).normalize().cross(u))
+        };
+        FaceFrame { x0, e1, e2, u, v }
     }
 
     /// The corners of face `f` in its chart.
@@ -709,7 +717,7 @@ impl Charts {
     /// [`Self::world`] with the face's index here.
     fn world_here(&self, motion: &Motion, at: Lerp, l: &Located) -> DVec3 {
         if motion.is_fixed() {
-            let f = &self.frame[l.face as usize];
+            let f = &self.frame(l.face as usize);
             return f.x0 + l.bary.y * f.e1 + l.bary.z * f.e2;
         }
         let tri = self.face[l.face as usize].verts;
@@ -722,7 +730,7 @@ impl Charts {
     fn chart_velocity(&self, motion: &Motion, at: Lerp, l: &Located, w: DVec3) -> DVec2 {
         let f = l.face as usize;
         if motion.is_fixed() {
-            let fr = &self.frame[f];
+            let fr = &self.frame(f);
             return DVec2::new(fr.u.dot(w), fr.v.dot(w));
         }
         let tri = self.face[f].verts;
@@ -1034,7 +1042,7 @@ pub fn flow_map(
                             (end, r.then([rw.a, rw.b], rw.sigma))
                         }
                     };
-                    let fr = &charts.frame[l.face as usize];
+                    let fr = &charts.frame(l.face as usize);
                     *x = if fixed {
                         fr.x0 + l.bary.y * fr.e1 + l.bary.z * fr.e2
                     } else {
