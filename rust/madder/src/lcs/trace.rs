@@ -515,7 +515,10 @@ impl Charts {
             rank[f as usize] = i as u32;
         }
         // the faces in the walks' order (module doc, "Memory")
-        let faces: Vec<[u32; 3]> = order.iter().map(|&f| topology.faces()[f as usize]).collect();
+        let faces: Vec<[u32; 3]> = order
+            .iter()
+            .map(|&f| topology.faces()[f as usize])
+            .collect();
         let faces = &faces[..];
         let chart: Vec<[f64; 3]> = faces
             .par_iter()
@@ -794,113 +797,171 @@ impl Charts {
     /// barycentric coordinates (module doc): returns where it ends and the orthogonal map
     /// from the end face's chart to the start face's.
     fn walk_bary(&self, start: &Located, delta: DVec3) -> (Located, Orth) {
-        let mut face = start.face as usize;
+        match self.walk_start(start, delta) {
+            Err(end) => end,
+            Ok(mut w) => loop {
+                if let Some(end) = self.walk_cross(&mut w) {
+                    return end;
+                }
+            },
+        }
+    }
+
+    /// Two walks ([`Self::walk_bary`]) taken a crossing each in turn: each crossing waits
+    /// for the next face's record, and the two chains of reads overlap (module doc,
+    /// "Memory"). The results are those of the walks taken one by one.
+    fn walk_pair(
+        &self,
+        (sa, da): (&Located, DVec3),
+        (sb, db): (&Located, DVec3),
+    ) -> [(Located, Orth); 2] {
+        let mut a = self.walk_start(sa, da);
+        let mut b = self.walk_start(sb, db);
+        loop {
+            match (&mut a, &mut b) {
+                (Ok(wa), Ok(wb)) => {
+                    let ea = self.walk_cross(wa);
+                    let eb = self.walk_cross(wb);
+                    if let Some(e) = ea {
+                        a = Err(e);
+                    }
+                    if let Some(e) = eb {
+                        b = Err(e);
+                    }
+                }
+                (Ok(w), Err(_)) => {
+                    if let Some(e) = self.walk_cross(w) {
+                        a = Err(e);
+                    }
+                }
+                (Err(_), Ok(w)) => {
+                    if let Some(e) = self.walk_cross(w) {
+                        b = Err(e);
+                    }
+                }
+                (Err(ea), Err(eb)) => return [*ea, *eb],
+            }
+        }
+    }
+
+    /// The start of a walk: its end if it stays in the start face, else the walk about to
+    /// cross the first edge it meets.
+    fn walk_start(&self, start: &Located, delta: DVec3) -> Result<Walk, (Located, Orth)> {
         let (p, q) = (start.bary, start.bary + delta);
         if q.min_element() >= -BARY_TOLERANCE {
-            return (
+            return Err((
                 Located {
                     face: start.face,
                     bary: clamp(q),
                 },
                 Orth::IDENTITY,
-            );
+            ));
         }
         // exit edge: the first one the line p → q crosses outward, the least
         // `p_k / (p_k − q_k)` over `q_k < 0`, compared without dividing
         let mut k = 3usize;
         for c in 0..3 {
-            if q[c] < -BARY_TOLERANCE
-                && (k == 3 || p[c] * (p[k] - q[k]) < p[k] * (p[c] - q[c]))
-            {
+            if q[c] < -BARY_TOLERANCE && (k == 3 || p[c] * (p[k] - q[k]) < p[k] * (p[c] - q[c])) {
                 k = c;
             }
         }
-        // the points' coordinates at corners k, k + 1, k + 2 of the face
         let (k1, k2) = (NEXT[k], PREV[k]);
-        let mut pk = [p[k], p[k1], p[k2]];
-        let mut qk = [q[k], q[k1], q[k2]];
-        let mut rot = Orth::IDENTITY;
-        // after the first crossing, the coordinates at corners l, l + 1, l + 2 of the face
-        // entered by its edge l
-        let (mut px, mut qx, mut entry) = ([0.0; 3], [0.0; 3], 3usize);
-        for _ in 0..MAX_CROSSINGS {
-            let hop = &self.hop[face];
-            let g = hop.nbr[k];
-            if g == NONE {
-                // a border: stop where the segment meets it
-                let t = pk[0] / (pk[0] - qk[0]);
-                let cross = [0.0, pk[1] + t * (qk[1] - pk[1]), pk[2] + t * (qk[2] - pk[2])];
-                return (
-                    Located {
-                        face: face as u32,
-                        bary: clamp(unrotate(cross, k)),
-                    },
-                    rot,
-                );
-            }
-            let code = hop.code[k];
-            let l = (code & 3) as usize;
-            let [r, ra] = hop.far[k];
-            let rb = r - 1.0 - ra;
-            let (pa, pb) = (pk[1] - pk[0] * ra, pk[2] - pk[0] * rb);
-            let (qa, qb) = (qk[1] - qk[0] * ra, qk[2] - qk[0] * rb);
-            // corner k + 1 here is corner l + 1 there if the windings disagree
-            (px, qx) = if (code >> 2) & 3 == NEXT[l] as u8 {
-                ([pk[0] * r, pa, pb], [qk[0] * r, qa, qb])
-            } else {
-                ([pk[0] * r, pb, pa], [qk[0] * r, qb, qa])
-            };
-            rot = rot.then(hop.rot[k], if code & 16 != 0 { -1.0 } else { 1.0 });
-            face = g as usize;
-            entry = l;
-            let (in1, in2) = (qx[1] >= -BARY_TOLERANCE, qx[2] >= -BARY_TOLERANCE);
-            // the next exit, never the entry edge (0 in this order)
-            let j = match (in1, in2) {
-                (true, true) if qx[0] >= -BARY_TOLERANCE => {
-                    return (
-                        Located {
-                            face: face as u32,
-                            bary: clamp(unrotate(qx, l)),
-                        },
-                        rot,
-                    );
-                }
-                (true, true) => break,
-                (false, true) => 1,
-                (true, false) => 2,
-                (false, false) => {
-                    if px[2] * (px[1] - qx[1]) < px[1] * (px[2] - qx[2]) {
-                        2
-                    } else {
-                        1
-                    }
-                }
-            };
-            k = (l + j) % 3;
-            (pk, qk) = if j == 1 {
-                ([px[1], px[2], px[0]], [qx[1], qx[2], qx[0]])
-            } else {
-                ([px[2], px[0], px[1]], [qx[2], qx[0], qx[1]])
-            };
-        }
-        // stopped: at the point where the segment entered the last face
-        let at = if entry == 3 {
-            start.bary
-        } else {
-            let t = px[0] / (px[0] - qx[0]);
-            unrotate(
-                [0.0, px[1] + t * (qx[1] - px[1]), px[2] + t * (qx[2] - px[2])],
-                entry,
-            )
-        };
-        (
-            Located {
-                face: face as u32,
-                bary: clamp(at),
-            },
-            rot,
-        )
+        Ok(Walk {
+            face: start.face as usize,
+            k,
+            pk: [p[k], p[k1], p[k2]],
+            qk: [q[k], q[k1], q[k2]],
+            rot: Orth::IDENTITY,
+            left: MAX_CROSSINGS,
+        })
     }
+
+    /// One crossing of walk `w` (over its edge `k`); its end if it ends in the face
+    /// entered, at a border, or stops.
+    fn walk_cross(&self, w: &mut Walk) -> Option<(Located, Orth)> {
+        let k = w.k;
+        let (pk, qk) = (w.pk, w.qk);
+        let hop = &self.hop[w.face];
+        let g = hop.nbr[k];
+        if g == NONE || w.left == 0 {
+            // a border (or too many crossings): stop where the segment meets the edge
+            let t = pk[0] / (pk[0] - qk[0]);
+            let cross = [
+                0.0,
+                pk[1] + t * (qk[1] - pk[1]),
+                pk[2] + t * (qk[2] - pk[2]),
+            ];
+            return Some((
+                Located {
+                    face: w.face as u32,
+                    bary: clamp(unrotate(cross, k)),
+                },
+                w.rot,
+            ));
+        }
+        w.left -= 1;
+        let code = hop.code[k];
+        let l = (code & 3) as usize;
+        let [r, ra] = hop.far[k];
+        let rb = r - 1.0 - ra;
+        let (pa, pb) = (pk[1] - pk[0] * ra, pk[2] - pk[0] * rb);
+        let (qa, qb) = (qk[1] - qk[0] * ra, qk[2] - qk[0] * rb);
+        // the coordinates at corners l, l + 1, l + 2 of the face entered by its edge l;
+        // corner k + 1 here is corner l + 1 there if the windings disagree
+        let (px, qx) = if (code >> 2) & 3 == NEXT[l] as u8 {
+            ([pk[0] * r, pa, pb], [qk[0] * r, qa, qb])
+        } else {
+            ([pk[0] * r, pb, pa], [qk[0] * r, qb, qa])
+        };
+        w.rot = w
+            .rot
+            .then(hop.rot[k], if code & 16 != 0 { -1.0 } else { 1.0 });
+        w.face = g as usize;
+        let (in1, in2) = (qx[1] >= -BARY_TOLERANCE, qx[2] >= -BARY_TOLERANCE);
+        if in1 && in2 {
+            let end = if qx[0] >= -BARY_TOLERANCE {
+                qx
+            } else {
+                // q is behind the entry edge (rounding): stop where the segment entered
+                let t = px[0] / (px[0] - qx[0]);
+                [
+                    0.0,
+                    px[1] + t * (qx[1] - px[1]),
+                    px[2] + t * (qx[2] - px[2]),
+                ]
+            };
+            return Some((
+                Located {
+                    face: g,
+                    bary: clamp(unrotate(end, l)),
+                },
+                w.rot,
+            ));
+        }
+        // the next exit, never the entry edge (0 in this order): edge 2 if it is the only
+        // one q is beyond or the line meets it first, else edge 1
+        let two = !in2 && (in1 || px[2] * (px[1] - qx[1]) < px[1] * (px[2] - qx[2]));
+        (w.k, w.pk, w.qk) = if two {
+            (PREV[l], [px[2], px[0], px[1]], [qx[2], qx[0], qx[1]])
+        } else {
+            (NEXT[l], [px[1], px[2], px[0]], [qx[1], qx[2], qx[0]])
+        };
+        None
+    }
+}
+
+/// A walk under way ([`Charts::walk_cross`]): in face `face`, to cross its edge `k` next,
+/// with the coordinates of the segment's ends at corners `k, k + 1, k + 2`.
+#[derive(Debug, Clone, Copy)]
+struct Walk {
+    face: usize,
+    k: usize,
+    pk: [f64; 3],
+    qk: [f64; 3],
+    /// The map of this face's chart into the start face's.
+    rot: Orth,
+    /// Crossings left before the walk stops ([`MAX_CROSSINGS`]).
+    left: usize,
 }
 
 /// Barycentric coordinates from those at corners `l, l + 1, l + 2`.
@@ -1017,44 +1078,60 @@ pub fn flow_map(
             };
             let at = motion.at(ts)?;
             let k_ref = &k;
+            let stage_point = |l: &mut Located,
+                               r: &mut Orth,
+                               x: &mut DVec3,
+                               tb: &mut DMat2,
+                               ax: &mut [DVec3; 2]| {
+                let fr = &charts.frame(l.face as usize);
+                *x = if fixed {
+                    fr.x0 + l.bary.y * fr.e1 + l.bary.z * fr.e2
+                } else {
+                    charts.world_here(motion, at, l)
+                };
+                let rm = r.mat();
+                *tb = fr.to_bary(rm);
+                // rows of R [u v]ᵀ: k = R (u·w, v·w)
+                *ax = [
+                    rm.x_axis.x * fr.u + rm.y_axis.x * fr.v,
+                    rm.x_axis.y * fr.u + rm.y_axis.y * fr.v,
+                ];
+            };
+            // each stage point walked on from the previous one (module doc), two particles
+            // at a time ([`Charts::walk_pair`])
             (
-                &mut stage_at,
-                &mut stage_rot,
-                &mut points,
-                &mut to_bary,
-                &mut axes,
+                stage_at.par_chunks_mut(2),
+                stage_rot.par_chunks_mut(2),
+                points.par_chunks_mut(2),
+                to_bary.par_chunks_mut(2),
+                axes.par_chunks_mut(2),
+                state.par_chunks(2),
             )
                 .into_par_iter()
-                .zip(&state)
                 .enumerate()
-                .for_each(|(i, ((l, r, x, tb, ax), p))| {
-                    // each stage point walked on from the previous one (module doc)
-                    let step_from_prev = match stage {
-                        0 => None,
-                        1 => Some(0.5 * h * k_ref[0][i]),
-                        2 => Some(0.5 * h * (k_ref[1][i] - k_ref[0][i])),
-                        _ => Some(h * k_ref[2][i] - 0.5 * h * k_ref[1][i]),
+                .for_each(|(c, (l, r, x, tb, ax, p))| {
+                    let step_from_prev = |i: usize| match stage {
+                        1 => 0.5 * h * k_ref[0][i],
+                        2 => 0.5 * h * (k_ref[1][i] - k_ref[0][i]),
+                        _ => h * k_ref[2][i] - 0.5 * h * k_ref[1][i],
                     };
-                    (*l, *r) = match step_from_prev {
-                        None => (*p, Orth::IDENTITY),
-                        Some(d) => {
-                            let (end, rw) = charts.walk_bary(l, bary_step(*tb, d));
-                            (end, r.then([rw.a, rw.b], rw.sigma))
-                        }
-                    };
-                    let fr = &charts.frame(l.face as usize);
-                    *x = if fixed {
-                        fr.x0 + l.bary.y * fr.e1 + l.bary.z * fr.e2
+                    let n = l.len();
+                    if stage == 0 {
+                        l.copy_from_slice(p);
+                        r.fill(Orth::IDENTITY);
+                    } else if n == 2 {
+                        let d = [0, 1].map(|j| bary_step(tb[j], step_from_prev(2 * c + j)));
+                        let [(la, ra), (lb, rb)] = charts.walk_pair((&l[0], d[0]), (&l[1], d[1]));
+                        (l[0], r[0]) = (la, r[0].then([ra.a, ra.b], ra.sigma));
+                        (l[1], r[1]) = (lb, r[1].then([rb.a, rb.b], rb.sigma));
                     } else {
-                        charts.world_here(motion, at, l)
-                    };
-                    let rm = r.mat();
-                    *tb = fr.to_bary(rm);
-                    // rows of R [u v]ᵀ: k = R (u·w, v·w)
-                    *ax = [
-                        rm.x_axis.x * fr.u + rm.y_axis.x * fr.v,
-                        rm.x_axis.y * fr.u + rm.y_axis.y * fr.v,
-                    ];
+                        let (e, rw) =
+                            charts.walk_bary(&l[0], bary_step(tb[0], step_from_prev(2 * c)));
+                        (l[0], r[0]) = (e, r[0].then([rw.a, rw.b], rw.sigma));
+                    }
+                    for j in 0..n {
+                        stage_point(&mut l[j], &mut r[j], &mut x[j], &mut tb[j], &mut ax[j]);
+                    }
                 });
             if velocity.uses_location() {
                 // the velocity reads the input's faces
@@ -1082,12 +1159,25 @@ pub fn flow_map(
             }
         }
         let [k1, k2, k3, k4] = &k;
-        (&mut state, &stage_at, &to_bary)
+        let last = |i: usize| {
+            let d = h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+            d - h * k3[i]
+        };
+        (
+            state.par_chunks_mut(2),
+            stage_at.par_chunks(2),
+            to_bary.par_chunks(2),
+        )
             .into_par_iter()
             .enumerate()
-            .for_each(|(i, (p, l, tb))| {
-                let d = h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-                *p = charts.walk_bary(l, bary_step(*tb, d - h * k3[i])).0;
+            .for_each(|(c, (p, l, tb))| {
+                if p.len() == 2 {
+                    let d = [0, 1].map(|j| bary_step(tb[j], last(2 * c + j)));
+                    let [a, b] = charts.walk_pair((&l[0], d[0]), (&l[1], d[1]));
+                    (p[0], p[1]) = (a.0, b.0);
+                } else {
+                    p[0] = charts.walk_bary(&l[0], bary_step(tb[0], last(2 * c))).0;
+                }
             });
     }
     let mut out = vec![None; n];
