@@ -522,7 +522,7 @@ impl FaceFrame {
     /// barycentric rates `(ḃ_1, ḃ_2)` here: `ḃ_2 = d'_y / c_{2,y}`,
     /// `ḃ_1 = (d'_x − ḃ_2 c_{2,x}) / c_{1,x}` of `d' = rotᵀ d` (zero on a degenerate face,
     /// where a walk does not move).
-    fn to_bary(&self, rot: DMat2) -> DMat2 {
+    fn bary_map(&self, rot: DMat2) -> DMat2 {
         let c1x = self.e1.dot(self.u);
         if c1x == 0.0 {
             return DMat2::ZERO;
@@ -1129,7 +1129,7 @@ pub fn flow_map(
                     charts.world_here(motion, at, l)
                 };
                 let rm = r.mat();
-                *tb = fr.to_bary(rm);
+                *tb = fr.bary_map(rm);
                 // rows of R [u v]ᵀ: k = R (u·w, v·w)
                 *ax = [
                     rm.x_axis.x * fr.u + rm.y_axis.x * fr.v,
