@@ -475,7 +475,11 @@ fn curved_walks_do_not_depend_on_the_faces_windings() {
     let topo_flipped = Topology::from_triangles(topo.n_vertices(), flipped).unwrap();
     let a = rolled_gyre_ftle(&topo, &p, 20);
     let b = rolled_gyre_ftle(&topo_flipped, &p, 20);
-    let diff = a.iter().zip(&b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+    let diff = a
+        .iter()
+        .zip(&b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max);
     let max = a.iter().cloned().fold(0.0, f64::max);
     eprintln!("windings flipped: max FTLE difference {diff:.1e} (σ_max {max:.3})");
     assert!(max > 0.1 && diff < 1e-9 * max, "{diff}");

@@ -442,8 +442,14 @@ struct Hop {
     /// Bits 0–1: the edge's index `l` in the neighbour (its far corner); bits 2–3: the
     /// neighbour's corner at this face's corner `k + 1`; bit 4: the map is a reflection.
     code: [u8; 3],
-    /// The face's vertices, and whether it is degenerate (no chart): what the stage point
-    /// where a walk ends needs ([`Charts::frame`]), in the lines the walk just read.
+    /// The face's vertices: what the stage point where a walk ends needs.
+    corners: Corners,
+}
+
+/// A face's vertices and whether it is degenerate (no chart): what its frame in space is
+/// computed from ([`Charts::frame_of`]).
+#[derive(Debug, Clone, Copy)]
+struct Corners {
     verts: [u32; 3],
     degenerate: bool,
 }
@@ -675,8 +681,10 @@ impl Charts {
             rot: [[1.0, 0.0]; 3],
             nbr: [NONE; 3],
             code: [0; 3],
-            verts: self.face[f].verts,
-            degenerate: self.face[f].chart[0] == 0.0,
+            corners: Corners {
+                verts: self.face[f].verts,
+                degenerate: self.face[f].chart[0] == 0.0,
+            },
         };
         for k in 0..3 {
             let here = &self.face[f];
@@ -707,10 +715,14 @@ impl Charts {
     /// needed rather than stored, since a stored frame per face is a cache miss per stage
     /// point while the vertices are few and the walk has just read the face's [`Hop`].
     fn frame(&self, f: usize) -> FaceFrame {
-        let hop = &self.hop[f];
-        let [x0, x1, x2] = hop.verts.map(|v| self.start[v as usize]);
+        self.frame_of(self.hop[f].corners)
+    }
+
+    /// [`Self::frame`] of the face with these corners.
+    fn frame_of(&self, c: Corners) -> FaceFrame {
+        let [x0, x1, x2] = c.verts.map(|v| self.start[v as usize]);
         let (e1, e2) = (x1 - x0, x2 - x0);
-        let (u, v) = if hop.degenerate {
+        let (u, v) = if c.degenerate {
             (DVec3::ZERO, DVec3::ZERO)
         } else {
             let u = e1 / e1.length();
@@ -828,14 +840,14 @@ impl Charts {
         }
         let d2 = d.y / c;
         let d1 = (d.x - d2 * b) / a;
-        let (end, rot) = self.walk_bary(start, DVec3::new(-d1 - d2, d1, d2));
+        let (end, rot, _) = self.walk_bary(start, DVec3::new(-d1 - d2, d1, d2));
         (end, rot.mat())
     }
 
     /// The walk from `start` by the barycentric displacement `delta` (summing to 0), in
     /// barycentric coordinates (module doc): returns where it ends and the orthogonal map
     /// from the end face's chart to the start face's.
-    fn walk_bary(&self, start: &Located, delta: DVec3) -> (Located, Orth) {
+    fn walk_bary(&self, start: &Located, delta: DVec3) -> (Located, Orth, Corners) {
         match self.walk_start(start, delta) {
             Err(end) => end,
             Ok(mut w) => loop {
@@ -853,7 +865,7 @@ impl Charts {
         &self,
         (sa, da): (&Located, DVec3),
         (sb, db): (&Located, DVec3),
-    ) -> [(Located, Orth); 2] {
+    ) -> [(Located, Orth, Corners); 2] {
         let mut a = self.walk_start(sa, da);
         let mut b = self.walk_start(sb, db);
         loop {
@@ -885,8 +897,9 @@ impl Charts {
 
     /// The start of a walk: its end if it stays in the start face, else the walk about to
     /// cross the first edge it meets.
-    fn walk_start(&self, start: &Located, delta: DVec3) -> Result<Walk, (Located, Orth)> {
+    fn walk_start(&self, start: &Located, delta: DVec3) -> Result<Walk, (Located, Orth, Corners)> {
         let (p, q) = (start.bary, start.bary + delta);
+        let corners = self.hop[start.face as usize].corners;
         if q.min_element() >= -BARY_TOLERANCE {
             return Err((
                 Located {
@@ -894,6 +907,7 @@ impl Charts {
                     bary: clamp(q),
                 },
                 Orth::IDENTITY,
+                corners,
             ));
         }
         // exit edge: the first one the line p → q crosses outward, the least
@@ -912,12 +926,13 @@ impl Charts {
             qk: [q[k], q[k1], q[k2]],
             rot: Orth::IDENTITY,
             left: MAX_CROSSINGS,
+            corners,
         })
     }
 
     /// One crossing of walk `w` (over its edge `k`); its end if it ends in the face
     /// entered, at a border, or stops.
-    fn walk_cross(&self, w: &mut Walk) -> Option<(Located, Orth)> {
+    fn walk_cross(&self, w: &mut Walk) -> Option<(Located, Orth, Corners)> {
         let k = w.k;
         let (pk, qk) = (w.pk, w.qk);
         let hop = &self.hop[w.face];
@@ -936,9 +951,13 @@ impl Charts {
                     bary: clamp(unrotate(cross, k)),
                 },
                 w.rot,
+                w.corners,
             ));
         }
         w.left -= 1;
+        // read now, used where the walk ends: the read of the next face's record starts
+        // while this crossing's arithmetic runs
+        w.corners = self.hop[g as usize].corners;
         let code = hop.code[k];
         let l = (code & 3) as usize;
         let [r, ra] = hop.far[k];
@@ -975,6 +994,7 @@ impl Charts {
                     bary: clamp(unrotate(end, l)),
                 },
                 w.rot,
+                w.corners,
             ));
         }
         // the next exit, never the entry edge (0 in this order): edge 2 if it is the only
@@ -1001,6 +1021,8 @@ struct Walk {
     rot: Orth,
     /// Crossings left before the walk stops ([`MAX_CROSSINGS`]).
     left: usize,
+    /// This face's corners.
+    corners: Corners,
 }
 
 /// Barycentric coordinates from those at corners `l, l + 1, l + 2`.
@@ -1117,12 +1139,13 @@ pub fn flow_map(
             };
             let at = motion.at(ts)?;
             let k_ref = &k;
-            let stage_point = |l: &mut Located,
+            let stage_point = |c: Corners,
+                               l: &mut Located,
                                r: &mut Orth,
                                x: &mut DVec3,
                                tb: &mut DMat2,
                                ax: &mut [DVec3; 2]| {
-                let fr = &charts.frame(l.face as usize);
+                let fr = &charts.frame_of(c);
                 *x = if fixed {
                     fr.x0 + l.bary.y * fr.e1 + l.bary.z * fr.e2
                 } else {
@@ -1155,21 +1178,27 @@ pub fn flow_map(
                         _ => h * k_ref[2][i] - 0.5 * h * k_ref[1][i],
                     };
                     let n = l.len();
+                    let mut corners = [None; 2];
                     if stage == 0 {
                         l.copy_from_slice(p);
                         r.fill(Orth::IDENTITY);
                     } else if n == 2 {
                         let d = [0, 1].map(|j| bary_step(tb[j], step_from_prev(2 * c + j)));
-                        let [(la, ra), (lb, rb)] = charts.walk_pair((&l[0], d[0]), (&l[1], d[1]));
+                        let [(la, ra, ca), (lb, rb, cb)] =
+                            charts.walk_pair((&l[0], d[0]), (&l[1], d[1]));
                         (l[0], r[0]) = (la, r[0].then([ra.a, ra.b], ra.sigma));
                         (l[1], r[1]) = (lb, r[1].then([rb.a, rb.b], rb.sigma));
+                        corners = [Some(ca), Some(cb)];
                     } else {
-                        let (e, rw) =
+                        let (e, rw, ce) =
                             charts.walk_bary(&l[0], bary_step(tb[0], step_from_prev(2 * c)));
                         (l[0], r[0]) = (e, r[0].then([rw.a, rw.b], rw.sigma));
+                        corners[0] = Some(ce);
                     }
                     for j in 0..n {
-                        stage_point(&mut l[j], &mut r[j], &mut x[j], &mut tb[j], &mut ax[j]);
+                        let cj =
+                            corners[j].unwrap_or_else(|| charts.hop[l[j].face as usize].corners);
+                        stage_point(cj, &mut l[j], &mut r[j], &mut x[j], &mut tb[j], &mut ax[j]);
                     }
                 });
             if velocity.uses_location() {
