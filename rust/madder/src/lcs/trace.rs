@@ -94,7 +94,9 @@
 //! face every few steps, so consecutive walks share faces; and two particles are walked a
 //! crossing each in turn ([`Charts::walk_pair`]), so their reads overlap. A stage point's
 //! face frame (corner, edges, chart axes) is computed from its three vertices rather than
-//! stored: a stored frame was a cache miss per stage point, the vertices a small array.
+//! stored: a stored frame was a cache miss per stage point, the vertices a small array;
+//! the vertices of each face entered are read at the crossing, which starts the read of
+//! its record before the crossing's arithmetic is done.
 //! None of this changes a value: each particle's arithmetic is its own, in the same order.
 //! Faces keep their input numbers outside (a [`Located`] names the input's face).
 //!
