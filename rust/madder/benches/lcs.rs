@@ -81,6 +81,15 @@ fn case(label: &str, nx: usize, ny: usize, steps: usize, rolled: bool) {
     let (t, c) = (Instant::now(), cpu_seconds());
     let s = ftle(&topo, &Motion::fixed(p.clone()), &mut v, 0.0, -10.0, steps).unwrap();
     let (t_ftle, c_ftle) = (t.elapsed().as_secs_f64(), cpu_seconds() - c);
+    // MADDER_LCS_DUMP=DIR writes σ (raw little-endian f64) per case, to compare versions
+    if let Ok(dir) = std::env::var("MADDER_LCS_DUMP") {
+        let name: String = label
+            .chars()
+            .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+            .collect();
+        let bytes: Vec<u8> = s.iter().flat_map(|x| x.to_le_bytes()).collect();
+        std::fs::write(format!("{dir}/{name}-{steps}.f64"), bytes).expect("dump σ");
+    }
     let (t, c) = (Instant::now(), cpu_seconds());
     let r = ridges(&topo, &p, &s, &RidgeOptions::default()).unwrap();
     let (t_ridges, c_ridges) = (t.elapsed().as_secs_f64(), cpu_seconds() - c);
@@ -98,6 +107,8 @@ fn case(label: &str, nx: usize, ny: usize, steps: usize, rolled: bool) {
 }
 
 fn main() {
+    // `cargo bench -p madder --bench lcs -- curved` runs the curved case only
+    let only_curved = std::env::args().any(|a| a == "curved");
     println!(
         "FTLE + ridges of the double gyre, T = −10, {} rayon threads",
         rayon::current_num_threads()
@@ -105,6 +116,9 @@ fn main() {
     // 25 RK4 steps: integration error 9e-5 of the range against numbacs' 1.8e-4 at rtol
     // 1e-4 (tests/bench/bench_numbacs.py); 100 steps: 4e-7 against 1.5e-6 at rtol 1e-6
     for steps in [100, 25] {
+        if only_curved {
+            break;
+        }
         case("double gyre 401×201, flat", 400, 200, steps, false);
         case("100k-vertex grid, flat", 447, 223, steps, false);
     }
