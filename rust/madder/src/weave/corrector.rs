@@ -293,12 +293,15 @@ impl Corrector {
             moment[0] += (u - 1.0) * ((v % gw) as f64 + 0.5) / r as f64;
             moment[1] += (u - 1.0) * ((v / gw) as f64 + 0.5) / r as f64;
         }
-        let mut out = self.clone();
-        out.patches = patch_table(&chi, gw, gh, |v| patch[v]);
-        out.chi = chi;
-        out.moment = moment.map(|m| m / (gw * gh) as f64);
-        out.filter = sigma;
-        Ok(out)
+        Ok(Corrector {
+            patches: patch_table(&chi, gw, gh, |v| patch[v]),
+            chi,
+            moment: moment.map(|m| m / (gw * gh) as f64),
+            filter: sigma,
+            tensors: self.tensors.clone(),
+            uptake: self.uptake.clone(),
+            ..*self
+        })
     }
 
     /// The uptake the texture reads in patch `v = q (w r) + p` of the sample grid (the
@@ -392,7 +395,9 @@ impl Corrector {
         }
     }
 
-    /// The uptake factor of the cell holding tile coordinate `y` (cells, periodic).
+    /// The uptake factor of the cell holding tile coordinate `y` (cells, periodic): the
+    /// unfiltered per-cell factor, also on a [`Corrector::filtered`] one (what its texels
+    /// read is [`Corrector::uptake_of_patch`]).
     #[inline]
     pub fn uptake_at(&self, y: [f64; 2]) -> f64 {
         let i = (y[0].floor() as i64).rem_euclid(self.width as i64) as usize;
