@@ -461,8 +461,10 @@ impl Simulator {
     }
 
     /// Wall-clock seconds per phase since the simulator was built, and counters: a dict
-    /// with `geometry`, `forces`, `advection`, `diffusion`, `interaction` (s),
-    /// `substeps`, `density_iterations`, `velocity_iterations`, `transport_cycles`.
+    /// with `window`, `geometry`, `forces`, `advection`, `diffusion`, `interaction` (s),
+    /// the counters of `Profile` (`substeps`, `density_iterations`, ...), and
+    /// `least_work`: per phase, the bytes and flops it must move and do at least and its
+    /// per-sweep working set (`Profile::least_work`, module `stain/work.rs`).
     fn profile<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let p = self.inner.profile();
         let d = PyDict::new(py);
@@ -477,6 +479,7 @@ impl Simulator {
             d.set_item(k, v)?;
         }
         for (k, v) in [
+            ("frames", p.frames),
             ("substeps", p.substeps),
             ("density_iterations", p.density_iterations),
             ("velocity_iterations", p.velocity_iterations),
@@ -484,9 +487,23 @@ impl Simulator {
             ("active_vertices", p.active_vertices),
             ("window_vertices", p.window_vertices),
             ("window_rebuilds", p.window_rebuilds),
+            ("window_edges", p.window_edges),
+            ("window_faces", p.window_faces),
+            ("transport_passes", p.transport_passes),
+            ("density_solves", p.density_solves),
+            ("carried_fields", p.carried_fields),
         ] {
             d.set_item(k, v)?;
         }
+        let least = PyDict::new(py);
+        for w in p.least_work() {
+            let e = PyDict::new(py);
+            e.set_item("bytes", w.bytes)?;
+            e.set_item("flops", w.flops)?;
+            e.set_item("working_set", w.working_set)?;
+            least.set_item(w.name, e)?;
+        }
+        d.set_item("least_work", least)?;
         Ok(d)
     }
 

@@ -11,6 +11,13 @@
 //!
 //! On the 100k flag it also steps the default CG tolerances beside the former tight ones
 //! and prints the largest difference of the outputs (`against_tight_solves`).
+//!
+//! **Close to the limit** (issue 16, target 4): after each case, per phase, the bytes and
+//! flops the step must move and do at least ([`Profile::least_work`], the model in
+//! `stain/work.rs`), the rates that makes, and the time the machine would need for that
+//! much work at its measured limits ([`Machine`]): the bandwidth of the memory level the
+//! phase's per-sweep working set fits in, or the multiply–add throughput, whichever is
+//! slower. `× limit` is the measured time over that bound.
 
 mod common;
 
@@ -18,11 +25,138 @@ use std::time::Instant;
 
 use common::{grid, motion, pour, wave};
 use faer::Par;
-use madder::stain::{Conductivity, Simulator, StainParams};
+use madder::stain::{Conductivity, Profile, Simulator, StainParams};
+use rayon::prelude::*;
+
+/// The machine's limits as this build reaches them, over all rayon threads: the triad
+/// `a = b + s c` (24 bytes an element) at working sets of 1, 16 and 256 MiB (served by
+/// L2, L3 and DRAM on this machine's 2 MiB / 32 MiB caches), and the multiply–add rate on
+/// an L1-resident array (the code the crate is compiled to: no `target-cpu`, so SSE2).
+struct Machine {
+    /// (working set in bytes, bytes per second), smallest first.
+    levels: Vec<(f64, f64)>,
+    /// Floating-point operations per second.
+    flops: f64,
+}
+
+impl Machine {
+    fn measure() -> Self {
+        let best = |f: &mut dyn FnMut()| {
+            let (mut best, start) = (f64::INFINITY, Instant::now());
+            while start.elapsed().as_secs_f64() < 0.3 {
+                let t = Instant::now();
+                f();
+                best = best.min(t.elapsed().as_secs_f64());
+            }
+            best
+        };
+        let levels = [1usize << 20, 16 << 20, 256 << 20]
+            .iter()
+            .map(|&bytes| {
+                let n = bytes / 24;
+                let (b, c) = (vec![1.0f64; n], vec![2.0f64; n]);
+                let mut a = vec![0.0f64; n];
+                // one chunk per thread, swept `reps` times in a row, so that the pool's
+                // hand-over is a small share even when the sweep sits in L2
+                let chunk = n.div_ceil(rayon::current_num_threads());
+                let reps = (256 << 20) / bytes;
+                let t = best(&mut || {
+                    a.par_chunks_mut(chunk)
+                        .zip(b.par_chunks(chunk))
+                        .zip(c.par_chunks(chunk))
+                        .for_each(|((a, b), c)| {
+                            for _ in 0..reps {
+                                for ((a, b), c) in a.iter_mut().zip(b).zip(c) {
+                                    *a = b + 0.5 * c;
+                                }
+                                std::hint::black_box(&mut *a);
+                            }
+                        });
+                });
+                (bytes as f64, 24.0 * (n * reps) as f64 / t)
+            })
+            .collect();
+        let threads = rayon::current_num_threads();
+        let (len, reps) = (256, 20_000);
+        let t = best(&mut || {
+            (0..threads).into_par_iter().for_each(|k| {
+                let mut y = vec![k as f64; len];
+                for _ in 0..reps {
+                    for y in y.iter_mut() {
+                        *y = *y * 0.999_999 + 1e-6;
+                    }
+                    std::hint::black_box(&mut y);
+                }
+            });
+        });
+        let flops = 2.0 * (len * reps * threads) as f64 / t;
+        Self { levels, flops }
+    }
+
+    /// The bandwidth of the smallest level that holds `working_set` bytes, and its name.
+    fn bandwidth(&self, working_set: f64) -> (f64, &'static str) {
+        let names = ["L2", "L3", "DRAM"];
+        let k = self
+            .levels
+            .iter()
+            .position(|&(size, _)| working_set <= size)
+            .unwrap_or(self.levels.len() - 1);
+        (self.levels[k].1, names[k])
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "machine limits ({} threads, as built): triad {}, multiply-add {:.1} GFLOP/s",
+            rayon::current_num_threads(),
+            self.levels
+                .iter()
+                .zip(["L2", "L3", "DRAM"])
+                .map(|(&(size, bw), name)| format!(
+                    "{name} ({:.0} MiB) {:.1} GB/s",
+                    size / (1u64 << 20) as f64,
+                    bw * 1e-9
+                ))
+                .collect::<Vec<_>>()
+                .join(", "),
+            self.flops * 1e-9
+        )
+    }
+}
+
+/// Prints, per phase and frame, the least bytes and flops, the rates achieved and the
+/// distance from the machine's limit (module doc).
+fn report_limits(p: &Profile, frames: usize, machine: &Machine) {
+    println!(
+        "    {:<12}{:>9}{:>11}{:>12}{:>8}{:>9}{:>10}{:>9}  served by",
+        "phase", "ms/frame", "least MB", "least Mflop", "GB/s", "GFLOP/s", "limit ms", "× limit"
+    );
+    let per = frames as f64;
+    for w in p.least_work() {
+        let (bw, level) = machine.bandwidth(w.working_set);
+        let limit = (w.bytes / bw).max(w.flops / machine.flops);
+        let bound = if w.bytes / bw >= w.flops / machine.flops {
+            level
+        } else {
+            "flops"
+        };
+        println!(
+            "    {:<12}{:>9.2}{:>11.1}{:>12.1}{:>8.1}{:>9.2}{:>10.3}{:>9.0}  {bound} ({:.1} MB a sweep)",
+            w.name,
+            w.seconds * 1e3 / per,
+            w.bytes * 1e-6 / per,
+            w.flops * 1e-6 / per,
+            w.bytes / w.seconds.max(1e-12) * 1e-9,
+            w.flops / w.seconds.max(1e-12) * 1e-9,
+            limit * 1e3 / per,
+            w.seconds / limit.max(1e-12),
+            w.working_set * 1e-6,
+        );
+    }
+}
 
 /// Steps the pour on an `nx` × `ny` flag grid scaled by `scale`; prints the phases and
 /// returns (construction, per frame) in ms.
-fn bench(nx: usize, ny: usize, frames: usize, scale: f64) -> (f64, f64) {
+fn bench(nx: usize, ny: usize, frames: usize, scale: f64, machine: &Machine) -> (f64, f64) {
     let (topo, mut rest) = grid(nx, ny);
     rest.iter_mut().for_each(|p| *p *= scale);
     let n = topo.n_vertices();
@@ -82,6 +216,7 @@ fn bench(nx: usize, ny: usize, frames: usize, scale: f64) -> (f64, f64) {
         100.0 * p.active_vertices as f64 / (p.substeps * n) as f64,
         p.window_rebuilds,
     );
+    report_limits(&p, frames, machine);
     (setup, total)
 }
 
@@ -94,14 +229,16 @@ fn main() {
         parts(127, 77, 50);
         return;
     }
-    bench(127, 77, 48, 1.0); // ≈ 10k vertices
+    let machine = Machine::measure();
+    println!("{}", machine.describe());
+    bench(127, 77, 48, 1.0, &machine); // ≈ 10k vertices
     if std::env::var("MADDER_BENCH_SMALL").is_ok() {
         return;
     }
-    let (_, small) = bench(407, 245, 12, 1.0); // ≈ 100k vertices
+    let (_, small) = bench(407, 245, 12, 1.0, &machine); // ≈ 100k vertices
     against_tight_solves(407, 245, 12);
     // ≈ 1M vertices at the 100k grid's spacing: the same stain on a cloth 10× the area
-    let (setup, large) = bench(1290, 775, 12, 1290.0 / 407.0);
+    let (setup, large) = bench(1290, 775, 12, 1290.0 / 407.0, &machine);
     println!(
         "cost follows the stain: the same pour on 1M vertices (same spacing) {large:.1} ms/frame = {:.2}× the 100k cloth's {small:.1} (target ≤ 2×); 1M construction {setup:.0} ms (target ≤ 1000)",
         large / small

@@ -633,7 +633,7 @@ pub(super) enum SoluteMotion<'a> {
 
 /// `(M + h K_A) σ' = m` for every flowing field on the active vertices, Neumann at the
 /// region's edge ([`crate::ops::restrict`]), then the exact mass restoration and the non-negativity
-/// repair; the masses outside are not touched. Returns the CG iterations.
+/// repair; the masses outside are not touched. Returns the work done.
 pub(super) fn diffuse_densities(
     ops: &Ops<'_>,
     cg: &mut WarmCg,
@@ -642,7 +642,7 @@ pub(super) fn diffuse_densities(
     h: f64,
     wicking: Option<&[f64]>,
     solute: SoluteMotion<'_>,
-) -> Result<usize, Error> {
+) -> Result<DensityWork, Error> {
     let (carry, held_scale) = match solute {
         SoluteMotion::Diffused => (false, None),
         SoluteMotion::Carried { held_scale } => (true, held_scale),
@@ -689,7 +689,12 @@ pub(super) fn diffuse_densities(
             if a > 0.0 { m / a } else { 0.0 }
         })
         .collect();
-    let iterations = match &held_full {
+    let mut work = DensityWork {
+        iterations: 0,
+        solves: fields.len(),
+        carried: 0,
+    };
+    work.iterations = match &held_full {
         None => {
             cg.solve_chained(&values, &rhs, &mut sigma)?;
             cg.last_iterations
@@ -724,6 +729,7 @@ pub(super) fn diffuse_densities(
         for (target, movable) in moves.iter_mut() {
             *movable = target.to_vec();
         }
+        work.carried += moves.len();
         carry_with_solvent(
             ops,
             &full,
@@ -755,6 +761,7 @@ pub(super) fn diffuse_densities(
             .iter_mut()
             .map(|(t, m)| (t, std::mem::take(m)))
             .collect();
+        work.carried += refs.len();
         carry_with_solvent(
             ops,
             held_full.as_ref().unwrap_or(&full),
@@ -773,7 +780,17 @@ pub(super) fn diffuse_densities(
     if let (Some(c), Some(cf)) = (color, f.color_free.as_mut()) {
         merge_rgb(&c, cf);
     }
-    Ok(iterations)
+    Ok(work)
+}
+
+/// What one density diffusion did (counted for [`crate::stain::Profile`]).
+pub(super) struct DensityWork {
+    /// CG iterations over all solved fields.
+    pub iterations: usize,
+    /// Fields solved (one CG solve each).
+    pub solves: usize,
+    /// Fields carried along the solved solvent's fluxes (the solute and its colour).
+    pub carried: usize,
 }
 
 /// Most Gauss–Seidel sweeps of the carried solute's concentrations ([`carry_with_solvent`]).

@@ -5,6 +5,7 @@
 //!   over the dry cloth by [`extend`]), diffusion ([`diffuse`], §4.3.3–4.3.4) and
 //!   stain–surface interactions ([`interact`], §4.5);
 //! - [`window`]: the active region a frame works on, cut out of the cloth;
+//! - [`work`]: what each phase must move and compute at least, for the benchmarks;
 //! - [`state`]: the per-vertex fields and the simulator's state, and what is read out of it;
 //! - [`sources`]: liquid poured, splashes and initial velocities;
 //! - [`DiffusionStepper`] ([`diffuse`]): the diffusion alone (the first slice, kept for the
@@ -21,6 +22,7 @@ pub(crate) mod simulate;
 pub(crate) mod sources;
 pub(crate) mod state;
 pub(crate) mod window;
+pub(crate) mod work;
 
 pub use detail::Detailed;
 pub use diffuse::{Conductivity, DEFAULT_DIFFUSION, DiffusionStepper, Wicking, WovenFaces};
@@ -29,3 +31,4 @@ pub use interact::InteractionRates;
 pub use irregular::Irregularity;
 pub use simulate::{DEFAULT_SOLUTE_COLOR, Profile, Simulator, StainParams};
 pub use state::{Fields, Totals};
+pub use work::{PhaseWork, TRANSCENDENTAL};

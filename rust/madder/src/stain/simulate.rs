@@ -81,8 +81,8 @@ use rayon::prelude::*;
 
 use super::advect::{UpwindPlan, advect_velocity_in, dual_fluxes};
 use super::diffuse::{
-    Conductivity, DENSITY_TOLERANCE, Ops, SoluteMotion, VELOCITY_TOLERANCE, Wicking, check_range,
-    diffuse_densities, diffuse_velocity,
+    Conductivity, DENSITY_TOLERANCE, DensityWork, Ops, SoluteMotion, VELOCITY_TOLERANCE, Wicking,
+    check_range, diffuse_densities, diffuse_velocity,
 };
 use super::extend::{extend_velocity, wet_vertices};
 use super::forces::{
@@ -259,6 +259,8 @@ pub struct Profile {
     pub diffusion: f64,
     /// Interactions.
     pub interaction: f64,
+    /// Frames stepped.
+    pub frames: usize,
     /// Sub-steps taken.
     pub substeps: usize,
     /// CG iterations of the density solves (all fields).
@@ -274,6 +276,17 @@ pub struct Profile {
     pub window_vertices: usize,
     /// Times the window was rebuilt.
     pub window_rebuilds: usize,
+    /// Window edges, summed over the sub-steps (for the work model of
+    /// [`Profile::least_work`]).
+    pub window_edges: usize,
+    /// Window faces, summed over the sub-steps.
+    pub window_faces: usize,
+    /// Fields carried through the transport sub-cycles, times the sub-cycles, summed.
+    pub transport_passes: usize,
+    /// Density fields solved (one CG solve each), summed over the sub-steps.
+    pub density_solves: usize,
+    /// Fields carried along the solved solvents' fluxes, summed over the sub-steps.
+    pub carried_fields: usize,
 }
 
 impl Simulator {
@@ -409,6 +422,7 @@ impl Simulator {
         let rebuilt = !std::mem::take(&mut self.prepared) && self.prepare_window()?;
         let mut prof = self.profile;
         prof.window_rebuilds += usize::from(rebuilt);
+        prof.frames += 1;
         prof.window += clock.elapsed().as_secs_f64();
         let t_end = self.state.time + dt;
         let mut window = self.window.take();
@@ -553,6 +567,8 @@ impl Simulator {
         let transport = Transport::new(topo, &w.cloth.rings, &geometry, &frames, q);
         prof.active_vertices += w.region.vertices.len();
         prof.window_vertices += n;
+        prof.window_edges += topo.n_edges();
+        prof.window_faces += topo.n_faces();
         lap(&mut prof.geometry);
 
         // 1. body forces (§4.4), friction and the Coriolis turn, exactly over half the
@@ -633,6 +649,7 @@ impl Simulator {
                 fields.extend(c.iter_mut().map(|v| v.as_mut_slice()));
             }
             plan.transport_all(topo, &mut fields);
+            prof.transport_passes += plan.substeps() * fields.len();
             if let (Some(c), Some(cf)) = (color, f.color_free.as_mut()) {
                 merge_rgb(&c, cf);
             }
@@ -702,7 +719,14 @@ impl Simulator {
         });
         let (fields, velocity) = (&mut loc.fields, &mut loc.velocity);
         let (densities, viscous) = match w.cg.as_mut() {
-            None => (Ok(0), Ok(0)),
+            None => (
+                Ok(DensityWork {
+                    iterations: 0,
+                    solves: 0,
+                    carried: 0,
+                }),
+                Ok(0),
+            ),
             Some((scalar_cg, vector_cg)) => {
                 scalar_cg.set_tolerance(self.tolerances[0]);
                 vector_cg.set_tolerance(self.tolerances[1]);
@@ -737,7 +761,10 @@ impl Simulator {
                 )
             }
         };
-        prof.density_iterations += densities?;
+        let densities = densities?;
+        prof.density_iterations += densities.iterations;
+        prof.density_solves += densities.solves;
+        prof.carried_fields += densities.carried;
         prof.velocity_iterations += viscous?;
         lap(&mut prof.diffusion);
 
