@@ -2,6 +2,7 @@
 //! of the densities and of the velocity, interactions) on a waving-flag grid, split into
 //! its phases. Prints figures; asserts nothing about time. `MADDER_BENCH_WHOLE=1` steps
 //! the whole mesh (no active region), `MADDER_BENCH_SMALL=1` only the 10k case,
+//! `MADDER_BENCH_100K=1` only the 100k one, without the machine's limits (for profiling),
 //! `MADDER_BENCH_PARTS=1` times the pieces one by one.
 //!
 //! **Cost follows the stain** (issue 16, target 3): the same pour on the 100k flag and on a
@@ -156,7 +157,7 @@ fn report_limits(p: &Profile, frames: usize, machine: &Machine) {
 
 /// Steps the pour on an `nx` × `ny` flag grid scaled by `scale`; prints the phases and
 /// returns (construction, per frame) in ms.
-fn bench(nx: usize, ny: usize, frames: usize, scale: f64, machine: &Machine) -> (f64, f64) {
+fn bench(nx: usize, ny: usize, frames: usize, scale: f64, machine: Option<&Machine>) -> (f64, f64) {
     let (topo, mut rest) = grid(nx, ny);
     rest.iter_mut().for_each(|p| *p *= scale);
     let n = topo.n_vertices();
@@ -216,7 +217,9 @@ fn bench(nx: usize, ny: usize, frames: usize, scale: f64, machine: &Machine) -> 
         100.0 * p.active_vertices as f64 / (p.substeps * n) as f64,
         p.window_rebuilds,
     );
-    report_limits(&p, frames, machine);
+    if let Some(machine) = machine {
+        report_limits(&p, frames, machine);
+    }
     (setup, total)
 }
 
@@ -229,16 +232,20 @@ fn main() {
         parts(127, 77, 50);
         return;
     }
+    if std::env::var("MADDER_BENCH_100K").is_ok() {
+        bench(407, 245, 12, 1.0, None);
+        return;
+    }
     let machine = Machine::measure();
     println!("{}", machine.describe());
-    bench(127, 77, 48, 1.0, &machine); // ≈ 10k vertices
+    bench(127, 77, 48, 1.0, Some(&machine)); // ≈ 10k vertices
     if std::env::var("MADDER_BENCH_SMALL").is_ok() {
         return;
     }
-    let (_, small) = bench(407, 245, 12, 1.0, &machine); // ≈ 100k vertices
+    let (_, small) = bench(407, 245, 12, 1.0, Some(&machine)); // ≈ 100k vertices
     against_tight_solves(407, 245, 12);
     // ≈ 1M vertices at the 100k grid's spacing: the same stain on a cloth 10× the area
-    let (setup, large) = bench(1290, 775, 12, 1290.0 / 407.0, &machine);
+    let (setup, large) = bench(1290, 775, 12, 1290.0 / 407.0, Some(&machine));
     println!(
         "cost follows the stain: the same pour on 1M vertices (same spacing) {large:.1} ms/frame = {:.2}× the 100k cloth's {small:.1} (target ≤ 2×); 1M construction {setup:.0} ms (target ≤ 1000)",
         large / small

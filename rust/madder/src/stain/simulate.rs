@@ -496,41 +496,49 @@ impl Simulator {
             cycles: 0,
         };
         prof.forces += clock.elapsed().as_secs_f64();
-        let s_count = self.substeps(w, &next, &local.frames, dt);
+        let clock = Instant::now();
+        // the frames at the frame's end: the sub-step count reads them, and the last
+        // sub-step's frames are these (the same formula at the same positions)
+        let cloth = &w.cloth;
+        let end_frames =
+            corotating_frames_with(&cloth.adjacency, &cloth.rest_frames, &cloth.rest, &next);
+        let s_count = self.substeps(w, &end_frames, &local.frames, dt);
+        let mut end_frames = Some(end_frames);
+        prof.geometry += clock.elapsed().as_secs_f64();
         let h = dt / s_count as f64;
         for s in 1..=s_count {
             let between: Vec<DVec3>;
-            let q = if s == s_count {
-                &next
+            let (q, frames) = if s == s_count {
+                (&next[..], end_frames.take())
             } else {
                 let t = s as f64 / s_count as f64;
                 between = cur.iter().zip(&next).map(|(a, b)| a.lerp(*b, t)).collect();
-                &between
+                (&between[..], None)
             };
-            self.substep(w, &mut local, q, h, &acceleration, prof)?;
+            self.substep(w, &mut local, q, frames, h, &acceleration, prof)?;
         }
         Ok(local)
     }
 
     /// Sub-steps of a frame of `dt` on the window `w` from the vertex frames `start` to the
-    /// positions `next` (window order): the user's [`StainParams::substeps`], or more so
+    /// frames `end` at the frame's positions (window order): the user's [`StainParams::substeps`], or more so
     /// that the frames of the active vertices turn (about their normals) by at most
     /// [`MAX_TURN`] per sub-step (module doc, "Fast rotation").
-    fn substeps(&self, w: &Window, next: &[DVec3], start: &VertexFrames, dt: f64) -> usize {
+    fn substeps(&self, w: &Window, end: &VertexFrames, start: &VertexFrames, dt: f64) -> usize {
         let asked = self.params.substeps as usize;
         if !self.params.forces.coriolis {
             return asked;
         }
-        let cloth = &w.cloth;
         let turn = w
             .region
             .vertices
             .par_iter()
             .map(|&j| {
                 let j = j as usize;
-                let end =
-                    cloth.adjacency.rotation(&cloth.rest, next, j) * cloth.rest_frames.frame[j];
-                frame_angular_velocity(&start.frame[j], &end, dt).z.abs() * dt
+                frame_angular_velocity(&start.frame[j], &end.frame[j], dt)
+                    .z
+                    .abs()
+                    * dt
             })
             .reduce(|| 0.0, f64::max);
         // a NaN turn (never from finite positions) keeps the user's count
@@ -542,12 +550,15 @@ impl Simulator {
         }
     }
 
-    /// One sub-step `h` of the window to positions `q` (window order).
+    /// One sub-step `h` of the window to positions `q` (window order), whose vertex frames
+    /// are `frames` if the caller has them.
+    #[allow(clippy::too_many_arguments)]
     fn substep(
         &self,
         w: &mut Window,
         loc: &mut Local,
         q: &[DVec3],
+        frames: Option<VertexFrames>,
         h: f64,
         acceleration: &[DVec3],
         prof: &mut Profile,
@@ -562,8 +573,9 @@ impl Simulator {
         let n = w.vertices.len();
         let topo = &w.cloth.topology;
         let geometry = Geometry::new(topo, q)?;
-        let frames =
-            corotating_frames_with(&w.cloth.adjacency, &w.cloth.rest_frames, &w.cloth.rest, q);
+        let frames = frames.unwrap_or_else(|| {
+            corotating_frames_with(&w.cloth.adjacency, &w.cloth.rest_frames, &w.cloth.rest, q)
+        });
         let transport = Transport::new(topo, &w.cloth.rings, &geometry, &frames, q);
         prof.active_vertices += w.region.vertices.len();
         prof.window_vertices += n;
