@@ -188,9 +188,11 @@ class Compression:
 
 class Decompression:
     """The `.madm` file `source` decoded, a frame at a time (`step`), into the PC2 file
-    `target` (same start and rate), written atomically by `finish()` (`madder.write_pc2`
-    replaces `target` only once the whole file is on disk); nothing is written before.
-    `name` (an object's) prefixes the messages when given."""
+    `target` (same start and rate). Each decoded frame goes straight to a partial file
+    beside `target` (`madder.Pc2Writer`), so memory holds one frame whatever the length;
+    `finish()` puts the file in place atomically and `abort()` (or any error) removes the
+    partial file: `target` keeps what it held until the whole file is on disk. `name` (an
+    object's) prefixes the messages when given."""
 
     def __init__(self, madder, source, target, name=None):
         self.who = f"'{name}': " if name else ""
@@ -206,7 +208,7 @@ class Decompression:
         if self.codec.n_frames == 0:
             raise self._error(f"{source} holds no frames", filename=source)
         self.timing = modifier_timing(self.codec.start, self.codec.rate, source)
-        self.frames = np.empty((self.codec.n_frames, self.codec.n_points, 3), dtype=np.float32)
+        self.writer = None
         self.done = 0
 
     @property
@@ -216,28 +218,48 @@ class Decompression:
     def _error(self, message, **fields):
         return MotionCodecError(self.who + message, object=self.name, **fields)
 
+    def _write(self, action):
+        """Runs `action` on the PC2 side, naming the target in its errors (and discarding
+        the partial file)."""
+        try:
+            return action()
+        except (self.madder.MadderError, OSError) as e:
+            self.abort()
+            text = str(e) if isinstance(e, self.madder.MadderError) else \
+                f"cannot write {self.target}: {e.strerror or e}"
+            raise self._error(text, filename=self.target) from e
+
     def step(self):
-        """Decodes the next sample; returns whether samples are left."""
+        """Decodes the next sample and appends it to the partial file; returns whether
+        samples are left."""
         k = self.done
         try:
-            self.frames[k] = self.codec.read_frame(k)
+            frame = self.codec.read_frame(k)
         except self.madder.MadderError as e:
+            self.abort()
             raise self._error(str(e), frame=k, filename=self.source) from e
+        if self.writer is None:
+            def start():
+                folder = os.path.dirname(self.target)
+                if folder:
+                    os.makedirs(folder, exist_ok=True)
+                return self.madder.Pc2Writer(self.target, self.codec.n_points,
+                                             start=float(self.codec.start), rate=float(self.codec.rate))
+            self.writer = self._write(start)
+        self._write(lambda: self.writer.add_frame(frame))
         self.done += 1
         return self.done < self.total
 
     def finish(self):
-        """Writes the PC2 file; returns its path."""
+        """Decodes what is left and puts the PC2 file in place; returns its path."""
         while self.done < self.total:
             self.step()
-        folder = os.path.dirname(self.target)
-        try:
-            if folder:
-                os.makedirs(folder, exist_ok=True)
-            self.madder.write_pc2(self.target, self.frames, start=float(self.codec.start),
-                                  rate=float(self.codec.rate))
-        except self.madder.MadderError as e:
-            raise self._error(str(e), filename=self.target) from e
-        except OSError as e:
-            raise self._error(f"cannot write {self.target}: {e.strerror or e}", filename=self.target) from e
+        self._write(self.writer.finish)
+        self.writer = None
         return self.target
+
+    def abort(self):
+        """Removes the partial file; `target` keeps what it held."""
+        writer, self.writer = self.writer, None
+        if writer is not None:
+            writer.abort()

@@ -168,8 +168,8 @@ class DecompressJob:
         return path
 
     def cancel(self):
-        """Nothing is written before `finish()`: drops the decoded frames."""
-        self.decompression.frames = None
+        """Removes the partial file: the earlier PC2, if any, is kept."""
+        self.decompression.abort()
 
 
 def point_mesh_cache(obj, path, frame_start, frame_scale):

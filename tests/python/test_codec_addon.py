@@ -149,6 +149,51 @@ def test_decompression_errors_name_the_file_and_keep_the_earlier_pc2(tmp_path):
     assert codec.pc2_path("/a/b.madm") == "/a/b.pc2" and codec.is_compressed("/a/B.MADM")
 
 
+def test_decompression_streams_and_an_abort_keeps_the_earlier_pc2(tmp_path):
+    path = compressed(tmp_path, n=6)
+    target = tmp_path / "cloth.pc2"
+    target.write_bytes(b"earlier")
+    d = codec.Decompression(madder, path, str(target), "Cloth")
+    for _ in range(3):
+        assert d.step()
+    # three frames are on disk beside the target, none in memory; the target is untouched
+    partial = [f for f in files(tmp_path) if f not in ("cloth.madm", "cloth.pc2")]
+    assert len(partial) == 1 and os.path.getsize(tmp_path / partial[0]) == 32 + 3 * 12 * d.codec.n_points
+    assert not hasattr(d, "frames") and target.read_bytes() == b"earlier"
+    d.abort()
+    assert target.read_bytes() == b"earlier" and files(tmp_path) == ["cloth.madm", "cloth.pc2"]
+    # a failure to write names the target and leaves nothing behind
+    blocked = tmp_path / "blocked"
+    blocked.write_bytes(b"a file where the folder should be")
+    with pytest.raises(MotionCodecError, match="'Cloth': .*blocked") as e:
+        codec.Decompression(madder, path, str(blocked / "cloth.pc2"), "Cloth").finish()
+    assert e.value.filename == str(blocked / "cloth.pc2")
+    assert files(tmp_path) == ["blocked", "cloth.madm", "cloth.pc2"]
+
+
+def test_pc2_writer_streams_what_write_pc2_writes(tmp_path):
+    rng = np.random.default_rng(3)
+    frames = rng.normal(size=(4, 7, 3)).astype(np.float32)
+    madder.write_pc2(str(tmp_path / "whole.pc2"), frames, start=-2.0, rate=0.5)
+    w = madder.Pc2Writer(str(tmp_path / "streamed.pc2"), 7, start=-2.0, rate=0.5)
+    for f in frames:
+        w.add_frame(f)
+    assert w.n_frames == 4 and not (tmp_path / "streamed.pc2").exists()
+    w.finish()
+    assert (tmp_path / "streamed.pc2").read_bytes() == (tmp_path / "whole.pc2").read_bytes()
+    w = madder.Pc2Writer(str(tmp_path / "bad.pc2"), 7)
+    bad = frames[0].copy()
+    bad[5, 1] = np.nan
+    with pytest.raises(madder.CacheError, match="frame 0, vertex 5"):
+        w.add_frame(bad)
+    with pytest.raises(madder.ParameterError, match=r"\(N, 3\)"):
+        w.add_frame(frames[0][:, :2].copy())
+    w.abort()
+    with pytest.raises(madder.CacheError, match="finished or aborted"):
+        w.add_frame(frames[0])
+    assert files(tmp_path) == ["streamed.pc2", "whole.pc2"]
+
+
 def test_timing_is_the_mesh_cache_modifiers_in_float32():
     assert codec.modifier_timing(1.0, 1.0) == (1.0, 1.0)
     assert codec.modifier_timing(1.0, 2.0) == (0.5, 0.5)

@@ -1,9 +1,11 @@
-//! `PointCache`, `write_pc2`, `write_mdd`: the PC2/MDD files of Blender's Mesh Cache
-//! modifier (core module `io::point_cache`).
+//! `PointCache`, `Pc2Writer`, `write_pc2`, `write_mdd`: the PC2/MDD files of Blender's
+//! Mesh Cache modifier (core module `io::point_cache`).
 
 use std::path::PathBuf;
 
-use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray3, PyUntypedArrayMethods};
+use numpy::{
+    PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods,
+};
 use pyo3::prelude::*;
 
 use crate::errors::{CacheError, ParameterError, to_py};
@@ -181,8 +183,105 @@ pub fn write_mdd(
         .map_err(to_py)
 }
 
+/// Writes a PC2 file a frame at a time (`add_frame`), for sequences too long to hold in
+/// memory; `finish()` puts it in place atomically, as `write_pc2` does. Until then `path`
+/// keeps what it held, and `abort()` (or dropping the writer) removes the partial file.
+/// Errors are `CacheError`s naming the file (and the frame and vertex of a bad position).
+#[pyclass(module = "madder")]
+pub struct Pc2Writer {
+    path: PathBuf,
+    inner: Option<core::Pc2Writer>,
+    n_frames: usize,
+}
+
+#[pymethods]
+impl Pc2Writer {
+    #[new]
+    #[pyo3(signature = (path, n_points, start=1.0, rate=1.0))]
+    fn new(
+        py: Python<'_>,
+        path: PathBuf,
+        n_points: usize,
+        start: f32,
+        rate: f32,
+    ) -> PyResult<Self> {
+        let inner = py
+            .detach(|| core::Pc2Writer::create(&path, n_points, start, rate))
+            .map_err(to_py)?;
+        Ok(Self {
+            path,
+            inner: Some(inner),
+            n_frames: 0,
+        })
+    }
+
+    /// Appends the next frame: `(N, 3)` float32 positions.
+    fn add_frame(&mut self, py: Python<'_>, positions: PyReadonlyArray2<'_, f32>) -> PyResult<()> {
+        let shape = positions.shape();
+        if shape[1] != 3 {
+            return Err(ParameterError::new_err(format!(
+                "positions must have shape (N, 3), got {shape:?}"
+            )));
+        }
+        let rows: Vec<[f32; 3]> = positions
+            .as_array()
+            .rows()
+            .into_iter()
+            .map(|r| [r[0], r[1], r[2]])
+            .collect();
+        let Some(inner) = self.inner.as_mut() else {
+            return Err(CacheError::new_err(format!(
+                "{}: the writer is finished or aborted",
+                self.path.display()
+            )));
+        };
+        py.detach(|| inner.add_frame(&rows)).map_err(to_py)?;
+        self.n_frames = inner.n_frames();
+        Ok(())
+    }
+
+    /// Writes the frame count and renames the file into place.
+    fn finish(&mut self, py: Python<'_>) -> PyResult<()> {
+        let Some(inner) = self.inner.take() else {
+            return Err(CacheError::new_err(format!(
+                "{}: the writer is finished or aborted",
+                self.path.display()
+            )));
+        };
+        py.detach(move || inner.finish()).map_err(to_py)
+    }
+
+    /// Removes the partial file; `path` is untouched. Does nothing after `finish()`.
+    fn abort(&mut self) {
+        if let Some(inner) = self.inner.take() {
+            inner.abort();
+        }
+    }
+
+    /// Frames written so far.
+    #[getter]
+    fn n_frames(&self) -> usize {
+        self.n_frames
+    }
+
+    #[getter]
+    fn path(&self) -> PathBuf {
+        self.path.clone()
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Pc2Writer({:?}, n_frames={}{})",
+            self.path.display().to_string(),
+            self.n_frames,
+            if self.inner.is_some() { "" } else { ", closed" }
+        )
+    }
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PointCache>()?;
+    m.add_class::<Pc2Writer>()?;
     m.add_function(wrap_pyfunction!(write_pc2, m)?)?;
     m.add_function(wrap_pyfunction!(write_mdd, m)?)
 }

@@ -4,7 +4,9 @@
 
 use std::path::{Path, PathBuf};
 
-use madder::io::point_cache::{Format, PointCache, PointCacheError, Timing, write_mdd, write_pc2};
+use madder::io::point_cache::{
+    Format, Pc2Writer, PointCache, PointCacheError, Timing, write_mdd, write_pc2,
+};
 
 fn tmpdir(tag: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("madder-pc-test-{tag}-{}", std::process::id()));
@@ -571,4 +573,86 @@ fn writers_refuse_what_they_could_not_read_back_and_keep_the_old_file() {
         .map(|e| e.unwrap().file_name())
         .collect();
     assert_eq!(names, vec!["keep.pc2"], "no temporary file is left");
+}
+
+/// The files in `d`, sorted.
+fn names(d: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(d)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn the_streaming_writer_writes_the_fixture_and_keeps_the_old_file_until_finish() {
+    let d = tmpdir("stream");
+    let p = d.join("s.pc2");
+    std::fs::write(&p, b"previous").unwrap();
+
+    // frame by frame: the hand-built fixture, byte for byte, once finished
+    let mut w = Pc2Writer::create(&p, 2, 10.0, 0.5).unwrap();
+    w.add_frame(&FRAMES[0]).unwrap();
+    assert_eq!(std::fs::read(&p).unwrap(), b"previous", "not before finish");
+    assert_eq!(names(&d).len(), 2, "a temporary file beside the target");
+    w.add_frame(&FRAMES[1]).unwrap();
+    assert_eq!(w.n_frames(), 2);
+    w.finish().unwrap();
+    assert_eq!(std::fs::read(&p).unwrap(), pc2_fixture());
+    assert_eq!(names(&d), vec!["s.pc2"]);
+
+    // dropped or aborted unfinished, or failing on bad input: the target is untouched and
+    // nothing is left beside it
+    let before = std::fs::read(&p).unwrap();
+    let mut w = Pc2Writer::create(&p, 2, 1.0, 1.0).unwrap();
+    w.add_frame(&FRAMES[1]).unwrap();
+    drop(w);
+    let mut w = Pc2Writer::create(&p, 2, 1.0, 1.0).unwrap();
+    w.add_frame(&FRAMES[0]).unwrap();
+    w.abort();
+    let mut w = Pc2Writer::create(&p, 2, 1.0, 1.0).unwrap();
+    w.add_frame(&FRAMES[0]).unwrap();
+    let mut nan = FRAMES[1];
+    nan[1][2] = f32::INFINITY;
+    let e = w.add_frame(&nan).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            PointCacheError::NonFinite {
+                frame: 1,
+                vertex: 1,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    let e = w.add_frame(&FRAMES[0][..1]).unwrap_err();
+    assert!(e.to_string().contains("frame 1 has 1 points"), "{e}");
+    drop(w);
+    let e = Pc2Writer::create(&p, 2, 1.0, 1.0)
+        .unwrap()
+        .finish()
+        .unwrap_err();
+    assert!(e.to_string().contains("at least one frame"), "{e}");
+    for (n, start, rate) in [(0, 1.0, 1.0), (2, f32::NAN, 1.0), (2, 1.0, -1.0)] {
+        assert!(matches!(
+            Pc2Writer::create(&p, n, start, rate),
+            Err(PointCacheError::Usage { .. })
+        ));
+    }
+    assert_eq!(std::fs::read(&p).unwrap(), before);
+    assert_eq!(names(&d), vec!["s.pc2"], "no temporary file is left");
+
+    // a long sequence streamed reads back frame for frame
+    let frames = cloth(40, 33);
+    let mut w = Pc2Writer::create(&p, 33, 1.0, 1.0).unwrap();
+    for f in &frames {
+        w.add_frame(f).unwrap();
+    }
+    w.finish().unwrap();
+    let mut back = PointCache::open(&p).unwrap();
+    for (k, f) in frames.iter().enumerate() {
+        assert_eq!(bits(&back.read_frame(k).unwrap()), bits(f), "frame {k}");
+    }
 }

@@ -86,7 +86,9 @@
 //! ## Writing
 //! [`write_pc2`] and [`write_mdd`] write the whole file to a temporary file next to the
 //! target, fsync it and rename it over the target, like the Madder cache writer: a failed
-//! write leaves the previous file untouched. They refuse input they could not read back:
+//! write leaves the previous file untouched. [`Pc2Writer`] does the same a frame at a time
+//! (the frame count is written into the header last), for sequences too long to hold in
+//! memory; [`write_pc2`] is built on it. They refuse input they could not read back:
 //! non-finite positions, frames of different lengths, empty data, non-finite or
 //! non-increasing times (PC2: a finite `start` and a finite `rate > 0`).
 //!
@@ -617,25 +619,174 @@ pub fn write_pc2<F: AsRef<[[f32; 3]]>>(
 ) -> Result<(), PointCacheError> {
     let path = path.as_ref();
     let n_points = check_frames(path, frames)?;
-    let usage = |reason: String| PointCacheError::Usage {
-        path: path.to_path_buf(),
-        reason,
-    };
-    if !start.is_finite() {
-        return Err(usage(format!("PC2 start frame {start} is not finite")));
+    let mut writer = Pc2Writer::create(path, n_points as usize, start, rate)?;
+    for frame in frames {
+        writer.add_frame(frame.as_ref())?;
     }
-    if !(rate.is_finite() && rate > 0.0) {
-        return Err(usage(format!("PC2 rate {rate} must be finite and > 0")));
+    writer.finish()
+}
+
+/// A PC2 file written a frame at a time, for sequences too long to hold in memory: the
+/// frames go to a temporary file beside the target as they come, and [`Pc2Writer::finish`]
+/// writes the frame count into the header, fsyncs and renames it over the target. Until
+/// then the target keeps what it held; a writer dropped or [`Pc2Writer::abort`]ed
+/// unfinished removes its temporary file. The same checks as [`write_pc2`]: a finite
+/// `start`, a finite `rate > 0`, at least one point and one frame, every frame with
+/// `n_points` finite positions (a [`NonFinite`](PointCacheError::NonFinite) error names
+/// the frame and vertex).
+#[derive(Debug)]
+pub struct Pc2Writer {
+    path: PathBuf,
+    tmp: PathBuf,
+    out: Option<BufWriter<File>>,
+    n_points: usize,
+    n_frames: usize,
+    block: Vec<u8>,
+}
+
+impl Pc2Writer {
+    /// Starts a PC2 file of `n_points` points per frame, frame `k` at scene frame
+    /// `start + k·rate`.
+    pub fn create(
+        path: impl AsRef<Path>,
+        n_points: usize,
+        start: f32,
+        rate: f32,
+    ) -> Result<Self, PointCacheError> {
+        let path = path.as_ref();
+        let usage = |reason: String| PointCacheError::Usage {
+            path: path.to_path_buf(),
+            reason,
+        };
+        if n_points == 0 || n_points > i32::MAX as usize {
+            return Err(usage(format!(
+                "{n_points} points per frame: the count must be in 1..=2³¹−1"
+            )));
+        }
+        if !start.is_finite() {
+            return Err(usage(format!("PC2 start frame {start} is not finite")));
+        }
+        if !(rate.is_finite() && rate > 0.0) {
+            return Err(usage(format!("PC2 rate {rate} must be finite and > 0")));
+        }
+        let f = Format::Pc2;
+        let mut header = Vec::with_capacity(PC2_HEADER_LEN as usize);
+        header.extend_from_slice(PC2_SIGNATURE);
+        header.extend_from_slice(&f.i32_to(PC2_VERSION));
+        header.extend_from_slice(&f.i32_to(n_points as i32));
+        header.extend_from_slice(&f.f32_to(start));
+        header.extend_from_slice(&f.f32_to(rate));
+        header.extend_from_slice(&f.i32_to(0)); // the frame count, written by `finish`
+        let tmp = temporary_beside(path);
+        let out = BufWriter::new(File::create(&tmp).map_err(|e| io_err(&tmp, e))?);
+        // from here on, dropping the writer (on an error too) removes the file
+        let mut writer = Self {
+            path: path.to_path_buf(),
+            tmp,
+            out: Some(out),
+            n_points,
+            n_frames: 0,
+            block: Vec::with_capacity(12 * n_points),
+        };
+        if let Some(out) = writer.out.as_mut() {
+            out.write_all(&header).map_err(|e| io_err(&writer.tmp, e))?;
+        }
+        Ok(writer)
     }
-    let f = Format::Pc2;
-    let mut header = Vec::with_capacity(PC2_HEADER_LEN as usize);
-    header.extend_from_slice(PC2_SIGNATURE);
-    header.extend_from_slice(&f.i32_to(PC2_VERSION));
-    header.extend_from_slice(&f.i32_to(n_points));
-    header.extend_from_slice(&f.f32_to(start));
-    header.extend_from_slice(&f.f32_to(rate));
-    header.extend_from_slice(&f.i32_to(frames.len() as i32));
-    write_atomic(path, f, &header, frames)
+
+    /// Appends the next frame.
+    pub fn add_frame(&mut self, frame: &[[f32; 3]]) -> Result<(), PointCacheError> {
+        let usage = |reason: String| PointCacheError::Usage {
+            path: self.path.clone(),
+            reason,
+        };
+        if frame.len() != self.n_points {
+            return Err(usage(format!(
+                "frame {} has {} points, the file has {}",
+                self.n_frames,
+                frame.len(),
+                self.n_points
+            )));
+        }
+        if self.n_frames >= i32::MAX as usize {
+            return Err(usage("a PC2 file holds at most 2³¹−1 frames".into()));
+        }
+        if let Some(vertex) = frame.iter().position(|p| !p.iter().all(|x| x.is_finite())) {
+            return Err(PointCacheError::NonFinite {
+                path: self.path.clone(),
+                frame: self.n_frames,
+                vertex,
+                position: frame[vertex],
+            });
+        }
+        let Some(out) = self.out.as_mut() else {
+            return Err(usage("the writer was finished or aborted".into()));
+        };
+        self.block.clear();
+        for &x in frame.iter().flatten() {
+            self.block.extend_from_slice(&Format::Pc2.f32_to(x));
+        }
+        // each frame goes to the file now: memory holds one frame, whatever the length
+        out.write_all(&self.block)
+            .and_then(|()| out.flush())
+            .map_err(|e| io_err(&self.tmp, e))?;
+        self.n_frames += 1;
+        Ok(())
+    }
+
+    /// Frames added so far.
+    pub fn n_frames(&self) -> usize {
+        self.n_frames
+    }
+
+    /// Writes the frame count, fsyncs and renames the file over the target. At least one
+    /// frame must have been added.
+    pub fn finish(mut self) -> Result<(), PointCacheError> {
+        if self.n_frames == 0 {
+            return Err(PointCacheError::Usage {
+                path: self.path.clone(),
+                reason: "a point cache needs at least one frame".into(),
+            });
+        }
+        let Some(out) = self.out.take() else {
+            return Err(PointCacheError::Usage {
+                path: self.path.clone(),
+                reason: "the writer was finished or aborted".into(),
+            });
+        };
+        let count = Format::Pc2.i32_to(self.n_frames as i32);
+        let written = (|| -> std::io::Result<()> {
+            let mut file = out.into_inner().map_err(|e| e.into_error())?;
+            file.seek(SeekFrom::Start(PC2_HEADER_LEN - 4))?;
+            file.write_all(&count)?;
+            file.sync_all()
+        })();
+        if let Err(source) = written {
+            let _ = std::fs::remove_file(&self.tmp);
+            return Err(io_err(&self.tmp, source));
+        }
+        std::fs::rename(&self.tmp, &self.path).map_err(|source| {
+            let _ = std::fs::remove_file(&self.tmp);
+            io_err(&self.path, source)
+        })
+    }
+
+    /// Discards the temporary file; the target keeps what it held.
+    pub fn abort(mut self) {
+        self.discard();
+    }
+
+    fn discard(&mut self) {
+        if self.out.take().is_some() {
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+    }
+}
+
+impl Drop for Pc2Writer {
+    fn drop(&mut self) {
+        self.discard();
+    }
 }
 
 /// Writes an MDD file atomically: frame `k` at `times[k]` seconds.
@@ -723,15 +874,7 @@ fn write_atomic<F: AsRef<[[f32; 3]]>>(
     header: &[u8],
     frames: &[F],
 ) -> Result<(), PointCacheError> {
-    // Unique per process and call, so concurrent writers never share a temporary file.
-    static SERIAL: AtomicU64 = AtomicU64::new(0);
-    let mut tmp_name = path.file_name().unwrap_or_default().to_os_string();
-    tmp_name.push(format!(
-        ".tmp{}-{}",
-        std::process::id(),
-        SERIAL.fetch_add(1, Ordering::Relaxed)
-    ));
-    let tmp = path.with_file_name(tmp_name);
+    let tmp = temporary_beside(path);
     let write = || -> std::io::Result<()> {
         let mut out = BufWriter::new(File::create(&tmp)?);
         out.write_all(header)?;
@@ -756,6 +899,19 @@ fn write_atomic<F: AsRef<[[f32; 3]]>>(
         let _ = std::fs::remove_file(&tmp);
         io_err(path, source)
     })
+}
+
+/// A temporary file name beside `path`, unique per process and call, so concurrent
+/// writers never share one.
+fn temporary_beside(path: &Path) -> PathBuf {
+    static SERIAL: AtomicU64 = AtomicU64::new(0);
+    let mut tmp_name = path.file_name().unwrap_or_default().to_os_string();
+    tmp_name.push(format!(
+        ".tmp{}-{}",
+        std::process::id(),
+        SERIAL.fetch_add(1, Ordering::Relaxed)
+    ));
+    path.with_file_name(tmp_name)
 }
 
 fn io_err(path: &Path, source: std::io::Error) -> PointCacheError {
