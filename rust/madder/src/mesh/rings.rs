@@ -367,6 +367,10 @@ fn harmonize_orientation(topology: &Topology) -> Vec<bool> {
     flipped
 }
 
+/// Fans of at most this many wedges find a spoke's wedges by scanning them (cheaper than
+/// sorting them for the few wedges of a cloth vertex); larger fans sort.
+const SMALL_FAN: usize = 16;
+
 /// Orders the fan of one vertex from its incident `(face, corner)` list, walking faces in
 /// their harmonized orientation (`flipped`); appends its wedges and spokes to `out`.
 fn order_fan(
@@ -396,21 +400,44 @@ fn order_fan(
         let (p, q) = (t[(k as usize + 1) % 3], t[(k as usize + 2) % 3]);
         if flipped[f as usize] { [q, p] } else { [p, q] }
     }));
-    // spoke → wedges touching it
+    // spoke → wedges touching it (how many, and the first two in wedge order): a scan of
+    // the wedges for a small fan, a sorted (spoke, wedge) list for a large one; both give
+    // the same answers
+    let small = m <= SMALL_FAN;
     touch.clear();
-    for (w, e) in ends.iter().enumerate() {
-        touch.push((e[0], w as u32));
-        touch.push((e[1], w as u32));
+    if !small {
+        for (w, e) in ends.iter().enumerate() {
+            touch.push((e[0], w as u32));
+            touch.push((e[1], w as u32));
+        }
+        touch.sort_unstable();
     }
-    touch.sort_unstable();
     let ends = &*ends;
     let touch = &*touch;
-    let touching = |s: u32| {
-        let lo = touch.partition_point(|&(x, _)| x < s);
-        let hi = touch.partition_point(|&(x, _)| x <= s);
-        &touch[lo..hi]
+    let touching = |s: u32| -> (usize, [usize; 2]) {
+        let mut first = [usize::MAX; 2];
+        if small {
+            let mut count = 0;
+            for (w, e) in ends.iter().enumerate() {
+                // a wedge touches a spoke once (its two spokes differ)
+                if e[0] == s || e[1] == s {
+                    if count < 2 {
+                        first[count] = w;
+                    }
+                    count += 1;
+                }
+            }
+            (count, first)
+        } else {
+            let lo = touch.partition_point(|&(x, _)| x < s);
+            let hi = touch.partition_point(|&(x, _)| x <= s);
+            for (slot, &(_, w)) in first.iter_mut().zip(&touch[lo..hi]) {
+                *slot = w as usize;
+            }
+            (hi - lo, first)
+        }
     };
-    let open = |s: u32| touching(s).len() != 2;
+    let open = |s: u32| touching(s).0 != 2;
 
     visited.clear();
     visited.resize(m, false);
@@ -436,11 +463,11 @@ fn order_fan(
             n_visited += 1;
             steps.push((w, fwd));
             let exit = ends[w][if fwd { 1 } else { 0 }];
-            let t = touching(exit);
-            if t.len() != 2 {
+            let (count, t) = touching(exit);
+            if count != 2 {
                 break false;
             }
-            let other = if t[0].1 as usize == w { t[1].1 } else { t[0].1 } as usize;
+            let other = if t[0] == w { t[1] } else { t[0] };
             if visited[other] {
                 break exit == first_spoke && other == start.0;
             }
@@ -458,13 +485,25 @@ fn order_fan(
     }
 
     // spokes in order of first meeting; wedges refer to them by local index
-    distinct.clear();
-    distinct.extend(touch.iter().map(|t| t.0));
-    distinct.dedup();
-    local.clear();
-    local.resize(distinct.len(), u32::MAX);
     let s0 = out.spokes.len();
+    distinct.clear();
+    local.clear();
+    if !small {
+        distinct.extend(touch.iter().map(|t| t.0));
+        distinct.dedup();
+        local.resize(distinct.len(), u32::MAX);
+    }
     let mut slot = |s: u32, spokes: &mut Vec<u32>| {
+        if small {
+            // the spokes met so far are few: find it among them
+            return match spokes[s0..].iter().position(|&x| x == s) {
+                Some(k) => k as u32,
+                None => {
+                    spokes.push(s);
+                    (spokes.len() - 1 - s0) as u32
+                }
+            };
+        }
         let k = distinct.binary_search(&s).expect("a wedge's spoke");
         if local[k] == u32::MAX {
             local[k] = (spokes.len() - s0) as u32;
@@ -488,7 +527,7 @@ fn order_fan(
             to,
         });
     }
-    let manifold = out.spokes[s0..].iter().all(|&s| touching(s).len() <= 2);
+    let manifold = out.spokes[s0..].iter().all(|&s| touching(s).0 <= 2);
     match (walks.len(), manifold) {
         (1, true) if walks[0].2 => FanKind::Interior,
         (1, true) => FanKind::Boundary,
