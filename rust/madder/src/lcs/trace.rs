@@ -111,6 +111,7 @@ use glam::{DMat2, DVec2, DVec3};
 use rayon::prelude::*;
 
 use super::planar::{Planar, flow_map_planar};
+use super::rk::{Moves, Scheme};
 use crate::error::{LcsError, MeshError};
 use crate::mesh::Topology;
 use crate::mesh::geometry::check_positions;
@@ -581,15 +582,22 @@ impl Charts {
                 [l1, e2.dot(u), e2.dot(w)]
             })
             .collect();
-        let mut edge_faces: Vec<Vec<(u32, u8)>> = vec![Vec::new(); topology.n_edges()];
+        // per edge: its first two (face, local edge) and how many faces it has (flat
+        // arrays, not a list per edge: this runs on every call)
+        let mut edge_faces = vec![[(NONE, 0u8); 2]; topology.n_edges()];
+        let mut edge_count = vec![0u8; topology.n_edges()];
         for (f, fe) in topology.face_edges().iter().enumerate() {
             for (k, &e) in fe.iter().enumerate() {
-                edge_faces[e as usize].push((rank[f], k as u8));
+                let c = &mut edge_count[e as usize];
+                if *c < 2 {
+                    edge_faces[e as usize][*c as usize] = (rank[f], k as u8);
+                }
+                *c = c.saturating_add(1);
             }
         }
         let mut neighbour = vec![[(NONE, 0u8); 3]; faces.len()];
-        for pair in edge_faces.iter().filter(|p| p.len() == 2) {
-            let [(f, k), (g, l)] = [pair[0], pair[1]];
+        for (pair, _) in edge_faces.iter().zip(&edge_count).filter(|(_, c)| **c == 2) {
+            let [(f, k), (g, l)] = *pair;
             neighbour[f as usize][k as usize] = (g, l);
             neighbour[g as usize][l as usize] = (f, k);
         }
@@ -1101,10 +1109,24 @@ pub fn flow_map(
     span: f64,
     steps: usize,
 ) -> Result<Vec<Option<Located>>, LcsError> {
+    flow_map_with(charts, motion, velocity, t0, span, Scheme::Rk4, steps)
+}
+
+/// [`flow_map`] with the explicit Runge–Kutta scheme `scheme` ([`super::rk`]).
+pub fn flow_map_with(
+    charts: &Charts,
+    motion: &Motion,
+    velocity: &mut dyn Velocity,
+    t0: f64,
+    span: f64,
+    scheme: Scheme,
+    steps: usize,
+) -> Result<Vec<Option<Located>>, LcsError> {
+    let moves = Moves::new(scheme);
     if let Some(planar) = &charts.planar
         && motion.is_fixed()
     {
-        return flow_map_planar(charts, planar, velocity, t0, span, steps);
+        return flow_map_planar(charts, planar, velocity, t0, span, &moves, steps);
     }
     let n = charts.vertex_face.len();
     let start: Vec<Option<Located>> = (0..n).map(|v| charts.at_vertex_here(v)).collect();
@@ -1127,18 +1149,14 @@ pub fn flow_map(
         Vec::new()
     };
     let mut w = vec![DVec3::ZERO; m];
-    let mut k: [Vec<DVec2>; 4] = std::array::from_fn(|_| vec![DVec2::ZERO; m]);
+    let stages = moves.stages();
+    let mut k: Vec<Vec<DVec2>> = vec![vec![DVec2::ZERO; m]; stages];
     for step in 0..steps.max(1) {
         if step % SORT_EVERY == 0 {
             sort_by_face(&mut state, &mut live);
         }
-        let t = t0 + step as f64 * h;
-        for stage in 0..4 {
-            let ts = match stage {
-                0 => t,
-                1 | 2 => t + 0.5 * h,
-                _ => t0 + (step + 1) as f64 * h,
-            };
+        for stage in 0..stages {
+            let ts = moves.time(stage, t0, step, h);
             let at = motion.at(ts)?;
             let k_ref = &k;
             let stage_point = |c: Corners,
@@ -1174,11 +1192,7 @@ pub fn flow_map(
                 .into_par_iter()
                 .enumerate()
                 .for_each(|(c, (l, r, x, tb, ax, p))| {
-                    let step_from_prev = |i: usize| match stage {
-                        1 => 0.5 * h * k_ref[0][i],
-                        2 => 0.5 * h * (k_ref[1][i] - k_ref[0][i]),
-                        _ => h * k_ref[2][i] - 0.5 * h * k_ref[1][i],
-                    };
+                    let step_from_prev = |i: usize| moves.to(stage, h, k_ref, i);
                     let n = l.len();
                     let mut corners = [None; 2];
                     if stage == 0 {
@@ -1228,11 +1242,7 @@ pub fn flow_map(
                     });
             }
         }
-        let [k1, k2, k3, k4] = &k;
-        let last = |i: usize| {
-            let d = h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-            d - h * k3[i]
-        };
+        let last = |i: usize| moves.to(stages, h, &k, i);
         (
             state.par_chunks_mut(2),
             stage_at.par_chunks(2),
