@@ -122,8 +122,19 @@ impl Velocity for PyVelocity<'_> {
             if ro.shape() != [m, 3] {
                 return Err(shape_error(&name(), &format!("({m}, 3)"), ro.shape()));
             }
-            for (o, p) in out.iter_mut().zip(rows3(&ro.as_array())) {
-                *o = p;
+            let view = ro.as_array();
+            match view.as_slice() {
+                // the usual C-contiguous result: copied straight into `out`
+                Some(s) => {
+                    for (o, c) in out.iter_mut().zip(s.chunks_exact(3)) {
+                        *o = DVec3::new(c[0], c[1], c[2]);
+                    }
+                }
+                None => {
+                    for (o, p) in out.iter_mut().zip(rows3(&view)) {
+                        *o = p;
+                    }
+                }
             }
             Ok(())
         })

@@ -1075,8 +1075,9 @@ pub(crate) fn clamp(b: DVec3) -> DVec3 {
     }
 }
 
-/// The particles are reordered by face every this many steps.
-const SORT_EVERY: usize = 4;
+/// The particles are reordered by face every this many stage walks (rounded to whole
+/// steps: every 4 RK4 steps, every RK8 step, a similar time span of scattering either way).
+const SORT_EVERY: usize = 16;
 
 /// Orders the particles by their face (then start vertex, so the order is unique), so that
 /// consecutive particles walk through the same faces: the walks are memory-bound, and the
@@ -1152,7 +1153,7 @@ pub fn flow_map_with(
     let stages = moves.stages();
     let mut k: Vec<Vec<DVec2>> = vec![vec![DVec2::ZERO; m]; stages];
     for step in 0..steps.max(1) {
-        if step % SORT_EVERY == 0 {
+        if step % (SORT_EVERY / stages).max(1) == 0 {
             sort_by_face(&mut state, &mut live);
         }
         for stage in 0..stages {
