@@ -5,9 +5,9 @@ unknown method named."""
 
 import numpy as np
 import pytest
+from test_lcs import grid, gyre, reference_ftle
 
 import madder
-from test_lcs import grid, gyre, reference_ftle
 
 
 def test_rk8_double_gyre_matches_the_reference_with_fewer_calls():

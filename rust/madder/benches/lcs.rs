@@ -115,7 +115,7 @@ fn main() {
         rayon::current_num_threads()
     );
     // integration errors of the gyre at 401×201 (tests/bench/bench_numbacs.py): RK4 × 25
-    // steps 9e-5 of the range, RK8 × 6 1.5e-4, both under numbacs' 1.8e-4 at rtol 1e-4;
+    // steps 9e-5 of the range, RK8 × 6 1.4e-4, both under numbacs' 1.8e-4 at rtol 1e-4;
     // RK4 × 100 4e-7 against 1.5e-6 at rtol 1e-6
     let runs = [(Scheme::Rk4, 100), (Scheme::Rk4, 25), (Scheme::Rk8, 6)];
     for run in runs {

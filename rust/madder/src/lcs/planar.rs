@@ -8,8 +8,10 @@
 //! identity of the plane: the charts of all faces are pieces of one chart, the plane. A walk
 //! from `a` by `d` then ends at `a + d` unless the segment meets a border edge, and the
 //! chart velocity of every face is the same projection `(U·w, W·w)` of the 3-D velocity.
-//! RK4 is then plain RK4 in the plane's coordinates, with no triangle to find per stage;
-//! the only question is whether a segment `a → b` reaches a border.
+//! The Runge–Kutta scheme then runs in the plane's coordinates, with no triangle to find
+//! per stage; the only question is whether a segment `a → b` reaches a border (any
+//! segment: RK8's moves between stage points have no fixed length or direction, and each
+//! is tested as RK4's are).
 //!
 //! ## Proving a segment stays inside
 //! A grid of square buckets (side `s`, about one mean edge length) over the bounding box

@@ -40,20 +40,23 @@
 //! entered by is never its exit, so the walk turns around the vertex until it finds the
 //! wedge that contains the direction.
 //!
-//! ## Integrator: classical RK4 in the chart, order 4
-//! With step `h = T / steps` the stages are evaluated at `p + h/2 k_1`, `p + h/2 k_2`,
-//! `p + h k_3` from the particle `p`, each stage's velocity brought back into `p`'s chart,
-//! and the particle moves to `p + h (k_1 + 2k_2 + 2k_3 + k_4) / 6`. Each of these points is
-//! walked to from the previous one, not from `p` (`p + h/2 k_2` is `p + h/2 k_1` moved by
-//! `h/2 (k_2 − k_1)`, and so on): on a flat or developable mesh the unfolded strip is the
-//! plane and the points are the same, but a step crosses its edges once instead of four
-//! times (the walks are most of the cost). On a curved mesh the unfolding, hence the point
-//! reached, depends on the path by the holonomy of the vertices passed, a discretization
-//! error of the same order as the unfolding's. On a flat mesh with a velocity that is smooth across
-//! the triangles this is the classical fourth-order Runge–Kutta method, global error
-//! `O(h⁴)` (`tests/ftle.rs` measures the order on an analytic rotation). Per-vertex
-//! velocities ([`VertexVelocity`]) are linear in each triangle and continuous, but their
-//! derivative jumps across edges: the error there is limited by the mesh, `O(Δx²)`.
+//! ## Integrator: explicit Runge–Kutta in the chart (RK4, order 4, or RK8, order 8)
+//! With step `h = T / steps` and a scheme's tableau ([`super::rk`]: classical RK4 by
+//! default, or DOP853's eighth-order solution) the stages are evaluated at
+//! `y_i = p + h Σ_j a_ij k_j` from the particle `p`, each stage's velocity brought back
+//! into `p`'s chart, and the particle moves to `p + h Σ_j b_j k_j`; for RK4 the stage points
+//! are `p + h/2 k_1`, `p + h/2 k_2`, `p + h k_3` and the end `p + h (k_1 + 2k_2 + 2k_3 + k_4) / 6`.
+//! Each of these points is walked to from the previous one, not from `p` (`y_i` is
+//! `y_{i−1}` moved by `h Σ_j (a_ij − a_{i−1,j}) k_j`): on a flat or developable mesh the
+//! unfolded strip is the plane and the points are the same, but a step crosses its edges
+//! about once instead of once per stage (the walks are most of the cost). On a curved mesh
+//! the unfolding, hence the point reached, depends on the path by the holonomy of the
+//! vertices passed, a discretization error of the same order as the unfolding's. On a flat
+//! mesh with a velocity that is smooth across the triangles this is the scheme itself,
+//! global error `O(h⁴)` or `O(h⁸)` (`tests/ftle.rs`, `tests/rk8.rs` measure the orders).
+//! Per-vertex velocities ([`VertexVelocity`]) are linear in each triangle and continuous,
+//! but their derivative jumps across edges: the error there is limited by the mesh,
+//! `O(Δx²)`, whatever the scheme.
 //!
 //! Every stage is evaluated for all particles at once ([`Velocity::eval`] gets the batch),
 //! which is what lets a Python callable be called once per stage. The walks run in
@@ -91,7 +94,9 @@
 //! `γ_{k+1}/γ_k` and the map per edge, the neighbours, how their corners line up, and the
 //! face's vertices); the faces are stored in the Morton order of their centroids, so faces
 //! near in space are near in memory ([`space_filling_order`]); the particles are sorted by
-//! face every few steps, so consecutive walks share faces; and two particles are walked a
+//! face every 16 stage walks or so (every 4 RK4 steps, every RK8 step: a similar time for
+//! them to scatter; sorting every 4 RK8 steps was 8% slower on the curved bench), so
+//! consecutive walks share faces; and two particles are walked a
 //! crossing each in turn ([`Charts::walk_pair`]), so their reads overlap. A stage point's
 //! face frame (corner, edges, chart axes) is computed from its three vertices rather than
 //! stored: a stored frame was a cache miss per stage point, the vertices a small array;
@@ -1097,7 +1102,8 @@ fn sort_by_face(state: &mut [Located], live: &mut [usize]) {
 }
 
 /// Traces one particle from every vertex through `velocity` from `t0` over `span` in
-/// `steps` RK4 steps (module doc) and returns where each ends (`None` for a loose vertex).
+/// `steps` classical RK4 steps (module doc; [`flow_map_with`] for another scheme) and
+/// returns where each ends (`None` for a loose vertex).
 ///
 /// `charts` must be built from `motion`'s positions at `t0`. Errors: a velocity that is not
 /// finite (naming the particle's start vertex and the time), a time outside the motion's
