@@ -130,12 +130,18 @@ def main():
         )
 
     faces, pos = grid_mesh(x, y)
-    for steps in (100, 50, 25, 12):
-        t, s = best(lambda steps=steps: madder.ftle(faces, pos, gyre, T0, T, steps=steps))
+    runs = [("rk4", 100), ("rk4", 50), ("rk4", 25), ("rk4", 21), ("rk4", 12)]
+    runs += [("rk8", 8), ("rk8", 7), ("rk8", 6), ("rk8", 5)]
+    for method, steps in runs:
+        t, s = best(
+            lambda steps=steps, method=method: madder.ftle(
+                faces, pos, gyre, T0, T, steps=steps, method=method
+            )
+        )
         s = s.reshape(NY, NX).T
         t_r, r = best(lambda s=s: madder.ridges(faces, pos, np.ascontiguousarray(s.T).ravel()))
         print(
-            f"  madder flow map + FTLE (RK4, {steps} steps, numpy callable): {t};"
+            f"  madder flow map + FTLE ({method}, {steps} steps, numpy callable): {t};"
             f" integration error {err(s, ref_ring)}; vs true {err(s, true)};"
             f" ridges {t_r} ({len(r['points'])} points)"
         )

@@ -546,6 +546,7 @@ fn lcs_class_fields<'py>(
                 .set("value", value),
         ),
         L::NonFiniteField { vertex } => (param, f.set("name", "field").set("vertex", vertex)),
+        L::Method { method } => (param, f.set("name", "method").set("value", method)),
         L::Option {
             name,
             requirement,

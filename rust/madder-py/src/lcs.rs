@@ -1,7 +1,7 @@
 //! `ftle` and `ridges`: Lagrangian coherent structures (core module `lcs`, seed ch. 5).
 //!
 //! Conversion only: numpy arrays in and out, a Python velocity callable wrapped as a core
-//! `Velocity` (called once per RK stage with every live particle, the GIL taken back for
+//! `Velocity` (called once per Runge–Kutta stage with every live particle, the GIL taken back for
 //! each call), the GIL released for everything else.
 
 use glam::DVec3;
@@ -13,7 +13,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use madder::LcsError;
-use madder::lcs::{FrameTimes, Located, Motion, RidgeOptions, Velocity, VertexVelocity};
+use madder::lcs::{FrameTimes, Located, Motion, RidgeOptions, Scheme, Velocity, VertexVelocity};
 
 use crate::errors::to_py;
 
@@ -122,8 +122,19 @@ impl Velocity for PyVelocity<'_> {
             if ro.shape() != [m, 3] {
                 return Err(shape_error(&name(), &format!("({m}, 3)"), ro.shape()));
             }
-            for (o, p) in out.iter_mut().zip(rows3(&ro.as_array())) {
-                *o = p;
+            let view = ro.as_array();
+            match view.as_slice() {
+                // the usual C-contiguous result: copied straight into `out`
+                Some(s) => {
+                    for (o, c) in out.iter_mut().zip(s.chunks_exact(3)) {
+                        *o = DVec3::new(c[0], c[1], c[2]);
+                    }
+                }
+                None => {
+                    for (o, p) in out.iter_mut().zip(rows3(&view)) {
+                        *o = p;
+                    }
+                }
             }
             Ok(())
         })
@@ -138,13 +149,14 @@ impl Velocity for PyVelocity<'_> {
 ///
 /// `faces` `(F, 3)` uint32; `positions` `(N, 3)` float64 for a fixed mesh or `(K, N, 3)`
 /// per frame (at `times`, `(K,)` increasing); `velocity` a callable
-/// `f(t, points (M, 3)) -> (M, 3)` of world points (called once per RK4 stage with all
-/// particles) or a `(K, N, 3)` array of per-vertex velocities at `times` (`(N, 3)`:
+/// `f(t, points (M, 3)) -> (M, 3)` of world points (called once per Runge–Kutta stage with
+/// all particles) or a `(K, N, 3)` array of per-vertex velocities at `times` (`(N, 3)`:
 /// constant), relative to the cloth, projected on each triangle. Particles start at the
-/// vertices at `t0` and are traced over `T` (negative: backward) in `steps` RK4 steps.
-/// Returns `(N,)` float64.
+/// vertices at `t0` and are traced over `T` (negative: backward) in `steps` fixed steps of
+/// `method`: `"rk4"` (classical, 4 stages) or `"rk8"` (DOP853's eighth-order solution, 12
+/// stages). Returns `(N,)` float64.
 #[pyfunction]
-#[pyo3(signature = (faces, positions, velocity, t0, T, *, steps=100, times=None))]
+#[pyo3(signature = (faces, positions, velocity, t0, T, *, steps=100, times=None, method="rk4"))]
 #[allow(non_snake_case, clippy::too_many_arguments)]
 pub fn ftle<'py>(
     py: Python<'py>,
@@ -155,7 +167,13 @@ pub fn ftle<'py>(
     T: f64,
     steps: usize,
     times: Option<PyReadonlyArray1<'py, f64>>,
+    method: &str,
 ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let scheme = Scheme::from_name(method).ok_or_else(|| {
+        to_py(LcsError::Method {
+            method: method.into(),
+        })
+    })?;
     let (pos_frames, n) = frames("positions", &positions)?;
     let topo = topology(&faces, n)?;
     let times = match times {
@@ -189,7 +207,7 @@ pub fn ftle<'py>(
             f: &f,
             raised: None,
         };
-        let r = py.detach(|| madder::lcs::ftle(&topo, &motion, &mut v, t0, T, steps));
+        let r = py.detach(|| madder::lcs::ftle_with(&topo, &motion, &mut v, t0, T, scheme, steps));
         match (r, v.raised.take()) {
             (Ok(s), _) => s,
             (Err(LcsError::Callable { .. }), Some(e)) => return Err(e),
@@ -220,9 +238,9 @@ pub fn ftle<'py>(
         let mut v = VertexVelocity::new(ft, vel_frames, &topo).map_err(to_py)?;
         if constant {
             let mut c = Constant(v);
-            py.detach(|| madder::lcs::ftle(&topo, &motion, &mut c, t0, T, steps))
+            py.detach(|| madder::lcs::ftle_with(&topo, &motion, &mut c, t0, T, scheme, steps))
         } else {
-            py.detach(|| madder::lcs::ftle(&topo, &motion, &mut v, t0, T, steps))
+            py.detach(|| madder::lcs::ftle_with(&topo, &motion, &mut v, t0, T, scheme, steps))
         }
         .map_err(to_py)?
     };

@@ -11,7 +11,7 @@ use std::f64::consts::PI;
 use std::time::Instant;
 
 use glam::{DVec2, DVec3};
-use madder::lcs::{FnVelocity, Motion, RidgeOptions, ftle, ridges};
+use madder::lcs::{FnVelocity, Motion, RidgeOptions, Scheme, ftle_with, ridges};
 use madder::mesh::Topology;
 
 mod common;
@@ -67,7 +67,7 @@ fn cpu_seconds() -> f64 {
         .map_or(0.0, |(u, s)| (u + s) / 100.0)
 }
 
-fn case(label: &str, nx: usize, ny: usize, steps: usize, rolled: bool) {
+fn case(label: &str, nx: usize, ny: usize, (scheme, steps): (Scheme, usize), rolled: bool) {
     let (topo, flat) = grid(nx, ny);
     let p = if rolled { roll(&flat) } else { flat };
     let flow = move |t, x: DVec3| {
@@ -79,7 +79,8 @@ fn case(label: &str, nx: usize, ny: usize, steps: usize, rolled: bool) {
     };
     let mut v = FnVelocity(flow);
     let (t, c) = (Instant::now(), cpu_seconds());
-    let s = ftle(&topo, &Motion::fixed(p.clone()), &mut v, 0.0, -10.0, steps).unwrap();
+    let motion = Motion::fixed(p.clone());
+    let s = ftle_with(&topo, &motion, &mut v, 0.0, -10.0, scheme, steps).unwrap();
     let (t_ftle, c_ftle) = (t.elapsed().as_secs_f64(), cpu_seconds() - c);
     // MADDER_LCS_DUMP=DIR writes σ (raw little-endian f64) per case, to compare versions
     if let Ok(dir) = std::env::var("MADDER_LCS_DUMP") {
@@ -88,13 +89,13 @@ fn case(label: &str, nx: usize, ny: usize, steps: usize, rolled: bool) {
             .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
             .collect();
         let bytes: Vec<u8> = s.iter().flat_map(|x| x.to_le_bytes()).collect();
-        std::fs::write(format!("{dir}/{name}-{steps}.f64"), bytes).expect("dump σ");
+        std::fs::write(format!("{dir}/{name}-{scheme:?}-{steps}.f64"), bytes).expect("dump σ");
     }
     let (t, c) = (Instant::now(), cpu_seconds());
     let r = ridges(&topo, &p, &s, &RidgeOptions::default()).unwrap();
     let (t_ridges, c_ridges) = (t.elapsed().as_secs_f64(), cpu_seconds() - c);
     println!(
-        "{label}: {} vertices, {steps} RK4 steps: flow map + FTLE {:.3} s (CPU {:.2} s), ridges {:.3} s (CPU {:.2} s; {} points, {} edges), total {:.3} s",
+        "{label}: {} vertices, {scheme:?} × {steps} steps: flow map + FTLE {:.3} s (CPU {:.2} s), ridges {:.3} s (CPU {:.2} s; {} points, {} edges), total {:.3} s",
         topo.n_vertices(),
         t_ftle,
         c_ftle,
@@ -113,20 +114,24 @@ fn main() {
         "FTLE + ridges of the double gyre, T = −10, {} rayon threads",
         rayon::current_num_threads()
     );
-    // 25 RK4 steps: integration error 9e-5 of the range against numbacs' 1.8e-4 at rtol
-    // 1e-4 (tests/bench/bench_numbacs.py); 100 steps: 4e-7 against 1.5e-6 at rtol 1e-6
-    for steps in [100, 25] {
+    // integration errors of the gyre at 401×201 (tests/bench/bench_numbacs.py): RK4 × 25
+    // steps 9e-5 of the range, RK8 × 6 1.4e-4, both under numbacs' 1.8e-4 at rtol 1e-4;
+    // RK4 × 100 4e-7 against 1.5e-6 at rtol 1e-6
+    let runs = [(Scheme::Rk4, 100), (Scheme::Rk4, 25), (Scheme::Rk8, 6)];
+    for run in runs {
         if only_curved {
             break;
         }
-        case("double gyre 401×201, flat", 400, 200, steps, false);
-        case("100k-vertex grid, flat", 447, 223, steps, false);
+        case("double gyre 401×201, flat", 400, 200, run, false);
+        case("100k-vertex grid, flat", 447, 223, run, false);
     }
-    case(
-        "100k-vertex grid rolled into a half cylinder",
-        447,
-        223,
-        25,
-        true,
-    );
+    for run in &runs[1..] {
+        case(
+            "100k-vertex grid rolled into a half cylinder",
+            447,
+            223,
+            *run,
+            true,
+        );
+    }
 }

@@ -537,6 +537,12 @@ pub enum LcsError {
         /// The value given.
         value: f64,
     },
+    /// An unknown integration scheme name.
+    #[error("method must be \"rk4\" or \"rk8\", got {method:?}")]
+    Method {
+        /// The name given.
+        method: String,
+    },
     /// An error raised by a user's velocity callable (its message).
     #[error("the velocity callable failed at time {}: {message}", Compact(*.time))]
     Callable {

@@ -8,7 +8,7 @@ change here fails that test. Arrays are numpy arrays; float32 at the boundary un
 
 from collections.abc import Callable
 from os import PathLike
-from typing import Any, Final
+from typing import Any, Final, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -62,8 +62,10 @@ def ftle(
     *,
     steps: int = 100,
     times: _F64 | None = None,
+    method: Literal["rk4", "rk8"] = "rk4",
 ) -> _F64:
-    """FTLE σ = ln √λmax / |T| per vertex (seed §5.2, §5.5.1); positions (N, 3) or (K, N, 3)."""
+    """FTLE σ = ln √λmax / |T| per vertex (seed §5.2, §5.5.1); positions (N, 3) or (K, N, 3);
+    `steps` fixed steps of `method` ("rk4": classical RK4; "rk8": DOP853's 8th-order solution)."""
 
 def ridges(
     faces: _U32,

@@ -35,7 +35,8 @@
 use glam::{DMat2, DVec2, DVec3};
 use rayon::prelude::*;
 
-use super::trace::{Charts, Motion, Velocity, flow_map};
+use super::rk::Scheme;
+use super::trace::{Charts, Motion, Velocity, flow_map_with};
 use crate::error::LcsError;
 use crate::mesh::{OneRings, Topology, VertexFrames};
 
@@ -60,6 +61,19 @@ pub fn ftle(
     span: f64,
     steps: usize,
 ) -> Result<Vec<f64>, LcsError> {
+    ftle_with(topology, motion, velocity, t0, span, Scheme::Rk4, steps)
+}
+
+/// [`ftle()`] with the particles traced by `scheme` ([`super::rk`]) in `steps` steps.
+pub fn ftle_with(
+    topology: &Topology,
+    motion: &Motion,
+    velocity: &mut dyn Velocity,
+    t0: f64,
+    span: f64,
+    scheme: Scheme,
+    steps: usize,
+) -> Result<Vec<f64>, LcsError> {
     check_span(span)?;
     if steps == 0 {
         return Err(LcsError::Option {
@@ -72,7 +86,7 @@ pub fn ftle(
     let start = motion.positions(t0)?;
     motion.at(t0 + span)?;
     let charts = Charts::new(topology, &start)?;
-    let flow = flow_map(&charts, motion, velocity, t0, span, steps)?;
+    let flow = flow_map_with(&charts, motion, velocity, t0, span, scheme, steps)?;
     let at = motion.at(t0 + span)?;
     let end: Vec<DVec3> = flow
         .iter()

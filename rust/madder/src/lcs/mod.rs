@@ -13,9 +13,11 @@
 //!
 //! ## The pipeline and the files
 //! - [`trace`] (§5.5.1): the particle `(triangle, barycentric)`, charts and edge crossings
-//!   by unfolding, the classical RK4 integrator ([`flow_map`]); velocities from an analytic
+//!   by unfolding, the fixed-step integrator ([`flow_map`], [`flow_map_with`]); velocities from an analytic
 //!   function ([`FnVelocity`]), per-vertex values per frame ([`VertexVelocity`]) or any
 //!   [`Velocity`] (the Python binding's callable); a fixed or deforming mesh ([`Motion`]).
+//! - [`rk`] (§5.5.1): the explicit Runge–Kutta schemes, classical RK4 (the default) and
+//!   DOP853's eighth-order solution with fixed steps ([`Scheme`]).
 //! - `planar` (§5.5.1): the same flow map on a flat fixed mesh without walking, where a
 //!   bucket grid proves a segment stays inside (a fast path of `trace`).
 //! - [`ftle`](mod@ftle) (§5.2, §5.5.1): the flow map's gradient by least squares over the one-ring
@@ -28,10 +30,13 @@
 pub mod ftle;
 mod planar;
 pub mod ridges;
+pub mod rk;
 pub mod trace;
 
-pub use ftle::{ftle, ftle_from_flow_map};
+pub use ftle::{ftle, ftle_from_flow_map, ftle_with};
 pub use ridges::{RidgeOptions, Ridges, ridges};
+pub use rk::Scheme;
 pub use trace::{
     Charts, FnVelocity, FrameTimes, Located, Motion, Velocity, VertexVelocity, flow_map,
+    flow_map_with,
 };

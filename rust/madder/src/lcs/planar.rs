@@ -8,8 +8,10 @@
 //! identity of the plane: the charts of all faces are pieces of one chart, the plane. A walk
 //! from `a` by `d` then ends at `a + d` unless the segment meets a border edge, and the
 //! chart velocity of every face is the same projection `(U·w, W·w)` of the 3-D velocity.
-//! RK4 is then plain RK4 in the plane's coordinates, with no triangle to find per stage;
-//! the only question is whether a segment `a → b` reaches a border.
+//! The Runge–Kutta scheme then runs in the plane's coordinates, with no triangle to find
+//! per stage; the only question is whether a segment `a → b` reaches a border (any
+//! segment: RK8's moves between stage points have no fixed length or direction, and each
+//! is tested as RK4's are).
 //!
 //! ## Proving a segment stays inside
 //! A grid of square buckets (side `s`, about one mean edge length) over the bounding box
@@ -35,6 +37,7 @@
 use glam::{DMat2, DVec2, DVec3};
 use rayon::prelude::*;
 
+use super::rk::Moves;
 use super::trace::{Charts, Located, Velocity, clamp, eval_checked};
 use crate::error::LcsError;
 use crate::mesh::Topology;
@@ -117,10 +120,16 @@ impl Planar {
         }
         // border edges (one face or more than two) and interior edges with both faces on
         // one side (the same direction in both)
-        let mut edge_faces: Vec<Vec<(u32, u8)>> = vec![Vec::new(); topology.n_edges()];
+        // per edge: its first two (face, local edge) and its number of faces
+        let mut edge_faces = vec![[(0u32, 0u8); 2]; topology.n_edges()];
+        let mut edge_count = vec![0u8; topology.n_edges()];
         for (f, fe) in topology.face_edges().iter().enumerate() {
             for (k, &e) in fe.iter().enumerate() {
-                edge_faces[e as usize].push((f as u32, k as u8));
+                let c = &mut edge_count[e as usize];
+                if *c < 2 {
+                    edge_faces[e as usize][*c as usize] = (f as u32, k as u8);
+                }
+                *c = c.saturating_add(1);
             }
         }
         let ends = |(f, k): (u32, u8)| {
@@ -128,8 +137,8 @@ impl Planar {
             (t[(k as usize + 1) % 3], t[(k as usize + 2) % 3])
         };
         let mut border = Vec::new();
-        for (e, ef) in edge_faces.iter().enumerate() {
-            if ef.len() == 2 {
+        for (e, (ef, &count)) in edge_faces.iter().zip(&edge_count).enumerate() {
+            if count == 2 {
                 if ends(ef[0]) != (ends(ef[1]).1, ends(ef[1]).0) {
                     return None;
                 }
@@ -233,22 +242,22 @@ impl Planar {
                 }
             }
         }
-        for j in 0..ny {
-            for i in 0..nx {
-                let b = j * nx + i;
-                if bad[b] {
+        let this = &*self;
+        bad.par_chunks_mut(nx).enumerate().for_each(|(j, row)| {
+            for (i, bad) in row.iter_mut().enumerate() {
+                if *bad {
                     continue;
                 }
                 // an irrational-ish point of the bucket, unlikely to lie on an edge
-                let p = self.lo + self.size * DVec2::new(i as f64 + 0.381966, j as f64 + 0.618034);
-                let covering = self
-                    .faces_in(b)
+                let p = this.lo + this.size * DVec2::new(i as f64 + 0.381966, j as f64 + 0.618034);
+                let covering = this
+                    .faces_in(j * nx + i)
                     .iter()
-                    .filter(|&&f| self.bary(f as usize, p).min_element() > 1e-9)
+                    .filter(|&&f| this.bary(f as usize, p).min_element() > 1e-9)
                     .count();
-                bad[b] = covering != 1;
+                *bad = covering != 1;
             }
-        }
+        });
         let big = (nx + ny) as u32;
         let mut d: Vec<u32> = bad.iter().map(|&x| if x { 0 } else { big }).collect();
         let at = |d: &[u32], i: isize, j: isize| -> u32 {
@@ -405,6 +414,7 @@ pub(crate) fn flow_map_planar(
     velocity: &mut dyn Velocity,
     t0: f64,
     span: f64,
+    moves: &Moves,
     steps: usize,
 ) -> Result<Vec<Option<Located>>, LcsError> {
     let n = planar.xy.len();
@@ -426,15 +436,11 @@ pub(crate) fn flow_map_planar(
     let mut stage_at: Vec<Located> = Vec::new();
     let mut points = vec![DVec3::ZERO; m];
     let mut w = vec![DVec3::ZERO; m];
-    let mut k: [Vec<DVec2>; 4] = std::array::from_fn(|_| vec![DVec2::ZERO; m]);
+    let stages = moves.stages();
+    let mut k: Vec<Vec<DVec2>> = vec![vec![DVec2::ZERO; m]; stages];
     for step in 0..steps.max(1) {
-        let t = t0 + step as f64 * h;
-        for stage in 0..4 {
-            let ts = match stage {
-                0 => t,
-                1 | 2 => t + 0.5 * h,
-                _ => t0 + (step + 1) as f64 * h,
-            };
+        for stage in 0..stages {
+            let ts = moves.time(stage, t0, step, h);
             let k_ref = &k;
             let (p_ref, p_at_ref, anchor_ref) = (&p, &p_at, &anchor);
             (&mut q, &mut q_at, &mut points)
@@ -448,12 +454,7 @@ pub(crate) fn flow_map_planar(
                             // each stage point walked on from the previous one, by the
                             // same displacements as trace.rs (the same points when no
                             // walk stopped at a border)
-                            let target = *qi
-                                + match stage {
-                                    1 => 0.5 * h * k_ref[0][i],
-                                    2 => 0.5 * h * (k_ref[1][i] - k_ref[0][i]),
-                                    _ => h * k_ref[2][i] - 0.5 * h * k_ref[1][i],
-                                };
+                            let target = *qi + moves.to(stage, h, k_ref, i);
                             advance(charts, planar, (*qi, *qa), target, &anchor_ref[i])
                         }
                     };
@@ -475,14 +476,13 @@ pub(crate) fn flow_map_planar(
                 .zip(&w)
                 .for_each(|(ki, wi)| *ki = DVec2::new(planar.u.dot(*wi), planar.w.dot(*wi)));
         }
-        let [k1, k2, k3, k4] = &k;
+        let k_ref = &k;
         (&mut p, &mut p_at, &mut anchor, &q, &q_at)
             .into_par_iter()
             .with_min_len(MIN_LEN)
             .enumerate()
             .for_each(|(i, (pi, pa, an, &a, &a_at))| {
-                let d = h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-                let target = a + (d - h * k3[i]);
+                let target = a + moves.to(stages, h, k_ref, i);
                 (*pi, *pa) = advance(charts, planar, (a, a_at), target, an);
                 if let Some(l) = *pa {
                     *an = (l, *pi);

@@ -40,20 +40,23 @@
 //! entered by is never its exit, so the walk turns around the vertex until it finds the
 //! wedge that contains the direction.
 //!
-//! ## Integrator: classical RK4 in the chart, order 4
-//! With step `h = T / steps` the stages are evaluated at `p + h/2 k_1`, `p + h/2 k_2`,
-//! `p + h k_3` from the particle `p`, each stage's velocity brought back into `p`'s chart,
-//! and the particle moves to `p + h (k_1 + 2k_2 + 2k_3 + k_4) / 6`. Each of these points is
-//! walked to from the previous one, not from `p` (`p + h/2 k_2` is `p + h/2 k_1` moved by
-//! `h/2 (k_2 − k_1)`, and so on): on a flat or developable mesh the unfolded strip is the
-//! plane and the points are the same, but a step crosses its edges once instead of four
-//! times (the walks are most of the cost). On a curved mesh the unfolding, hence the point
-//! reached, depends on the path by the holonomy of the vertices passed, a discretization
-//! error of the same order as the unfolding's. On a flat mesh with a velocity that is smooth across
-//! the triangles this is the classical fourth-order Runge–Kutta method, global error
-//! `O(h⁴)` (`tests/ftle.rs` measures the order on an analytic rotation). Per-vertex
-//! velocities ([`VertexVelocity`]) are linear in each triangle and continuous, but their
-//! derivative jumps across edges: the error there is limited by the mesh, `O(Δx²)`.
+//! ## Integrator: explicit Runge–Kutta in the chart (RK4, order 4, or RK8, order 8)
+//! With step `h = T / steps` and a scheme's tableau ([`super::rk`]: classical RK4 by
+//! default, or DOP853's eighth-order solution) the stages are evaluated at
+//! `y_i = p + h Σ_j a_ij k_j` from the particle `p`, each stage's velocity brought back
+//! into `p`'s chart, and the particle moves to `p + h Σ_j b_j k_j`; for RK4 the stage points
+//! are `p + h/2 k_1`, `p + h/2 k_2`, `p + h k_3` and the end `p + h (k_1 + 2k_2 + 2k_3 + k_4) / 6`.
+//! Each of these points is walked to from the previous one, not from `p` (`y_i` is
+//! `y_{i−1}` moved by `h Σ_j (a_ij − a_{i−1,j}) k_j`): on a flat or developable mesh the
+//! unfolded strip is the plane and the points are the same, but a step crosses its edges
+//! about once instead of once per stage (the walks are most of the cost). On a curved mesh
+//! the unfolding, hence the point reached, depends on the path by the holonomy of the
+//! vertices passed, a discretization error of the same order as the unfolding's. On a flat
+//! mesh with a velocity that is smooth across the triangles this is the scheme itself,
+//! global error `O(h⁴)` or `O(h⁸)` (`tests/ftle.rs`, `tests/rk8.rs` measure the orders).
+//! Per-vertex velocities ([`VertexVelocity`]) are linear in each triangle and continuous,
+//! but their derivative jumps across edges: the error there is limited by the mesh,
+//! `O(Δx²)`, whatever the scheme.
 //!
 //! Every stage is evaluated for all particles at once ([`Velocity::eval`] gets the batch),
 //! which is what lets a Python callable be called once per stage. The walks run in
@@ -91,7 +94,9 @@
 //! `γ_{k+1}/γ_k` and the map per edge, the neighbours, how their corners line up, and the
 //! face's vertices); the faces are stored in the Morton order of their centroids, so faces
 //! near in space are near in memory ([`space_filling_order`]); the particles are sorted by
-//! face every few steps, so consecutive walks share faces; and two particles are walked a
+//! face every 16 stage walks or so (every 4 RK4 steps, every RK8 step: a similar time for
+//! them to scatter; sorting every 4 RK8 steps was 8% slower on the curved bench), so
+//! consecutive walks share faces; and two particles are walked a
 //! crossing each in turn ([`Charts::walk_pair`]), so their reads overlap. A stage point's
 //! face frame (corner, edges, chart axes) is computed from its three vertices rather than
 //! stored: a stored frame was a cache miss per stage point, the vertices a small array;
@@ -111,6 +116,7 @@ use glam::{DMat2, DVec2, DVec3};
 use rayon::prelude::*;
 
 use super::planar::{Planar, flow_map_planar};
+use super::rk::{Moves, Scheme};
 use crate::error::{LcsError, MeshError};
 use crate::mesh::Topology;
 use crate::mesh::geometry::check_positions;
@@ -581,15 +587,22 @@ impl Charts {
                 [l1, e2.dot(u), e2.dot(w)]
             })
             .collect();
-        let mut edge_faces: Vec<Vec<(u32, u8)>> = vec![Vec::new(); topology.n_edges()];
+        // per edge: its first two (face, local edge) and how many faces it has (flat
+        // arrays, not a list per edge: this runs on every call)
+        let mut edge_faces = vec![[(NONE, 0u8); 2]; topology.n_edges()];
+        let mut edge_count = vec![0u8; topology.n_edges()];
         for (f, fe) in topology.face_edges().iter().enumerate() {
             for (k, &e) in fe.iter().enumerate() {
-                edge_faces[e as usize].push((rank[f], k as u8));
+                let c = &mut edge_count[e as usize];
+                if *c < 2 {
+                    edge_faces[e as usize][*c as usize] = (rank[f], k as u8);
+                }
+                *c = c.saturating_add(1);
             }
         }
         let mut neighbour = vec![[(NONE, 0u8); 3]; faces.len()];
-        for pair in edge_faces.iter().filter(|p| p.len() == 2) {
-            let [(f, k), (g, l)] = [pair[0], pair[1]];
+        for (pair, _) in edge_faces.iter().zip(&edge_count).filter(|(_, c)| **c == 2) {
+            let [(f, k), (g, l)] = *pair;
             neighbour[f as usize][k as usize] = (g, l);
             neighbour[g as usize][l as usize] = (f, k);
         }
@@ -1067,8 +1080,9 @@ pub(crate) fn clamp(b: DVec3) -> DVec3 {
     }
 }
 
-/// The particles are reordered by face every this many steps.
-const SORT_EVERY: usize = 4;
+/// The particles are reordered by face every this many stage walks (rounded to whole
+/// steps: every 4 RK4 steps, every RK8 step, a similar time span of scattering either way).
+const SORT_EVERY: usize = 16;
 
 /// Orders the particles by their face (then start vertex, so the order is unique), so that
 /// consecutive particles walk through the same faces: the walks are memory-bound, and the
@@ -1088,7 +1102,8 @@ fn sort_by_face(state: &mut [Located], live: &mut [usize]) {
 }
 
 /// Traces one particle from every vertex through `velocity` from `t0` over `span` in
-/// `steps` RK4 steps (module doc) and returns where each ends (`None` for a loose vertex).
+/// `steps` classical RK4 steps (module doc; [`flow_map_with`] for another scheme) and
+/// returns where each ends (`None` for a loose vertex).
 ///
 /// `charts` must be built from `motion`'s positions at `t0`. Errors: a velocity that is not
 /// finite (naming the particle's start vertex and the time), a time outside the motion's
@@ -1101,10 +1116,24 @@ pub fn flow_map(
     span: f64,
     steps: usize,
 ) -> Result<Vec<Option<Located>>, LcsError> {
+    flow_map_with(charts, motion, velocity, t0, span, Scheme::Rk4, steps)
+}
+
+/// [`flow_map`] with the explicit Runge–Kutta scheme `scheme` ([`super::rk`]).
+pub fn flow_map_with(
+    charts: &Charts,
+    motion: &Motion,
+    velocity: &mut dyn Velocity,
+    t0: f64,
+    span: f64,
+    scheme: Scheme,
+    steps: usize,
+) -> Result<Vec<Option<Located>>, LcsError> {
+    let moves = Moves::new(scheme);
     if let Some(planar) = &charts.planar
         && motion.is_fixed()
     {
-        return flow_map_planar(charts, planar, velocity, t0, span, steps);
+        return flow_map_planar(charts, planar, velocity, t0, span, &moves, steps);
     }
     let n = charts.vertex_face.len();
     let start: Vec<Option<Located>> = (0..n).map(|v| charts.at_vertex_here(v)).collect();
@@ -1127,18 +1156,14 @@ pub fn flow_map(
         Vec::new()
     };
     let mut w = vec![DVec3::ZERO; m];
-    let mut k: [Vec<DVec2>; 4] = std::array::from_fn(|_| vec![DVec2::ZERO; m]);
+    let stages = moves.stages();
+    let mut k: Vec<Vec<DVec2>> = vec![vec![DVec2::ZERO; m]; stages];
     for step in 0..steps.max(1) {
-        if step % SORT_EVERY == 0 {
+        if step % (SORT_EVERY / stages).max(1) == 0 {
             sort_by_face(&mut state, &mut live);
         }
-        let t = t0 + step as f64 * h;
-        for stage in 0..4 {
-            let ts = match stage {
-                0 => t,
-                1 | 2 => t + 0.5 * h,
-                _ => t0 + (step + 1) as f64 * h,
-            };
+        for stage in 0..stages {
+            let ts = moves.time(stage, t0, step, h);
             let at = motion.at(ts)?;
             let k_ref = &k;
             let stage_point = |c: Corners,
@@ -1174,11 +1199,7 @@ pub fn flow_map(
                 .into_par_iter()
                 .enumerate()
                 .for_each(|(c, (l, r, x, tb, ax, p))| {
-                    let step_from_prev = |i: usize| match stage {
-                        1 => 0.5 * h * k_ref[0][i],
-                        2 => 0.5 * h * (k_ref[1][i] - k_ref[0][i]),
-                        _ => h * k_ref[2][i] - 0.5 * h * k_ref[1][i],
-                    };
+                    let step_from_prev = |i: usize| moves.to(stage, h, k_ref, i);
                     let n = l.len();
                     let mut corners = [None; 2];
                     if stage == 0 {
@@ -1228,11 +1249,7 @@ pub fn flow_map(
                     });
             }
         }
-        let [k1, k2, k3, k4] = &k;
-        let last = |i: usize| {
-            let d = h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-            d - h * k3[i]
-        };
+        let last = |i: usize| moves.to(stages, h, &k, i);
         (
             state.par_chunks_mut(2),
             stage_at.par_chunks(2),
