@@ -116,6 +116,70 @@ impl Topology {
         })
     }
 
+    /// The sub-mesh of the faces `faces` (increasing) of this mesh, without sorting: its
+    /// vertices are `vertices` (increasing; every corner of `faces` among them) and
+    /// `local[v]` is the new index of mesh vertex `v` (`u32::MAX` if it is not kept).
+    /// Because the renumbering keeps the order of vertices and faces, the sub-mesh's edges
+    /// are this mesh's edges that some kept face has, in the same (lexicographic) order:
+    /// exactly what [`Topology::from_triangles`] on the renumbered faces would build, but
+    /// gathered through the maps in time proportional to the sub-mesh (plus one pass over
+    /// a per-edge array). Also returns the sub-mesh edge of every mesh edge (`u32::MAX`
+    /// where none).
+    pub(crate) fn restricted(
+        &self,
+        faces: &[u32],
+        vertices: &[u32],
+        local: &[u32],
+    ) -> (Self, Vec<u32>) {
+        // mesh edge → sub-mesh edge: mark the kept faces' edges, then number them in the
+        // mesh's order, vertex by vertex (the edges whose lower end is `a` are contiguous
+        // and increasing among `a`'s incident edges)
+        let mut edge_local = vec![u32::MAX; self.edges.len()];
+        for &f in faces {
+            for e in self.face_edges[f as usize] {
+                edge_local[e as usize] = 0;
+            }
+        }
+        let mut edges = Vec::new();
+        for &a in vertices {
+            for &e in self.vertex_edges(a as usize) {
+                let [lo, hi] = self.edges[e as usize];
+                if lo == a && edge_local[e as usize] == 0 {
+                    edge_local[e as usize] = edges.len() as u32;
+                    edges.push([local[lo as usize], local[hi as usize]]);
+                }
+            }
+        }
+        let mut edge_face_count = vec![0u32; edges.len()];
+        let face_edges: Vec<[u32; 3]> = faces
+            .iter()
+            .map(|&f| {
+                self.face_edges[f as usize].map(|e| {
+                    let k = edge_local[e as usize];
+                    edge_face_count[k as usize] += 1;
+                    k
+                })
+            })
+            .collect();
+        let n = vertices.len();
+        let (vertex_edge_ptr, vertex_edge) = incidence(n, &edges);
+        let topology = Self {
+            n_vertices: n,
+            faces: faces
+                .iter()
+                .map(|&f| self.faces[f as usize].map(|v| local[v as usize]))
+                .collect(),
+            edges,
+            face_edges,
+            edge_face_count,
+            face_polygon: (0..faces.len() as u32).collect(),
+            n_polygons: faces.len(),
+            vertex_edge_ptr,
+            vertex_edge,
+        };
+        (topology, edge_local)
+    }
+
     /// The edges incident to vertex `v`, in increasing edge order.
     pub(crate) fn vertex_edges(&self, v: usize) -> &[u32] {
         &self.vertex_edge[self.vertex_edge_ptr[v] as usize..self.vertex_edge_ptr[v + 1] as usize]

@@ -135,26 +135,34 @@ pub(super) struct Window {
 }
 
 impl Window {
-    /// The window of the mesh vertices flagged `active` or `held`.
+    /// The window of the mesh vertices flagged `active` or `held`; `reuse`: the solvers
+    /// of a window it replaces, whose memory it takes over.
     pub(super) fn new(
         cloth: &Cloth,
         mask: Vec<bool>,
         held: &[bool],
+        reuse: Option<(WarmCg, WarmCg)>,
     ) -> Result<Option<Self>, Error> {
         let topo = &cloth.topology;
         let n = topo.n_vertices();
         let whole_mask: Vec<bool> = (0..n).map(|v| mask[v] || held[v]).collect();
-        let mut faces: Vec<u32> = (0..n)
-            .filter(|&v| whole_mask[v])
-            .flat_map(|v| cloth.rings.wedges(v).iter().map(|w| w.face))
+        // the faces of the active and held vertices, in the cloth's order (marked, then
+        // read off in order: no sort), and their corners
+        let mut face_local = vec![u32::MAX; topo.n_faces()];
+        for v in (0..n).filter(|&v| whole_mask[v]) {
+            for w in cloth.rings.wedges(v) {
+                face_local[w.face as usize] = 0;
+            }
+        }
+        let faces: Vec<u32> = (0..topo.n_faces() as u32)
+            .filter(|&f| face_local[f as usize] == 0)
             .collect();
         if faces.is_empty() {
             return Ok(None);
         }
-        faces.sort_unstable();
-        faces.dedup();
         let mut local = vec![u32::MAX; n];
-        for &f in &faces {
+        for (k, &f) in faces.iter().enumerate() {
+            face_local[f as usize] = k as u32;
             for v in topo.faces()[f as usize] {
                 local[v as usize] = 0;
             }
@@ -163,21 +171,21 @@ impl Window {
         for (j, &v) in vertices.iter().enumerate() {
             local[v as usize] = j as u32;
         }
-        let tris = faces
-            .iter()
-            .map(|&f| topo.faces()[f as usize].map(|v| local[v as usize]))
-            .collect();
-        let topology = Topology::from_triangles(vertices.len(), tris)?;
-        // the fans walked in the cloth's sense (its harmonized orientation)
-        let flipped = faces
-            .iter()
-            .map(|&f| cloth.rings.face_flipped()[f as usize])
-            .collect();
-        let rings = OneRings::with_orientation(&topology, flipped);
+        // the window's edges and fans are the cloth's, renumbered (module doc)
+        let (topology, edge_local) = topo.restricted(&faces, &vertices, &local);
+        let rings = OneRings::restricted(
+            &cloth.rings,
+            &topology,
+            &faces,
+            &vertices,
+            &face_local,
+            &local,
+            &edge_local,
+        );
         let adjacency = RingAdjacency::new(&topology);
         let pattern = VertexPattern::new(&topology);
         let region = Restriction::new(&pattern, pick(&vertices, &mask));
-        let cg = solvers(&region);
+        let cg = solvers(&region, reuse);
         let part = Cloth {
             rest: pick(&vertices, &cloth.rest),
             rest_frames: VertexFrames {
@@ -325,7 +333,8 @@ impl Simulator {
         match plan {
             WindowPlan::Keep => Ok(false),
             WindowPlan::Build { mask, held } => {
-                self.window = Window::new(&self.cloth, mask, &held)?;
+                let reuse = self.window.take().and_then(|w| w.cg);
+                self.window = Window::new(&self.cloth, mask, &held, reuse)?;
                 Ok(true)
             }
         }
