@@ -197,12 +197,47 @@ impl OneRings {
         vertex_local: &[u32],
         edge_local: &[u32],
     ) -> Self {
-        let n = topology.n_vertices();
-        let faces = topology.faces();
         let flipped: Vec<bool> = face_parent
             .iter()
             .map(|&f| parent.flipped[f as usize])
             .collect();
+        let maps = [face_local, vertex_local, edge_local];
+        Self::derived(parent, topology, flipped, vertex_parent, maps)
+    }
+
+    /// The fans of `topology`, grown from the mesh of `old` by faces and vertices appended
+    /// ([`Topology::extended`], whose edge map `old_new` it takes), walked in the
+    /// orientation `flipped`: a vertex that has no new face keeps its fan (edges
+    /// renumbered), the others are walked. As [`OneRings::restricted`], the same as
+    /// [`OneRings::with_orientation`] on the grown mesh.
+    pub(crate) fn extended(
+        old: &OneRings,
+        topology: &Topology,
+        flipped: Vec<bool>,
+        old_new: &[u32],
+    ) -> Self {
+        let n_old = old.n_vertices() as u32;
+        let vertex_parent: Vec<u32> = (0..topology.n_vertices() as u32)
+            .map(|v| if v < n_old { v } else { u32::MAX })
+            .collect();
+        let faces: Vec<u32> = (0..old.flipped.len() as u32).collect();
+        let maps = [&faces[..], &vertex_parent[..n_old as usize], old_new];
+        Self::derived(old, topology, flipped, &vertex_parent, maps)
+    }
+
+    /// [`OneRings::restricted`] and [`OneRings::extended`]: vertex `v` of `topology`
+    /// takes the fan of `parent`'s vertex `vertex_parent[v]` (`u32::MAX`: none) when it
+    /// has as many corners, through the maps `[face, vertex, edge]` of `parent`'s numbers
+    /// to `topology`'s; any other is walked.
+    fn derived(
+        parent: &OneRings,
+        topology: &Topology,
+        flipped: Vec<bool>,
+        vertex_parent: &[u32],
+        [face_local, vertex_local, edge_local]: [&[u32]; 3],
+    ) -> Self {
+        let n = topology.n_vertices();
+        let faces = topology.faces();
         let (corner_ptr, corners) = incidence(n, faces);
         let edges = topology.edges();
         let mut edge_ptr = vec![0u32; n + 1];
@@ -224,7 +259,8 @@ impl OneRings {
                     let cs = &corners[corner_ptr[v] as usize..corner_ptr[v + 1] as usize];
                     let pv = vertex_parent[v] as usize;
                     let (w0, s0) = (out.wedges.len(), out.spokes.len());
-                    let kind = if cs.len() == parent.wedges(pv).len() {
+                    let whole = pv != u32::MAX as usize && cs.len() == parent.wedges(pv).len();
+                    let kind = if whole {
                         // the whole fan: the parent's, renumbered
                         out.wedges.extend(parent.wedges(pv).iter().map(|w| Wedge {
                             face: face_local[w.face as usize],
