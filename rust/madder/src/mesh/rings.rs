@@ -812,37 +812,91 @@ pub(super) mod tests {
         let mut rims = 0;
         for pick in picks {
             let [(a, ra), (b, rb)] = both_ways(&t, |v| pick[v]);
-            assert_eq!(a.n_vertices(), b.n_vertices());
-            assert_eq!(a.faces(), b.faces());
-            assert_eq!(a.edges(), b.edges());
-            assert_eq!(a.face_edges(), b.face_edges());
-            assert_eq!(a.face_polygon(), b.face_polygon());
-            assert_eq!(a.n_polygons(), b.n_polygons());
-            for e in 0..a.n_edges() {
-                assert_eq!(a.edge_kind(e), b.edge_kind(e), "edge {e}");
-            }
-            for v in 0..a.n_vertices() {
-                assert_eq!(a.vertex_edges(v), b.vertex_edges(v), "vertex {v}");
-                assert_eq!(ra.wedges(v), rb.wedges(v), "vertex {v}");
-                assert_eq!(ra.spokes(v), rb.spokes(v), "vertex {v}");
-                assert_eq!(ra.spoke_edges(v), rb.spoke_edges(v), "vertex {v}");
-                assert_eq!(ra.kind(v), rb.kind(v), "vertex {v}");
-                rims += usize::from(ra.kind(v) != FanKind::Interior);
-            }
-            assert_eq!(ra.face_flipped(), rb.face_flipped());
-            assert_eq!(ra.edge_spoke, rb.edge_spoke);
-            assert_eq!(ra.edge_ptr, rb.edge_ptr);
-            assert_eq!(ra.edge_end, rb.edge_end);
-            assert_eq!(
-                ra.orientation_reversing_edges(),
-                rb.orientation_reversing_edges()
-            );
+            assert_same(&a, &ra, &b, &rb);
+            rims += (0..a.n_vertices())
+                .filter(|&v| ra.kind(v) != FanKind::Interior)
+                .count();
         }
         assert!(rims > 0);
         // the awkward vertices are in the whole mesh's fans
         let r = OneRings::new(&t);
         assert_eq!(r.kind(7), FanKind::Irregular);
         assert_eq!(r.kind(5 * 8 + 5), FanKind::Irregular);
+    }
+
+    /// Every array of two topologies and their fans, compared.
+    fn assert_same(a: &Topology, ra: &OneRings, b: &Topology, rb: &OneRings) {
+        assert_eq!(a.n_vertices(), b.n_vertices());
+        assert_eq!(a.faces(), b.faces());
+        assert_eq!(a.edges(), b.edges());
+        assert_eq!(a.face_edges(), b.face_edges());
+        assert_eq!(a.face_polygon(), b.face_polygon());
+        assert_eq!(a.n_polygons(), b.n_polygons());
+        for e in 0..a.n_edges() {
+            assert_eq!(a.edge_kind(e), b.edge_kind(e), "edge {e}");
+        }
+        for v in 0..a.n_vertices() {
+            assert_eq!(a.vertex_edges(v), b.vertex_edges(v), "vertex {v}");
+            assert_eq!(ra.wedges(v), rb.wedges(v), "vertex {v}");
+            assert_eq!(ra.spokes(v), rb.spokes(v), "vertex {v}");
+            assert_eq!(ra.spoke_edges(v), rb.spoke_edges(v), "vertex {v}");
+            assert_eq!(ra.kind(v), rb.kind(v), "vertex {v}");
+        }
+        assert_eq!(ra.face_flipped(), rb.face_flipped());
+        assert_eq!(ra.edge_spoke, rb.edge_spoke);
+        assert_eq!(ra.edge_ptr, rb.edge_ptr);
+        assert_eq!(ra.edge_end, rb.edge_end);
+        assert_eq!(
+            ra.orientation_reversing_edges(),
+            rb.orientation_reversing_edges()
+        );
+    }
+
+    #[test]
+    fn a_mesh_grown_by_appended_faces_is_the_mesh_built_from_scratch() {
+        let full = awkward_mesh();
+        let flipped = OneRings::new(&full).face_flipped().to_vec();
+        let faces = full.faces();
+        let part = |k: usize| {
+            // the first k faces, on the vertices up to the highest they use
+            let n = faces[..k]
+                .iter()
+                .flatten()
+                .max()
+                .map_or(0, |&v| v as usize + 1);
+            let t = Topology::from_triangles(n, faces[..k].to_vec()).unwrap();
+            let r = OneRings::with_orientation(&t, flipped[..k].to_vec());
+            (t, r)
+        };
+        let (mut t, mut r) = part(5);
+        let mut grown_vertices = 0;
+        for k in [6, 19, 40, 41, faces.len()] {
+            let (want, want_rings) = part(k);
+            let n = want.n_vertices();
+            grown_vertices += n - t.n_vertices();
+            let (grown, old_new) = t
+                .extended(n, &faces[t.n_faces()..k], (0..k as u32).collect(), k)
+                .unwrap();
+            assert_eq!(old_new.len(), t.n_edges());
+            let rings = OneRings::extended(&r, &grown, flipped[..k].to_vec(), &old_new);
+            assert_same(&want, &want_rings, &grown, &rings);
+            (t, r) = (grown, rings);
+        }
+        assert!(grown_vertices > 20);
+        // a bad new face is named by its index in the grown mesh
+        let bad = t.extended(
+            t.n_vertices(),
+            &[[0, 1, 1]],
+            (0..=t.n_faces() as u32).collect(),
+            1,
+        );
+        assert_eq!(
+            bad.unwrap_err(),
+            crate::error::MeshError::RepeatedVertex {
+                face: t.n_faces(),
+                vertex: 1
+            }
+        );
     }
 
     #[test]

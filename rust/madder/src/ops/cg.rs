@@ -286,6 +286,12 @@ impl WarmCg {
         let mut l_ptr = refill(std::mem::take(&mut self.l_ptr), 0, 0u32);
         let mut l_row = refill(std::mem::take(&mut self.l_row), 0, 0u32);
         let mut l_slot = refill(std::mem::take(&mut self.l_slot), 0, 0u32);
+        // capacities reserved up front: growing by doubling would copy, and touch twice
+        // the memory (reserved pages cost nothing until written)
+        let n_lower = (nnz - n) / 2;
+        l_ptr.reserve(n + 1);
+        l_row.reserve(n_lower);
+        l_slot.reserve(n_lower);
         l_ptr.push(0u32);
         for j in 0..n {
             for k in col_ptr[j] as usize..col_ptr[j + 1] as usize {
@@ -302,6 +308,15 @@ impl WarmCg {
         // them all (in the order the factorization applies them: by column, then j, then i)
         let mut upd_ptr = refill(std::mem::take(&mut self.upd_ptr), 0, 0u32);
         let mut upd = refill(std::mem::take(&mut self.upd), 0, [0u32; 3]);
+        // at most one update per pair of entries of a column
+        let pairs: usize = (0..n)
+            .map(|k| {
+                let m = (l_ptr[k + 1] - l_ptr[k]) as usize;
+                m * m.saturating_sub(1) / 2
+            })
+            .sum();
+        upd_ptr.reserve(n + 1);
+        upd.reserve(pairs);
         upd_ptr.push(0u32);
         for k in 0..n {
             let (lo, hi) = (l_ptr[k] as usize, l_ptr[k + 1] as usize);

@@ -44,6 +44,13 @@
 //! are drawn per fine vertex index, so a splash is another draw of the same distribution.
 //!
 //! The simulator needs a mesh, so one coarse face (the first) is built from the start.
+//!
+//! A growth costs its new part, not the whole built part again (issue 16): vertices and
+//! faces are appended, so only the new faces' edges are sorted and merged into the old
+//! ones ([`Topology::extended`]), a vertex with no new face keeps its fan
+//! ([`OneRings::extended`]), and a vertex that is not reset keeps its rest frame, frame
+//! and area; the reset ones get theirs (the area summed over its faces in face order, as
+//! [`vertex_areas`] does). The results are those of rebuilding it all, bit for bit.
 
 use std::borrow::Cow;
 use std::time::Instant;
@@ -62,7 +69,7 @@ use crate::mesh::{OneRings, RingAdjacency, Topology, VertexFrames};
 
 /// Coarse rings of faces built beyond the corners of a window that reached the edge of
 /// the built part (module doc): room for the window to grow a few frames before the next
-/// build (each costs a rebuild of the simulator's mesh, about a window's cost).
+/// build (each grows the simulator's mesh and costs a window rebuild).
 pub(crate) const GROWTH_RINGS: usize = 4;
 
 /// The stain simulator at a Detail level: the cloth's own simulator at level 0, or one on

@@ -26,9 +26,23 @@
 //! positions. A frame gathers the window's state, steps it, and writes it back. The window
 //! is kept from frame to frame while the liquid's needed region stays inside its active
 //! vertices and is at least half of it; a new one reaches twice as far as the frame
-//! needs, plus [`WINDOW_SLACK_RINGS`] rings, so that it lasts a few frames (building one
-//! is a topology, fans, patterns and solvers on the window). With `active_region` off, the
-//! window is the whole mesh, every vertex active: one code path.
+//! needs, plus [`WINDOW_SLACK_RINGS`] rings, so that it lasts a few frames. With
+//! `active_region` off, the window is the whole mesh, every vertex active: one code path.
+//!
+//! **Building a window derives it from the cloth** (issue 16). Its faces are the cloth's
+//! faces around the active and held vertices, read off a per-face mark in the cloth's
+//! order, and its vertices keep the cloth's order. A renumbering that keeps the order
+//! keeps everything that was sorted, so nothing is sorted again: the window's edges are
+//! the cloth's edges that one of its faces has, gathered in the cloth's order
+//! ([`Topology::restricted`]); a vertex that has all its cloth faces in the window (every
+//! active and held one) has the cloth's fan with faces, spokes and edges renumbered, and
+//! only the halo's partial fans are walked ([`OneRings::restricted`]; the fan walk
+//! depends on nothing but the corners in face order and the order of the vertex
+//! numbers). The pattern, the restriction and the IC(0) analysis follow in time
+//! proportional to the window, and the solvers are rebuilt in the memory of the window
+//! they replace ([`WarmCg::rebuild`]: fresh pages cost more than the analysis). The
+//! result is the window built from scratch, bit for bit (a test compares every array on
+//! a mesh with a hole, a fin, a bow-tie and a flipped face).
 //!
 //! - **Diffusion.** `(M + h K_A) σ' = m` on the active vertices, `K_A` the stiffness
 //!   restricted to them with a Neumann (no-flux) boundary at the region's edge
