@@ -53,25 +53,29 @@ impl VertexFrames {
         }
         let frame = (0..rings.n_vertices())
             .into_par_iter()
-            .map(|v| {
-                let p = positions[v];
-                let spoke: Vec<DVec3> = rings
-                    .spokes(v)
-                    .iter()
-                    .map(|&j| positions[j as usize] - p)
-                    .collect();
-                if spoke.is_empty() {
-                    return DMat3::IDENTITY;
-                }
-                let z = vertex_normal(rings.wedges(v), &spoke);
-                let x = spoke
-                    .iter()
-                    .find_map(|&e| tangent_direction(e, z))
-                    .unwrap_or_else(|| z.any_orthonormal_vector());
-                DMat3::from_cols(x, z.cross(x), z)
-            })
+            .map(|v| Self::frame_of(rings, positions, v))
             .collect();
         Ok(Self { frame })
+    }
+
+    /// The frame of vertex `v` alone, as [`VertexFrames::new`] makes it (positions
+    /// unchecked).
+    pub(crate) fn frame_of(rings: &OneRings, positions: &[DVec3], v: usize) -> DMat3 {
+        let p = positions[v];
+        let spoke: Vec<DVec3> = rings
+            .spokes(v)
+            .iter()
+            .map(|&j| positions[j as usize] - p)
+            .collect();
+        if spoke.is_empty() {
+            return DMat3::IDENTITY;
+        }
+        let z = vertex_normal(rings.wedges(v), &spoke);
+        let x = spoke
+            .iter()
+            .find_map(|&e| tangent_direction(e, z))
+            .unwrap_or_else(|| z.any_orthonormal_vector());
+        DMat3::from_cols(x, z.cross(x), z)
     }
 
     /// Frames `F_i = U_i F̄_i` turned by one rotation per vertex (the comoving–corotating

@@ -441,6 +441,25 @@ impl Partial {
         )
     }
 
+    /// The built part as [`Partial::topology`] makes it, from `old`, the part as it was
+    /// before the last builds: only the new faces' edges are sorted
+    /// ([`Topology::extended`]); also the new index of every old edge.
+    pub(crate) fn extended_topology(
+        &self,
+        old: &Topology,
+    ) -> Result<(Topology, Vec<u32>), MeshError> {
+        let per = self.template.len();
+        let polygon = (0..self.faces.len())
+            .map(|t| self.coarse.face_polygon()[self.built[t / per] as usize])
+            .collect();
+        old.extended(
+            self.weights.len(),
+            &self.faces[old.n_faces()..],
+            polygon,
+            self.coarse.n_polygons(),
+        )
+    }
+
     /// Per local fine face, the value of its coarse face.
     pub(crate) fn face_values<T: Copy>(&self, coarse: &[T]) -> Vec<T> {
         self.built

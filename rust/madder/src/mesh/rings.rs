@@ -175,12 +175,145 @@ impl OneRings {
             })
             .collect();
 
+        Self::assemble(topology, flipped, edge_ptr, edge_end, chunks)
+    }
+
+    /// The fans of `topology`, a part of the mesh of `parent` cut out by
+    /// [`Topology::restricted`], walked in the parent's orientation: what
+    /// [`OneRings::with_orientation`] with the parent's [`OneRings::face_flipped`] builds,
+    /// without walking again the fans the part has whole. The walk of a fan depends only
+    /// on its corners in face order and on the order of the vertex numbers, which the
+    /// renumbering keeps, so a vertex with all its parent's faces has the parent's fan
+    /// with faces, spokes and edges renumbered; only the others (the part's rim) are
+    /// walked. `face_parent`, `vertex_parent`: the parent's face and vertex of each of
+    /// the part's; `face_local`, `vertex_local`, `edge_local`: the part's face, vertex and
+    /// edge of each of the parent's (`u32::MAX` where none).
+    pub(crate) fn restricted(
+        parent: &OneRings,
+        topology: &Topology,
+        face_parent: &[u32],
+        vertex_parent: &[u32],
+        face_local: &[u32],
+        vertex_local: &[u32],
+        edge_local: &[u32],
+    ) -> Self {
+        let flipped: Vec<bool> = face_parent
+            .iter()
+            .map(|&f| parent.flipped[f as usize])
+            .collect();
+        let maps = [face_local, vertex_local, edge_local];
+        Self::derived(parent, topology, flipped, vertex_parent, maps)
+    }
+
+    /// The fans of `topology`, grown from the mesh of `old` by faces and vertices appended
+    /// ([`Topology::extended`], whose edge map `old_new` it takes), walked in the
+    /// orientation `flipped`: a vertex that has no new face keeps its fan (edges
+    /// renumbered), the others are walked. As [`OneRings::restricted`], the same as
+    /// [`OneRings::with_orientation`] on the grown mesh.
+    pub(crate) fn extended(
+        old: &OneRings,
+        topology: &Topology,
+        flipped: Vec<bool>,
+        old_new: &[u32],
+    ) -> Self {
+        let n_old = old.n_vertices() as u32;
+        let vertex_parent: Vec<u32> = (0..topology.n_vertices() as u32)
+            .map(|v| if v < n_old { v } else { u32::MAX })
+            .collect();
+        let faces: Vec<u32> = (0..old.flipped.len() as u32).collect();
+        let maps = [&faces[..], &vertex_parent[..n_old as usize], old_new];
+        Self::derived(old, topology, flipped, &vertex_parent, maps)
+    }
+
+    /// [`OneRings::restricted`] and [`OneRings::extended`]: vertex `v` of `topology`
+    /// takes the fan of `parent`'s vertex `vertex_parent[v]` (`u32::MAX`: none) when it
+    /// has as many corners, through the maps `[face, vertex, edge]` of `parent`'s numbers
+    /// to `topology`'s; any other is walked.
+    fn derived(
+        parent: &OneRings,
+        topology: &Topology,
+        flipped: Vec<bool>,
+        vertex_parent: &[u32],
+        [face_local, vertex_local, edge_local]: [&[u32]; 3],
+    ) -> Self {
+        let n = topology.n_vertices();
+        let faces = topology.faces();
+        let (corner_ptr, corners) = incidence(n, faces);
+        let edges = topology.edges();
+        let mut edge_ptr = vec![0u32; n + 1];
+        for &[a, _] in edges {
+            edge_ptr[a as usize + 1] += 1;
+        }
+        for v in 0..n {
+            edge_ptr[v + 1] += edge_ptr[v];
+        }
+        let edge_end: Vec<u32> = edges.iter().map(|&[_, b]| b).collect();
+        let lookup = |i: u32, j: u32| find_edge(&edge_ptr, &edge_end, i, j);
+        const CHUNK: usize = 4096;
+        let chunks: Vec<FanChunk> = (0..n.div_ceil(CHUNK))
+            .into_par_iter()
+            .map(|c| {
+                let mut scratch = FanScratch::default();
+                let mut out = FanChunk::default();
+                for v in c * CHUNK..n.min((c + 1) * CHUNK) {
+                    let cs = &corners[corner_ptr[v] as usize..corner_ptr[v + 1] as usize];
+                    let pv = vertex_parent[v] as usize;
+                    let (w0, s0) = (out.wedges.len(), out.spokes.len());
+                    let whole = pv != u32::MAX as usize && cs.len() == parent.wedges(pv).len();
+                    let kind = if whole {
+                        // the whole fan: the parent's, renumbered
+                        out.wedges.extend(parent.wedges(pv).iter().map(|w| Wedge {
+                            face: face_local[w.face as usize],
+                            ..*w
+                        }));
+                        out.spokes
+                            .extend(parent.spokes(pv).iter().map(|&s| vertex_local[s as usize]));
+                        out.spoke_edges.extend(
+                            parent
+                                .spoke_edges(pv)
+                                .iter()
+                                .map(|&e| edge_local[e as usize]),
+                        );
+                        parent.kind(pv)
+                    } else {
+                        let kind = order_fan(faces, &flipped, cs, &mut scratch, &mut out);
+                        for &j in &out.spokes[s0..] {
+                            let e = lookup(v as u32, j).expect("a spoke is an edge");
+                            out.spoke_edges.push(e as u32);
+                        }
+                        kind
+                    };
+                    out.counts.push((
+                        (out.wedges.len() - w0) as u32,
+                        (out.spokes.len() - s0) as u32,
+                    ));
+                    out.kind.push(kind);
+                }
+                out
+            })
+            .collect();
+        Self::assemble(topology, flipped, edge_ptr, edge_end, chunks)
+    }
+
+    /// Joins the fans of chunks of vertices (in vertex order) into the rings of
+    /// `topology`, with the orientation-reversing edges and the edges' spokes.
+    fn assemble(
+        topology: &Topology,
+        flipped: Vec<bool>,
+        edge_ptr: Vec<u32>,
+        edge_end: Vec<u32>,
+        chunks: Vec<FanChunk>,
+    ) -> Self {
+        let n = topology.n_vertices();
+        let faces = topology.faces();
+        let edges = topology.edges();
+        let n_corners = 3 * faces.len();
         let n_spokes: usize = chunks.iter().map(|c| c.spokes.len()).sum();
         let mut wedge_ptr = Vec::with_capacity(n + 1);
         let mut spoke_ptr = Vec::with_capacity(n + 1);
         wedge_ptr.push(0u32);
         spoke_ptr.push(0u32);
-        let mut wedges = Vec::with_capacity(corners.len());
+        let mut wedges = Vec::with_capacity(n_corners);
         let mut spoke_vertex = Vec::with_capacity(n_spokes);
         let mut spoke_edge = Vec::with_capacity(n_spokes);
         let mut kind = Vec::with_capacity(n);
@@ -614,6 +747,195 @@ pub(super) mod tests {
     fn open_fan_is_a_boundary() {
         let (t, _) = fan(false);
         assert_eq!(OneRings::new(&t).kind(0), FanKind::Boundary);
+    }
+
+    /// A 7×7 grid of split quads with what the fans must handle: a face stored flipped,
+    /// a hole, a fin of three faces on an edge and a bow-tie vertex.
+    fn awkward_mesh() -> Topology {
+        let idx = |i: u32, j: u32| i * 8 + j;
+        let mut faces = Vec::new();
+        for i in 0..7 {
+            for j in 0..7 {
+                if (i, j) == (3, 3) {
+                    continue; // a hole
+                }
+                let (a, b, c, d) = (idx(i, j), idx(i, j + 1), idx(i + 1, j + 1), idx(i + 1, j));
+                faces.extend([[a, b, c], [a, c, d]]);
+            }
+        }
+        faces[17] = [faces[17][0], faces[17][2], faces[17][1]]; // stored flipped
+        faces.push([idx(5, 5), idx(5, 6), 64]); // a fin on edge (5,5)-(5,6)
+        // a bow-tie: two triangles meeting at corner vertex 7 only
+        faces.push([7, 65, 66]);
+        Topology::from_triangles(67, faces).unwrap()
+    }
+
+    /// The part of `topology` made of the faces around the vertices picked by `pick`,
+    /// built from scratch and derived ([`Topology::restricted`],
+    /// [`OneRings::restricted`]).
+    fn both_ways(topology: &Topology, pick: impl Fn(usize) -> bool) -> [(Topology, OneRings); 2] {
+        let rings = OneRings::new(topology);
+        let n = topology.n_vertices();
+        let mut face_local = vec![u32::MAX; topology.n_faces()];
+        for v in (0..n).filter(|&v| pick(v)) {
+            rings
+                .wedges(v)
+                .iter()
+                .for_each(|w| face_local[w.face as usize] = 0);
+        }
+        let faces: Vec<u32> = (0..topology.n_faces() as u32)
+            .filter(|&f| face_local[f as usize] == 0)
+            .collect();
+        let mut local = vec![u32::MAX; n];
+        for (k, &f) in faces.iter().enumerate() {
+            face_local[f as usize] = k as u32;
+            topology.faces()[f as usize]
+                .iter()
+                .for_each(|&v| local[v as usize] = 0);
+        }
+        let vertices: Vec<u32> = (0..n as u32).filter(|&v| local[v as usize] == 0).collect();
+        vertices
+            .iter()
+            .enumerate()
+            .for_each(|(j, &v)| local[v as usize] = j as u32);
+        let flipped: Vec<bool> = faces
+            .iter()
+            .map(|&f| rings.face_flipped()[f as usize])
+            .collect();
+        let tris = faces
+            .iter()
+            .map(|&f| topology.faces()[f as usize].map(|v| local[v as usize]))
+            .collect();
+        let scratch = Topology::from_triangles(vertices.len(), tris).unwrap();
+        let scratch_rings = OneRings::with_orientation(&scratch, flipped);
+        let (derived, edge_local) = topology.restricted(&faces, &vertices, &local);
+        let derived_rings = OneRings::restricted(
+            &rings,
+            &derived,
+            &faces,
+            &vertices,
+            &face_local,
+            &local,
+            &edge_local,
+        );
+        // the edge map points at the same edges
+        for (e, &k) in edge_local.iter().enumerate() {
+            if k != u32::MAX {
+                let [a, b] = topology.edges()[e];
+                assert_eq!(
+                    derived.edges()[k as usize],
+                    [local[a as usize], local[b as usize]]
+                );
+            }
+        }
+        [(scratch, scratch_rings), (derived, derived_rings)]
+    }
+
+    #[test]
+    fn a_part_derived_from_the_whole_is_the_part_built_from_scratch() {
+        let t = awkward_mesh();
+        let mut seed = 12345u64;
+        let mut picks: Vec<Vec<bool>> = vec![vec![true; 67], (0..67).map(|v| v == 7).collect()];
+        for density in [2, 4, 8] {
+            picks.push(
+                (0..67)
+                    .map(|_| {
+                        seed = seed
+                            .wrapping_mul(6364136223846793005)
+                            .wrapping_add(1442695040888963407);
+                        (seed >> 33) % density == 0
+                    })
+                    .collect(),
+            );
+        }
+        let mut rims = 0;
+        for pick in picks {
+            let [(a, ra), (b, rb)] = both_ways(&t, |v| pick[v]);
+            assert_same(&a, &ra, &b, &rb);
+            rims += (0..a.n_vertices())
+                .filter(|&v| ra.kind(v) != FanKind::Interior)
+                .count();
+        }
+        assert!(rims > 0);
+        // the awkward vertices are in the whole mesh's fans
+        let r = OneRings::new(&t);
+        assert_eq!(r.kind(7), FanKind::Irregular);
+        assert_eq!(r.kind(5 * 8 + 5), FanKind::Irregular);
+    }
+
+    /// Every array of two topologies and their fans, compared.
+    fn assert_same(a: &Topology, ra: &OneRings, b: &Topology, rb: &OneRings) {
+        assert_eq!(a.n_vertices(), b.n_vertices());
+        assert_eq!(a.faces(), b.faces());
+        assert_eq!(a.edges(), b.edges());
+        assert_eq!(a.face_edges(), b.face_edges());
+        assert_eq!(a.face_polygon(), b.face_polygon());
+        assert_eq!(a.n_polygons(), b.n_polygons());
+        for e in 0..a.n_edges() {
+            assert_eq!(a.edge_kind(e), b.edge_kind(e), "edge {e}");
+        }
+        for v in 0..a.n_vertices() {
+            assert_eq!(a.vertex_edges(v), b.vertex_edges(v), "vertex {v}");
+            assert_eq!(ra.wedges(v), rb.wedges(v), "vertex {v}");
+            assert_eq!(ra.spokes(v), rb.spokes(v), "vertex {v}");
+            assert_eq!(ra.spoke_edges(v), rb.spoke_edges(v), "vertex {v}");
+            assert_eq!(ra.kind(v), rb.kind(v), "vertex {v}");
+        }
+        assert_eq!(ra.face_flipped(), rb.face_flipped());
+        assert_eq!(ra.edge_spoke, rb.edge_spoke);
+        assert_eq!(ra.edge_ptr, rb.edge_ptr);
+        assert_eq!(ra.edge_end, rb.edge_end);
+        assert_eq!(
+            ra.orientation_reversing_edges(),
+            rb.orientation_reversing_edges()
+        );
+    }
+
+    #[test]
+    fn a_mesh_grown_by_appended_faces_is_the_mesh_built_from_scratch() {
+        let full = awkward_mesh();
+        let flipped = OneRings::new(&full).face_flipped().to_vec();
+        let faces = full.faces();
+        let part = |k: usize| {
+            // the first k faces, on the vertices up to the highest they use
+            let n = faces[..k]
+                .iter()
+                .flatten()
+                .max()
+                .map_or(0, |&v| v as usize + 1);
+            let t = Topology::from_triangles(n, faces[..k].to_vec()).unwrap();
+            let r = OneRings::with_orientation(&t, flipped[..k].to_vec());
+            (t, r)
+        };
+        let (mut t, mut r) = part(5);
+        let mut grown_vertices = 0;
+        for k in [6, 19, 40, 41, faces.len()] {
+            let (want, want_rings) = part(k);
+            let n = want.n_vertices();
+            grown_vertices += n - t.n_vertices();
+            let (grown, old_new) = t
+                .extended(n, &faces[t.n_faces()..k], (0..k as u32).collect(), k)
+                .unwrap();
+            assert_eq!(old_new.len(), t.n_edges());
+            let rings = OneRings::extended(&r, &grown, flipped[..k].to_vec(), &old_new);
+            assert_same(&want, &want_rings, &grown, &rings);
+            (t, r) = (grown, rings);
+        }
+        assert!(grown_vertices > 20);
+        // a bad new face is named by its index in the grown mesh
+        let bad = t.extended(
+            t.n_vertices(),
+            &[[0, 1, 1]],
+            (0..=t.n_faces() as u32).collect(),
+            1,
+        );
+        assert_eq!(
+            bad.unwrap_err(),
+            crate::error::MeshError::RepeatedVertex {
+                face: t.n_faces(),
+                vertex: 1
+            }
+        );
     }
 
     #[test]

@@ -67,20 +67,7 @@ impl Topology {
                 got: face_polygon.len(),
             });
         }
-        for (f, tri) in faces.iter().enumerate() {
-            for (k, &v) in tri.iter().enumerate() {
-                if v as usize >= n_vertices {
-                    return Err(MeshError::VertexOutOfRange {
-                        face: f,
-                        vertex: v,
-                        n_vertices,
-                    });
-                }
-                if tri[(k + 1) % 3] == v {
-                    return Err(MeshError::RepeatedVertex { face: f, vertex: v });
-                }
-            }
-        }
+        check_faces(n_vertices, &faces, 0)?;
         // Unique edges: sort the 3F half-edge keys, then run-length them.
         let mut half: Vec<(u32, u32, u32)> = Vec::with_capacity(3 * faces.len());
         for (f, tri) in faces.iter().enumerate() {
@@ -114,6 +101,164 @@ impl Topology {
             vertex_edge_ptr,
             vertex_edge,
         })
+    }
+
+    /// The sub-mesh of the faces `faces` (increasing) of this mesh, without sorting: its
+    /// vertices are `vertices` (increasing; every corner of `faces` among them) and
+    /// `local[v]` is the new index of mesh vertex `v` (`u32::MAX` if it is not kept).
+    /// Because the renumbering keeps the order of vertices and faces, the sub-mesh's edges
+    /// are this mesh's edges that some kept face has, in the same (lexicographic) order:
+    /// exactly what [`Topology::from_triangles`] on the renumbered faces would build, but
+    /// gathered through the maps in time proportional to the sub-mesh (plus one pass over
+    /// a per-edge array). Also returns the sub-mesh edge of every mesh edge (`u32::MAX`
+    /// where none).
+    pub(crate) fn restricted(
+        &self,
+        faces: &[u32],
+        vertices: &[u32],
+        local: &[u32],
+    ) -> (Self, Vec<u32>) {
+        // mesh edge → sub-mesh edge: mark the kept faces' edges, then number them in the
+        // mesh's order, vertex by vertex (the edges whose lower end is `a` are contiguous
+        // and increasing among `a`'s incident edges)
+        let mut edge_local = vec![u32::MAX; self.edges.len()];
+        for &f in faces {
+            for e in self.face_edges[f as usize] {
+                edge_local[e as usize] = 0;
+            }
+        }
+        let mut edges = Vec::new();
+        for &a in vertices {
+            for &e in self.vertex_edges(a as usize) {
+                let [lo, hi] = self.edges[e as usize];
+                if lo == a && edge_local[e as usize] == 0 {
+                    edge_local[e as usize] = edges.len() as u32;
+                    edges.push([local[lo as usize], local[hi as usize]]);
+                }
+            }
+        }
+        let mut edge_face_count = vec![0u32; edges.len()];
+        let face_edges: Vec<[u32; 3]> = faces
+            .iter()
+            .map(|&f| {
+                self.face_edges[f as usize].map(|e| {
+                    let k = edge_local[e as usize];
+                    edge_face_count[k as usize] += 1;
+                    k
+                })
+            })
+            .collect();
+        let n = vertices.len();
+        let (vertex_edge_ptr, vertex_edge) = incidence(n, &edges);
+        let topology = Self {
+            n_vertices: n,
+            faces: faces
+                .iter()
+                .map(|&f| self.faces[f as usize].map(|v| local[v as usize]))
+                .collect(),
+            edges,
+            face_edges,
+            edge_face_count,
+            face_polygon: (0..faces.len() as u32).collect(),
+            n_polygons: faces.len(),
+            vertex_edge_ptr,
+            vertex_edge,
+        };
+        (topology, edge_local)
+    }
+
+    /// This mesh with `faces` appended (and `n_vertices` vertices, at least this mesh's):
+    /// what [`Topology::with_polygons`] on all the faces builds, with only the new faces'
+    /// edges sorted. The new edges are merged into the old ones (both in lexicographic
+    /// order), so a mesh that grows by a few faces at a time (the lazily refined cloth of
+    /// [`super::refine::Partial`]) pays for its new part and one pass over the old. Also
+    /// returns the new index of every old edge. `face_polygon` covers all the faces.
+    pub(crate) fn extended(
+        &self,
+        n_vertices: usize,
+        faces: &[[u32; 3]],
+        face_polygon: Vec<u32>,
+        n_polygons: usize,
+    ) -> Result<(Self, Vec<u32>), MeshError> {
+        let old_faces = self.faces.len();
+        let all: Vec<[u32; 3]> = self.faces.iter().chain(faces).copied().collect();
+        if n_vertices < self.n_vertices || face_polygon.len() != all.len() {
+            // not a growth: built from scratch (which also names what is wrong)
+            let t = Self::with_polygons(n_vertices, all, face_polygon, n_polygons)?;
+            return Ok((t, Vec::new()));
+        }
+        check_faces(n_vertices, faces, old_faces)?;
+        // the new faces' sides that are not edges of this mesh, sorted
+        let mut half: Vec<(u32, u32)> = faces
+            .iter()
+            .flat_map(|tri| {
+                (0..3).map(move |k| {
+                    let (a, b) = (tri[(k + 1) % 3], tri[(k + 2) % 3]);
+                    (a.min(b), a.max(b))
+                })
+            })
+            .filter(|&(a, b)| self.find_edge(a, b).is_none())
+            .collect();
+        half.sort_unstable();
+        half.dedup();
+        // merge: old edges and new ones, both increasing
+        let mut edges = Vec::with_capacity(self.edges.len() + half.len());
+        let mut old_new = Vec::with_capacity(self.edges.len());
+        let mut fresh = half.iter().peekable();
+        for &[a, b] in &self.edges {
+            while let Some(&&(c, d)) = fresh.peek() {
+                if (c, d) > (a, b) {
+                    break;
+                }
+                edges.push([c, d]);
+                fresh.next();
+            }
+            old_new.push(edges.len() as u32);
+            edges.push([a, b]);
+        }
+        edges.extend(fresh.map(|&(c, d)| [c, d]));
+        let (vertex_edge_ptr, vertex_edge) = incidence(n_vertices, &edges);
+        let mut grown = Self {
+            n_vertices,
+            faces: all,
+            edges,
+            face_edges: self
+                .face_edges
+                .iter()
+                .map(|fe| fe.map(|e| old_new[e as usize]))
+                .collect(),
+            edge_face_count: Vec::new(),
+            face_polygon,
+            n_polygons,
+            vertex_edge_ptr,
+            vertex_edge,
+        };
+        let mut count = vec![0u32; grown.edges.len()];
+        for (&e, &c) in old_new.iter().zip(&self.edge_face_count) {
+            count[e as usize] = c;
+        }
+        for tri in faces {
+            let fe: [u32; 3] = std::array::from_fn(|k| {
+                let (a, b) = (tri[(k + 1) % 3], tri[(k + 2) % 3]);
+                grown.find_edge(a, b).expect("a side is an edge") as u32
+            });
+            fe.iter().for_each(|&e| count[e as usize] += 1);
+            grown.face_edges.push(fe);
+        }
+        grown.edge_face_count = count;
+        Ok((grown, old_new))
+    }
+
+    /// The edge between `i` and `j`, if any (a search among the edges of the lower).
+    fn find_edge(&self, i: u32, j: u32) -> Option<usize> {
+        let (a, b) = (i.min(j), i.max(j));
+        if a as usize >= self.n_vertices {
+            return None;
+        }
+        self.vertex_edges(a as usize)
+            .iter()
+            .map(|&e| e as usize)
+            .find(|&e| self.edges[e] == [a, b])
     }
 
     /// The edges incident to vertex `v`, in increasing edge order.
@@ -204,6 +349,29 @@ impl Topology {
         }
         loose
     }
+}
+
+/// Fails on an index out of range or a repeated vertex in `faces`, naming the face (its
+/// index plus `first`).
+fn check_faces(n_vertices: usize, faces: &[[u32; 3]], first: usize) -> Result<(), MeshError> {
+    for (f, tri) in faces.iter().enumerate() {
+        for (k, &v) in tri.iter().enumerate() {
+            if v as usize >= n_vertices {
+                return Err(MeshError::VertexOutOfRange {
+                    face: first + f,
+                    vertex: v,
+                    n_vertices,
+                });
+            }
+            if tri[(k + 1) % 3] == v {
+                return Err(MeshError::RepeatedVertex {
+                    face: first + f,
+                    vertex: v,
+                });
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Vertex → incident edge lists (counting sort over the edges, so each list is in

@@ -44,6 +44,13 @@
 //! are drawn per fine vertex index, so a splash is another draw of the same distribution.
 //!
 //! The simulator needs a mesh, so one coarse face (the first) is built from the start.
+//!
+//! A growth costs its new part, not the whole built part again (issue 16): vertices and
+//! faces are appended, so only the new faces' edges are sorted and merged into the old
+//! ones ([`Topology::extended`]), a vertex with no new face keeps its fan
+//! ([`OneRings::extended`]), and a vertex that is not reset keeps its rest frame, frame
+//! and area; the reset ones get theirs (the area summed over its faces in face order, as
+//! [`vertex_areas`] does). The results are those of rebuilding it all, bit for bit.
 
 use std::borrow::Cow;
 use std::time::Instant;
@@ -52,18 +59,17 @@ use faer::Par;
 use glam::{DMat3, DVec2, DVec3};
 
 use super::diffuse::{Conductivity, WovenFaces};
-use super::forces::{corotating_frames_with, rest_frames};
 use super::simulate::{Profile, Simulator, StainParams};
 use super::sources::{check_each_nonnegative, check_length};
 use super::state::{Fields, Totals};
 use crate::error::{Error, ParamError};
-use crate::mesh::geometry::{check_positions, vertex_areas};
+use crate::mesh::geometry::{check_positions, vertex_area, vertex_areas};
 use crate::mesh::refine::Partial;
-use crate::mesh::{OneRings, RingAdjacency, Topology};
+use crate::mesh::{OneRings, RingAdjacency, Topology, VertexFrames};
 
 /// Coarse rings of faces built beyond the corners of a window that reached the edge of
 /// the built part (module doc): room for the window to grow a few frames before the next
-/// build (each costs a rebuild of the simulator's mesh, about a window's cost).
+/// build (each grows the simulator's mesh and costs a window rebuild).
 pub(crate) const GROWTH_RINGS: usize = 4;
 
 /// The stain simulator at a Detail level: the cloth's own simulator at level 0, or one on
@@ -122,18 +128,41 @@ impl Fine {
         let p = &self.partial;
         let n = p.n_vertices();
         reset.extend(old_n..n);
-        let topology = p.topology()?;
-        let rings = OneRings::with_orientation(&topology, p.face_values(&self.flipped));
+        // only the new faces' topology and the fans that changed (module doc)
+        let old = &sim.cloth;
+        let (topology, old_new) = p.extended_topology(&old.topology)?;
+        let flipped = p.face_values(&self.flipped);
+        let rings = if old_new.is_empty() {
+            OneRings::with_orientation(&topology, flipped)
+        } else {
+            OneRings::extended(&old.rings, &topology, flipped, &old_new)
+        };
         let adjacency = RingAdjacency::new(&topology);
         let rest = p.prolong(&self.rest);
-        let rest_frames = rest_frames(&rings, &rest)?;
+        // a vertex not reset had its whole ring: its rest frame is unchanged
+        let mut rest_frames = old.rest_frames.clone();
+        rest_frames.frame.resize(n, DMat3::IDENTITY);
+        for &j in &reset {
+            rest_frames.frame[j] = VertexFrames::frame_of(&rings, &rest, j);
+        }
         let positions = p.prolong(&self.current);
         let (at, t_ref, world) = match &self.reference {
             Some((at, t, u)) => (p.prolong(at), *t, Some(p.prolong(u))),
             None => (p.prolong(&self.first), 0.0, None),
         };
-        let frames = corotating_frames_with(&adjacency, &rest_frames, &rest, &at);
-        let area = vertex_areas(&topology, &positions);
+        // the frames and areas of the reset vertices (the others keep theirs); each area
+        // summed over its faces in face order, as `vertex_areas` does
+        let faces = topology.faces();
+        let reset_state: Vec<(DMat3, f64)> = reset
+            .iter()
+            .map(|&j| {
+                let frame = adjacency.rotation(&rest, &at, j) * rest_frames.frame[j];
+                let mut around: Vec<u32> = rings.wedges(j).iter().map(|w| w.face).collect();
+                around.sort_unstable();
+                let area = vertex_area(around.iter().map(|&f| faces[f as usize]), &positions);
+                (frame, area)
+            })
+            .collect();
 
         let c = &mut sim.cloth;
         c.irregular = sim
@@ -171,13 +200,12 @@ impl Fine {
         for c in [&mut f.color_free, &mut f.color_held].into_iter().flatten() {
             c.resize(n, [0.0; 3]);
         }
-        for j in reset {
-            st.frames.frame[j] = frames.frame[j];
+        for (j, (frame, area)) in reset.into_iter().zip(reset_state) {
+            st.frames.frame[j] = frame;
             st.stamp[j] = t_ref;
-            st.velocity[j] = world
-                .as_ref()
-                .map_or(DVec2::ZERO, |u| frames.to_local(j, u[j]));
-            st.vertex_area[j] = area[j];
+            let to_local = |w: DVec3| DVec2::new(w.dot(frame.x_axis), w.dot(frame.y_axis));
+            st.velocity[j] = world.as_ref().map_or(DVec2::ZERO, |u| to_local(u[j]));
+            st.vertex_area[j] = area;
         }
         sim.window = None;
         sim.rescan = true;

@@ -134,8 +134,8 @@ use crate::mesh::geometry::check_positions;
 use crate::mesh::{Geometry, RingAdjacency, Topology, Transport};
 use crate::ops::cotan::assemble_face_weights;
 use crate::ops::{
-    PrefactoredSpd, Restriction, VertexPattern, WarmCg, add_lumped_mass, anisotropic_stiffness,
-    anisotropic_stiffness_scaled, cotan_stiffness, weft_angles,
+    CscPattern, PrefactoredSpd, Restriction, VertexPattern, WarmCg, add_lumped_mass,
+    anisotropic_stiffness, anisotropic_stiffness_scaled, cotan_stiffness, weft_angles,
 };
 use crate::weave::Tensor2;
 
@@ -602,12 +602,27 @@ impl DiffusionStepper {
 
 /// Warm-started CG solvers of the two restricted systems, the densities' and the
 /// velocity's (none for an empty restriction).
-pub(super) fn solvers(region: &Restriction) -> Option<(WarmCg, WarmCg)> {
-    // the two analyses are independent (and the velocity's, on 2×2 blocks, the larger)
+pub(super) fn solvers(
+    region: &Restriction,
+    reuse: Option<(WarmCg, WarmCg)>,
+) -> Option<(WarmCg, WarmCg)> {
+    // the two analyses are independent (and the velocity's, on 2×2 blocks, the larger);
+    // a former window's solvers lend their memory ([`WarmCg::rebuild`])
     (!region.vertices.is_empty()).then(|| {
+        let (a, b) = match reuse {
+            Some((a, b)) => (Some(a), Some(b)),
+            None => (None, None),
+        };
+        let make = |old: Option<WarmCg>, pattern: &CscPattern, tolerance: f64| match old {
+            Some(mut cg) => {
+                cg.rebuild(pattern);
+                cg.with_tolerance(tolerance)
+            }
+            None => WarmCg::new(pattern).with_tolerance(tolerance),
+        };
         rayon::join(
-            || WarmCg::new(region.scalar()).with_tolerance(DENSITY_TOLERANCE),
-            || WarmCg::new(region.bochner()).with_tolerance(VELOCITY_TOLERANCE),
+            || make(a, region.scalar(), DENSITY_TOLERANCE),
+            || make(b, region.bochner(), VELOCITY_TOLERANCE),
         )
     })
 }

@@ -26,9 +26,23 @@
 //! positions. A frame gathers the window's state, steps it, and writes it back. The window
 //! is kept from frame to frame while the liquid's needed region stays inside its active
 //! vertices and is at least half of it; a new one reaches twice as far as the frame
-//! needs, plus [`WINDOW_SLACK_RINGS`] rings, so that it lasts a few frames (building one
-//! is a topology, fans, patterns and solvers on the window). With `active_region` off, the
-//! window is the whole mesh, every vertex active: one code path.
+//! needs, plus [`WINDOW_SLACK_RINGS`] rings, so that it lasts a few frames. With
+//! `active_region` off, the window is the whole mesh, every vertex active: one code path.
+//!
+//! **Building a window derives it from the cloth** (issue 16). Its faces are the cloth's
+//! faces around the active and held vertices, read off a per-face mark in the cloth's
+//! order, and its vertices keep the cloth's order. A renumbering that keeps the order
+//! keeps everything that was sorted, so nothing is sorted again: the window's edges are
+//! the cloth's edges that one of its faces has, gathered in the cloth's order
+//! ([`Topology::restricted`]); a vertex that has all its cloth faces in the window (every
+//! active and held one) has the cloth's fan with faces, spokes and edges renumbered, and
+//! only the halo's partial fans are walked ([`OneRings::restricted`]; the fan walk
+//! depends on nothing but the corners in face order and the order of the vertex
+//! numbers). The pattern, the restriction and the IC(0) analysis follow in time
+//! proportional to the window, and the solvers are rebuilt in the memory of the window
+//! they replace ([`WarmCg::rebuild`]: fresh pages cost more than the analysis). The
+//! result is the window built from scratch, bit for bit (a test compares every array on
+//! a mesh with a hole, a fin, a bow-tie and a flipped face).
 //!
 //! - **Diffusion.** `(M + h K_A) σ' = m` on the active vertices, `K_A` the stiffness
 //!   restricted to them with a Neumann (no-flux) boundary at the region's edge
@@ -135,26 +149,34 @@ pub(super) struct Window {
 }
 
 impl Window {
-    /// The window of the mesh vertices flagged `active` or `held`.
+    /// The window of the mesh vertices flagged `active` or `held`; `reuse`: the solvers
+    /// of a window it replaces, whose memory it takes over.
     pub(super) fn new(
         cloth: &Cloth,
         mask: Vec<bool>,
         held: &[bool],
+        reuse: Option<(WarmCg, WarmCg)>,
     ) -> Result<Option<Self>, Error> {
         let topo = &cloth.topology;
         let n = topo.n_vertices();
         let whole_mask: Vec<bool> = (0..n).map(|v| mask[v] || held[v]).collect();
-        let mut faces: Vec<u32> = (0..n)
-            .filter(|&v| whole_mask[v])
-            .flat_map(|v| cloth.rings.wedges(v).iter().map(|w| w.face))
+        // the faces of the active and held vertices, in the cloth's order (marked, then
+        // read off in order: no sort), and their corners
+        let mut face_local = vec![u32::MAX; topo.n_faces()];
+        for v in (0..n).filter(|&v| whole_mask[v]) {
+            for w in cloth.rings.wedges(v) {
+                face_local[w.face as usize] = 0;
+            }
+        }
+        let faces: Vec<u32> = (0..topo.n_faces() as u32)
+            .filter(|&f| face_local[f as usize] == 0)
             .collect();
         if faces.is_empty() {
             return Ok(None);
         }
-        faces.sort_unstable();
-        faces.dedup();
         let mut local = vec![u32::MAX; n];
-        for &f in &faces {
+        for (k, &f) in faces.iter().enumerate() {
+            face_local[f as usize] = k as u32;
             for v in topo.faces()[f as usize] {
                 local[v as usize] = 0;
             }
@@ -163,21 +185,21 @@ impl Window {
         for (j, &v) in vertices.iter().enumerate() {
             local[v as usize] = j as u32;
         }
-        let tris = faces
-            .iter()
-            .map(|&f| topo.faces()[f as usize].map(|v| local[v as usize]))
-            .collect();
-        let topology = Topology::from_triangles(vertices.len(), tris)?;
-        // the fans walked in the cloth's sense (its harmonized orientation)
-        let flipped = faces
-            .iter()
-            .map(|&f| cloth.rings.face_flipped()[f as usize])
-            .collect();
-        let rings = OneRings::with_orientation(&topology, flipped);
+        // the window's edges and fans are the cloth's, renumbered (module doc)
+        let (topology, edge_local) = topo.restricted(&faces, &vertices, &local);
+        let rings = OneRings::restricted(
+            &cloth.rings,
+            &topology,
+            &faces,
+            &vertices,
+            &face_local,
+            &local,
+            &edge_local,
+        );
         let adjacency = RingAdjacency::new(&topology);
         let pattern = VertexPattern::new(&topology);
         let region = Restriction::new(&pattern, pick(&vertices, &mask));
-        let cg = solvers(&region);
+        let cg = solvers(&region, reuse);
         let part = Cloth {
             rest: pick(&vertices, &cloth.rest),
             rest_frames: VertexFrames {
@@ -325,7 +347,8 @@ impl Simulator {
         match plan {
             WindowPlan::Keep => Ok(false),
             WindowPlan::Build { mask, held } => {
-                self.window = Window::new(&self.cloth, mask, &held)?;
+                let reuse = self.window.take().and_then(|w| w.cg);
+                self.window = Window::new(&self.cloth, mask, &held, reuse)?;
                 Ok(true)
             }
         }
