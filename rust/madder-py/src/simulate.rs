@@ -461,7 +461,8 @@ impl Simulator {
     }
 
     /// Wall-clock seconds per phase since the simulator was built, and counters: a dict
-    /// with `geometry`, `forces`, `advection`, `diffusion`, `interaction` (s),
+    /// with `geometry`, `forces`, `advection` (its parts `advection_trace`,
+    /// `advection_plan`, `advection_apply`), `diffusion`, `interaction` (s),
     /// `substeps`, `density_iterations`, `velocity_iterations`, `transport_cycles`.
     fn profile<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let p = self.inner.profile();
@@ -471,6 +472,9 @@ impl Simulator {
             ("geometry", p.geometry),
             ("forces", p.forces),
             ("advection", p.advection),
+            ("advection_trace", p.advection_trace),
+            ("advection_plan", p.advection_plan),
+            ("advection_apply", p.advection_apply),
             ("diffusion", p.diffusion),
             ("interaction", p.interaction),
         ] {

@@ -2,7 +2,8 @@
 //! of the densities and of the velocity, interactions) on a waving-flag grid, split into
 //! its phases. Prints figures; asserts nothing about time. `MADDER_BENCH_WHOLE=1` steps
 //! the whole mesh (no active region), `MADDER_BENCH_SMALL=1` only the 10k case,
-//! `MADDER_BENCH_PARTS=1` times the pieces one by one.
+//! `MADDER_BENCH_100K=1` only the 100k case, `MADDER_BENCH_PARTS=1` times the pieces
+//! one by one.
 //!
 //! **Cost follows the stain** (issue 16, target 3): the same pour on the 100k flag and on a
 //! 1M-vertex cloth with the same vertex spacing (the grid scaled by 3.17 in both
@@ -68,12 +69,16 @@ fn bench(nx: usize, ny: usize, frames: usize, scale: f64) -> (f64, f64) {
         (h ^ b).wrapping_mul(0x0100_0000_01b3)
     });
     println!(
-        "{n:>7} vertices, {frames} frames: {total:7.2} ms/frame ({:.1} sub-steps, setup {setup:.0} ms) = window {:.2}, geometry+frames+transport {:.2}, forces {:.2}, advection {:.2}, diffusion {:.2} (density {:.1} + velocity {:.1} CG it.), interactions {:.2}; window {:.1} %, active {:.1} % of the vertices ({} rebuilds); state checksum {checksum:016x}",
+        "{n:>7} vertices, {frames} frames: {total:7.2} ms/frame ({:.1} sub-steps, setup {setup:.0} ms) = window {:.2}, geometry+frames+transport {:.2}, forces {:.2}, advection {:.2} (back-traces {:.2}, fluxes+plan {:.2}, sub-cycles {:.2} at {:.2} cycles/sub-step), diffusion {:.2} (density {:.1} + velocity {:.1} CG it.), interactions {:.2}; window {:.1} %, active {:.1} % of the vertices ({} rebuilds); state checksum {checksum:016x}",
         p.substeps as f64 / frames as f64,
         per(p.window),
         per(p.geometry),
         per(p.forces),
         per(p.advection),
+        per(p.advection_trace),
+        per(p.advection_plan),
+        per(p.advection_apply),
+        p.transport_cycles as f64 / p.substeps as f64,
         per(p.diffusion),
         p.density_iterations as f64 / frames as f64,
         p.velocity_iterations as f64 / frames as f64,
@@ -92,6 +97,10 @@ fn main() {
     );
     if std::env::var("MADDER_BENCH_PARTS").is_ok() {
         parts(127, 77, 50);
+        return;
+    }
+    if std::env::var("MADDER_BENCH_100K").is_ok() {
+        bench(407, 245, 12, 1.0);
         return;
     }
     bench(127, 77, 48, 1.0); // ≈ 10k vertices

@@ -523,24 +523,75 @@ pub fn dual_fluxes(
     frames: &VertexFrames,
     velocity: &[DVec2],
 ) -> Vec<f64> {
+    dual_fluxes_where(topology, positions, frames, velocity, None)
+}
+
+/// [`dual_fluxes`] through the edges whose two ends are `active` (the simulator's active
+/// region); the other edges get no flux. Only the faces with an active edge are visited;
+/// each active edge gets exactly the value [`dual_fluxes`] gives it (the same face
+/// contributions, summed in the same order).
+///
+/// # Panics
+/// As [`dual_fluxes`], and if `active` does not have one entry per vertex.
+pub(crate) fn dual_fluxes_in(
+    topology: &Topology,
+    positions: &[DVec3],
+    frames: &VertexFrames,
+    velocity: &[DVec2],
+    active: &[bool],
+) -> Vec<f64> {
+    assert_eq!(active.len(), topology.n_vertices(), "one flag per vertex");
+    dual_fluxes_where(topology, positions, frames, velocity, Some(active))
+}
+
+fn dual_fluxes_where(
+    topology: &Topology,
+    positions: &[DVec3],
+    frames: &VertexFrames,
+    velocity: &[DVec2],
+    active: Option<&[bool]>,
+) -> Vec<f64> {
     let n = topology.n_vertices();
     assert_eq!(positions.len(), n, "one position per vertex");
     assert_eq!(frames.len(), n, "one frame per vertex");
     assert_eq!(velocity.len(), n, "one velocity per vertex");
+    let on = |v: u32| active.is_none_or(|a| a[v as usize]);
     let world: Vec<DVec3> = (0..n)
         .into_par_iter()
-        .map(|i| frames.to_world(i, velocity[i]))
+        .with_min_len(VERTICES_PER_TASK)
+        .map(|i| {
+            if on(i as u32) {
+                frames.to_world(i, velocity[i])
+            } else {
+                DVec3::ZERO
+            }
+        })
         .collect();
+    // a face with fewer than two active corners has no active edge
     let per_face: Vec<[f64; 3]> = topology
         .faces()
         .par_iter()
-        .map(|tri| face_fluxes(tri.map(|v| v as usize), positions, &world))
+        .with_min_len(VERTICES_PER_TASK)
+        .map(|tri| {
+            if tri.iter().filter(|&&v| on(v)).count() >= 2 {
+                face_fluxes(tri.map(|v| v as usize), positions, &world)
+            } else {
+                [0.0; 3]
+            }
+        })
         .collect();
     // gather per edge in face order (deterministic)
     let mut flux = vec![0.0; topology.n_edges()];
     for (fe, contrib) in topology.face_edges().iter().zip(&per_face) {
         for k in 0..3 {
             flux[fe[k] as usize] += contrib[k];
+        }
+    }
+    if active.is_some() {
+        for (phi, &[a, b]) in flux.iter_mut().zip(topology.edges()) {
+            if !(on(a) && on(b)) {
+                *phi = 0.0;
+            }
         }
     }
     flux
@@ -578,13 +629,13 @@ fn face_fluxes(tri: [usize; 3], pos: &[DVec3], world: &[DVec3]) -> [f64; 3] {
 /// what fraction of the donor's mass it gives per sub-step (see the module doc).
 #[derive(Debug, Clone)]
 pub struct UpwindPlan {
-    /// Per edge: `true` if `a` (the lower-numbered end) donates.
-    donor_is_a: Vec<bool>,
     /// Per edge: fraction of the donor's mass given per sub-step.
     fraction: Vec<f64>,
     substeps: usize,
     max_courant: f64,
     n_limited: usize,
+    /// The transfers as each vertex sees them, built once with the plan.
+    flows: Flows,
 }
 
 impl UpwindPlan {
@@ -679,7 +730,8 @@ impl UpwindPlan {
         let substeps = ((max_courant / SUBSTEP_COURANT).ceil() as usize).clamp(1, MAX_SUBSTEPS);
         let limited: Vec<bool> = courant.iter().map(|&c| c / substeps as f64 > 1.0).collect();
         let n_limited = limited.iter().filter(|&&l| l).count();
-        let fraction = (0..n_edges)
+        let fraction: Vec<f64> = (0..n_edges)
+            .into_par_iter()
             .map(|e| {
                 let (d, phi) = (donor(e), flux[e].abs());
                 if phi == 0.0 || h == 0.0 {
@@ -691,12 +743,13 @@ impl UpwindPlan {
                 }
             })
             .collect();
+        let flows = Flows::new(topology, &donor_is_a, &fraction);
         Ok(Self {
-            donor_is_a,
             fraction,
             substeps,
             max_courant: courant.iter().copied().fold(0.0, f64::max),
             n_limited,
+            flows,
         })
     }
 
@@ -714,42 +767,6 @@ impl UpwindPlan {
     /// Number of vertices whose outflows the limiter scaled down.
     pub fn n_limited(&self) -> usize {
         self.n_limited
-    }
-
-    fn donor(&self, edges: &[[u32; 2]], e: usize) -> usize {
-        edges[e][usize::from(!self.donor_is_a[e])] as usize
-    }
-
-    /// The plan's transfers as each vertex sees them, in its edge order, without the
-    /// edges that carry nothing (built once per transport, used by every sub-cycle).
-    fn flows(&self, topology: &Topology) -> Flows {
-        let edges = topology.edges();
-        let n = topology.n_vertices();
-        let mut f = Flows {
-            out_ptr: Vec::with_capacity(n + 1),
-            out_fraction: Vec::new(),
-            in_ptr: Vec::with_capacity(n + 1),
-            in_from: Vec::new(),
-        };
-        f.out_ptr.push(0);
-        f.in_ptr.push(0);
-        for v in 0..n {
-            for &e in topology.vertex_edges(v) {
-                let fraction = self.fraction[e as usize];
-                if fraction == 0.0 {
-                    continue;
-                }
-                let d = self.donor(edges, e as usize);
-                if d == v {
-                    f.out_fraction.push(fraction);
-                } else {
-                    f.in_from.push((fraction, d as u32, e));
-                }
-            }
-            f.out_ptr.push(f.out_fraction.len() as u32);
-            f.in_ptr.push(f.in_from.len() as u32);
-        }
-        f
     }
 
     fn check(&self, topology: &Topology, len: usize) {
@@ -774,38 +791,19 @@ impl UpwindPlan {
     /// Moves several fields (solvent, solute, colour masses) with the same fractions, each
     /// exactly as [`UpwindPlan::transport`] would.
     ///
-    /// The fields move together, interleaved per vertex (one pass over the edges and one
-    /// over the vertices per sub-cycle for all of them, into reused buffers); each value
-    /// is computed by the same operations in the same order as [`UpwindPlan::transport`],
-    /// so the result is bit-identical to moving them one by one.
+    /// The fields move together, interleaved per vertex (one pass over the transfers per
+    /// sub-cycle for all of them, into reused buffers); each value is computed by the same
+    /// operations in the same order as [`UpwindPlan::transport`], so the result is
+    /// bit-identical to moving them one by one.
     ///
     /// # Panics
     /// If a field does not have one value per vertex of `topology`, the plan's topology.
     pub fn transport_all(&self, topology: &Topology, fields: &mut [&mut [f64]]) {
-        let k = fields.len();
         for field in fields.iter() {
             self.check(topology, field.len());
         }
-        if k == 0 {
-            return;
-        }
-        let n = topology.n_vertices();
-        let mut m = vec![0.0; n * k];
-        for (c, field) in fields.iter().enumerate() {
-            for (v, x) in field.iter().enumerate() {
-                m[v * k + c] = *x;
-            }
-        }
-        let flows = self.flows(topology);
-        let mut next = vec![0.0; n * k];
-        for _ in 0..self.substeps {
-            flows.cycle(&m, k, &mut next);
-            std::mem::swap(&mut m, &mut next);
-        }
-        for (c, field) in fields.iter_mut().enumerate() {
-            for (v, x) in field.iter_mut().enumerate() {
-                *x = m[v * k + c];
-            }
+        if !fields.is_empty() {
+            self.cycles(fields, None);
         }
     }
 
@@ -826,33 +824,42 @@ impl UpwindPlan {
         velocity: &[DVec2],
         fallback: &[DVec2],
     ) -> Vec<DVec2> {
-        self.check(topology, solvent_before.len());
+        let mut mass = solvent_before.to_vec();
+        self.transport_with_momentum(topology, transport, &mut [&mut mass], velocity, fallback)
+    }
+
+    /// [`UpwindPlan::transport_all`] and [`UpwindPlan::momentum_velocity`] in one: moves the
+    /// fields, the first of which is the solvent, and the solvent's momentum with them, in
+    /// one pass over the transfers per sub-cycle; returns the velocities. Every value is
+    /// computed by the same operations as the two calls make (the momentum velocity
+    /// divides by the transported solvent, which is what `momentum_velocity` recomputes),
+    /// so the result is bit-identical to them.
+    ///
+    /// # Panics
+    /// If `fields` is empty, or a field or per-vertex slice does not have one value per
+    /// vertex of `topology`.
+    pub fn transport_with_momentum(
+        &self,
+        topology: &Topology,
+        transport: &Transport,
+        fields: &mut [&mut [f64]],
+        velocity: &[DVec2],
+        fallback: &[DVec2],
+    ) -> Vec<DVec2> {
+        assert!(!fields.is_empty(), "the solvent is the first field");
+        for field in fields.iter() {
+            self.check(topology, field.len());
+        }
         self.check(topology, velocity.len());
         self.check(topology, fallback.len());
-        let flows = self.flows(topology);
-        let mut mass = solvent_before.to_vec();
-        let mut next = vec![0.0; mass.len()];
-        let mut momentum: Vec<DVec2> = mass.iter().zip(velocity).map(|(&m, &u)| m * u).collect();
-        for _ in 0..self.substeps {
-            momentum = (0..mass.len())
-                .into_par_iter()
-                .map(|v| {
-                    let (mut out, mut inflow) = (DVec2::ZERO, DVec2::ZERO);
-                    for &fraction in flows.given(v) {
-                        out += fraction * momentum[v];
-                    }
-                    for &(fraction, d, e) in flows.received(v) {
-                        let r = transport.edge_rotation(e as usize);
-                        let r = if v < d as usize { r } else { r.transpose() };
-                        inflow += r * (fraction * momentum[d as usize]);
-                    }
-                    (momentum[v] - out) + inflow
-                })
-                .collect();
-            flows.cycle(&mass, 1, &mut next);
-            std::mem::swap(&mut mass, &mut next);
-        }
-        let scale = solvent_before.iter().copied().fold(0.0, f64::max);
+        let scale = fields[0].iter().copied().fold(0.0, f64::max);
+        let momentum: Vec<DVec2> = fields[0]
+            .iter()
+            .zip(velocity)
+            .map(|(&m, &u)| m * u)
+            .collect();
+        let momentum = self.cycles(fields, Some((transport, momentum)));
+        let mass = &*fields[0];
         let floor = MOMENTUM_MIN_MASS_REL * scale;
         (0..mass.len())
             .into_par_iter()
@@ -866,11 +873,51 @@ impl UpwindPlan {
             })
             .collect()
     }
+
+    /// The sub-cycles on the fields, interleaved per vertex, and, given the transport and
+    /// the solvent's momentum, on the momentum too (returned; empty without).
+    fn cycles(
+        &self,
+        fields: &mut [&mut [f64]],
+        momentum: Option<(&Transport, Vec<DVec2>)>,
+    ) -> Vec<DVec2> {
+        let (k, n) = (fields.len(), fields[0].len());
+        let mut m = vec![0.0; n * k];
+        for (c, field) in fields.iter().enumerate() {
+            for (v, x) in field.iter().enumerate() {
+                m[v * k + c] = *x;
+            }
+        }
+        let mut next = vec![0.0; n * k];
+        let (transport, mut p) = match momentum {
+            Some((t, p)) => (Some(t), p),
+            None => (None, Vec::new()),
+        };
+        let mut p_next = vec![DVec2::ZERO; p.len()];
+        for _ in 0..self.substeps {
+            match transport {
+                None => self.flows.cycle(&m, k, &mut next),
+                Some(t) => self
+                    .flows
+                    .cycle_with_momentum(&m, k, &mut next, t, &p, &mut p_next),
+            }
+            std::mem::swap(&mut m, &mut next);
+            std::mem::swap(&mut p, &mut p_next);
+        }
+        for (c, field) in fields.iter_mut().enumerate() {
+            for (v, x) in field.iter_mut().enumerate() {
+                *x = m[v * k + c];
+            }
+        }
+        p
+    }
 }
 
-/// An [`UpwindPlan`]'s transfers per vertex ([`UpwindPlan::flows`]): the fractions it
-/// gives away, and the `(fraction, donor, edge)` of what it receives, each in the
-/// vertex's edge order.
+/// An [`UpwindPlan`]'s transfers per vertex: the fractions it gives away, and the
+/// `(fraction, donor, edge)` of what it receives, each in the vertex's edge order, without
+/// the edges that carry nothing. Built once with the plan (in parallel over runs of
+/// vertices, laid end to end: deterministic), read by every sub-cycle.
+#[derive(Debug, Clone)]
 struct Flows {
     out_ptr: Vec<u32>,
     out_fraction: Vec<f64>,
@@ -878,7 +925,56 @@ struct Flows {
     in_from: Vec<(f64, u32, u32)>,
 }
 
+/// Vertices per task of the transfer passes (rayon's splitting below this costs more
+/// than the work).
+const VERTICES_PER_TASK: usize = 1024;
+
 impl Flows {
+    fn new(topology: &Topology, donor_is_a: &[bool], fraction: &[f64]) -> Self {
+        let (n, edges) = (topology.n_vertices(), topology.edges());
+        let chunks: Vec<_> = (0..n.div_ceil(VERTICES_PER_TASK))
+            .into_par_iter()
+            .map(|c| {
+                let vertices = c * VERTICES_PER_TASK..((c + 1) * VERTICES_PER_TASK).min(n);
+                let (mut out_end, mut out, mut in_end, mut inflow) =
+                    (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+                for v in vertices {
+                    for &e in topology.vertex_edges(v) {
+                        let f = fraction[e as usize];
+                        if f == 0.0 {
+                            continue;
+                        }
+                        let d = edges[e as usize][usize::from(!donor_is_a[e as usize])];
+                        if d as usize == v {
+                            out.push(f);
+                        } else {
+                            inflow.push((f, d, e));
+                        }
+                    }
+                    out_end.push(out.len() as u32);
+                    in_end.push(inflow.len() as u32);
+                }
+                (out_end, out, in_end, inflow)
+            })
+            .collect();
+        let mut f = Flows {
+            out_ptr: Vec::with_capacity(n + 1),
+            out_fraction: Vec::new(),
+            in_ptr: Vec::with_capacity(n + 1),
+            in_from: Vec::new(),
+        };
+        f.out_ptr.push(0);
+        f.in_ptr.push(0);
+        for (out_end, out, in_end, inflow) in chunks {
+            let (o, i) = (f.out_fraction.len() as u32, f.in_from.len() as u32);
+            f.out_ptr.extend(out_end.iter().map(|x| o + x));
+            f.in_ptr.extend(in_end.iter().map(|x| i + x));
+            f.out_fraction.extend(out);
+            f.in_from.extend(inflow);
+        }
+        f
+    }
+
     fn given(&self, v: usize) -> &[f64] {
         &self.out_fraction[self.out_ptr[v] as usize..self.out_ptr[v + 1] as usize]
     }
@@ -887,25 +983,66 @@ impl Flows {
         &self.in_from[self.in_ptr[v] as usize..self.in_ptr[v + 1] as usize]
     }
 
-    /// One sub-cycle of `k` interleaved fields `m` into `next`: each vertex gives
-    /// `fraction · m_v` across each of its outgoing edges and receives
-    /// `fraction · m_donor` across each incoming one — the same product on both sides, so
-    /// the transfer is conservative to rounding — clamped at zero against rounding.
+    /// One sub-cycle of `k` interleaved fields `m` into `next`.
     fn cycle(&self, m: &[f64], k: usize, next: &mut [f64]) {
-        next.par_chunks_mut(k).enumerate().for_each(|(v, out)| {
-            for (c, o) in out.iter_mut().enumerate() {
-                let mv = m[v * k + c];
-                let mut gone = 0.0;
-                for &fraction in self.given(v) {
-                    gone += fraction * mv;
-                }
-                let mut inflow = 0.0;
-                for &(fraction, d, _) in self.received(v) {
-                    inflow += fraction * m[d as usize * k + c];
-                }
-                *o = (mv - gone).max(0.0) + inflow;
+        next.par_chunks_mut(k)
+            .enumerate()
+            .with_min_len(VERTICES_PER_TASK)
+            .for_each(|(v, out)| self.fields_at(v, m, k, out));
+    }
+
+    /// [`Flows::cycle`], and the momentum `p` into `p_next` in the same pass.
+    fn cycle_with_momentum(
+        &self,
+        m: &[f64],
+        k: usize,
+        next: &mut [f64],
+        transport: &Transport,
+        p: &[DVec2],
+        p_next: &mut [DVec2],
+    ) {
+        next.par_chunks_mut(k)
+            .zip(p_next.par_iter_mut())
+            .enumerate()
+            .with_min_len(VERTICES_PER_TASK)
+            .for_each(|(v, (out, pv))| {
+                self.fields_at(v, m, k, out);
+                *pv = self.momentum_at(v, transport, p);
+            });
+    }
+
+    /// Vertex `v`'s fields after one sub-cycle: it gives `fraction · m_v` across each of
+    /// its outgoing edges and receives `fraction · m_donor` across each incoming one — the
+    /// same product on both sides, so the transfer is conservative to rounding — clamped
+    /// at zero against rounding.
+    fn fields_at(&self, v: usize, m: &[f64], k: usize, out: &mut [f64]) {
+        for (c, o) in out.iter_mut().enumerate() {
+            let mv = m[v * k + c];
+            let mut gone = 0.0;
+            for &fraction in self.given(v) {
+                gone += fraction * mv;
             }
-        });
+            let mut inflow = 0.0;
+            for &(fraction, d, _) in self.received(v) {
+                inflow += fraction * m[d as usize * k + c];
+            }
+            *o = (mv - gone).max(0.0) + inflow;
+        }
+    }
+
+    /// Vertex `v`'s momentum after one sub-cycle: the same fractions of the donors'
+    /// momenta, turned into `F_v` by `R_vd`.
+    fn momentum_at(&self, v: usize, transport: &Transport, p: &[DVec2]) -> DVec2 {
+        let (mut out, mut inflow) = (DVec2::ZERO, DVec2::ZERO);
+        for &fraction in self.given(v) {
+            out += fraction * p[v];
+        }
+        for &(fraction, d, e) in self.received(v) {
+            let r = transport.edge_rotation(e as usize);
+            let r = if v < d as usize { r } else { r.transpose() };
+            inflow += r * (fraction * p[d as usize]);
+        }
+        (p[v] - out) + inflow
     }
 }
 
@@ -1054,10 +1191,24 @@ mod tests {
             plan.transport(&m.t, &mut b1);
             plan.transport_all(&m.t, &mut [&mut a, &mut b]);
             assert_eq!(
-                (a, b),
+                (a.clone(), b.clone()),
                 (a1, b1),
                 "h = {h}: transport_all differs from transport"
             );
+            // the fields and the momentum in one pass: the same fields, the same velocities
+            let mut solvent = before.clone();
+            let mut c = b.clone();
+            let fused = plan.transport_with_momentum(
+                &m.t,
+                &m.transport,
+                &mut [&mut solvent, &mut c],
+                &u,
+                &out,
+            );
+            let (mut s1, mut c1) = (before.clone(), b.clone());
+            plan.transport_all(&m.t, &mut [&mut s1, &mut c1]);
+            assert_eq!((solvent, c), (s1, c1), "h = {h}: fused fields");
+            assert_eq!(fused, mom, "h = {h}: fused momentum");
         }
     }
 
