@@ -629,8 +629,8 @@ fn face_fluxes(tri: [usize; 3], pos: &[DVec3], world: &[DVec3]) -> [f64; 3] {
 /// what fraction of the donor's mass it gives per sub-step (see the module doc).
 #[derive(Debug, Clone)]
 pub struct UpwindPlan {
-    /// Per edge: fraction of the donor's mass given per sub-step.
-    fraction: Vec<f64>,
+    /// Edges of the plan's topology.
+    n_edges: usize,
     substeps: usize,
     max_courant: f64,
     n_limited: usize,
@@ -692,21 +692,46 @@ impl UpwindPlan {
                 value,
             });
         }
+        // one pass over each vertex's edges, in its edge order: its outflow (gathered in
+        // edge order: the numerator of its Courant number) and the |Φ| it gives and
+        // receives, the donor chosen by the sign of the flux
         let edges = topology.edges();
-        let donor_is_a: Vec<bool> = flux.iter().map(|&x| x > 0.0).collect();
-        let donor = |e: usize| edges[e][usize::from(!donor_is_a[e])] as usize;
-
-        // total outflow per vertex (gathered in edge order) and its Courant number
-        let outflow: Vec<f64> = (0..n)
+        let runs: Vec<Run> = (0..n.div_ceil(VERTICES_PER_TASK))
             .into_par_iter()
-            .map(|v| {
-                topology
-                    .vertex_edges(v)
-                    .iter()
-                    .filter(|&&e| donor(e as usize) == v)
-                    .map(|&e| flux[e as usize].abs())
-                    .sum()
+            .map(|c| {
+                let vertices = c * VERTICES_PER_TASK..((c + 1) * VERTICES_PER_TASK).min(n);
+                let mut run = Run::default();
+                for v in vertices {
+                    let o: f64 = topology
+                        .vertex_edges(v)
+                        .iter()
+                        .filter_map(|&e| {
+                            let phi = flux[e as usize];
+                            let [a, b] = edges[e as usize];
+                            let d = if phi > 0.0 { a } else { b };
+                            if d as usize == v {
+                                if phi != 0.0 {
+                                    run.flows.out_fraction.push(phi.abs());
+                                }
+                                Some(phi.abs())
+                            } else {
+                                if phi != 0.0 {
+                                    run.flows.in_from.push((phi.abs(), d, e));
+                                }
+                                None
+                            }
+                        })
+                        .sum();
+                    run.outflow.push(o);
+                    run.flows.out_ptr.push(run.flows.out_fraction.len() as u32);
+                    run.flows.in_ptr.push(run.flows.in_from.len() as u32);
+                }
+                run
             })
+            .collect();
+        let outflow: Vec<f64> = runs
+            .iter()
+            .flat_map(|r| r.outflow.iter().copied())
             .collect();
         let courant: Vec<f64> = outflow
             .iter()
@@ -730,22 +755,49 @@ impl UpwindPlan {
         let substeps = ((max_courant / SUBSTEP_COURANT).ceil() as usize).clamp(1, MAX_SUBSTEPS);
         let limited: Vec<bool> = courant.iter().map(|&c| c / substeps as f64 > 1.0).collect();
         let n_limited = limited.iter().filter(|&&l| l).count();
-        let fraction: Vec<f64> = (0..n_edges)
+        // |Φ| → the fraction of the donor's mass per sub-step; a transfer that rounds to
+        // nothing is dropped
+        let fraction = |d: usize, phi: f64| {
+            if h == 0.0 {
+                0.0
+            } else if limited[d] {
+                phi / outflow[d]
+            } else {
+                h * phi / (substeps as f64 * vertex_area[d])
+            }
+        };
+        let runs: Vec<Flows> = runs
             .into_par_iter()
-            .map(|e| {
-                let (d, phi) = (donor(e), flux[e].abs());
-                if phi == 0.0 || h == 0.0 {
-                    0.0
-                } else if limited[d] {
-                    phi / outflow[d]
-                } else {
-                    h * phi / (substeps as f64 * vertex_area[d])
+            .enumerate()
+            .map(|(c, run)| {
+                let f = run.flows;
+                let mut out = Flows::default();
+                let (mut o, mut i) = (0, 0);
+                for (k, v) in (c * VERTICES_PER_TASK..).take(f.out_ptr.len()).enumerate() {
+                    let o_end = f.out_ptr[k] as usize;
+                    for &phi in &f.out_fraction[o..o_end] {
+                        let x = fraction(v, phi);
+                        if x != 0.0 {
+                            out.out_fraction.push(x);
+                        }
+                    }
+                    let i_end = f.in_ptr[k] as usize;
+                    for &(phi, d, e) in &f.in_from[i..i_end] {
+                        let x = fraction(d as usize, phi);
+                        if x != 0.0 {
+                            out.in_from.push((x, d, e));
+                        }
+                    }
+                    (o, i) = (o_end, i_end);
+                    out.out_ptr.push(out.out_fraction.len() as u32);
+                    out.in_ptr.push(out.in_from.len() as u32);
                 }
+                out
             })
             .collect();
-        let flows = Flows::new(topology, &donor_is_a, &fraction);
+        let flows = Flows::concat(n, runs);
         Ok(Self {
-            fraction,
+            n_edges,
             substeps,
             max_courant: courant.iter().copied().fold(0.0, f64::max),
             n_limited,
@@ -770,11 +822,7 @@ impl UpwindPlan {
     }
 
     fn check(&self, topology: &Topology, len: usize) {
-        assert_eq!(
-            self.fraction.len(),
-            topology.n_edges(),
-            "plan of another topology"
-        );
+        assert_eq!(self.n_edges, topology.n_edges(), "plan of another topology");
         assert_eq!(len, topology.n_vertices(), "one value per vertex");
     }
 
@@ -917,7 +965,7 @@ impl UpwindPlan {
 /// `(fraction, donor, edge)` of what it receives, each in the vertex's edge order, without
 /// the edges that carry nothing. Built once with the plan (in parallel over runs of
 /// vertices, laid end to end: deterministic), read by every sub-cycle.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 struct Flows {
     out_ptr: Vec<u32>,
     out_fraction: Vec<f64>,
@@ -925,38 +973,22 @@ struct Flows {
     in_from: Vec<(f64, u32, u32)>,
 }
 
+/// One run of vertices in [`UpwindPlan::new`]: their outflows, and their transfers
+/// (`|Φ|` where [`Flows`] will hold the fractions; ends relative to the run's start).
+#[derive(Default)]
+struct Run {
+    outflow: Vec<f64>,
+    flows: Flows,
+}
+
 /// Vertices per task of the transfer passes (rayon's splitting below this costs more
 /// than the work).
 const VERTICES_PER_TASK: usize = 1024;
 
 impl Flows {
-    fn new(topology: &Topology, donor_is_a: &[bool], fraction: &[f64]) -> Self {
-        let (n, edges) = (topology.n_vertices(), topology.edges());
-        let chunks: Vec<_> = (0..n.div_ceil(VERTICES_PER_TASK))
-            .into_par_iter()
-            .map(|c| {
-                let vertices = c * VERTICES_PER_TASK..((c + 1) * VERTICES_PER_TASK).min(n);
-                let (mut out_end, mut out, mut in_end, mut inflow) =
-                    (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-                for v in vertices {
-                    for &e in topology.vertex_edges(v) {
-                        let f = fraction[e as usize];
-                        if f == 0.0 {
-                            continue;
-                        }
-                        let d = edges[e as usize][usize::from(!donor_is_a[e as usize])];
-                        if d as usize == v {
-                            out.push(f);
-                        } else {
-                            inflow.push((f, d, e));
-                        }
-                    }
-                    out_end.push(out.len() as u32);
-                    in_end.push(inflow.len() as u32);
-                }
-                (out_end, out, in_end, inflow)
-            })
-            .collect();
+    /// Runs of consecutive vertices' transfers (each with ends relative to its own
+    /// start) laid end to end.
+    fn concat(n: usize, runs: Vec<Flows>) -> Self {
         let mut f = Flows {
             out_ptr: Vec::with_capacity(n + 1),
             out_fraction: Vec::new(),
@@ -965,12 +997,12 @@ impl Flows {
         };
         f.out_ptr.push(0);
         f.in_ptr.push(0);
-        for (out_end, out, in_end, inflow) in chunks {
+        for run in runs {
             let (o, i) = (f.out_fraction.len() as u32, f.in_from.len() as u32);
-            f.out_ptr.extend(out_end.iter().map(|x| o + x));
-            f.in_ptr.extend(in_end.iter().map(|x| i + x));
-            f.out_fraction.extend(out);
-            f.in_from.extend(inflow);
+            f.out_ptr.extend(run.out_ptr.iter().map(|x| o + x));
+            f.in_ptr.extend(run.in_ptr.iter().map(|x| i + x));
+            f.out_fraction.extend(run.out_fraction);
+            f.in_from.extend(run.in_from);
         }
         f
     }
