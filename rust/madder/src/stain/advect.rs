@@ -51,7 +51,10 @@
 //! developable cloth). For `j` and `k` of the first triangle this formula is eq. 4.4
 //! itself (`α_ij + δ_i + π − (α_ji + δ_j) = θ_ij`), so `R_ij` is taken from the
 //! [`Transport`] and the one-ring case is bit-identical to the seed's formula. A vertex
-//! keeps the rotation it was given when first placed while the strip passes it.
+//! keeps the rotation it was given when first placed while the strip passes it. The
+//! rotation (two `atan2` and a `sin_cos`) is only evaluated for the vertices whose velocity
+//! is read, the last triangle's or a crossing's where the walk stops: the others a long
+//! strip passes never need it (the same operations when read, so the same values).
 //!
 //! The walk is the "straight walk" of point location: each new vertex is classified once
 //! as left or right of the line `0 → p`, the exit edge is the one whose endpoints are on
@@ -143,9 +146,22 @@
 //!
 //! The plan ([`UpwindPlan`]) stores the fractions and is applied to every transported
 //! field (solvent, solute, colour masses): the solute moves with the solvent, so the
-//! concentration of a uniform solution stays uniform. Per-edge transfers are computed in
-//! parallel, then each vertex gathers its incident edges in edge order: results do not
-//! depend on the thread count.
+//! concentration of a uniform solution stays uniform. Results do not depend on the thread
+//! count: every sum is gathered per vertex in its edge order.
+//!
+//! *Layout (issue 16, speed).* The plan is built in two passes over each vertex's edges,
+//! in parallel over runs of vertices laid end to end: the first sums the vertex's outflow
+//! and lists the `|Φ|` of the edges with a flux, given and received (the donor read off
+//! the flux's sign); once the sub-step count is known from the largest Courant number,
+//! the second turns them into fractions. The result is a CSR table per vertex (the
+//! fractions it gives; the fraction, donor and edge of what it receives, edges without
+//! flux left out), built once per step. Each sub-cycle is then one pass over that table
+//! for all fields at once, interleaved per vertex, and with the momentum form (below) the
+//! momentum in the same pass; the solvent's transported mass is the momentum's divisor,
+//! so it is not transported twice. Each value is computed by the same operations in the
+//! same order as the former one-field-at-a-time passes: the outputs are bit-identical.
+//! The fluxes ([`dual_fluxes`]) inside the simulator's active region visit only the faces
+//! with an active edge.
 //!
 //! ## Momentum advection (§4.3.2)
 //! The alternative of §4.3.2 moves the momentum `p_i = m_i u_i` with the same transfers as
@@ -203,7 +219,44 @@ struct Placed {
     /// Its side of the line `0 → foot` ([`Trace::side`]), computed once.
     side: f64,
     /// Rotation from `F_v` into the layout (= `F_i`) coordinates.
-    q: DMat2,
+    q: Turn,
+}
+
+/// The rotation of a [`Placed`] vertex: a matrix (`i` and its one-ring), or, for a vertex
+/// placed by the unfolding, what it is computed from. Only the vertices whose velocity is
+/// read (the last triangle's, a crossing's where the walk stops) need it, and most
+/// vertices a long strip passes are not read: their `atan2`s and `sin_cos` are left
+/// undone. When read it is computed by the same operations as if it had been computed at
+/// once, so the values are the same.
+#[derive(Clone, Copy)]
+enum Turn {
+    Matrix(DMat2),
+    /// Layout directions of the edges `c → r` and `c → l`, and their polar angles
+    /// `α + δ_c` in `F_c`.
+    Unfolded {
+        to_r: DVec2,
+        to_l: DVec2,
+        polar_r: f64,
+        polar_l: f64,
+    },
+}
+
+impl Turn {
+    fn matrix(self) -> DMat2 {
+        match self {
+            Turn::Matrix(q) => q,
+            Turn::Unfolded {
+                to_r,
+                to_l,
+                polar_r,
+                polar_l,
+            } => {
+                let a_r = to_r.y.atan2(to_r.x) - polar_r;
+                let a_l = to_l.y.atan2(to_l.x) - polar_l;
+                DMat2::from_angle(a_r + 0.5 * wrap_angle(a_l - a_r))
+            }
+        }
+    }
 }
 
 /// Semi-Lagrangian advection of the velocity over `h` (see the module doc): the value at
@@ -336,7 +389,7 @@ impl Trace<'_> {
     }
 
     fn value(&self, a: &Placed) -> DVec2 {
-        a.q * self.velocity[a.v]
+        a.q.matrix() * self.velocity[a.v]
     }
 
     /// The walk from vertex `i` with points on the line counted as left (`ties_left`) or
@@ -380,23 +433,27 @@ impl Trace<'_> {
             v: i,
             p: DVec2::ZERO,
             side: 0.0,
-            q: DMat2::IDENTITY,
+            q: Turn::Matrix(DMat2::IDENTITY),
         };
         let mut right = Placed {
             v: spokes[wedge.from as usize] as usize,
             p: pj,
             side: self.side(pj),
-            q: rot(wedge.from),
+            q: Turn::Matrix(rot(wedge.from)),
         };
         let mut left = Placed {
             v: spokes[wedge.to as usize] as usize,
             p: pk,
             side: self.side(pk),
-            q: rot(wedge.to),
+            q: Turn::Matrix(rot(wedge.to)),
         };
         let mut face = wedge.face as usize;
-        // value at the last entry point, for the degenerate fallbacks
-        let mut entry = self.value(&behind);
+        // the last entry point (`i`, or a crossing of an edge at a fraction), whose value
+        // the degenerate fallbacks return
+        let start = behind;
+        let mut entry: Option<(Placed, Placed, f64)> = None;
+        let at =
+            |right: &Placed, left: &Placed, f: f64| self.value(right).lerp(self.value(left), f);
 
         for crossing in 0..=MAX_CROSSINGS {
             let (pr, pl) = (right.p, left.p);
@@ -406,19 +463,21 @@ impl Trace<'_> {
                     Some([a, b, c]) => {
                         a * self.value(&behind) + b * self.value(&right) + c * self.value(&left)
                     }
-                    None => entry,
+                    None => match &entry {
+                        None => self.value(&start),
+                        Some((r, l, f)) => at(r, l, *f),
+                    },
                 });
             }
             // the segment crosses the edge (right, left) at fraction f from `right`
             // (right.side ≤ 0 ≤ left.side, not both 0)
             let f = (-right.side / (left.side - right.side)).clamp(0.0, 1.0);
-            let at_crossing = self.value(&right).lerp(self.value(&left), f);
             if crossing == MAX_CROSSINGS {
-                return Some(at_crossing);
+                return Some(at(&right, &left, f));
             }
-            entry = at_crossing;
+            entry = Some((right, left, f));
             let Some((g, c)) = self.across(face, &right, &left, f) else {
-                return Some(at_crossing);
+                return Some(at(&right, &left, f));
             };
             face = g;
             if is_left(c.side) {
@@ -473,20 +532,23 @@ impl Trace<'_> {
         let spokes_c = rings.spokes(c);
         let alpha_c = transport.polar_angles(c);
         let delta_c = transport.frame_offset(c);
-        let turn = |m: usize, pm: DVec2| {
+        let polar = |m: usize| {
             let k = spokes_c.iter().position(|&s| s as usize == m)?;
-            let dir = pm - p;
-            Some(dir.y.atan2(dir.x) - (alpha_c[k] + delta_c))
+            Some(alpha_c[k] + delta_c)
         };
-        let (a_r, a_l) = (turn(r.v, r_star)?, turn(l.v, l_star)?);
-        let angle = a_r + 0.5 * wrap_angle(a_l - a_r);
+        let (polar_r, polar_l) = (polar(r.v)?, polar(l.v)?);
         Some((
             g,
             Placed {
                 v: c,
                 p,
                 side: self.side(p),
-                q: DMat2::from_angle(angle),
+                q: Turn::Unfolded {
+                    to_r: r_star - p,
+                    to_l: l_star - p,
+                    polar_r,
+                    polar_l,
+                },
             },
         ))
     }
