@@ -461,10 +461,11 @@ impl Simulator {
     }
 
     /// Wall-clock seconds per phase since the simulator was built, and counters: a dict
-    /// with `window`, `geometry`, `forces`, `advection`, `diffusion`, `interaction` (s),
-    /// the counters of `Profile` (`substeps`, `density_iterations`, ...), and
-    /// `least_work`: per phase, the bytes and flops it must move and do at least and its
-    /// per-sweep working set (`Profile::least_work`, module `stain/work.rs`).
+    /// with `window`, `geometry`, `forces`, `advection` (its parts `advection_trace`,
+    /// `advection_plan`, `advection_apply`), `diffusion`, `interaction` (s), the counters
+    /// of `Profile` (`substeps`, `density_iterations`, ...), and `least_work`: per phase,
+    /// the bytes and flops it must move and do at least and its per-sweep working set
+    /// (`Profile::least_work`, module `stain/work.rs`).
     fn profile<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let p = self.inner.profile();
         let d = PyDict::new(py);
@@ -473,6 +474,9 @@ impl Simulator {
             ("geometry", p.geometry),
             ("forces", p.forces),
             ("advection", p.advection),
+            ("advection_trace", p.advection_trace),
+            ("advection_plan", p.advection_plan),
+            ("advection_apply", p.advection_apply),
             ("diffusion", p.diffusion),
             ("interaction", p.interaction),
         ] {

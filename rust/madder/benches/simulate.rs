@@ -203,12 +203,16 @@ fn bench(nx: usize, ny: usize, frames: usize, scale: f64, machine: Option<&Machi
         (h ^ b).wrapping_mul(0x0100_0000_01b3)
     });
     println!(
-        "{n:>7} vertices, {frames} frames: {total:7.2} ms/frame ({:.1} sub-steps, setup {setup:.0} ms) = window {:.2}, geometry+frames+transport {:.2}, forces {:.2}, advection {:.2}, diffusion {:.2} (density {:.1} + velocity {:.1} CG it.), interactions {:.2}; window {:.1} %, active {:.1} % of the vertices ({} rebuilds); state checksum {checksum:016x}",
+        "{n:>7} vertices, {frames} frames: {total:7.2} ms/frame ({:.1} sub-steps, setup {setup:.0} ms) = window {:.2}, geometry+frames+transport {:.2}, forces {:.2}, advection {:.2} (back-traces {:.2}, fluxes+plan {:.2}, sub-cycles {:.2} at {:.2} cycles/sub-step), diffusion {:.2} (density {:.1} + velocity {:.1} CG it.), interactions {:.2}; window {:.1} %, active {:.1} % of the vertices ({} rebuilds); state checksum {checksum:016x}",
         p.substeps as f64 / frames as f64,
         per(p.window),
         per(p.geometry),
         per(p.forces),
         per(p.advection),
+        per(p.advection_trace),
+        per(p.advection_plan),
+        per(p.advection_apply),
+        p.transport_cycles as f64 / p.substeps as f64,
         per(p.diffusion),
         p.density_iterations as f64 / frames as f64,
         p.velocity_iterations as f64 / frames as f64,

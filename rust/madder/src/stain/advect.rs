@@ -51,7 +51,10 @@
 //! developable cloth). For `j` and `k` of the first triangle this formula is eq. 4.4
 //! itself (`α_ij + δ_i + π − (α_ji + δ_j) = θ_ij`), so `R_ij` is taken from the
 //! [`Transport`] and the one-ring case is bit-identical to the seed's formula. A vertex
-//! keeps the rotation it was given when first placed while the strip passes it.
+//! keeps the rotation it was given when first placed while the strip passes it. The
+//! rotation (two `atan2` and a `sin_cos`) is only evaluated for the vertices whose velocity
+//! is read, the last triangle's or a crossing's where the walk stops: the others a long
+//! strip passes never need it (the same operations when read, so the same values).
 //!
 //! The walk is the "straight walk" of point location: each new vertex is classified once
 //! as left or right of the line `0 → p`, the exit edge is the one whose endpoints are on
@@ -143,9 +146,22 @@
 //!
 //! The plan ([`UpwindPlan`]) stores the fractions and is applied to every transported
 //! field (solvent, solute, colour masses): the solute moves with the solvent, so the
-//! concentration of a uniform solution stays uniform. Per-edge transfers are computed in
-//! parallel, then each vertex gathers its incident edges in edge order: results do not
-//! depend on the thread count.
+//! concentration of a uniform solution stays uniform. Results do not depend on the thread
+//! count: every sum is gathered per vertex in its edge order.
+//!
+//! *Layout (issue 16, speed).* The plan is built in two passes over each vertex's edges,
+//! in parallel over runs of vertices laid end to end: the first sums the vertex's outflow
+//! and lists the `|Φ|` of the edges with a flux, given and received (the donor read off
+//! the flux's sign); once the sub-step count is known from the largest Courant number,
+//! the second turns them into fractions. The result is a CSR table per vertex (the
+//! fractions it gives; the fraction, donor and edge of what it receives, edges without
+//! flux left out), built once per step. Each sub-cycle is then one pass over that table
+//! for all fields at once, interleaved per vertex, and with the momentum form (below) the
+//! momentum in the same pass; the solvent's transported mass is the momentum's divisor,
+//! so it is not transported twice. Each value is computed by the same operations in the
+//! same order as the former one-field-at-a-time passes: the outputs are bit-identical.
+//! The fluxes ([`dual_fluxes`]) inside the simulator's active region visit only the faces
+//! with an active edge.
 //!
 //! ## Momentum advection (§4.3.2)
 //! The alternative of §4.3.2 moves the momentum `p_i = m_i u_i` with the same transfers as
@@ -203,7 +219,44 @@ struct Placed {
     /// Its side of the line `0 → foot` ([`Trace::side`]), computed once.
     side: f64,
     /// Rotation from `F_v` into the layout (= `F_i`) coordinates.
-    q: DMat2,
+    q: Turn,
+}
+
+/// The rotation of a [`Placed`] vertex: a matrix (`i` and its one-ring), or, for a vertex
+/// placed by the unfolding, what it is computed from. Only the vertices whose velocity is
+/// read (the last triangle's, a crossing's where the walk stops) need it, and most
+/// vertices a long strip passes are not read: their `atan2`s and `sin_cos` are left
+/// undone. When read it is computed by the same operations as if it had been computed at
+/// once, so the values are the same.
+#[derive(Clone, Copy)]
+enum Turn {
+    Matrix(DMat2),
+    /// Layout directions of the edges `c → r` and `c → l`, and their polar angles
+    /// `α + δ_c` in `F_c`.
+    Unfolded {
+        to_r: DVec2,
+        to_l: DVec2,
+        polar_r: f64,
+        polar_l: f64,
+    },
+}
+
+impl Turn {
+    fn matrix(self) -> DMat2 {
+        match self {
+            Turn::Matrix(q) => q,
+            Turn::Unfolded {
+                to_r,
+                to_l,
+                polar_r,
+                polar_l,
+            } => {
+                let a_r = to_r.y.atan2(to_r.x) - polar_r;
+                let a_l = to_l.y.atan2(to_l.x) - polar_l;
+                DMat2::from_angle(a_r + 0.5 * wrap_angle(a_l - a_r))
+            }
+        }
+    }
 }
 
 /// Semi-Lagrangian advection of the velocity over `h` (see the module doc): the value at
@@ -336,7 +389,7 @@ impl Trace<'_> {
     }
 
     fn value(&self, a: &Placed) -> DVec2 {
-        a.q * self.velocity[a.v]
+        a.q.matrix() * self.velocity[a.v]
     }
 
     /// The walk from vertex `i` with points on the line counted as left (`ties_left`) or
@@ -380,23 +433,27 @@ impl Trace<'_> {
             v: i,
             p: DVec2::ZERO,
             side: 0.0,
-            q: DMat2::IDENTITY,
+            q: Turn::Matrix(DMat2::IDENTITY),
         };
         let mut right = Placed {
             v: spokes[wedge.from as usize] as usize,
             p: pj,
             side: self.side(pj),
-            q: rot(wedge.from),
+            q: Turn::Matrix(rot(wedge.from)),
         };
         let mut left = Placed {
             v: spokes[wedge.to as usize] as usize,
             p: pk,
             side: self.side(pk),
-            q: rot(wedge.to),
+            q: Turn::Matrix(rot(wedge.to)),
         };
         let mut face = wedge.face as usize;
-        // value at the last entry point, for the degenerate fallbacks
-        let mut entry = self.value(&behind);
+        // the last entry point (`i`, or a crossing of an edge at a fraction), whose value
+        // the degenerate fallbacks return
+        let start = behind;
+        let mut entry: Option<(Placed, Placed, f64)> = None;
+        let at =
+            |right: &Placed, left: &Placed, f: f64| self.value(right).lerp(self.value(left), f);
 
         for crossing in 0..=MAX_CROSSINGS {
             let (pr, pl) = (right.p, left.p);
@@ -406,19 +463,21 @@ impl Trace<'_> {
                     Some([a, b, c]) => {
                         a * self.value(&behind) + b * self.value(&right) + c * self.value(&left)
                     }
-                    None => entry,
+                    None => match &entry {
+                        None => self.value(&start),
+                        Some((r, l, f)) => at(r, l, *f),
+                    },
                 });
             }
             // the segment crosses the edge (right, left) at fraction f from `right`
             // (right.side ≤ 0 ≤ left.side, not both 0)
             let f = (-right.side / (left.side - right.side)).clamp(0.0, 1.0);
-            let at_crossing = self.value(&right).lerp(self.value(&left), f);
             if crossing == MAX_CROSSINGS {
-                return Some(at_crossing);
+                return Some(at(&right, &left, f));
             }
-            entry = at_crossing;
+            entry = Some((right, left, f));
             let Some((g, c)) = self.across(face, &right, &left, f) else {
-                return Some(at_crossing);
+                return Some(at(&right, &left, f));
             };
             face = g;
             if is_left(c.side) {
@@ -473,20 +532,23 @@ impl Trace<'_> {
         let spokes_c = rings.spokes(c);
         let alpha_c = transport.polar_angles(c);
         let delta_c = transport.frame_offset(c);
-        let turn = |m: usize, pm: DVec2| {
+        let polar = |m: usize| {
             let k = spokes_c.iter().position(|&s| s as usize == m)?;
-            let dir = pm - p;
-            Some(dir.y.atan2(dir.x) - (alpha_c[k] + delta_c))
+            Some(alpha_c[k] + delta_c)
         };
-        let (a_r, a_l) = (turn(r.v, r_star)?, turn(l.v, l_star)?);
-        let angle = a_r + 0.5 * wrap_angle(a_l - a_r);
+        let (polar_r, polar_l) = (polar(r.v)?, polar(l.v)?);
         Some((
             g,
             Placed {
                 v: c,
                 p,
                 side: self.side(p),
-                q: DMat2::from_angle(angle),
+                q: Turn::Unfolded {
+                    to_r: r_star - p,
+                    to_l: l_star - p,
+                    polar_r,
+                    polar_l,
+                },
             },
         ))
     }
@@ -523,24 +585,75 @@ pub fn dual_fluxes(
     frames: &VertexFrames,
     velocity: &[DVec2],
 ) -> Vec<f64> {
+    dual_fluxes_where(topology, positions, frames, velocity, None)
+}
+
+/// [`dual_fluxes`] through the edges whose two ends are `active` (the simulator's active
+/// region); the other edges get no flux. Only the faces with an active edge are visited;
+/// each active edge gets exactly the value [`dual_fluxes`] gives it (the same face
+/// contributions, summed in the same order).
+///
+/// # Panics
+/// As [`dual_fluxes`], and if `active` does not have one entry per vertex.
+pub(crate) fn dual_fluxes_in(
+    topology: &Topology,
+    positions: &[DVec3],
+    frames: &VertexFrames,
+    velocity: &[DVec2],
+    active: &[bool],
+) -> Vec<f64> {
+    assert_eq!(active.len(), topology.n_vertices(), "one flag per vertex");
+    dual_fluxes_where(topology, positions, frames, velocity, Some(active))
+}
+
+fn dual_fluxes_where(
+    topology: &Topology,
+    positions: &[DVec3],
+    frames: &VertexFrames,
+    velocity: &[DVec2],
+    active: Option<&[bool]>,
+) -> Vec<f64> {
     let n = topology.n_vertices();
     assert_eq!(positions.len(), n, "one position per vertex");
     assert_eq!(frames.len(), n, "one frame per vertex");
     assert_eq!(velocity.len(), n, "one velocity per vertex");
+    let on = |v: u32| active.is_none_or(|a| a[v as usize]);
     let world: Vec<DVec3> = (0..n)
         .into_par_iter()
-        .map(|i| frames.to_world(i, velocity[i]))
+        .with_min_len(VERTICES_PER_TASK)
+        .map(|i| {
+            if on(i as u32) {
+                frames.to_world(i, velocity[i])
+            } else {
+                DVec3::ZERO
+            }
+        })
         .collect();
+    // a face with fewer than two active corners has no active edge
     let per_face: Vec<[f64; 3]> = topology
         .faces()
         .par_iter()
-        .map(|tri| face_fluxes(tri.map(|v| v as usize), positions, &world))
+        .with_min_len(VERTICES_PER_TASK)
+        .map(|tri| {
+            if tri.iter().filter(|&&v| on(v)).count() >= 2 {
+                face_fluxes(tri.map(|v| v as usize), positions, &world)
+            } else {
+                [0.0; 3]
+            }
+        })
         .collect();
     // gather per edge in face order (deterministic)
     let mut flux = vec![0.0; topology.n_edges()];
     for (fe, contrib) in topology.face_edges().iter().zip(&per_face) {
         for k in 0..3 {
             flux[fe[k] as usize] += contrib[k];
+        }
+    }
+    if active.is_some() {
+        for (phi, &[a, b]) in flux.iter_mut().zip(topology.edges()) {
+            if !(on(a) && on(b)) {
+                *phi = 0.0;
+            }
         }
     }
     flux
@@ -578,13 +691,13 @@ fn face_fluxes(tri: [usize; 3], pos: &[DVec3], world: &[DVec3]) -> [f64; 3] {
 /// what fraction of the donor's mass it gives per sub-step (see the module doc).
 #[derive(Debug, Clone)]
 pub struct UpwindPlan {
-    /// Per edge: `true` if `a` (the lower-numbered end) donates.
-    donor_is_a: Vec<bool>,
-    /// Per edge: fraction of the donor's mass given per sub-step.
-    fraction: Vec<f64>,
+    /// Edges of the plan's topology.
+    n_edges: usize,
     substeps: usize,
     max_courant: f64,
     n_limited: usize,
+    /// The transfers as each vertex sees them, built once with the plan.
+    flows: Flows,
 }
 
 impl UpwindPlan {
@@ -641,21 +754,46 @@ impl UpwindPlan {
                 value,
             });
         }
+        // one pass over each vertex's edges, in its edge order: its outflow (gathered in
+        // edge order: the numerator of its Courant number) and the |Φ| it gives and
+        // receives, the donor chosen by the sign of the flux
         let edges = topology.edges();
-        let donor_is_a: Vec<bool> = flux.iter().map(|&x| x > 0.0).collect();
-        let donor = |e: usize| edges[e][usize::from(!donor_is_a[e])] as usize;
-
-        // total outflow per vertex (gathered in edge order) and its Courant number
-        let outflow: Vec<f64> = (0..n)
+        let runs: Vec<Run> = (0..n.div_ceil(VERTICES_PER_TASK))
             .into_par_iter()
-            .map(|v| {
-                topology
-                    .vertex_edges(v)
-                    .iter()
-                    .filter(|&&e| donor(e as usize) == v)
-                    .map(|&e| flux[e as usize].abs())
-                    .sum()
+            .map(|c| {
+                let vertices = c * VERTICES_PER_TASK..((c + 1) * VERTICES_PER_TASK).min(n);
+                let mut run = Run::default();
+                for v in vertices {
+                    let o: f64 = topology
+                        .vertex_edges(v)
+                        .iter()
+                        .filter_map(|&e| {
+                            let phi = flux[e as usize];
+                            let [a, b] = edges[e as usize];
+                            let d = if phi > 0.0 { a } else { b };
+                            if d as usize == v {
+                                if phi != 0.0 {
+                                    run.flows.out_fraction.push(phi.abs());
+                                }
+                                Some(phi.abs())
+                            } else {
+                                if phi != 0.0 {
+                                    run.flows.in_from.push((phi.abs(), d, e));
+                                }
+                                None
+                            }
+                        })
+                        .sum();
+                    run.outflow.push(o);
+                    run.flows.out_ptr.push(run.flows.out_fraction.len() as u32);
+                    run.flows.in_ptr.push(run.flows.in_from.len() as u32);
+                }
+                run
             })
+            .collect();
+        let outflow: Vec<f64> = runs
+            .iter()
+            .flat_map(|r| r.outflow.iter().copied())
             .collect();
         let courant: Vec<f64> = outflow
             .iter()
@@ -679,24 +817,53 @@ impl UpwindPlan {
         let substeps = ((max_courant / SUBSTEP_COURANT).ceil() as usize).clamp(1, MAX_SUBSTEPS);
         let limited: Vec<bool> = courant.iter().map(|&c| c / substeps as f64 > 1.0).collect();
         let n_limited = limited.iter().filter(|&&l| l).count();
-        let fraction = (0..n_edges)
-            .map(|e| {
-                let (d, phi) = (donor(e), flux[e].abs());
-                if phi == 0.0 || h == 0.0 {
-                    0.0
-                } else if limited[d] {
-                    phi / outflow[d]
-                } else {
-                    h * phi / (substeps as f64 * vertex_area[d])
+        // |Φ| → the fraction of the donor's mass per sub-step; a transfer that rounds to
+        // nothing is dropped
+        let fraction = |d: usize, phi: f64| {
+            if h == 0.0 {
+                0.0
+            } else if limited[d] {
+                phi / outflow[d]
+            } else {
+                h * phi / (substeps as f64 * vertex_area[d])
+            }
+        };
+        let runs: Vec<Flows> = runs
+            .into_par_iter()
+            .enumerate()
+            .map(|(c, run)| {
+                let f = run.flows;
+                let mut out = Flows::default();
+                let (mut o, mut i) = (0, 0);
+                for (k, v) in (c * VERTICES_PER_TASK..).take(f.out_ptr.len()).enumerate() {
+                    let o_end = f.out_ptr[k] as usize;
+                    for &phi in &f.out_fraction[o..o_end] {
+                        let x = fraction(v, phi);
+                        if x != 0.0 {
+                            out.out_fraction.push(x);
+                        }
+                    }
+                    let i_end = f.in_ptr[k] as usize;
+                    for &(phi, d, e) in &f.in_from[i..i_end] {
+                        let x = fraction(d as usize, phi);
+                        if x != 0.0 {
+                            out.in_from.push((x, d, e));
+                        }
+                    }
+                    (o, i) = (o_end, i_end);
+                    out.out_ptr.push(out.out_fraction.len() as u32);
+                    out.in_ptr.push(out.in_from.len() as u32);
                 }
+                out
             })
             .collect();
+        let flows = Flows::concat(n, runs);
         Ok(Self {
-            donor_is_a,
-            fraction,
+            n_edges,
             substeps,
             max_courant: courant.iter().copied().fold(0.0, f64::max),
             n_limited,
+            flows,
         })
     }
 
@@ -716,48 +883,8 @@ impl UpwindPlan {
         self.n_limited
     }
 
-    fn donor(&self, edges: &[[u32; 2]], e: usize) -> usize {
-        edges[e][usize::from(!self.donor_is_a[e])] as usize
-    }
-
-    /// The plan's transfers as each vertex sees them, in its edge order, without the
-    /// edges that carry nothing (built once per transport, used by every sub-cycle).
-    fn flows(&self, topology: &Topology) -> Flows {
-        let edges = topology.edges();
-        let n = topology.n_vertices();
-        let mut f = Flows {
-            out_ptr: Vec::with_capacity(n + 1),
-            out_fraction: Vec::new(),
-            in_ptr: Vec::with_capacity(n + 1),
-            in_from: Vec::new(),
-        };
-        f.out_ptr.push(0);
-        f.in_ptr.push(0);
-        for v in 0..n {
-            for &e in topology.vertex_edges(v) {
-                let fraction = self.fraction[e as usize];
-                if fraction == 0.0 {
-                    continue;
-                }
-                let d = self.donor(edges, e as usize);
-                if d == v {
-                    f.out_fraction.push(fraction);
-                } else {
-                    f.in_from.push((fraction, d as u32, e));
-                }
-            }
-            f.out_ptr.push(f.out_fraction.len() as u32);
-            f.in_ptr.push(f.in_from.len() as u32);
-        }
-        f
-    }
-
     fn check(&self, topology: &Topology, len: usize) {
-        assert_eq!(
-            self.fraction.len(),
-            topology.n_edges(),
-            "plan of another topology"
-        );
+        assert_eq!(self.n_edges, topology.n_edges(), "plan of another topology");
         assert_eq!(len, topology.n_vertices(), "one value per vertex");
     }
 
@@ -774,38 +901,19 @@ impl UpwindPlan {
     /// Moves several fields (solvent, solute, colour masses) with the same fractions, each
     /// exactly as [`UpwindPlan::transport`] would.
     ///
-    /// The fields move together, interleaved per vertex (one pass over the edges and one
-    /// over the vertices per sub-cycle for all of them, into reused buffers); each value
-    /// is computed by the same operations in the same order as [`UpwindPlan::transport`],
-    /// so the result is bit-identical to moving them one by one.
+    /// The fields move together, interleaved per vertex (one pass over the transfers per
+    /// sub-cycle for all of them, into reused buffers); each value is computed by the same
+    /// operations in the same order as [`UpwindPlan::transport`], so the result is
+    /// bit-identical to moving them one by one.
     ///
     /// # Panics
     /// If a field does not have one value per vertex of `topology`, the plan's topology.
     pub fn transport_all(&self, topology: &Topology, fields: &mut [&mut [f64]]) {
-        let k = fields.len();
         for field in fields.iter() {
             self.check(topology, field.len());
         }
-        if k == 0 {
-            return;
-        }
-        let n = topology.n_vertices();
-        let mut m = vec![0.0; n * k];
-        for (c, field) in fields.iter().enumerate() {
-            for (v, x) in field.iter().enumerate() {
-                m[v * k + c] = *x;
-            }
-        }
-        let flows = self.flows(topology);
-        let mut next = vec![0.0; n * k];
-        for _ in 0..self.substeps {
-            flows.cycle(&m, k, &mut next);
-            std::mem::swap(&mut m, &mut next);
-        }
-        for (c, field) in fields.iter_mut().enumerate() {
-            for (v, x) in field.iter_mut().enumerate() {
-                *x = m[v * k + c];
-            }
+        if !fields.is_empty() {
+            self.cycles(fields, None);
         }
     }
 
@@ -826,33 +934,42 @@ impl UpwindPlan {
         velocity: &[DVec2],
         fallback: &[DVec2],
     ) -> Vec<DVec2> {
-        self.check(topology, solvent_before.len());
+        let mut mass = solvent_before.to_vec();
+        self.transport_with_momentum(topology, transport, &mut [&mut mass], velocity, fallback)
+    }
+
+    /// [`UpwindPlan::transport_all`] and [`UpwindPlan::momentum_velocity`] in one: moves the
+    /// fields, the first of which is the solvent, and the solvent's momentum with them, in
+    /// one pass over the transfers per sub-cycle; returns the velocities. Every value is
+    /// computed by the same operations as the two calls make (the momentum velocity
+    /// divides by the transported solvent, which is what `momentum_velocity` recomputes),
+    /// so the result is bit-identical to them.
+    ///
+    /// # Panics
+    /// If `fields` is empty, or a field or per-vertex slice does not have one value per
+    /// vertex of `topology`.
+    pub fn transport_with_momentum(
+        &self,
+        topology: &Topology,
+        transport: &Transport,
+        fields: &mut [&mut [f64]],
+        velocity: &[DVec2],
+        fallback: &[DVec2],
+    ) -> Vec<DVec2> {
+        assert!(!fields.is_empty(), "the solvent is the first field");
+        for field in fields.iter() {
+            self.check(topology, field.len());
+        }
         self.check(topology, velocity.len());
         self.check(topology, fallback.len());
-        let flows = self.flows(topology);
-        let mut mass = solvent_before.to_vec();
-        let mut next = vec![0.0; mass.len()];
-        let mut momentum: Vec<DVec2> = mass.iter().zip(velocity).map(|(&m, &u)| m * u).collect();
-        for _ in 0..self.substeps {
-            momentum = (0..mass.len())
-                .into_par_iter()
-                .map(|v| {
-                    let (mut out, mut inflow) = (DVec2::ZERO, DVec2::ZERO);
-                    for &fraction in flows.given(v) {
-                        out += fraction * momentum[v];
-                    }
-                    for &(fraction, d, e) in flows.received(v) {
-                        let r = transport.edge_rotation(e as usize);
-                        let r = if v < d as usize { r } else { r.transpose() };
-                        inflow += r * (fraction * momentum[d as usize]);
-                    }
-                    (momentum[v] - out) + inflow
-                })
-                .collect();
-            flows.cycle(&mass, 1, &mut next);
-            std::mem::swap(&mut mass, &mut next);
-        }
-        let scale = solvent_before.iter().copied().fold(0.0, f64::max);
+        let scale = fields[0].iter().copied().fold(0.0, f64::max);
+        let momentum: Vec<DVec2> = fields[0]
+            .iter()
+            .zip(velocity)
+            .map(|(&m, &u)| m * u)
+            .collect();
+        let momentum = self.cycles(fields, Some((transport, momentum)));
+        let mass = &*fields[0];
         let floor = MOMENTUM_MIN_MASS_REL * scale;
         (0..mass.len())
             .into_par_iter()
@@ -866,11 +983,51 @@ impl UpwindPlan {
             })
             .collect()
     }
+
+    /// The sub-cycles on the fields, interleaved per vertex, and, given the transport and
+    /// the solvent's momentum, on the momentum too (returned; empty without).
+    fn cycles(
+        &self,
+        fields: &mut [&mut [f64]],
+        momentum: Option<(&Transport, Vec<DVec2>)>,
+    ) -> Vec<DVec2> {
+        let (k, n) = (fields.len(), fields[0].len());
+        let mut m = vec![0.0; n * k];
+        for (c, field) in fields.iter().enumerate() {
+            for (v, x) in field.iter().enumerate() {
+                m[v * k + c] = *x;
+            }
+        }
+        let mut next = vec![0.0; n * k];
+        let (transport, mut p) = match momentum {
+            Some((t, p)) => (Some(t), p),
+            None => (None, Vec::new()),
+        };
+        let mut p_next = vec![DVec2::ZERO; p.len()];
+        for _ in 0..self.substeps {
+            match transport {
+                None => self.flows.cycle(&m, k, &mut next),
+                Some(t) => self
+                    .flows
+                    .cycle_with_momentum(&m, k, &mut next, t, &p, &mut p_next),
+            }
+            std::mem::swap(&mut m, &mut next);
+            std::mem::swap(&mut p, &mut p_next);
+        }
+        for (c, field) in fields.iter_mut().enumerate() {
+            for (v, x) in field.iter_mut().enumerate() {
+                *x = m[v * k + c];
+            }
+        }
+        p
+    }
 }
 
-/// An [`UpwindPlan`]'s transfers per vertex ([`UpwindPlan::flows`]): the fractions it
-/// gives away, and the `(fraction, donor, edge)` of what it receives, each in the
-/// vertex's edge order.
+/// An [`UpwindPlan`]'s transfers per vertex: the fractions it gives away, and the
+/// `(fraction, donor, edge)` of what it receives, each in the vertex's edge order, without
+/// the edges that carry nothing. Built once with the plan (in parallel over runs of
+/// vertices, laid end to end: deterministic), read by every sub-cycle.
+#[derive(Debug, Clone, Default)]
 struct Flows {
     out_ptr: Vec<u32>,
     out_fraction: Vec<f64>,
@@ -878,7 +1035,40 @@ struct Flows {
     in_from: Vec<(f64, u32, u32)>,
 }
 
+/// One run of vertices in [`UpwindPlan::new`]: their outflows, and their transfers
+/// (`|Φ|` where [`Flows`] will hold the fractions; ends relative to the run's start).
+#[derive(Default)]
+struct Run {
+    outflow: Vec<f64>,
+    flows: Flows,
+}
+
+/// Vertices per task of the transfer passes (rayon's splitting below this costs more
+/// than the work).
+const VERTICES_PER_TASK: usize = 1024;
+
 impl Flows {
+    /// Runs of consecutive vertices' transfers (each with ends relative to its own
+    /// start) laid end to end.
+    fn concat(n: usize, runs: Vec<Flows>) -> Self {
+        let mut f = Flows {
+            out_ptr: Vec::with_capacity(n + 1),
+            out_fraction: Vec::new(),
+            in_ptr: Vec::with_capacity(n + 1),
+            in_from: Vec::new(),
+        };
+        f.out_ptr.push(0);
+        f.in_ptr.push(0);
+        for run in runs {
+            let (o, i) = (f.out_fraction.len() as u32, f.in_from.len() as u32);
+            f.out_ptr.extend(run.out_ptr.iter().map(|x| o + x));
+            f.in_ptr.extend(run.in_ptr.iter().map(|x| i + x));
+            f.out_fraction.extend(run.out_fraction);
+            f.in_from.extend(run.in_from);
+        }
+        f
+    }
+
     fn given(&self, v: usize) -> &[f64] {
         &self.out_fraction[self.out_ptr[v] as usize..self.out_ptr[v + 1] as usize]
     }
@@ -887,25 +1077,66 @@ impl Flows {
         &self.in_from[self.in_ptr[v] as usize..self.in_ptr[v + 1] as usize]
     }
 
-    /// One sub-cycle of `k` interleaved fields `m` into `next`: each vertex gives
-    /// `fraction · m_v` across each of its outgoing edges and receives
-    /// `fraction · m_donor` across each incoming one — the same product on both sides, so
-    /// the transfer is conservative to rounding — clamped at zero against rounding.
+    /// One sub-cycle of `k` interleaved fields `m` into `next`.
     fn cycle(&self, m: &[f64], k: usize, next: &mut [f64]) {
-        next.par_chunks_mut(k).enumerate().for_each(|(v, out)| {
-            for (c, o) in out.iter_mut().enumerate() {
-                let mv = m[v * k + c];
-                let mut gone = 0.0;
-                for &fraction in self.given(v) {
-                    gone += fraction * mv;
-                }
-                let mut inflow = 0.0;
-                for &(fraction, d, _) in self.received(v) {
-                    inflow += fraction * m[d as usize * k + c];
-                }
-                *o = (mv - gone).max(0.0) + inflow;
+        next.par_chunks_mut(k)
+            .enumerate()
+            .with_min_len(VERTICES_PER_TASK)
+            .for_each(|(v, out)| self.fields_at(v, m, k, out));
+    }
+
+    /// [`Flows::cycle`], and the momentum `p` into `p_next` in the same pass.
+    fn cycle_with_momentum(
+        &self,
+        m: &[f64],
+        k: usize,
+        next: &mut [f64],
+        transport: &Transport,
+        p: &[DVec2],
+        p_next: &mut [DVec2],
+    ) {
+        next.par_chunks_mut(k)
+            .zip(p_next.par_iter_mut())
+            .enumerate()
+            .with_min_len(VERTICES_PER_TASK)
+            .for_each(|(v, (out, pv))| {
+                self.fields_at(v, m, k, out);
+                *pv = self.momentum_at(v, transport, p);
+            });
+    }
+
+    /// Vertex `v`'s fields after one sub-cycle: it gives `fraction · m_v` across each of
+    /// its outgoing edges and receives `fraction · m_donor` across each incoming one — the
+    /// same product on both sides, so the transfer is conservative to rounding — clamped
+    /// at zero against rounding.
+    fn fields_at(&self, v: usize, m: &[f64], k: usize, out: &mut [f64]) {
+        for (c, o) in out.iter_mut().enumerate() {
+            let mv = m[v * k + c];
+            let mut gone = 0.0;
+            for &fraction in self.given(v) {
+                gone += fraction * mv;
             }
-        });
+            let mut inflow = 0.0;
+            for &(fraction, d, _) in self.received(v) {
+                inflow += fraction * m[d as usize * k + c];
+            }
+            *o = (mv - gone).max(0.0) + inflow;
+        }
+    }
+
+    /// Vertex `v`'s momentum after one sub-cycle: the same fractions of the donors'
+    /// momenta, turned into `F_v` by `R_vd`.
+    fn momentum_at(&self, v: usize, transport: &Transport, p: &[DVec2]) -> DVec2 {
+        let (mut out, mut inflow) = (DVec2::ZERO, DVec2::ZERO);
+        for &fraction in self.given(v) {
+            out += fraction * p[v];
+        }
+        for &(fraction, d, e) in self.received(v) {
+            let r = transport.edge_rotation(e as usize);
+            let r = if v < d as usize { r } else { r.transpose() };
+            inflow += r * (fraction * p[d as usize]);
+        }
+        (p[v] - out) + inflow
     }
 }
 
@@ -1054,10 +1285,24 @@ mod tests {
             plan.transport(&m.t, &mut b1);
             plan.transport_all(&m.t, &mut [&mut a, &mut b]);
             assert_eq!(
-                (a, b),
+                (a.clone(), b.clone()),
                 (a1, b1),
                 "h = {h}: transport_all differs from transport"
             );
+            // the fields and the momentum in one pass: the same fields, the same velocities
+            let mut solvent = before.clone();
+            let mut c = b.clone();
+            let fused = plan.transport_with_momentum(
+                &m.t,
+                &m.transport,
+                &mut [&mut solvent, &mut c],
+                &u,
+                &out,
+            );
+            let (mut s1, mut c1) = (before.clone(), b.clone());
+            plan.transport_all(&m.t, &mut [&mut s1, &mut c1]);
+            assert_eq!((solvent, c), (s1, c1), "h = {h}: fused fields");
+            assert_eq!(fused, mom, "h = {h}: fused momentum");
         }
     }
 

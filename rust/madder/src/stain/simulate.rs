@@ -79,7 +79,7 @@ use faer::Par;
 use glam::{DMat3, DVec2, DVec3};
 use rayon::prelude::*;
 
-use super::advect::{UpwindPlan, advect_velocity_in, dual_fluxes};
+use super::advect::{UpwindPlan, advect_velocity_in, dual_fluxes_in};
 use super::diffuse::{
     Conductivity, DENSITY_TOLERANCE, DensityWork, Ops, SoluteMotion, VELOCITY_TOLERANCE, Wicking,
     check_range, diffuse_densities, diffuse_velocity,
@@ -252,8 +252,15 @@ pub struct Profile {
     /// Body forces (and bringing the velocities of vertices entering the window up to
     /// date).
     pub forces: f64,
-    /// Velocity and density advection.
+    /// Velocity and density advection (the sum of the three parts below, and the
+    /// centred velocity).
     pub advection: f64,
+    /// Part of `advection`: the semi-Lagrangian back-traces of the velocity.
+    pub advection_trace: f64,
+    /// Part of `advection`: the dual fluxes and the upwind plan.
+    pub advection_plan: f64,
+    /// Part of `advection`: the sub-cycles applied to the densities and the momentum.
+    pub advection_apply: f64,
     /// Diffusion of the densities and of the velocity (assembly and CG; the two run
     /// side by side).
     pub diffusion: f64,
@@ -620,6 +627,7 @@ impl Simulator {
 
         // 2. advection (§4.3.1–4.3.2), closed inside the active region
         let active = &w.region.mask;
+        let part = Instant::now();
         let advected = advect_velocity_in(
             topo,
             &w.cloth.rings,
@@ -629,6 +637,8 @@ impl Simulator {
             h,
             active,
         );
+        prof.advection_trace += part.elapsed().as_secs_f64();
+        let part = Instant::now();
         // the densities move with the sub-step's mean velocity: the exact mean under the
         // forces, plus half the change the advection made at its end (module doc)
         let centred: Vec<DVec2> = (0..n)
@@ -640,36 +650,33 @@ impl Simulator {
                 }
             })
             .collect();
-        let mut flux = dual_fluxes(topo, q, &frames, &centred);
-        for (phi, &[a, b]) in flux.iter_mut().zip(topo.edges()) {
-            if !(active[a as usize] && active[b as usize]) {
-                *phi = 0.0;
-            }
-        }
+        let flux = dual_fluxes_in(topo, q, &frames, &centred, active);
         let plan = UpwindPlan::new(topo, &geometry.vertex_area, &flux, h)?;
         prof.transport_cycles += plan.substeps();
         loc.cycles += plan.substeps();
-        // the momentum advection needs the solvent before its transport
-        let solvent_before = p
-            .momentum_advection
-            .then(|| loc.fields.free_solvent.clone());
-        {
+        prof.advection_plan += part.elapsed().as_secs_f64();
+        let part = Instant::now();
+        // the densities, and with the momentum form the solvent's momentum alongside
+        let arrived = {
             let f = &mut loc.fields;
             let mut color = f.color_free.as_ref().map(|c| split_rgb(c));
             let mut fields: Vec<&mut [f64]> = vec![&mut f.free_solvent, &mut f.solute];
             if let Some(c) = color.as_mut() {
                 fields.extend(c.iter_mut().map(|v| v.as_mut_slice()));
             }
-            plan.transport_all(topo, &mut fields);
             prof.transport_passes += plan.substeps() * fields.len();
+            let arrived = if p.momentum_advection {
+                plan.transport_with_momentum(topo, &transport, &mut fields, &forced, &advected)
+            } else {
+                plan.transport_all(topo, &mut fields);
+                advected
+            };
             if let (Some(c), Some(cf)) = (color, f.color_free.as_mut()) {
                 merge_rgb(&c, cf);
             }
-        }
-        let arrived = match solvent_before {
-            Some(before) => plan.momentum_velocity(topo, &transport, &before, &forced, &advected),
-            None => advected,
+            arrived
         };
+        prof.advection_apply += part.elapsed().as_secs_f64();
         lap(&mut prof.advection);
         // the second half of the forces, at the vertex the liquid arrived at
         loc.velocity = arrived
