@@ -269,6 +269,14 @@ def madder_rows(result):
     parts = ("window", "geometry", "forces", "advection", "diffusion", "interaction")
     phases = ", ".join(f"{p} {1e3 * prof[p] / k:.1f}" for p in parts if p in prof)
     row("  of which, per sub-step (ms, last repetition)", "", f" {phases}")
+    split = ("advection_trace", "advection_plan", "advection_apply")
+    if all(p in prof for p in split):
+        trace, plan, apply = (1e3 * prof[p] / k for p in split)
+        row(
+            "  advection: back-traces / fluxes + plan / sub-cycles (ms)",
+            "",
+            f" {trace:.1f} / {plan:.1f} / {apply:.1f}",
+        )
     row(
         "  CG iterations / transport cycles per sub-step",
         "",
