@@ -528,9 +528,10 @@ impl Simulator {
     }
 
     /// Sub-steps of a frame of `dt` on the window `w` from the vertex frames `start` to the
-    /// frames `end` at the frame's positions (window order): the user's [`StainParams::substeps`], or more so
-    /// that the frames of the active vertices turn (about their normals) by at most
-    /// [`MAX_TURN`] per sub-step (module doc, "Fast rotation").
+    /// frames `end` at the frame's positions (window order): the user's
+    /// [`StainParams::substeps`], or more so that the frames of the active vertices turn
+    /// (about their normals) by at most [`MAX_TURN`] per sub-step (module doc, "Fast
+    /// rotation").
     fn substeps(&self, w: &Window, end: &VertexFrames, start: &VertexFrames, dt: f64) -> usize {
         let asked = self.params.substeps as usize;
         if !self.params.forces.coriolis {
