@@ -138,16 +138,7 @@ impl OneRings {
         let faces = topology.faces();
         // vertex → incident (face, corner), in face order
         let (corner_ptr, corners) = incidence(n, faces);
-        // edge lookup: edges are sorted by (a, b), so those starting at a are contiguous
-        let edges = topology.edges();
-        let mut edge_ptr = vec![0u32; n + 1];
-        for &[a, _] in edges {
-            edge_ptr[a as usize + 1] += 1;
-        }
-        for v in 0..n {
-            edge_ptr[v + 1] += edge_ptr[v];
-        }
-        let edge_end: Vec<u32> = edges.iter().map(|&[_, b]| b).collect();
+        let (edge_ptr, edge_end) = edge_index(topology);
         let lookup = |i: u32, j: u32| find_edge(&edge_ptr, &edge_end, i, j);
 
         // in chunks of vertices, each laid out as the whole is; joined in vertex order
@@ -239,15 +230,7 @@ impl OneRings {
         let n = topology.n_vertices();
         let faces = topology.faces();
         let (corner_ptr, corners) = incidence(n, faces);
-        let edges = topology.edges();
-        let mut edge_ptr = vec![0u32; n + 1];
-        for &[a, _] in edges {
-            edge_ptr[a as usize + 1] += 1;
-        }
-        for v in 0..n {
-            edge_ptr[v + 1] += edge_ptr[v];
-        }
-        let edge_end: Vec<u32> = edges.iter().map(|&[_, b]| b).collect();
+        let (edge_ptr, edge_end) = edge_index(topology);
         let lookup = |i: u32, j: u32| find_edge(&edge_ptr, &edge_end, i, j);
         const CHUNK: usize = 4096;
         let chunks: Vec<FanChunk> = (0..n.div_ceil(CHUNK))
@@ -411,6 +394,22 @@ impl OneRings {
     pub fn orientation_reversing_edges(&self) -> &[u32] {
         &self.reversing
     }
+}
+
+/// The edge lookup of [`find_edge`]: edges are sorted by `(a, b)`, so those starting at
+/// `a` are contiguous; returns the first edge of each lower endpoint and every edge's
+/// upper endpoint.
+fn edge_index(topology: &Topology) -> (Vec<u32>, Vec<u32>) {
+    let n = topology.n_vertices();
+    let edges = topology.edges();
+    let mut edge_ptr = vec![0u32; n + 1];
+    for &[a, _] in edges {
+        edge_ptr[a as usize + 1] += 1;
+    }
+    for v in 0..n {
+        edge_ptr[v + 1] += edge_ptr[v];
+    }
+    (edge_ptr, edges.iter().map(|&[_, b]| b).collect())
 }
 
 /// Index of the edge `{i, j}` in the sorted edge list (`edge_ptr`: the first edge of each

@@ -1024,9 +1024,8 @@ mod tests {
         assert!(iterations[2] < iterations[0], "{iterations:?}");
     }
 
-    #[test]
-    fn bochner_block_system_still_solves() {
-        let n = 12;
+    /// The Bochner system (stiffness plus lumped mass) of a sheared `n × n` grid.
+    fn bochner_system(n: usize) -> (BochnerPattern, Vec<f64>) {
         let (topo, pos) = sheared_mesh(n, 0.3, true);
         let geom = Geometry::new(&topo, &pos).unwrap();
         let rings = OneRings::new(&topo);
@@ -1037,6 +1036,13 @@ mod tests {
         let stiffness = cotan_stiffness(&topo, &geom, &scalar, 0.05);
         let mut values = bochner_stiffness(&scalar, &pattern, &stiffness, &transport);
         add_lumped_mass_blocks(&geom, &pattern, 1.0, &mut values);
+        (pattern, values)
+    }
+
+    #[test]
+    fn bochner_block_system_still_solves() {
+        let n = 12;
+        let (pattern, values) = bochner_system(n);
         let b: Vec<f64> = (0..2 * n * n)
             .map(|i| ((i * 7 % 11) as f64).cos())
             .collect();
@@ -1060,17 +1066,7 @@ mod tests {
 
     #[test]
     fn rebuilt_in_old_memory_is_new_and_its_updates_are_ic0s() {
-        let n = 12;
-        let (topo, pos) = sheared_mesh(n, 0.3, true);
-        let geom = Geometry::new(&topo, &pos).unwrap();
-        let rings = OneRings::new(&topo);
-        let frames = VertexFrames::new(&rings, &pos).unwrap();
-        let transport = Transport::new(&topo, &rings, &geom, &frames, &pos);
-        let scalar = VertexPattern::new(&topo);
-        let block = BochnerPattern::new(&scalar);
-        let stiffness = cotan_stiffness(&topo, &geom, &scalar, 0.05);
-        let mut values = bochner_stiffness(&scalar, &block, &stiffness, &transport);
-        add_lumped_mass_blocks(&geom, &block, 1.0, &mut values);
+        let (block, values) = bochner_system(12);
         let (small, small_values) = obtuse_anisotropic_system(7);
         let solve = |cg: &mut WarmCg, values: &[f64], m: usize| {
             let b: Vec<f64> = (0..2 * m).map(|i| ((i * 7 % 11) as f64).cos()).collect();
