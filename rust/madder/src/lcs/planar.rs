@@ -37,7 +37,7 @@
 use glam::{DMat2, DVec2, DVec3};
 use rayon::prelude::*;
 
-use super::rk::Moves;
+use super::rk::{Moves, two};
 use super::trace::{Charts, Located, Velocity, clamp, eval_checked};
 use crate::error::LcsError;
 use crate::mesh::Topology;
@@ -431,8 +431,10 @@ pub(crate) fn flow_map_planar(
     let m = p.len();
     let h = span / steps.max(1) as f64;
     let with_at = velocity.uses_location();
-    let mut q = vec![DVec2::ZERO; m];
-    let mut q_at: Vec<Option<Located>> = vec![None; m];
+    // per particle and slot ([`Moves::slot`]): a stage point, located if a walk ended there
+    let slots = moves.slots();
+    let mut slot_q = vec![vec![DVec2::ZERO; m]; slots];
+    let mut slot_at: Vec<Vec<Option<Located>>> = vec![vec![None; m]; slots];
     let mut stage_at: Vec<Located> = Vec::new();
     let mut points = vec![DVec3::ZERO; m];
     let mut w = vec![DVec3::ZERO; m];
@@ -443,25 +445,35 @@ pub(crate) fn flow_map_planar(
             let ts = moves.time(stage, t0, step, h);
             let k_ref = &k;
             let (p_ref, p_at_ref, anchor_ref) = (&p, &p_at, &anchor);
-            (&mut q, &mut q_at, &mut points)
-                .into_par_iter()
-                .with_min_len(MIN_LEN)
-                .enumerate()
-                .for_each(|(i, (qi, qa, x))| {
-                    (*qi, *qa) = match stage {
-                        0 => (p_ref[i], p_at_ref[i]),
-                        _ => {
-                            // each stage point walked on from the previous one, by the
-                            // same displacements as trace.rs (the same points when no
-                            // walk stopped at a border)
-                            let target = *qi + moves.to(stage, h, k_ref, i);
-                            advance(charts, planar, (*qi, *qa), target, &anchor_ref[i])
-                        }
-                    };
-                    *x = planar.world(*qi);
-                });
+            let dst = moves.slot(stage);
+            if stage == 0 {
+                (&mut slot_q[dst], &mut slot_at[dst], &mut points)
+                    .into_par_iter()
+                    .with_min_len(MIN_LEN)
+                    .enumerate()
+                    .for_each(|(i, (qi, qa, x))| {
+                        (*qi, *qa) = (p_ref[i], p_at_ref[i]);
+                        *x = planar.world(*qi);
+                    });
+            } else {
+                // each stage point walked on from the earlier one nearest in time, by the
+                // same displacements as trace.rs (the same points when no walk stopped at
+                // a border)
+                let src = moves.slot(moves.source(stage));
+                let (from_q, to_q) = two(&mut slot_q, src, dst);
+                let (from_at, to_at) = two(&mut slot_at, src, dst);
+                (to_q, to_at, &mut points[..], from_q, from_at)
+                    .into_par_iter()
+                    .with_min_len(MIN_LEN)
+                    .enumerate()
+                    .for_each(|(i, (qi, qa, x, &q0, &a0))| {
+                        let target = q0 + moves.to(stage, h, k_ref, i);
+                        (*qi, *qa) = advance(charts, planar, (q0, a0), target, &anchor_ref[i]);
+                        *x = planar.world(*qi);
+                    });
+            }
             if with_at {
-                stage_at = (&q, &q_at, &anchor)
+                stage_at = (&slot_q[dst], &slot_at[dst], &anchor)
                     .into_par_iter()
                     .with_min_len(MIN_LEN)
                     .map(|(&x, &xa, (a, ap))| {
@@ -477,7 +489,8 @@ pub(crate) fn flow_map_planar(
                 .for_each(|(ki, wi)| *ki = DVec2::new(planar.u.dot(*wi), planar.w.dot(*wi)));
         }
         let k_ref = &k;
-        (&mut p, &mut p_at, &mut anchor, &q, &q_at)
+        let src = moves.slot(moves.source(stages));
+        (&mut p, &mut p_at, &mut anchor, &slot_q[src], &slot_at[src])
             .into_par_iter()
             .with_min_len(MIN_LEN)
             .enumerate()

@@ -17,17 +17,29 @@
 //!   walks and the flat path's clearance test need. On the double gyre at 401×201,
 //!   T = −10 it reaches numbacs' integration error at rtol 1e-4 in 6 steps, 72
 //!   evaluations, where RK4 takes 21 steps, 84 (ARCHITECTURE.md); its global error is
-//!   `O(h⁸)` (`tests/rk8.rs` measures the order). On a curved mesh its stage points jump
-//!   back and forth in time (`c` is not increasing), so the walks between them are about
-//!   1.27× a step's displacement where RK4's are about 1×.
+//!   `O(h⁸)` (`tests/rk8.rs` measures the order). Its stage points jump back and forth in
+//!   time (`c` = 0, 0.05, 0.08, 0.12, 0.28, 0.33, 0.25, 0.31, 0.65, 0.6, 0.86, 1), which
+//!   decides how far the walks go (next section).
 //!
-//! ## Walking from one stage point to the next
-//! The tracer reaches stage point `y_i` from `y_{i−1}`, not from `p` ([`super::trace`],
-//! "Integrator"): by `h Σ_j (a_ij − a_{i−1,j}) k_j`, and the step's end from the last stage
-//! point by `h Σ_j (b_j − a_{s−1,j}) k_j` ([`Moves`]). On a flat or developable mesh these
-//! are the same points as from `p`; on a curved one they differ by the holonomy of the
-//! vertices passed, as for RK4. Stage `c_i = 1` is evaluated at the step's end time
-//! computed as `t0 + (n + 1) h`, so it lands on the frames' times exactly.
+//! ## Walking from stage point to stage point
+//! The tracer reaches stage point `y_i` from an earlier stage point `y_{src(i)}`, not from
+//! `p` ([`super::trace`], "Integrator"): by `h Σ_j (a_ij − a_{src(i),j}) k_j`, and the
+//! step's end from the last stage point by `h Σ_j (b_j − a_{s−1,j}) k_j` ([`Moves`]).
+//! `src(i)` is the earlier stage nearest in time (ties: the later), since a walk's length,
+//! and so its cost, is about `|c_i − c_src| h |v|`. For RK4 that is the stage before
+//! (`c` increases), a walk of about one step's displacement per step. For RK8, walking from
+//! the stage before would cover `Σ |c_i − c_{i−1}| ≈ 1.27` steps' displacement; from the
+//! nearest (stage 6 from 4, 7 and 8 from 5, 10 from 8) about 1.11, 12% fewer crossings on
+//! the curved bench. The stage points are kept per particle in a few slots, each reused
+//! once no later walk starts from it (3 for RK8, 2 for RK4).
+//!
+//! On a flat or developable mesh these are the same points as from `p`, up to rounding and
+//! to walks stopped at a border (a stage point stopped at a border is where the walks from
+//! it start: which stage a walk starts from matters there; the flat path
+//! [`super::planar`] walks from the same sources, so the two agree). On a curved mesh they
+//! differ by the holonomy of the vertices passed, a discretization error of the
+//! unfolding's order. Stage `c_i = 1` is evaluated at the step's end time computed as
+//! `t0 + (n + 1) h`, so it lands on the frames' times exactly.
 
 use glam::DVec2;
 
@@ -200,12 +212,21 @@ const RK8: Tableau = Tableau {
     ],
 };
 
-/// A scheme's moves from one stage point to the next (module doc): row `i − 1` gives the
-/// coefficients of `h k_j` from `y_{i−1}` to `y_i` for `i = 1 … s − 1`, row `s − 1` from
-/// `y_{s−1}` to the step's end. Zero coefficients are dropped.
+/// A scheme's moves between its stage points (module doc, "Walking"): stage point `y_i`
+/// (`1 ≤ i < s`) is reached from the earlier stage point nearest in time, `y_{src(i)}`
+/// (`y_0 = p`), by `h Σ_j (a_ij − a_{src(i),j}) k_j`, and the step's end from the last
+/// stage point by `h Σ_j (b_j − a_{s−1,j}) k_j`. Zero coefficients are dropped.
+///
+/// The stage points live in a few *slots* (a walk's start and end, per particle), reused
+/// once no later move starts from them: [`Self::slot`].
 #[derive(Debug, Clone)]
 pub(crate) struct Moves {
     rows: Vec<Vec<(usize, f64)>>,
+    /// `src[i − 1]`: the stage point the move onto `i` starts from (`i = s`: the end).
+    src: Vec<usize>,
+    /// The slot each stage point is kept in.
+    slot: Vec<usize>,
+    slots: usize,
     c: &'static [f64],
 }
 
@@ -214,17 +235,51 @@ impl Moves {
         let t = scheme.tableau();
         let s = t.c.len();
         let row = |i: usize| -> &[f64] { if i == 0 { &[] } else { t.a[i - 1] } };
+        // the earlier stage nearest in time (ties: the later one, so a chain of stages at
+        // increasing times, as RK4's, walks from each to the next)
+        let src: Vec<usize> = (1..=s)
+            .map(|i| {
+                if i == s {
+                    return i - 1;
+                }
+                (0..i)
+                    .rev()
+                    .min_by(|&x, &y| {
+                        let (dx, dy) = ((t.c[i] - t.c[x]).abs(), (t.c[i] - t.c[y]).abs());
+                        dx.total_cmp(&dy)
+                    })
+                    .unwrap_or(0)
+            })
+            .collect();
         let rows = (1..=s)
             .map(|i| {
                 let to = if i == s { t.b } else { row(i) };
-                let from = row(i - 1);
+                let from = row(src[i - 1]);
                 (0..to.len())
                     .map(|j| (j, to[j] - from.get(j).copied().unwrap_or(0.0)))
                     .filter(|&(_, c)| c != 0.0)
                     .collect()
             })
             .collect();
-        Self { rows, c: t.c }
+        // slots: stage j's is free once every move starting from j is made; the move onto
+        // `i` reads its source's slot and writes its own, so the two differ
+        let last_read: Vec<usize> = (0..s)
+            .map(|j| (1..=s).filter(|&i| src[i - 1] == j).max().unwrap_or(j))
+            .collect();
+        let mut slot = vec![0; s];
+        let mut slots = 0;
+        for i in 0..s {
+            let busy = |x: usize| (0..i).any(|j| slot[j] == x && last_read[j] >= i);
+            slot[i] = (0..).find(|&x| !busy(x)).unwrap_or(0);
+            slots = slots.max(slot[i] + 1);
+        }
+        Self {
+            rows,
+            src,
+            slot,
+            slots,
+            c: t.c,
+        }
     }
 
     /// Stages per step.
@@ -241,8 +296,24 @@ impl Moves {
         }
     }
 
+    /// The stage point the move onto stage `i` (`1 ≤ i ≤ s`, `s`: the step's end) starts
+    /// from.
+    pub(crate) fn source(&self, i: usize) -> usize {
+        self.src[i - 1]
+    }
+
+    /// The slot stage point `i` is kept in (`0 ≤ i < s`).
+    pub(crate) fn slot(&self, i: usize) -> usize {
+        self.slot[i]
+    }
+
+    /// How many slots the stage points need.
+    pub(crate) fn slots(&self) -> usize {
+        self.slots
+    }
+
     /// The move of particle `p` onto stage point `i` (`1 ≤ i < s`) from stage point
-    /// `i − 1`, or (`i = s`) to the step's end, from the stage velocities `k`.
+    /// [`Self::source`]`(i)`, or (`i = s`) to the step's end, from the stage velocities `k`.
     #[inline]
     pub(crate) fn to(&self, i: usize, h: f64, k: &[Vec<DVec2>], p: usize) -> DVec2 {
         let mut d = DVec2::ZERO;
@@ -250,6 +321,18 @@ impl Moves {
             d += c * k[j][p];
         }
         h * d
+    }
+}
+
+/// Slot `a` to read and slot `b` to write (`a ≠ b`).
+pub(crate) fn two<T>(slots: &mut [Vec<T>], a: usize, b: usize) -> (&[T], &mut [T]) {
+    assert_ne!(a, b, "a move reads and writes the same slot");
+    if a < b {
+        let (lo, hi) = slots.split_at_mut(b);
+        (&lo[a], &mut hi[0])
+    } else {
+        let (lo, hi) = slots.split_at_mut(a);
+        (&hi[0], &mut lo[b])
     }
 }
 
@@ -275,12 +358,21 @@ mod tests {
                 .map(|j| vec![DVec2::new((j as f64 * 1.7).sin(), (j as f64 * 0.3).cos())])
                 .collect();
             let h = 0.37;
-            let mut y = DVec2::ZERO;
+            let mut y = vec![DVec2::ZERO; s + 1];
             for i in 1..=s {
-                y += moves.to(i, h, &k, 0);
+                y[i] = y[moves.source(i)] + moves.to(i, h, &k, 0);
                 let row = if i == s { t.b } else { t.a[i - 1] };
                 let want: DVec2 = row.iter().zip(&k).map(|(a, kj)| h * a * kj[0]).sum();
-                assert!(y.distance(want) < 1e-13, "{scheme:?} stage {i}");
+                assert!(y[i].distance(want) < 1e-13, "{scheme:?} stage {i}");
+            }
+            // a stage's slot is not overwritten before the last move from it
+            for i in 1..s {
+                for j in 0..i {
+                    let read_later = (i..=s).any(|r| moves.source(r) == j);
+                    if read_later {
+                        assert_ne!(moves.slot(i), moves.slot(j), "{scheme:?} {j} {i}");
+                    }
+                }
             }
         }
     }

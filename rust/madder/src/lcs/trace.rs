@@ -46,10 +46,12 @@
 //! `y_i = p + h Σ_j a_ij k_j` from the particle `p`, each stage's velocity brought back
 //! into `p`'s chart, and the particle moves to `p + h Σ_j b_j k_j`; for RK4 the stage points
 //! are `p + h/2 k_1`, `p + h/2 k_2`, `p + h k_3` and the end `p + h (k_1 + 2k_2 + 2k_3 + k_4) / 6`.
-//! Each of these points is walked to from the previous one, not from `p` (`y_i` is
-//! `y_{i−1}` moved by `h Σ_j (a_ij − a_{i−1,j}) k_j`): on a flat or developable mesh the
-//! unfolded strip is the plane and the points are the same, but a step crosses its edges
-//! about once instead of once per stage (the walks are most of the cost). On a curved mesh
+//! Each of these points is walked to from an earlier stage point, the one nearest in time
+//! (for RK4 the previous one), not from `p` (`y_i` is `y_{src(i)}` moved by
+//! `h Σ_j (a_ij − a_{src(i),j}) k_j`, [`super::rk`], "Walking"): on a flat or developable
+//! mesh the unfolded strip is the plane and the points are the same, but a step crosses
+//! its edges about once (RK8: 1.11 times) instead of once per stage (the walks are most of
+//! the cost). On a curved mesh
 //! the unfolding, hence the point reached, depends on the path by the holonomy of the
 //! vertices passed, a discretization error of the same order as the unfolding's. On a flat
 //! mesh with a velocity that is smooth across the triangles this is the scheme itself,
@@ -116,7 +118,7 @@ use glam::{DMat2, DVec2, DVec3};
 use rayon::prelude::*;
 
 use super::planar::{Planar, flow_map_planar};
-use super::rk::{Moves, Scheme};
+use super::rk::{Moves, Scheme, two};
 use crate::error::{LcsError, MeshError};
 use crate::mesh::Topology;
 use crate::mesh::geometry::check_positions;
@@ -1142,12 +1144,16 @@ pub fn flow_map_with(
     let m = state.len();
     let h = span / steps.max(1) as f64;
     let fixed = motion.is_fixed();
-    let mut stage_at = vec![state[0]; m];
-    let mut stage_rot = vec![Orth::IDENTITY; m];
-    // per particle, at its stage point: the map of a displacement in the particle's chart
-    // to barycentric rates there (for the next walk), and on a fixed mesh the rows of
-    // `R (u, n̂ × u)ᵀ`, which give the stage velocity in the particle's chart from `w`
-    let mut to_bary = vec![DMat2::ZERO; m];
+    // per particle and slot ([`Moves::slot`]): a stage point, the map of its face's chart
+    // into the particle's, and the map of a displacement in the particle's chart to
+    // barycentric rates there (for the walks from it)
+    let slots = moves.slots();
+    let mut slot_at = vec![vec![state[0]; m]; slots];
+    let mut slot_rot = vec![vec![Orth::IDENTITY; m]; slots];
+    let mut slot_bary = vec![vec![DMat2::ZERO; m]; slots];
+    // per particle, at the current stage point: its world position and, on a fixed mesh,
+    // the rows of `R (u, n̂ × u)ᵀ`, which give the stage velocity in the particle's chart
+    // from `w`
     let mut axes = vec![[DVec3::ZERO; 2]; m];
     let mut points = vec![DVec3::ZERO; m];
     let mut outside_at = if velocity.uses_location() {
@@ -1186,49 +1192,75 @@ pub fn flow_map_with(
                     rm.x_axis.y * fr.u + rm.y_axis.y * fr.v,
                 ];
             };
-            // each stage point walked on from the previous one (module doc), two particles
-            // at a time ([`Charts::walk_pair`])
-            (
-                stage_at.par_chunks_mut(2),
-                stage_rot.par_chunks_mut(2),
-                points.par_chunks_mut(2),
-                to_bary.par_chunks_mut(2),
-                axes.par_chunks_mut(2),
-                state.par_chunks(2),
-            )
-                .into_par_iter()
-                .enumerate()
-                .for_each(|(c, (l, r, x, tb, ax, p))| {
-                    let step_from_prev = |i: usize| moves.to(stage, h, k_ref, i);
-                    let n = l.len();
-                    let mut corners = [None; 2];
-                    if stage == 0 {
+            let dst = moves.slot(stage);
+            if stage == 0 {
+                (
+                    slot_at[dst].par_chunks_mut(2),
+                    slot_rot[dst].par_chunks_mut(2),
+                    points.par_chunks_mut(2),
+                    slot_bary[dst].par_chunks_mut(2),
+                    axes.par_chunks_mut(2),
+                    state.par_chunks(2),
+                )
+                    .into_par_iter()
+                    .for_each(|(l, r, x, tb, ax, p)| {
                         l.copy_from_slice(p);
                         r.fill(Orth::IDENTITY);
-                    } else if n == 2 {
-                        let d = [0, 1].map(|j| bary_step(tb[j], step_from_prev(2 * c + j)));
-                        let [(la, ra, ca), (lb, rb, cb)] =
-                            charts.walk_pair((&l[0], d[0]), (&l[1], d[1]));
-                        (l[0], r[0]) = (la, r[0].then([ra.a, ra.b], ra.sigma));
-                        (l[1], r[1]) = (lb, r[1].then([rb.a, rb.b], rb.sigma));
-                        corners = [Some(ca), Some(cb)];
-                    } else {
-                        let (e, rw, ce) =
-                            charts.walk_bary(&l[0], bary_step(tb[0], step_from_prev(2 * c)));
-                        (l[0], r[0]) = (e, r[0].then([rw.a, rw.b], rw.sigma));
-                        corners[0] = Some(ce);
-                    }
-                    for j in 0..n {
-                        let cj =
-                            corners[j].unwrap_or_else(|| charts.hop[l[j].face as usize].corners);
-                        stage_point(cj, &mut l[j], &mut r[j], &mut x[j], &mut tb[j], &mut ax[j]);
-                    }
-                });
+                        for j in 0..l.len() {
+                            let cj = charts.hop[l[j].face as usize].corners;
+                            stage_point(
+                                cj, &mut l[j], &mut r[j], &mut x[j], &mut tb[j], &mut ax[j],
+                            );
+                        }
+                    });
+            } else {
+                // each stage point walked on from the earlier one nearest in time (module
+                // doc), two particles at a time ([`Charts::walk_pair`])
+                let src = moves.slot(moves.source(stage));
+                let (from_at, to_at) = two(&mut slot_at, src, dst);
+                let (from_rot, to_rot) = two(&mut slot_rot, src, dst);
+                let (from_bary, to_bary) = two(&mut slot_bary, src, dst);
+                (
+                    to_at.par_chunks_mut(2),
+                    to_rot.par_chunks_mut(2),
+                    points.par_chunks_mut(2),
+                    to_bary.par_chunks_mut(2),
+                    axes.par_chunks_mut(2),
+                    from_at.par_chunks(2),
+                    from_rot.par_chunks(2),
+                    from_bary.par_chunks(2),
+                )
+                    .into_par_iter()
+                    .enumerate()
+                    .for_each(|(c, (l, r, x, tb, ax, l0, r0, tb0))| {
+                        let mv = |j: usize| bary_step(tb0[j], moves.to(stage, h, k_ref, 2 * c + j));
+                        let mut corners = [None; 2];
+                        if l.len() == 2 {
+                            let [(la, ra, ca), (lb, rb, cb)] =
+                                charts.walk_pair((&l0[0], mv(0)), (&l0[1], mv(1)));
+                            (l[0], r[0]) = (la, r0[0].then([ra.a, ra.b], ra.sigma));
+                            (l[1], r[1]) = (lb, r0[1].then([rb.a, rb.b], rb.sigma));
+                            corners = [Some(ca), Some(cb)];
+                        } else {
+                            let (e, rw, ce) = charts.walk_bary(&l0[0], mv(0));
+                            (l[0], r[0]) = (e, r0[0].then([rw.a, rw.b], rw.sigma));
+                            corners[0] = Some(ce);
+                        }
+                        for j in 0..l.len() {
+                            let cj = corners[j]
+                                .unwrap_or_else(|| charts.hop[l[j].face as usize].corners);
+                            stage_point(
+                                cj, &mut l[j], &mut r[j], &mut x[j], &mut tb[j], &mut ax[j],
+                            );
+                        }
+                    });
+            }
+            let (stage_at, stage_rot) = (&slot_at[dst], &slot_rot[dst]);
             if velocity.uses_location() {
                 // the velocity reads the input's faces
                 outside_at
                     .par_iter_mut()
-                    .zip(&stage_at)
+                    .zip(stage_at)
                     .for_each(|(o, l)| *o = charts.outside(l));
             }
             eval_checked(velocity, ts, &outside_at, &points, &live, &mut w)?;
@@ -1241,8 +1273,8 @@ pub fn flow_map_with(
             } else {
                 k[stage]
                     .par_iter_mut()
-                    .zip(&stage_at)
-                    .zip(&stage_rot)
+                    .zip(stage_at)
+                    .zip(stage_rot)
                     .zip(&w)
                     .for_each(|(((ki, l), r), &wi)| {
                         *ki = r.mat() * charts.chart_velocity(motion, at, l, wi);
@@ -1250,10 +1282,11 @@ pub fn flow_map_with(
             }
         }
         let last = |i: usize| moves.to(stages, h, &k, i);
+        let src = moves.slot(moves.source(stages));
         (
             state.par_chunks_mut(2),
-            stage_at.par_chunks(2),
-            to_bary.par_chunks(2),
+            slot_at[src].par_chunks(2),
+            slot_bary[src].par_chunks(2),
         )
             .into_par_iter()
             .enumerate()
