@@ -94,6 +94,17 @@ fn bench(level: u32, radius: Option<f64>, frames: usize, report: bool) -> (usize
     if !report {
         return (wet, fine_n);
     }
+    // the last frame's fine stain and wetness (whole refined numbering), for comparing
+    // two builds whose results differ (`MADDER_BENCH_DUMP=file`: little-endian f64s)
+    if let Some(path) = std::env::var_os("MADDER_BENCH_DUMP") {
+        let bytes: Vec<u8> = sim
+            .fine_solute_density()
+            .iter()
+            .chain(&sim.fine_wetness())
+            .flat_map(|x| x.to_le_bytes())
+            .collect();
+        std::fs::write(path, bytes).unwrap();
+    }
     // FNV-1a over the bits of the cloth-level read-outs: equal = bit-identical results
     let (s, w, d) = (sim.solute_density(), sim.wetness(), sim.deposit());
     let checksum = s

@@ -57,6 +57,7 @@ use std::time::Instant;
 
 use faer::Par;
 use glam::{DMat3, DVec2, DVec3};
+use rayon::prelude::*;
 
 use super::diffuse::{Conductivity, WovenFaces};
 use super::simulate::{Profile, Simulator, StainParams};
@@ -132,18 +133,26 @@ impl Fine {
         let old = &sim.cloth;
         let (topology, old_new) = p.extended_topology(&old.topology)?;
         let flipped = p.face_values(&self.flipped);
-        let rings = if old_new.is_empty() {
-            OneRings::with_orientation(&topology, flipped)
-        } else {
-            OneRings::extended(&old.rings, &topology, flipped, &old_new)
-        };
-        let adjacency = RingAdjacency::new(&topology);
-        let rest = p.prolong(&self.rest);
+        // the fans beside the neighbour lists and the rest positions (independent)
+        let (rings, (adjacency, rest)) = rayon::join(
+            || {
+                if old_new.is_empty() {
+                    OneRings::with_orientation(&topology, flipped)
+                } else {
+                    OneRings::extended(&old.rings, &topology, flipped, &old_new)
+                }
+            },
+            || (RingAdjacency::new(&topology), p.prolong(&self.rest)),
+        );
         // a vertex not reset had its whole ring: its rest frame is unchanged
         let mut rest_frames = old.rest_frames.clone();
         rest_frames.frame.resize(n, DMat3::IDENTITY);
-        for &j in &reset {
-            rest_frames.frame[j] = VertexFrames::frame_of(&rings, &rest, j);
+        let fresh: Vec<DMat3> = reset
+            .par_iter()
+            .map(|&j| VertexFrames::frame_of(&rings, &rest, j))
+            .collect();
+        for (&j, frame) in reset.iter().zip(fresh) {
+            rest_frames.frame[j] = frame;
         }
         let positions = p.prolong(&self.current);
         let (at, t_ref, world) = match &self.reference {
@@ -154,7 +163,7 @@ impl Fine {
         // summed over its faces in face order, as `vertex_areas` does
         let faces = topology.faces();
         let reset_state: Vec<(DMat3, f64)> = reset
-            .iter()
+            .par_iter()
             .map(|&j| {
                 let frame = adjacency.rotation(&rest, &at, j) * rest_frames.frame[j];
                 let mut around: Vec<u32> = rings.wedges(j).iter().map(|w| w.face).collect();
@@ -207,7 +216,10 @@ impl Fine {
             st.velocity[j] = world.as_ref().map_or(DVec2::ZERO, |u| to_local(u[j]));
             st.vertex_area[j] = area;
         }
-        sim.window = None;
+        // the window goes (its mesh is the old part's); its solvers' memory serves the next
+        if let Some(cg) = sim.window.take().and_then(|w| w.cg) {
+            sim.spare = Some(cg);
+        }
         sim.rescan = true;
         sim.prepared = false;
         Ok(())
@@ -397,7 +409,9 @@ impl Detailed {
             check_positions(fine.partial.coarse(), a)?;
         }
         super::diffuse::check_range("time step", dt, dt > 0.0, "finite and > 0")?;
-        fine.prepare(&mut self.sim)?;
+        // in the rayon pool, as `Simulator::step` runs its frame: the parallel loops of a
+        // growth and a window build then start from a worker
+        rayon::scope(|_| fine.prepare(&mut self.sim))?;
         let r = &fine.partial;
         let after = after.map(|a| r.prolong(a));
         self.sim.step(&r.prolong(positions), dt, after.as_deref())?;

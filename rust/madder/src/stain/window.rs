@@ -185,29 +185,43 @@ impl Window {
         for (j, &v) in vertices.iter().enumerate() {
             local[v as usize] = j as u32;
         }
-        // the window's edges and fans are the cloth's, renumbered (module doc)
+        // the window's edges and fans are the cloth's, renumbered (module doc); the
+        // solvers' analysis needs only the pattern, so the fans and the rest are derived
+        // beside it (the two analyses are uneven: one core idles through the end of the
+        // larger)
         let (topology, edge_local) = topo.restricted(&faces, &vertices, &local);
-        let rings = OneRings::restricted(
-            &cloth.rings,
-            &topology,
-            &faces,
-            &vertices,
-            &face_local,
-            &local,
-            &edge_local,
-        );
-        let adjacency = RingAdjacency::new(&topology);
         let pattern = VertexPattern::new(&topology);
         let region = Restriction::new(&pattern, pick(&vertices, &mask));
-        let cg = solvers(&region, reuse);
-        let part = Cloth {
-            rest: pick(&vertices, &cloth.rest),
-            rest_frames: VertexFrames {
-                frame: pick(&vertices, &cloth.rest_frames.frame),
+        let (cg, (rings, adjacency, rest, rest_frames, boundary, irregular)) = rayon::join(
+            || solvers(&region, reuse),
+            || {
+                let rings = OneRings::restricted(
+                    &cloth.rings,
+                    &topology,
+                    &faces,
+                    &vertices,
+                    &face_local,
+                    &local,
+                    &edge_local,
+                );
+                (
+                    rings,
+                    RingAdjacency::new(&topology),
+                    pick(&vertices, &cloth.rest),
+                    VertexFrames {
+                        frame: pick(&vertices, &cloth.rest_frames.frame),
+                    },
+                    pick(&vertices, &cloth.boundary),
+                    cloth.irregular.as_ref().map(|m| pick(&vertices, m)),
+                )
             },
+        );
+        let part = Cloth {
+            rest,
+            rest_frames,
             conductivity: cloth.conductivity.faces(&faces),
-            boundary: pick(&vertices, &cloth.boundary),
-            irregular: cloth.irregular.as_ref().map(|m| pick(&vertices, m)),
+            boundary,
+            irregular,
             topology,
             rings,
             adjacency,
@@ -348,6 +362,7 @@ impl Simulator {
             WindowPlan::Keep => Ok(false),
             WindowPlan::Build { mask, held } => {
                 let reuse = self.window.take().and_then(|w| w.cg);
+                let reuse = reuse.or_else(|| self.spare.take());
                 self.window = Window::new(&self.cloth, mask, &held, reuse)?;
                 Ok(true)
             }
