@@ -64,7 +64,7 @@ use super::simulate::{Profile, Simulator, StainParams};
 use super::sources::{check_each_nonnegative, check_length};
 use super::state::{Fields, Totals};
 use crate::error::{Error, ParamError};
-use crate::mesh::geometry::{check_positions, vertex_area, vertex_areas};
+use crate::mesh::geometry::{check_positions, vertex_area, vertex_areas, vertex_areas_par};
 use crate::mesh::refine::Partial;
 use crate::mesh::{OneRings, RingAdjacency, Topology, VertexFrames};
 
@@ -410,14 +410,18 @@ impl Detailed {
         }
         super::diffuse::check_range("time step", dt, dt > 0.0, "finite and > 0")?;
         // in the rayon pool, as `Simulator::step` runs its frame: the parallel loops of a
-        // growth and a window build then start from a worker
-        rayon::scope(|_| fine.prepare(&mut self.sim))?;
-        let r = &fine.partial;
-        let after = after.map(|a| r.prolong(a));
-        self.sim.step(&r.prolong(positions), dt, after.as_deref())?;
-        fine.previous = Some(std::mem::replace(&mut fine.current, positions.to_vec()));
-        fine.area = vertex_areas(fine.partial.coarse(), positions);
-        Ok(())
+        // growth, a window build and the placement then start from a worker
+        let sim = &mut self.sim;
+        rayon::scope(|_| {
+            fine.prepare(sim)?;
+            let r = &fine.partial;
+            let after = after.map(|a| r.prolong(a));
+            sim.step(&r.prolong(positions), dt, after.as_deref())?;
+            fine.previous = Some(std::mem::replace(&mut fine.current, positions.to_vec()));
+            let p = &fine.partial;
+            fine.area = vertex_areas_par(p.coarse(), positions, |v| p.faces_around(v));
+            Ok(())
+        })
     }
 
     /// [`Simulator::add_liquid`] with `solvent` per cloth vertex (kg/m²), spread over the
