@@ -50,7 +50,10 @@
 //! ones ([`Topology::extended`]), a vertex with no new face keeps its fan
 //! ([`OneRings::extended`]), and a vertex that is not reset keeps its rest frame, frame
 //! and area; the reset ones get theirs (the area summed over its faces in face order, as
-//! [`vertex_areas`] does). The results are those of rebuilding it all, bit for bit.
+//! [`vertex_areas`] does). The results are those of rebuilding it all, bit for bit. The
+//! window a growth drops leaves its solvers to the next one (built in their memory, as a
+//! window replacing another is), and the growth, the window build, the placement and the
+//! cloth's areas run in the rayon pool, their independent parts side by side.
 
 use std::borrow::Cow;
 use std::time::Instant;

@@ -40,8 +40,10 @@
 //! depends on nothing but the corners in face order and the order of the vertex
 //! numbers). The pattern, the restriction and the IC(0) analysis follow in time
 //! proportional to the window, and the solvers are rebuilt in the memory of the window
-//! they replace ([`WarmCg::rebuild`]: fresh pages cost more than the analysis). The
-//! result is the window built from scratch, bit for bit (a test compares every array on
+//! they replace ([`WarmCg::rebuild`]: fresh pages cost more than the analysis), or of
+//! one a growth of the refined cloth dropped ([`super::detail`]); the fans, neighbour
+//! lists and gathers are derived beside the solvers' analysis, which needs only the
+//! pattern. The result is the window built from scratch, bit for bit (a test compares every array on
 //! a mesh with a hole, a fin, a bow-tie and a flipped face).
 //!
 //! - **Diffusion.** `(M + h K_A) σ' = m` on the active vertices, `K_A` the stiffness
