@@ -268,32 +268,53 @@ pub(super) fn find_liquid(
     area: &[f64],
     mobile_held: f64,
 ) -> (Vec<u32>, Vec<u32>) {
-    let floor = |m: &[f64]| {
-        ACTIVE_THRESHOLD
-            * scan
-                .iter()
-                .map(|&v| v as usize)
-                .filter(|&v| area[v] > 0.0)
-                .map(|v| m[v] / area[v])
-                .fold(0.0, f64::max)
-    };
     let f = fields;
-    let flowing_floor = [floor(&f.free_solvent), floor(&f.solute)];
-    let held_floor = [floor(&f.absorbed_solvent), floor(&f.absorbed_solute)];
+    let by_field = [
+        &f.free_solvent,
+        &f.solute,
+        &f.absorbed_solvent,
+        &f.absorbed_solute,
+    ];
+    // the four peaks in one parallel sweep (a maximum does not depend on the order)
+    let peak = scan
+        .par_iter()
+        .map(|&v| v as usize)
+        .filter(|&v| area[v] > 0.0)
+        .fold(
+            || [0.0; 4],
+            |p, v| std::array::from_fn(|k| f64::max(p[k], by_field[k][v] / area[v])),
+        )
+        .reduce(
+            || [0.0; 4],
+            |a, b| std::array::from_fn(|k| f64::max(a[k], b[k])),
+        );
+    let floor = peak.map(|p| ACTIVE_THRESHOLD * p);
+    // 1 flowing, 2 held, 0 neither
+    let class: Vec<u8> = scan
+        .par_iter()
+        .map(|&v| {
+            let i = v as usize;
+            let above = |k: usize| {
+                let m = by_field[k][i];
+                m > 0.0 && m > floor[k] * area[i]
+            };
+            if loose[i] {
+                0
+            } else if above(0) || above(1) || f.absorbed_solvent[i] > mobile_held * area[i] {
+                1
+            } else if above(2) || above(3) {
+                2
+            } else {
+                0
+            }
+        })
+        .collect();
     let (mut flowing, mut held) = (Vec::new(), Vec::new());
-    for &v in scan {
-        let i = v as usize;
-        let above = |m: &[f64], floor: f64| m[i] > 0.0 && m[i] > floor * area[i];
-        if loose[i] {
-        } else if above(&f.free_solvent, flowing_floor[0])
-            || above(&f.solute, flowing_floor[1])
-            || f.absorbed_solvent[i] > mobile_held * area[i]
-        {
-            flowing.push(v);
-        } else if above(&f.absorbed_solvent, held_floor[0])
-            || above(&f.absorbed_solute, held_floor[1])
-        {
-            held.push(v);
+    for (&v, c) in scan.iter().zip(class) {
+        match c {
+            1 => flowing.push(v),
+            2 => held.push(v),
+            _ => {}
         }
     }
     (flowing, held)
