@@ -5,8 +5,8 @@
 //! the per-cloth-vertex read-outs out), and the memory the refined simulator takes
 //! (resident set growth over the setup and the frames, the part built lazily as the
 //! liquid arrives). Prints figures; asserts nothing about time. `MADDER_BENCH_DUMP=file`
-//! writes each case's last-frame fine stain and wetness there (little-endian f64s), to
-//! compare two builds whose checksums differ.
+//! writes a case's last-frame fine stain and wetness there (little-endian f64s; run one
+//! `--case` at a time), to compare two builds whose checksums differ.
 //!
 //! The wet share is counted as in `tests/bench/bench_dynamic_paint.py`: the pour's radius
 //! is found by bisection, on untimed runs in a process of their own, until the fine
