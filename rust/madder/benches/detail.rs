@@ -4,7 +4,9 @@
 //! vertex count), per frame as the bake meets it (the cloth's positions in, the step,
 //! the per-cloth-vertex read-outs out), and the memory the refined simulator takes
 //! (resident set growth over the setup and the frames, the part built lazily as the
-//! liquid arrives). Prints figures; asserts nothing about time.
+//! liquid arrives). Prints figures; asserts nothing about time. `MADDER_BENCH_DUMP=file`
+//! writes a case's last-frame fine stain and wetness there (little-endian f64s; run one
+//! `--case` at a time), to compare two builds whose checksums differ.
 //!
 //! The wet share is counted as in `tests/bench/bench_dynamic_paint.py`: the pour's radius
 //! is found by bisection, on untimed runs in a process of their own, until the fine
@@ -93,6 +95,17 @@ fn bench(level: u32, radius: Option<f64>, frames: usize, report: bool) -> (usize
     let wet = sim.fine().wetness().iter().filter(|&&w| w > 1e-3).count();
     if !report {
         return (wet, fine_n);
+    }
+    // the last frame's fine stain and wetness (whole refined numbering), for comparing
+    // two builds whose results differ (`MADDER_BENCH_DUMP=file`: little-endian f64s)
+    if let Some(path) = std::env::var_os("MADDER_BENCH_DUMP") {
+        let bytes: Vec<u8> = sim
+            .fine_solute_density()
+            .iter()
+            .chain(&sim.fine_wetness())
+            .flat_map(|x| x.to_le_bytes())
+            .collect();
+        std::fs::write(path, bytes).unwrap();
     }
     // FNV-1a over the bits of the cloth-level read-outs: equal = bit-identical results
     let (s, w, d) = (sim.solute_density(), sim.wetness(), sim.deposit());

@@ -181,17 +181,42 @@ pub(crate) fn vertex_area<P: Copy + Into<DVec3>>(
 pub fn vertex_areas<P: Copy + Into<DVec3>>(topology: &Topology, positions: &[P]) -> Vec<f64> {
     let mut area = vec![0.0; topology.n_vertices()];
     for f in topology.faces() {
-        let p = f.map(|v| positions[v as usize].into());
-        let a = heron([
-            p[1].distance(p[2]),
-            p[2].distance(p[0]),
-            p[0].distance(p[1]),
-        ]) / 3.0;
+        let a = face_third(f, positions);
         for &v in f {
             area[v as usize] += a;
         }
     }
     area
+}
+
+/// [`vertex_areas`] in parallel, given each vertex's faces in increasing order
+/// (`faces_of(v)`): every face's third once, then each vertex's sum in face order, so
+/// the same bits as [`vertex_areas`] whatever the thread count.
+pub(crate) fn vertex_areas_par<'a, P: Copy + Into<DVec3> + Sync>(
+    topology: &Topology,
+    positions: &[P],
+    faces_of: impl Fn(usize) -> &'a [u32] + Sync,
+) -> Vec<f64> {
+    use rayon::prelude::*;
+    let third: Vec<f64> = topology
+        .faces()
+        .par_iter()
+        .map(|f| face_third(f, positions))
+        .collect();
+    (0..topology.n_vertices())
+        .into_par_iter()
+        .map(|v| faces_of(v).iter().fold(0.0, |a, &f| a + third[f as usize]))
+        .collect()
+}
+
+/// A third of face `f`'s area (its share of each corner's lumped area).
+fn face_third<P: Copy + Into<DVec3>>(f: &[u32; 3], positions: &[P]) -> f64 {
+    let p = f.map(|v| positions[v as usize].into());
+    heron([
+        p[1].distance(p[2]),
+        p[2].distance(p[0]),
+        p[0].distance(p[1]),
+    ]) / 3.0
 }
 
 #[cfg(test)]

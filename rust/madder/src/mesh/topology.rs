@@ -199,7 +199,8 @@ impl Topology {
             })
             .filter(|&(a, b)| self.find_edge(a, b).is_none())
             .collect();
-        half.sort_unstable();
+        // equal keys are equal pairs: the sorted list is the same whoever sorts it
+        rayon::slice::ParallelSliceMut::par_sort_unstable(&mut half[..]);
         half.dedup();
         // merge: old edges and new ones, both increasing
         let mut edges = Vec::with_capacity(self.edges.len() + half.len());

@@ -50,20 +50,24 @@
 //! ones ([`Topology::extended`]), a vertex with no new face keeps its fan
 //! ([`OneRings::extended`]), and a vertex that is not reset keeps its rest frame, frame
 //! and area; the reset ones get theirs (the area summed over its faces in face order, as
-//! [`vertex_areas`] does). The results are those of rebuilding it all, bit for bit.
+//! [`vertex_areas`] does). The results are those of rebuilding it all, bit for bit. The
+//! window a growth drops leaves its solvers to the next one (built in their memory, as a
+//! window replacing another is), and the growth, the window build, the placement and the
+//! cloth's areas run in the rayon pool, their independent parts side by side.
 
 use std::borrow::Cow;
 use std::time::Instant;
 
 use faer::Par;
 use glam::{DMat3, DVec2, DVec3};
+use rayon::prelude::*;
 
 use super::diffuse::{Conductivity, WovenFaces};
 use super::simulate::{Profile, Simulator, StainParams};
 use super::sources::{check_each_nonnegative, check_length};
 use super::state::{Fields, Totals};
 use crate::error::{Error, ParamError};
-use crate::mesh::geometry::{check_positions, vertex_area, vertex_areas};
+use crate::mesh::geometry::{check_positions, vertex_area, vertex_areas, vertex_areas_par};
 use crate::mesh::refine::Partial;
 use crate::mesh::{OneRings, RingAdjacency, Topology, VertexFrames};
 
@@ -132,18 +136,26 @@ impl Fine {
         let old = &sim.cloth;
         let (topology, old_new) = p.extended_topology(&old.topology)?;
         let flipped = p.face_values(&self.flipped);
-        let rings = if old_new.is_empty() {
-            OneRings::with_orientation(&topology, flipped)
-        } else {
-            OneRings::extended(&old.rings, &topology, flipped, &old_new)
-        };
-        let adjacency = RingAdjacency::new(&topology);
-        let rest = p.prolong(&self.rest);
+        // the fans beside the neighbour lists and the rest positions (independent)
+        let (rings, (adjacency, rest)) = rayon::join(
+            || {
+                if old_new.is_empty() {
+                    OneRings::with_orientation(&topology, flipped)
+                } else {
+                    OneRings::extended(&old.rings, &topology, flipped, &old_new)
+                }
+            },
+            || (RingAdjacency::new(&topology), p.prolong(&self.rest)),
+        );
         // a vertex not reset had its whole ring: its rest frame is unchanged
         let mut rest_frames = old.rest_frames.clone();
         rest_frames.frame.resize(n, DMat3::IDENTITY);
-        for &j in &reset {
-            rest_frames.frame[j] = VertexFrames::frame_of(&rings, &rest, j);
+        let fresh: Vec<DMat3> = reset
+            .par_iter()
+            .map(|&j| VertexFrames::frame_of(&rings, &rest, j))
+            .collect();
+        for (&j, frame) in reset.iter().zip(fresh) {
+            rest_frames.frame[j] = frame;
         }
         let positions = p.prolong(&self.current);
         let (at, t_ref, world) = match &self.reference {
@@ -154,7 +166,7 @@ impl Fine {
         // summed over its faces in face order, as `vertex_areas` does
         let faces = topology.faces();
         let reset_state: Vec<(DMat3, f64)> = reset
-            .iter()
+            .par_iter()
             .map(|&j| {
                 let frame = adjacency.rotation(&rest, &at, j) * rest_frames.frame[j];
                 let mut around: Vec<u32> = rings.wedges(j).iter().map(|w| w.face).collect();
@@ -207,7 +219,10 @@ impl Fine {
             st.velocity[j] = world.as_ref().map_or(DVec2::ZERO, |u| to_local(u[j]));
             st.vertex_area[j] = area;
         }
-        sim.window = None;
+        // the window goes (its mesh is the old part's); its solvers' memory serves the next
+        if let Some(cg) = sim.window.take().and_then(|w| w.cg) {
+            sim.spare = Some(cg);
+        }
         sim.rescan = true;
         sim.prepared = false;
         Ok(())
@@ -397,13 +412,19 @@ impl Detailed {
             check_positions(fine.partial.coarse(), a)?;
         }
         super::diffuse::check_range("time step", dt, dt > 0.0, "finite and > 0")?;
-        fine.prepare(&mut self.sim)?;
-        let r = &fine.partial;
-        let after = after.map(|a| r.prolong(a));
-        self.sim.step(&r.prolong(positions), dt, after.as_deref())?;
-        fine.previous = Some(std::mem::replace(&mut fine.current, positions.to_vec()));
-        fine.area = vertex_areas(fine.partial.coarse(), positions);
-        Ok(())
+        // in the rayon pool, as `Simulator::step` runs its frame: the parallel loops of a
+        // growth, a window build and the placement then start from a worker
+        let sim = &mut self.sim;
+        rayon::scope(|_| {
+            fine.prepare(sim)?;
+            let r = &fine.partial;
+            let after = after.map(|a| r.prolong(a));
+            sim.step(&r.prolong(positions), dt, after.as_deref())?;
+            fine.previous = Some(std::mem::replace(&mut fine.current, positions.to_vec()));
+            let p = &fine.partial;
+            fine.area = vertex_areas_par(p.coarse(), positions, |v| p.faces_around(v));
+            Ok(())
+        })
     }
 
     /// [`Simulator::add_liquid`] with `solvent` per cloth vertex (kg/m²), spread over the

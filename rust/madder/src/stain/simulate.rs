@@ -96,6 +96,7 @@ use super::window::{Cloth, Window, pick};
 use crate::error::{Error, ParamError};
 use crate::mesh::geometry::check_positions;
 use crate::mesh::{Geometry, OneRings, RingAdjacency, Topology, Transport, VertexFrames};
+use crate::ops::WarmCg;
 
 /// A vertex is "dry" for the evaporation boundary rule (eq. 4.8) below this liquid
 /// density, kg/m² (1 g/m², a film of water 1 µm thick).
@@ -237,6 +238,9 @@ pub struct Simulator {
     /// The window for the next frame was already prepared (by [`super::detail`], which
     /// checks it against the part of the refined cloth built so far).
     pub(super) prepared: bool,
+    /// The solvers of a window dropped without a successor (the refined cloth grew,
+    /// [`super::detail`]): the next window is built in their memory.
+    pub(super) spare: Option<(WarmCg, WarmCg)>,
     /// Relative residual tolerances of the density and the velocity solves
     /// ([`DENSITY_TOLERANCE`], [`VELOCITY_TOLERANCE`]).
     pub(super) tolerances: [f64; 2],
@@ -362,6 +366,7 @@ impl Simulator {
             rescan: true,
             last_frame_cycles: 1,
             prepared: false,
+            spare: None,
             tolerances: [DENSITY_TOLERANCE, VELOCITY_TOLERANCE],
         })
     }

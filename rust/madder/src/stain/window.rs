@@ -40,8 +40,10 @@
 //! depends on nothing but the corners in face order and the order of the vertex
 //! numbers). The pattern, the restriction and the IC(0) analysis follow in time
 //! proportional to the window, and the solvers are rebuilt in the memory of the window
-//! they replace ([`WarmCg::rebuild`]: fresh pages cost more than the analysis). The
-//! result is the window built from scratch, bit for bit (a test compares every array on
+//! they replace ([`WarmCg::rebuild`]: fresh pages cost more than the analysis), or of
+//! one a growth of the refined cloth dropped ([`super::detail`]); the fans, neighbour
+//! lists and gathers are derived beside the solvers' analysis, which needs only the
+//! pattern. The result is the window built from scratch, bit for bit (a test compares every array on
 //! a mesh with a hole, a fin, a bow-tie and a flipped face).
 //!
 //! - **Diffusion.** `(M + h K_A) σ' = m` on the active vertices, `K_A` the stiffness
@@ -185,29 +187,43 @@ impl Window {
         for (j, &v) in vertices.iter().enumerate() {
             local[v as usize] = j as u32;
         }
-        // the window's edges and fans are the cloth's, renumbered (module doc)
+        // the window's edges and fans are the cloth's, renumbered (module doc); the
+        // solvers' analysis needs only the pattern, so the fans and the rest are derived
+        // beside it (the two analyses are uneven: one core idles through the end of the
+        // larger)
         let (topology, edge_local) = topo.restricted(&faces, &vertices, &local);
-        let rings = OneRings::restricted(
-            &cloth.rings,
-            &topology,
-            &faces,
-            &vertices,
-            &face_local,
-            &local,
-            &edge_local,
-        );
-        let adjacency = RingAdjacency::new(&topology);
         let pattern = VertexPattern::new(&topology);
         let region = Restriction::new(&pattern, pick(&vertices, &mask));
-        let cg = solvers(&region, reuse);
-        let part = Cloth {
-            rest: pick(&vertices, &cloth.rest),
-            rest_frames: VertexFrames {
-                frame: pick(&vertices, &cloth.rest_frames.frame),
+        let (cg, (rings, adjacency, rest, rest_frames, boundary, irregular)) = rayon::join(
+            || solvers(&region, reuse),
+            || {
+                let rings = OneRings::restricted(
+                    &cloth.rings,
+                    &topology,
+                    &faces,
+                    &vertices,
+                    &face_local,
+                    &local,
+                    &edge_local,
+                );
+                (
+                    rings,
+                    RingAdjacency::new(&topology),
+                    pick(&vertices, &cloth.rest),
+                    VertexFrames {
+                        frame: pick(&vertices, &cloth.rest_frames.frame),
+                    },
+                    pick(&vertices, &cloth.boundary),
+                    cloth.irregular.as_ref().map(|m| pick(&vertices, m)),
+                )
             },
+        );
+        let part = Cloth {
+            rest,
+            rest_frames,
             conductivity: cloth.conductivity.faces(&faces),
-            boundary: pick(&vertices, &cloth.boundary),
-            irregular: cloth.irregular.as_ref().map(|m| pick(&vertices, m)),
+            boundary,
+            irregular,
             topology,
             rings,
             adjacency,
@@ -252,32 +268,53 @@ pub(super) fn find_liquid(
     area: &[f64],
     mobile_held: f64,
 ) -> (Vec<u32>, Vec<u32>) {
-    let floor = |m: &[f64]| {
-        ACTIVE_THRESHOLD
-            * scan
-                .iter()
-                .map(|&v| v as usize)
-                .filter(|&v| area[v] > 0.0)
-                .map(|v| m[v] / area[v])
-                .fold(0.0, f64::max)
-    };
     let f = fields;
-    let flowing_floor = [floor(&f.free_solvent), floor(&f.solute)];
-    let held_floor = [floor(&f.absorbed_solvent), floor(&f.absorbed_solute)];
+    let by_field = [
+        &f.free_solvent,
+        &f.solute,
+        &f.absorbed_solvent,
+        &f.absorbed_solute,
+    ];
+    // the four peaks in one parallel sweep (a maximum does not depend on the order)
+    let peak = scan
+        .par_iter()
+        .map(|&v| v as usize)
+        .filter(|&v| area[v] > 0.0)
+        .fold(
+            || [0.0; 4],
+            |p, v| std::array::from_fn(|k| f64::max(p[k], by_field[k][v] / area[v])),
+        )
+        .reduce(
+            || [0.0; 4],
+            |a, b| std::array::from_fn(|k| f64::max(a[k], b[k])),
+        );
+    let floor = peak.map(|p| ACTIVE_THRESHOLD * p);
+    // 1 flowing, 2 held, 0 neither
+    let class: Vec<u8> = scan
+        .par_iter()
+        .map(|&v| {
+            let i = v as usize;
+            let above = |k: usize| {
+                let m = by_field[k][i];
+                m > 0.0 && m > floor[k] * area[i]
+            };
+            if loose[i] {
+                0
+            } else if above(0) || above(1) || f.absorbed_solvent[i] > mobile_held * area[i] {
+                1
+            } else if above(2) || above(3) {
+                2
+            } else {
+                0
+            }
+        })
+        .collect();
     let (mut flowing, mut held) = (Vec::new(), Vec::new());
-    for &v in scan {
-        let i = v as usize;
-        let above = |m: &[f64], floor: f64| m[i] > 0.0 && m[i] > floor * area[i];
-        if loose[i] {
-        } else if above(&f.free_solvent, flowing_floor[0])
-            || above(&f.solute, flowing_floor[1])
-            || f.absorbed_solvent[i] > mobile_held * area[i]
-        {
-            flowing.push(v);
-        } else if above(&f.absorbed_solvent, held_floor[0])
-            || above(&f.absorbed_solute, held_floor[1])
-        {
-            held.push(v);
+    for (&v, c) in scan.iter().zip(class) {
+        match c {
+            1 => flowing.push(v),
+            2 => held.push(v),
+            _ => {}
         }
     }
     (flowing, held)
@@ -348,6 +385,7 @@ impl Simulator {
             WindowPlan::Keep => Ok(false),
             WindowPlan::Build { mask, held } => {
                 let reuse = self.window.take().and_then(|w| w.cg);
+                let reuse = reuse.or_else(|| self.spare.take());
                 self.window = Window::new(&self.cloth, mask, &held, reuse)?;
                 Ok(true)
             }
