@@ -26,12 +26,12 @@ fn topology(faces: &PyReadonlyArray2<'_, u32>, n: usize) -> PyResult<madder::mes
     if shape[0] == 0 {
         return Err(to_py(LcsError::NoTriangles));
     }
-    let tris = faces
-        .as_array()
-        .rows()
-        .into_iter()
-        .map(|r| [r[0], r[1], r[2]])
-        .collect();
+    let a = faces.as_array();
+    // the usual C-contiguous array read as one slice rather than row by row
+    let tris = match a.as_slice() {
+        Some(s) => s.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+        None => a.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect(),
+    };
     madder::mesh::Topology::from_triangles(n, tris).map_err(to_py)
 }
 

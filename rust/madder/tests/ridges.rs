@@ -88,6 +88,42 @@ fn steady_double_gyre_ridge_is_the_separatrix() {
     assert!(sizes.iter().all(|&k| k >= 20));
 }
 
+#[test]
+fn ridges_do_not_depend_on_the_thread_count() {
+    let (topo, p) = rect_grid(100, 50, [0.0, 2.0], [0.0, 1.0]);
+    let s = planar_ftle(&topo, &p, steady_gyre, 0.0, -5.0, 25);
+    // the field's gradient taken beside the factorization, or after smoothing the field
+    for field_smoothing in [0.0, 0.5] {
+        let options = RidgeOptions {
+            field_smoothing,
+            ..RidgeOptions::default()
+        };
+        let run = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| ridges(&topo, &p, &s, &options).unwrap())
+        };
+        let (a, b) = (run(1), run(2));
+        assert!(!a.edges.is_empty());
+        assert_eq!(a.edges, b.edges);
+        let bits = |r: &Ridges| -> Vec<u64> {
+            r.points
+                .iter()
+                .flat_map(|q| {
+                    q.at.bary
+                        .to_array()
+                        .into_iter()
+                        .chain(q.position.to_array())
+                })
+                .map(f64::to_bits)
+                .collect()
+        };
+        assert_eq!(bits(&a), bits(&b));
+    }
+}
+
 /// What a comparison with the reference measured.
 #[derive(Debug)]
 struct Comparison {

@@ -85,7 +85,16 @@ pub fn ftle_with(
     motion.check(topology)?;
     let start = motion.positions(t0)?;
     motion.at(t0 + span)?;
-    let charts = Charts::new(topology, &start)?;
+    // the fit's one-rings and frames at t0 need nothing of the charts: built beside them
+    let (charts, (rings, frames)) = rayon::join(
+        || Charts::new(topology, &start),
+        || {
+            let rings = OneRings::new(topology);
+            let frames = VertexFrames::new(&rings, &start);
+            (rings, frames)
+        },
+    );
+    let charts = charts?;
     let flow = flow_map_with(&charts, motion, velocity, t0, span, scheme, steps)?;
     let at = motion.at(t0 + span)?;
     let end: Vec<DVec3> = flow
@@ -96,7 +105,10 @@ pub fn ftle_with(
             None => motion.position(at, v),
         })
         .collect();
-    Ok(ftle_from_flow_map(topology, &start, &end, span))
+    Ok(match frames {
+        Ok(frames) => fit(&rings, &frames, &start, &end, span),
+        Err(_) => vec![0.0; start.len()],
+    })
 }
 
 /// FTLE from the flow map's end points `end` of the vertices at `start` (module doc).
@@ -110,6 +122,17 @@ pub fn ftle_from_flow_map(
     let Ok(frames) = VertexFrames::new(&rings, start) else {
         return vec![0.0; start.len()];
     };
+    fit(&rings, &frames, start, end, span)
+}
+
+/// σ per vertex from the end points, with the one-rings and the frames at `start`.
+fn fit(
+    rings: &OneRings,
+    frames: &VertexFrames,
+    start: &[DVec3],
+    end: &[DVec3],
+    span: f64,
+) -> Vec<f64> {
     (0..start.len())
         .into_par_iter()
         .map(|i| {

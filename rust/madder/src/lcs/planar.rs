@@ -102,21 +102,29 @@ impl Planar {
         let u = n.any_orthonormal_vector();
         let w = n.cross(u);
         let xy: Vec<DVec2> = positions
-            .iter()
+            .par_iter()
             .map(|&p| DVec2::new((p - origin).dot(u), (p - origin).dot(w)))
             .collect();
+        // per face (in parallel): its affine map and edge lengths; `None` for a face of
+        // non-positive area
+        let per_face: Vec<Option<((DVec2, DMat2), f64)>> = faces
+            .par_iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|v| xy[v as usize]);
+                let m = DMat2::from_cols(b - a, c - a);
+                let (l1, l2) = ((b - a).length(), (c - a).length());
+                // positive area, and not degenerate (the charts' own test)
+                (m.determinant() > 1e-14 * l1 * l2)
+                    .then(|| ((a, m.inverse()), l1 + l2 + (c - b).length()))
+            })
+            .collect();
         let mut affine = Vec::with_capacity(faces.len());
+        // summed in face order, as before: the bucket size does not depend on the threads
         let mut edge_sum = 0.0;
-        for t in faces {
-            let [a, b, c] = t.map(|v| xy[v as usize]);
-            let m = DMat2::from_cols(b - a, c - a);
-            let (l1, l2) = ((b - a).length(), (c - a).length());
-            // positive area, and not degenerate (the charts' own test)
-            if m.determinant() <= 1e-14 * l1 * l2 {
-                return None;
-            }
-            edge_sum += l1 + l2 + (c - b).length();
-            affine.push((a, m.inverse()));
+        for f in per_face {
+            let (map, edges) = f?;
+            edge_sum += edges;
+            affine.push(map);
         }
         // border edges (one face or more than two) and interior edges with both faces on
         // one side (the same direction in both)
@@ -196,7 +204,7 @@ impl Planar {
     fn fill_buckets(&mut self, faces: &[[u32; 3]]) {
         let n_buckets = self.nx * self.ny;
         let ranges: Vec<_> = faces
-            .iter()
+            .par_iter()
             .map(|t| {
                 let [a, b, c] = t.map(|v| self.xy[v as usize]);
                 self.bucket_range(a.min(b).min(c), a.max(b).max(c))

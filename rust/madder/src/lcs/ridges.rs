@@ -157,12 +157,46 @@ pub fn ridges(
         return Err(LcsError::NonFiniteField { vertex });
     }
     let geometry = Geometry::new(topology, positions)?;
-    let rings = OneRings::new(topology);
-    let frames = VertexFrames::new(&rings, positions)?;
     let mean_edge =
         geometry.edge_length.iter().sum::<f64>() / geometry.edge_length.len().max(1) as f64;
-    let mut smoother = Smoother::new(topology, &geometry)?;
     let ell2 = mean_edge * mean_edge;
+    // the smoother's ordering and first factorization need only the geometry, the
+    // one-rings, frames and (unsmoothed) field gradient only the positions: side by side
+    let first_h = [
+        options.field_smoothing,
+        options.smoothing,
+        options.hessian_smoothing,
+    ]
+    .map(|t| t * ell2)
+    .into_iter()
+    .find(|&h| h != 0.0);
+    let (smoother, (rings, frames, grad_field)) = rayon::join(
+        || {
+            let mut smoother = Smoother::new(topology, &geometry)?;
+            if let Some(h) = first_h {
+                smoother.prepare(h)?;
+            }
+            Ok::<_, LcsError>(smoother)
+        },
+        || {
+            let rings = OneRings::new(topology);
+            let frames = VertexFrames::new(&rings, positions);
+            let grad = match &frames {
+                Ok(frames) if options.field_smoothing == 0.0 => Some(
+                    FieldOps {
+                        rings: &rings,
+                        frames,
+                        positions,
+                    }
+                    .gradient(field),
+                ),
+                _ => None,
+            };
+            (rings, frames, grad)
+        },
+    );
+    let frames = frames?;
+    let mut smoother = smoother?;
 
     let mut sigma = field.to_vec();
     smoother.smooth(options.field_smoothing * ell2, &mut sigma, 1)?;
@@ -183,7 +217,8 @@ pub fn ridges(
         frames: &frames,
         positions,
     };
-    let grad_sigma = field_ops.gradient(&sigma);
+    // the field's gradient was taken beside the factorization unless it was smoothed
+    let grad_sigma = grad_field.unwrap_or_else(|| field_ops.gradient(&sigma));
     let grad_s = field_ops.gradient(&s);
     // Hessian of S̃ as 3-D tangent tensors (six components, column-major blocks)
     let hess = field_ops.hessian3(&grad_s);
@@ -295,18 +330,7 @@ impl<'a> Smoother<'a> {
         if h == 0.0 {
             return Ok(());
         }
-        if h != self.h {
-            let mut values = cotan_stiffness(self.topology, self.geometry, &self.pattern, h);
-            add_lumped_mass(self.geometry, &self.pattern, 1.0, &mut values);
-            // a loose vertex has no mass and no stiffness: keep it as it is
-            for (v, &a) in self.geometry.vertex_area.iter().enumerate() {
-                if a == 0.0 {
-                    values[self.pattern.diag_slot()[v] as usize] = 1.0;
-                }
-            }
-            self.solver.factorize(&values)?;
-            self.h = h;
-        }
+        self.prepare(h)?;
         let n = self.geometry.vertex_area.len();
         for c in 0..cols {
             for (xi, &a) in x[c * n..(c + 1) * n]
@@ -319,6 +343,23 @@ impl<'a> Smoother<'a> {
             }
         }
         self.solver.solve_in_place(x);
+        Ok(())
+    }
+
+    /// Factorizes `M + hK` unless it is the last factorization.
+    fn prepare(&mut self, h: f64) -> Result<(), LcsError> {
+        if h != self.h {
+            let mut values = cotan_stiffness(self.topology, self.geometry, &self.pattern, h);
+            add_lumped_mass(self.geometry, &self.pattern, 1.0, &mut values);
+            // a loose vertex has no mass and no stiffness: keep it as it is
+            for (v, &a) in self.geometry.vertex_area.iter().enumerate() {
+                if a == 0.0 {
+                    values[self.pattern.diag_slot()[v] as usize] = 1.0;
+                }
+            }
+            self.solver.factorize(&values)?;
+            self.h = h;
+        }
         Ok(())
     }
 }

@@ -632,13 +632,19 @@ impl Charts {
             planar: None,
             start: positions.to_vec(),
         };
-        charts.hop = (0..faces.len())
-            .into_par_iter()
-            .map(|f| charts.hop_of(f))
-            .collect();
-        if charts.face.iter().all(|f| f.chart[0] != 0.0) {
-            charts.planar = Planar::new(topology, positions);
-        }
+        // the hop records and the flat path's buckets are independent: built side by side
+        let flat = charts.face.iter().all(|f| f.chart[0] != 0.0);
+        let (hop, planar) = rayon::join(
+            || {
+                (0..faces.len())
+                    .into_par_iter()
+                    .map(|f| charts.hop_of(f))
+                    .collect()
+            },
+            || flat.then(|| Planar::new(topology, positions)).flatten(),
+        );
+        charts.hop = hop;
+        charts.planar = planar;
         Ok(charts)
     }
 

@@ -139,7 +139,7 @@ impl OneRings {
         // vertex → incident (face, corner), in face order
         let (corner_ptr, corners) = incidence(n, faces);
         let (edge_ptr, edge_end) = edge_index(topology);
-        let lookup = |i: u32, j: u32| find_edge(&edge_ptr, &edge_end, i, j);
+        let face_edges = topology.face_edges();
 
         // in chunks of vertices, each laid out as the whole is; joined in vertex order
         const CHUNK: usize = 4096;
@@ -151,11 +151,7 @@ impl OneRings {
                 for v in c * CHUNK..n.min((c + 1) * CHUNK) {
                     let cs = &corners[corner_ptr[v] as usize..corner_ptr[v + 1] as usize];
                     let (w0, s0) = (out.wedges.len(), out.spokes.len());
-                    let kind = order_fan(faces, &flipped, cs, &mut scratch, &mut out);
-                    for &j in &out.spokes[s0..] {
-                        let e = lookup(v as u32, j).expect("a spoke is an edge");
-                        out.spoke_edges.push(e as u32);
-                    }
+                    let kind = order_fan(faces, face_edges, &flipped, cs, &mut scratch, &mut out);
                     out.counts.push((
                         (out.wedges.len() - w0) as u32,
                         (out.spokes.len() - s0) as u32,
@@ -231,7 +227,7 @@ impl OneRings {
         let faces = topology.faces();
         let (corner_ptr, corners) = incidence(n, faces);
         let (edge_ptr, edge_end) = edge_index(topology);
-        let lookup = |i: u32, j: u32| find_edge(&edge_ptr, &edge_end, i, j);
+        let face_edges = topology.face_edges();
         const CHUNK: usize = 4096;
         let chunks: Vec<FanChunk> = (0..n.div_ceil(CHUNK))
             .into_par_iter()
@@ -259,12 +255,7 @@ impl OneRings {
                         );
                         parent.kind(pv)
                     } else {
-                        let kind = order_fan(faces, &flipped, cs, &mut scratch, &mut out);
-                        for &j in &out.spokes[s0..] {
-                            let e = lookup(v as u32, j).expect("a spoke is an edge");
-                            out.spoke_edges.push(e as u32);
-                        }
-                        kind
+                        order_fan(faces, face_edges, &flipped, cs, &mut scratch, &mut out)
                     };
                     out.counts.push((
                         (out.wedges.len() - w0) as u32,
@@ -461,6 +452,31 @@ fn harmonize_orientation(topology: &Topology) -> Vec<bool> {
         let t = faces[f as usize];
         (t[(k as usize + 1) % 3], t[(k as usize + 2) % 3])
     };
+    // the usual case, every two-face edge already consistent: the walk would flip nothing
+    // (each face takes its root's `false`, and no component has a majority of flipped
+    // faces), so it is skipped
+    let consistent = (0..n_edges).into_par_iter().all(|e| {
+        let pair = &inc[ptr[e] as usize..ptr[e + 1] as usize];
+        if pair.len() != 2 {
+            return true;
+        }
+        let (a, b) = run(pair[0].0, pair[0].1);
+        run(pair[1].0, pair[1].1) == (b, a)
+    });
+    if consistent {
+        return vec![false; faces.len()];
+    }
+    harmonize_walk(topology, &ptr, &inc)
+}
+
+/// The breadth-first walk of [`harmonize_orientation`], over the edge → (face, corner)
+/// incidence `ptr`, `inc`.
+fn harmonize_walk(topology: &Topology, ptr: &[u32], inc: &[(u32, u8)]) -> Vec<bool> {
+    let (faces, face_edges) = (topology.faces(), topology.face_edges());
+    let run = |f: u32, k: u8| {
+        let t = faces[f as usize];
+        (t[(k as usize + 1) % 3], t[(k as usize + 2) % 3])
+    };
     let mut flipped = vec![false; faces.len()];
     let mut seen = vec![false; faces.len()];
     let mut queue = std::collections::VecDeque::new();
@@ -504,9 +520,11 @@ fn harmonize_orientation(topology: &Topology) -> Vec<bool> {
 const SMALL_FAN: usize = 16;
 
 /// Orders the fan of one vertex from its incident `(face, corner)` list, walking faces in
-/// their harmonized orientation (`flipped`); appends its wedges and spokes to `out`.
+/// their harmonized orientation (`flipped`); appends its wedges, spokes and the spokes'
+/// edges (read from the face met first, `face_edges`) to `out`.
 fn order_fan(
     faces: &[[u32; 3]],
+    face_edges: &[[u32; 3]],
     flipped: &[bool],
     corners: &[(u32, u8)],
     scratch: &mut FanScratch,
@@ -625,13 +643,15 @@ fn order_fan(
         distinct.dedup();
         local.resize(distinct.len(), u32::MAX);
     }
-    let mut slot = |s: u32, spokes: &mut Vec<u32>| {
+    // `edge`: the spoke's edge, pushed with a spoke met for the first time
+    let mut slot = |s: u32, edge: u32, spokes: &mut Vec<u32>, spoke_edges: &mut Vec<u32>| {
         if small {
             // the spokes met so far are few: find it among them
             return match spokes[s0..].iter().position(|&x| x == s) {
                 Some(k) => k as u32,
                 None => {
                     spokes.push(s);
+                    spoke_edges.push(edge);
                     (spokes.len() - 1 - s0) as u32
                 }
             };
@@ -640,6 +660,7 @@ fn order_fan(
         if local[k] == u32::MAX {
             local[k] = (spokes.len() - s0) as u32;
             spokes.push(s);
+            spoke_edges.push(edge);
         }
         local[k]
     };
@@ -649,8 +670,18 @@ fn order_fan(
         } else {
             (ends[w][1], ends[w][0])
         };
-        let from = slot(a, &mut out.spokes);
-        let to = slot(b, &mut out.spokes);
+        // the edge from the corner `k` to vertex `x` of the face: the one opposite the
+        // face's third corner
+        let (f, k) = (corners[w].0 as usize, corners[w].1 as usize);
+        let edge = |x: u32| {
+            if faces[f][(k + 1) % 3] == x {
+                face_edges[f][(k + 2) % 3]
+            } else {
+                face_edges[f][(k + 1) % 3]
+            }
+        };
+        let from = slot(a, edge(a), &mut out.spokes, &mut out.spoke_edges);
+        let to = slot(b, edge(b), &mut out.spokes, &mut out.spoke_edges);
         out.wedges.push(Wedge {
             face: corners[w].0,
             corner: corners[w].1,
@@ -746,6 +777,22 @@ pub(super) mod tests {
     fn open_fan_is_a_boundary() {
         let (t, _) = fan(false);
         assert_eq!(OneRings::new(&t).kind(0), FanKind::Boundary);
+    }
+
+    #[test]
+    fn skipping_the_walk_on_a_consistent_mesh_changes_nothing() {
+        let walk = |t: &Topology| {
+            let (ptr, inc) = incidence(t.n_edges(), t.face_edges());
+            harmonize_walk(t, &ptr, &inc)
+        };
+        // consistent (the fast path), then with a face stored flipped (the walk)
+        let (consistent, _) = fan(true);
+        let awkward = awkward_mesh();
+        for t in [&consistent, &awkward] {
+            assert_eq!(harmonize_orientation(t), walk(t));
+        }
+        assert!(harmonize_orientation(&consistent).iter().all(|&f| !f));
+        assert!(harmonize_orientation(&awkward).iter().any(|&f| f));
     }
 
     /// A 7×7 grid of split quads with what the fans must handle: a face stored flipped,
@@ -947,5 +994,20 @@ pub(super) mod tests {
         }
         assert_eq!(r.edge_between(1, 4), None);
         assert_eq!(r.edge_between(3, 3), None);
+    }
+
+    #[test]
+    fn every_spoke_has_the_edge_to_its_neighbour() {
+        // read from the faces while the fans are ordered: the edge list's own lookup agrees
+        let (closed, _) = fan(true);
+        let (open, _) = fan(false);
+        for t in [closed, open, awkward_mesh()] {
+            let r = OneRings::new(&t);
+            for v in 0..t.n_vertices() {
+                for (&j, &e) in r.spokes(v).iter().zip(r.spoke_edges(v)) {
+                    assert_eq!(r.edge_between(v, j as usize), Some(e as usize));
+                }
+            }
+        }
     }
 }

@@ -68,15 +68,35 @@ impl Topology {
             });
         }
         check_faces(n_vertices, &faces, 0)?;
-        // Unique edges: sort the 3F half-edge keys, then run-length them.
-        let mut half: Vec<(u32, u32, u32)> = Vec::with_capacity(3 * faces.len());
-        for (f, tri) in faces.iter().enumerate() {
+        // Unique edges: sort the 3F half-edge keys `(low end, high end, slot)`, then
+        // run-length them. The keys are distinct, so any sort gives the same order: a
+        // counting sort by the low end, then each vertex's few keys sorted in place.
+        let key = |f: usize, k: usize| {
+            let tri = faces[f];
+            let (a, b) = (tri[(k + 1) % 3], tri[(k + 2) % 3]);
+            (a.min(b), a.max(b), (3 * f + k) as u32)
+        };
+        let mut start = vec![0u32; n_vertices + 1];
+        for f in 0..faces.len() {
             for k in 0..3 {
-                let (a, b) = (tri[(k + 1) % 3], tri[(k + 2) % 3]);
-                half.push((a.min(b), a.max(b), (3 * f + k) as u32));
+                start[key(f, k).0 as usize + 1] += 1;
             }
         }
-        half.sort_unstable();
+        for v in 0..n_vertices {
+            start[v + 1] += start[v];
+        }
+        let mut next = start[..n_vertices].to_vec();
+        let mut half = vec![(0u32, 0u32, 0u32); 3 * faces.len()];
+        for f in 0..faces.len() {
+            for k in 0..3 {
+                let h = key(f, k);
+                half[next[h.0 as usize] as usize] = h;
+                next[h.0 as usize] += 1;
+            }
+        }
+        for v in 0..n_vertices {
+            half[start[v] as usize..start[v + 1] as usize].sort_unstable();
+        }
         let mut edges = Vec::new();
         let mut edge_face_count = Vec::new();
         let mut face_edges = vec![[0u32; 3]; faces.len()];
