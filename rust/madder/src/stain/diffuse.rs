@@ -132,6 +132,7 @@ use super::state::{Fields, merge_rgb, split_rgb};
 use crate::error::{Error, ParamError};
 use crate::mesh::geometry::check_positions;
 use crate::mesh::{Geometry, RingAdjacency, Topology, Transport};
+use crate::ops::cg::Preconditioner;
 use crate::ops::cotan::assemble_face_weights;
 use crate::ops::{
     CscPattern, PrefactoredSpd, Restriction, VertexPattern, WarmCg, add_lumped_mass,
@@ -291,6 +292,39 @@ impl Conductivity {
                         topology, geometry, pattern, &angle, &w.tensor, scale, g,
                     ),
                 }
+            }
+        }
+    }
+
+    /// `M + scale · K_S` restricted to `region` ([`Restriction::scalar_values`] of
+    /// [`Self::stiffness`]), bit for bit; for an isotropic cloth assembled on the region's
+    /// faces only ([`Restriction::values_from_faces`]), without the whole window's matrix.
+    pub(crate) fn restricted_values(
+        &self,
+        topology: &Topology,
+        geometry: &Geometry,
+        pattern: &VertexPattern,
+        region: &Restriction,
+        scale: f64,
+        face_scale: Option<&[f64]>,
+    ) -> Vec<f64> {
+        let area = &geometry.vertex_area;
+        match (self, face_scale) {
+            (Conductivity::Isotropic(d), None) => {
+                // `cotan_stiffness(scale · d)`'s weights
+                let s = scale * d;
+                region.values_from_faces(topology, area, false, |f| {
+                    geometry.face_cot[f].map(|c| -0.5 * s * c)
+                })
+            }
+            (Conductivity::Isotropic(d), Some(g)) => {
+                region.values_from_faces(topology, area, false, |f| {
+                    geometry.face_cot[f].map(|c| -0.5 * scale * d * g[f] * c)
+                })
+            }
+            (Conductivity::Woven(_), g) => {
+                let full = self.stiffness(topology, geometry, pattern, scale, g);
+                region.scalar_values(pattern, &full, area, false)
             }
         }
     }
@@ -622,7 +656,10 @@ pub(super) fn solvers(
         };
         rayon::join(
             || make(a, region.scalar(), DENSITY_TOLERANCE),
-            || make(b, region.bochner(), VELOCITY_TOLERANCE),
+            || {
+                make(b, region.scalar(), VELOCITY_TOLERANCE)
+                    .with_preconditioner(Preconditioner::SymmetricGaussSeidel)
+            },
         )
     })
 }
@@ -666,10 +703,22 @@ pub(super) fn diffuse_densities(
     let vertices = &region.vertices;
     let nv = vertices.len();
     let area = &geometry.vertex_area;
-    let full = ops
-        .conductivity
-        .stiffness(ops.topology, geometry, ops.pattern, h, wicking);
-    let values = region.scalar_values(ops.pattern, &full, area, false);
+    // the whole window's stiffness only when the solute follows its fluxes
+    let full = carry.then(|| {
+        ops.conductivity
+            .stiffness(ops.topology, geometry, ops.pattern, h, wicking)
+    });
+    let values = match &full {
+        Some(full) => region.scalar_values(ops.pattern, full, area, false),
+        None => ops.conductivity.restricted_values(
+            ops.topology,
+            geometry,
+            ops.pattern,
+            region,
+            h,
+            wicking,
+        ),
+    };
     // the fibres' liquid on its own, pinned operator (its faces' scales), when carried
     let held_full = held_scale.map(|g| {
         ops.conductivity
@@ -735,7 +784,7 @@ pub(super) fn diffuse_densities(
             vertices.iter().for_each(|&v| m[v as usize] *= scale);
         }
     }
-    if let Some((free, held)) = &before {
+    if let (Some((free, held)), Some(full)) = (&before, &full) {
         // the dissolved solute and its colour with the free solvent
         let mut moves: Vec<(&mut Vec<f64>, Vec<f64>)> = vec![(&mut f.solute, Vec::new())];
         if let Some(c) = color.as_mut() {
@@ -745,13 +794,7 @@ pub(super) fn diffuse_densities(
             *movable = target.to_vec();
         }
         work.carried += moves.len();
-        carry_with_solvent(
-            ops,
-            &full,
-            &sigma[..nv],
-            (free, &f.free_solvent),
-            &mut moves,
-        );
+        carry_with_solvent(ops, full, &sigma[..nv], (free, &f.free_solvent), &mut moves);
         // the absorbed solute with the solvent in the fibres; the held colour pool
         // (absorbed + adsorbed) gives up the absorbed solute's share
         let held_color = f.color_held.as_ref().map(|c| split_rgb(c));
@@ -779,7 +822,7 @@ pub(super) fn diffuse_densities(
         work.carried += refs.len();
         carry_with_solvent(
             ops,
-            held_full.as_ref().unwrap_or(&full),
+            held_full.as_ref().unwrap_or(full),
             &sigma[nv..2 * nv],
             (held, &f.absorbed_solvent),
             &mut refs,
@@ -965,10 +1008,11 @@ pub(super) fn diffuse_velocity(
     scale: f64,
 ) -> Result<usize, Error> {
     let region = ops.region;
-    let stiffness = cotan_stiffness(ops.topology, geometry, ops.pattern, scale);
     let area = &geometry.vertex_area;
-    let scalar = region.scalar_values(ops.pattern, &stiffness, area, true);
-    let values = region.bochner_values(&scalar, transport);
+    // `cotan_stiffness(scale)` on the region's faces, clamped
+    let scalar = region.values_from_faces(ops.topology, area, true, |f| {
+        geometry.face_cot[f].map(|c| -0.5 * scale * c)
+    });
     let nv = region.vertices.len();
     let mut rhs = Vec::with_capacity(2 * nv);
     let mut x = Vec::with_capacity(2 * nv);
@@ -977,7 +1021,13 @@ pub(super) fn diffuse_velocity(
         rhs.extend([a * u.x, a * u.y]);
         x.extend([u.x, u.y]);
     }
-    cg.solve(&values, &rhs, &mut x)?;
+    cg.solve_rotated(
+        &scalar,
+        region.entry_edges(),
+        transport.edge_cos_sin(),
+        &rhs,
+        &mut x,
+    )?;
     for (j, &v) in region.vertices.iter().enumerate() {
         velocity[v as usize] = DVec2::new(x[2 * j], x[2 * j + 1]);
     }
