@@ -27,6 +27,8 @@
 //! angle per edge. The whole mesh's [`super::BochnerPattern`] and a restriction use the
 //! same two functions, so the operator of eq. 4.6 is assembled in one place.
 
+use std::sync::OnceLock;
+
 use super::{LowerCsc, VertexPattern};
 use crate::mesh::{Topology, Transport};
 
@@ -126,8 +128,9 @@ pub struct Restriction {
     scalar: CscPattern,
     /// Per entry of `scalar`: its mesh edge (`u32::MAX` on the diagonal).
     edge: Vec<u32>,
-    /// The `2×2` block expansion of `scalar` (the Bochner system).
-    bochner: CscPattern,
+    /// The `2×2` block expansion of `scalar` (the Bochner system), made when first asked
+    /// for (the simulator applies the blocks from the scalar values instead).
+    bochner: OnceLock<CscPattern>,
     /// Per mesh edge: its entry in `scalar` (`u32::MAX` if an end is not kept).
     edge_entry: Vec<u32>,
 }
@@ -167,7 +170,6 @@ impl Restriction {
             col_ptr,
             row_idx,
         };
-        let bochner = block_pattern(&scalar);
         let mut edge_entry = vec![u32::MAX; pattern.edge_slot().len()];
         for (s, &e) in edge.iter().enumerate() {
             if e != u32::MAX {
@@ -179,7 +181,7 @@ impl Restriction {
             mask,
             scalar,
             edge,
-            bochner,
+            bochner: OnceLock::new(),
             edge_entry,
         }
     }
@@ -191,7 +193,7 @@ impl Restriction {
 
     /// Its `2×2` block expansion, the pattern of the restricted Bochner system.
     pub fn bochner(&self) -> &CscPattern {
-        &self.bochner
+        self.bochner.get_or_init(|| block_pattern(&self.scalar))
     }
 
     /// Lower-triangle values of `M + K_A` on the scalar sub-pattern from the mesh
