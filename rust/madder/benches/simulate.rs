@@ -185,6 +185,17 @@ fn bench(nx: usize, ny: usize, frames: usize, scale: f64, machine: Option<&Machi
         sim.step(&cloth[f], dt, Some(&cloth[f + 1])).unwrap();
     }
     let total = t.elapsed().as_secs_f64() * 1e3 / frames as f64;
+    // MADDER_BENCH_DUMP=dir: the last frame's solute density and wetness, raw f64 (to
+    // compare two builds' results, issue 16's before/after errors)
+    if let Ok(dir) = std::env::var("MADDER_BENCH_DUMP") {
+        let bytes: Vec<u8> = sim
+            .solute_density()
+            .iter()
+            .chain(&sim.wetness())
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        std::fs::write(format!("{dir}/{n}-{frames}.f64"), bytes).unwrap();
+    }
     let p = sim.profile();
     let per = |s: f64| s * 1e3 / frames as f64;
     // FNV-1a over the bits of the state: equal checksums = bit-identical results

@@ -27,8 +27,10 @@
 //! angle per edge. The whole mesh's [`super::BochnerPattern`] and a restriction use the
 //! same two functions, so the operator of eq. 4.6 is assembled in one place.
 
+use std::sync::OnceLock;
+
 use super::{LowerCsc, VertexPattern};
-use crate::mesh::Transport;
+use crate::mesh::{Topology, Transport};
 
 /// A lower-triangle CSC pattern built at run time (a restriction or a block expansion).
 #[derive(Debug, Clone)]
@@ -126,8 +128,11 @@ pub struct Restriction {
     scalar: CscPattern,
     /// Per entry of `scalar`: its mesh edge (`u32::MAX` on the diagonal).
     edge: Vec<u32>,
-    /// The `2×2` block expansion of `scalar` (the Bochner system).
-    bochner: CscPattern,
+    /// The `2×2` block expansion of `scalar` (the Bochner system), made when first asked
+    /// for (the simulator applies the blocks from the scalar values instead).
+    bochner: OnceLock<CscPattern>,
+    /// Per mesh edge: its entry in `scalar` (`u32::MAX` if an end is not kept).
+    edge_entry: Vec<u32>,
 }
 
 impl Restriction {
@@ -165,13 +170,19 @@ impl Restriction {
             col_ptr,
             row_idx,
         };
-        let bochner = block_pattern(&scalar);
+        let mut edge_entry = vec![u32::MAX; pattern.edge_slot().len()];
+        for (s, &e) in edge.iter().enumerate() {
+            if e != u32::MAX {
+                edge_entry[e as usize] = s as u32;
+            }
+        }
         Self {
             vertices,
             mask,
             scalar,
             edge,
-            bochner,
+            bochner: OnceLock::new(),
+            edge_entry,
         }
     }
 
@@ -182,7 +193,7 @@ impl Restriction {
 
     /// Its `2×2` block expansion, the pattern of the restricted Bochner system.
     pub fn bochner(&self) -> &CscPattern {
-        &self.bochner
+        self.bochner.get_or_init(|| block_pattern(&self.scalar))
     }
 
     /// Lower-triangle values of `M + K_A` on the scalar sub-pattern from the mesh
@@ -218,9 +229,127 @@ impl Restriction {
         values
     }
 
+    /// [`Restriction::scalar_values`] of the stiffness that [`assemble_face_weights`]
+    /// (`crate::ops::cotan`) would assemble from `weights` on the whole mesh, without
+    /// assembling it: only the faces with an edge inside add, in the same face order,
+    /// so every value is the same to the last bit (the whole mesh's diagonal, which the
+    /// restriction recomputes, is not formed).
+    pub(crate) fn values_from_faces(
+        &self,
+        topology: &Topology,
+        area: &[f64],
+        clamp: bool,
+        weights: impl Fn(usize) -> [f64; 3],
+    ) -> Vec<f64> {
+        let (cp, ri) = (&self.scalar.col_ptr, &self.scalar.row_idx);
+        let nv = self.vertices.len();
+        let mut values = vec![0.0; ri.len()];
+        for (f, fe) in topology.face_edges().iter().enumerate() {
+            let entry = fe.map(|e| self.edge_entry[e as usize]);
+            if entry.iter().all(|&s| s == u32::MAX) {
+                continue;
+            }
+            let w = weights(f);
+            for k in 0..3 {
+                if entry[k] != u32::MAX {
+                    values[entry[k] as usize] += w[k];
+                }
+            }
+        }
+        let mut row = vec![0.0; nv];
+        for j in 0..nv {
+            for s in cp[j] as usize + 1..cp[j + 1] as usize {
+                let k = &mut values[s];
+                if clamp && *k > 0.0 {
+                    *k = 0.0;
+                }
+                row[j] += *k;
+                row[ri[s] as usize] += *k;
+            }
+        }
+        for (j, &v) in self.vertices.iter().enumerate() {
+            values[cp[j] as usize] = area[v as usize] - row[j];
+        }
+        values
+    }
+
+    /// Per entry of [`Restriction::scalar`]: its mesh edge (`u32::MAX` on the diagonal).
+    pub(crate) fn entry_edges(&self) -> &[u32] {
+        &self.edge
+    }
+
     /// Values of `M ⊗ I₂ + K_∇` on [`Restriction::bochner`] from the scalar values of
     /// [`Restriction::scalar_values`] and the transport ([`block_values`]).
     pub fn bochner_values(&self, scalar: &[f64], transport: &Transport) -> Vec<f64> {
         block_values(&self.scalar, scalar, &self.edge, transport.edge_cos_sin())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::Geometry;
+    use crate::ops::cotan::{assemble_face_weights, cotan_stiffness};
+    use glam::DVec3;
+
+    /// A jittered, sheared grid (obtuse triangles: positive weights to clamp).
+    fn mesh(n: usize) -> (Topology, Vec<DVec3>) {
+        let pos = (0..n * n)
+            .map(|v| {
+                let (i, j) = ((v % n) as f64, (v / n) as f64);
+                let jit = ((v * 7) % 5) as f64 * 0.02;
+                DVec3::new(0.1 * (i + 0.7 * j) + jit, 0.1 * j, 0.03 * (i * j).sin())
+            })
+            .collect();
+        let mut faces = Vec::new();
+        for j in 0..n - 1 {
+            for i in 0..n - 1 {
+                let v = (j * n + i) as u32;
+                let w = v + n as u32;
+                faces.extend([[v, v + 1, w + 1], [v, w + 1, w]]);
+            }
+        }
+        (Topology::from_triangles(n * n, faces).unwrap(), pos)
+    }
+
+    /// Assembled on the region's faces, the restricted values are those restricted from
+    /// the whole mesh's stiffness, to the last bit, with and without the clamp, for the
+    /// cotan weights and for per-face scaled ones.
+    #[test]
+    fn values_from_faces_are_the_restricted_whole_bit_for_bit() {
+        let n = 12;
+        let (topo, pos) = mesh(n);
+        let geom = Geometry::new(&topo, &pos).unwrap();
+        let pattern = VertexPattern::new(&topo);
+        let mask: Vec<bool> = (0..n * n).map(|v| (v % n) * (v / n) % 5 != 1).collect();
+        let region = Restriction::new(&pattern, mask);
+        assert!(region.vertices.len() < n * n);
+        let area = &geom.vertex_area;
+        let scale: Vec<f64> = (0..topo.n_faces()).map(|f| (f % 3) as f64 * 0.5).collect();
+        let cot = |f: usize| geom.face_cot[f].map(|c| -0.5 * 0.3 * c);
+        let scaled = |f: usize| geom.face_cot[f].map(|c| -0.5 * 0.3 * scale[f] * c);
+        let mut positive = 0;
+        for clamp in [false, true] {
+            let whole = cotan_stiffness(&topo, &geom, &pattern, 0.3);
+            positive += whole.iter().filter(|&&k| k > 0.0).count();
+            let want = region.scalar_values(&pattern, &whole, area, clamp);
+            let got = region.values_from_faces(&topo, area, clamp, cot);
+            assert_eq!(got.len(), want.len());
+            assert!(
+                got.iter()
+                    .zip(&want)
+                    .all(|(a, b)| a.to_bits() == b.to_bits())
+            );
+            let whole = assemble_face_weights(&topo, &pattern, scaled);
+            let want = region.scalar_values(&pattern, &whole, area, clamp);
+            let got = region.values_from_faces(&topo, area, clamp, scaled);
+            assert!(
+                got.iter()
+                    .zip(&want)
+                    .all(|(a, b)| a.to_bits() == b.to_bits())
+            );
+        }
+        // the clamp had something to do (off-diagonals are positive on obtuse triangles)
+        assert!(positive > 2, "{positive}");
     }
 }

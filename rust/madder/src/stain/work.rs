@@ -25,7 +25,7 @@
 //! | geometry | positions, rest positions and frames in; edge lengths, face areas and cotangents, lumped areas, vertex frames, polar angles and `R_ij` out | `216n + 64e + 44f` | `38f + 125e + 650n` (a 3×3 SVD per vertex, a polar angle per spoke, `R_ij` per edge) |
 //! | forces | both frames, the acceleration and the velocity in; the kicks, the mean velocity and the extension out | `296n + 32e` | `200n` (two friction exponentials per kick) |
 //! | advection | the back-trace (velocities, spoke angles and lengths in, `a` velocities out), the dual fluxes (positions, frames, velocities in, a flux per edge out), the plan (a fraction per edge), and per transport sub-cycle the plan and each carried field | `200n + 65e + 12f + 16a + 17e·C + 16n·P` | `300a + 60f + 24e + 4e·P` |
-//! | diffusion | assembly (cotangents, areas, `R_ij` in; both matrices out), both IC(0) factors, per solve the right-hand side, warm start and restoration, per CG iteration the matrix, the factor twice and five vectors, per carried field its fluxes | see [`Profile::least_work`] | idem |
+//! | diffusion | assembly (cotangents, areas, `R_ij` in; the density matrix and the velocity's rotated values out), the densities' IC(0) factor, per solve the right-hand side, warm start and restoration, per CG iteration the matrix, the factor twice (the velocity: its rotated values twice, product and Gauss–Seidel sweeps) and five vectors, per carried field its fluxes | see [`Profile::least_work`] | idem |
 //! | interaction | the eleven per-vertex fields in and out, the wetness and the exposure | `208n + 8e` | `80n` |
 //! | window | per frame, the search for the liquid (five fields and the area of each window vertex, a mask, the fans of the rings it grows over); per rebuild, the window's faces, edges, fans, both patterns, rest positions and frames written once | `57n + 8e` a frame, `140n + 40e + 12f` a rebuild (window means) | 0 |
 //!
@@ -65,7 +65,6 @@ impl Profile {
         let cycles = self.transport_cycles as f64;
         let passes = self.transport_passes as f64;
         let (nnz_s, fac_s) = (nm + 2.0 * em, nm + em);
-        let (nnz_v, fac_v) = (4.0 * nnz_s, 4.0 * fac_s);
         let t = TRANSCENDENTAL;
 
         let geometry = (
@@ -79,14 +78,13 @@ impl Profile {
         );
         // diffusion: assembly and factorizations per sub-step, then per solve and per
         // iteration (module doc)
+        // the velocity's values: `(a c, a s)` per scalar entry (`ops/cg.rs`, "Rotated
+        // blocks"), 16 bytes and two products; only the densities' matrix is factored
         let assembly = (
-            36.0 * f + 8.0 * n + 16.0 * e + 8.0 * (nnz_s + nnz_v) * s,
-            10.0 * f + 4.0 * nnz_v * s,
+            36.0 * f + 8.0 * n + 16.0 * e + (8.0 + 16.0) * nnz_s * s,
+            10.0 * f + 2.0 * nnz_s * s,
         );
-        let factor = (
-            (12.0 * (nnz_s + nnz_v) + 8.0 * (fac_s + fac_v)) * s,
-            (6.0 * fac_s + 12.0 * fac_v) * s,
-        );
+        let factor = ((12.0 * nnz_s + 8.0 * fac_s) * s, 6.0 * fac_s * s);
         let solves = self.density_solves as f64 + s; // each density field, and the velocity
         let per_solve = (48.0 * nm + 12.0 * nnz_s, 10.0 * nm + 2.0 * nnz_s);
         let iteration = |nnz: f64, fac: f64, vec: f64| {
@@ -96,7 +94,12 @@ impl Profile {
             )
         };
         let dens = iteration(nnz_s, fac_s, nm);
-        let vel = iteration(nnz_v, fac_v, 2.0 * nm);
+        // the product and the two Gauss–Seidel sweeps each read the rotated values once
+        // (20 bytes an entry with its index), 8 flops an entry each
+        let vel = (
+            40.0 * nnz_s + 136.0 * 2.0 * nm,
+            16.0 * nnz_s + 10.0 * 2.0 * nm,
+        );
         let (di, vi) = (
             self.density_iterations as f64,
             self.velocity_iterations as f64,
@@ -138,7 +141,7 @@ impl Profile {
                 "diffusion",
                 self.diffusion,
                 diffusion,
-                12.0 * (nnz_s + nnz_v) + 8.0 * (fac_s + fac_v) + 136.0 * 3.0 * nm,
+                12.0 * nnz_s + 8.0 * fac_s + 20.0 * nnz_s + 136.0 * 3.0 * nm,
             ),
             phase(
                 "interaction",
