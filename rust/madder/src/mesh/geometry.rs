@@ -164,16 +164,7 @@ pub(crate) fn vertex_area<P: Copy + Into<DVec3>>(
     faces: impl Iterator<Item = [u32; 3]>,
     positions: &[P],
 ) -> f64 {
-    faces
-        .map(|f| {
-            let p = f.map(|v| positions[v as usize].into());
-            heron([
-                p[1].distance(p[2]),
-                p[2].distance(p[0]),
-                p[0].distance(p[1]),
-            ]) / 3.0
-        })
-        .sum()
+    faces.map(|f| face_third(&f, positions)).sum()
 }
 
 /// The lumped areas `A_v = Σ_{T∋v} A_T / 3` of every vertex (unmollified, as

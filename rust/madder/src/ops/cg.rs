@@ -935,6 +935,49 @@ impl LinOp<f64> for RotatedOp<'_> {
     }
 }
 
+/// faer's preconditioner traits for a sweep type with `inv_d` (one entry per unknown) and
+/// `solve(x, y)` (`y = M⁻¹ x`, one column): the CG applies it out of place, column by
+/// column; in place goes through faer's default copy.
+macro_rules! sweep_preconditioner {
+    ($t:ident) => {
+        impl LinOp<f64> for $t<'_> {
+            fn apply_scratch(&self, _rhs_ncols: usize, _par: Par) -> StackReq {
+                StackReq::EMPTY
+            }
+
+            fn nrows(&self) -> usize {
+                self.inv_d.len()
+            }
+
+            fn ncols(&self) -> usize {
+                self.inv_d.len()
+            }
+
+            fn apply(
+                &self,
+                out: MatMut<'_, f64>,
+                rhs: MatRef<'_, f64>,
+                _par: Par,
+                _: &mut MemStack,
+            ) {
+                by_columns(self.nrows(), out, rhs, |x, y| self.solve(x, y));
+            }
+
+            fn conj_apply(
+                &self,
+                out: MatMut<'_, f64>,
+                rhs: MatRef<'_, f64>,
+                par: Par,
+                s: &mut MemStack,
+            ) {
+                self.apply(out, rhs, par, s);
+            }
+        }
+
+        impl Precond<f64> for $t<'_> {}
+    };
+}
+
 /// Symmetric Gauss–Seidel for [`RotatedOp`]: `M = (D + L) D⁻¹ (D + Lᵀ)`, `L` the blocks
 /// below the diagonal, `D = diag(a_ii) ⊗ I₂` (`inv_d` its inverse, two entries a vertex):
 /// a forward sweep along the rows' entries left of the diagonal, a backward sweep along
@@ -984,29 +1027,7 @@ impl RotatedSgs<'_> {
     }
 }
 
-impl LinOp<f64> for RotatedSgs<'_> {
-    fn apply_scratch(&self, _rhs_ncols: usize, _par: Par) -> StackReq {
-        StackReq::EMPTY
-    }
-
-    fn nrows(&self) -> usize {
-        self.inv_d.len()
-    }
-
-    fn ncols(&self) -> usize {
-        self.inv_d.len()
-    }
-
-    fn apply(&self, out: MatMut<'_, f64>, rhs: MatRef<'_, f64>, _par: Par, _: &mut MemStack) {
-        by_columns(self.nrows(), out, rhs, |x, y| self.solve(x, y));
-    }
-
-    fn conj_apply(&self, out: MatMut<'_, f64>, rhs: MatRef<'_, f64>, par: Par, s: &mut MemStack) {
-        self.apply(out, rhs, par, s);
-    }
-}
-
-impl Precond<f64> for RotatedSgs<'_> {}
+sweep_preconditioner!(RotatedSgs);
 
 /// The full symmetric matrix, compressed by columns, which are also its rows: the
 /// product gathers every output entry along its row (see the module doc).
@@ -1134,30 +1155,7 @@ impl Factor<'_> {
     }
 }
 
-impl LinOp<f64> for Factor<'_> {
-    fn apply_scratch(&self, _rhs_ncols: usize, _par: Par) -> StackReq {
-        StackReq::EMPTY
-    }
-
-    fn nrows(&self) -> usize {
-        self.inv_d.len()
-    }
-
-    fn ncols(&self) -> usize {
-        self.inv_d.len()
-    }
-
-    fn apply(&self, out: MatMut<'_, f64>, rhs: MatRef<'_, f64>, _par: Par, _: &mut MemStack) {
-        by_columns(self.nrows(), out, rhs, |x, y| self.solve(x, y));
-    }
-
-    fn conj_apply(&self, out: MatMut<'_, f64>, rhs: MatRef<'_, f64>, par: Par, s: &mut MemStack) {
-        self.apply(out, rhs, par, s);
-    }
-}
-
-/// The CG applies the factor out of place; in place goes through faer's default copy.
-impl Precond<f64> for Factor<'_> {}
+sweep_preconditioner!(Factor);
 
 #[cfg(test)]
 mod tests {
