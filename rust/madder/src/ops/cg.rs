@@ -695,7 +695,7 @@ impl WarmCg {
             return Ok(());
         }
         if self.scratch.is_empty() {
-            self.scratch.push(MemBuffer::new(cg_scratch_op(op, 2 * n)));
+            self.scratch.push(MemBuffer::new(cg_scratch(op, 2 * n)));
         }
         let params = CgParams::<f64> {
             rel_tolerance: self.tolerance,
@@ -866,12 +866,7 @@ fn recycle(
     }
 }
 
-fn cg_scratch(a: SymOp<'_>, n: usize) -> StackReq {
-    let d = Col::<f64>::zeros(n);
-    conjugate_gradient_scratch(d.as_ref().as_diagonal(), a, 1, Par::Seq)
-}
-
-fn cg_scratch_op(a: RotatedOp<'_>, n: usize) -> StackReq {
+fn cg_scratch(a: impl LinOp<f64>, n: usize) -> StackReq {
     let d = Col::<f64>::zeros(n);
     conjugate_gradient_scratch(d.as_ref().as_diagonal(), a, 1, Par::Seq)
 }

@@ -208,54 +208,23 @@ impl Restriction {
         area: &[f64],
         clamp: bool,
     ) -> Vec<f64> {
-        let (cp, ri) = (&self.scalar.col_ptr, &self.scalar.row_idx);
-        let nv = self.vertices.len();
-        let mut values = vec![0.0; ri.len()];
-        let mut row = vec![0.0; nv];
-        for j in 0..nv {
+        let cp = &self.scalar.col_ptr;
+        let mut values = vec![0.0; self.scalar.row_idx.len()];
+        for j in 0..self.vertices.len() {
             for s in cp[j] as usize + 1..cp[j + 1] as usize {
-                let mut k = full[pattern.edge_slot()[self.edge[s] as usize] as usize];
-                if clamp && k > 0.0 {
-                    k = 0.0;
-                }
-                values[s] = k;
-                row[j] += k;
-                row[ri[s] as usize] += k;
+                values[s] = full[pattern.edge_slot()[self.edge[s] as usize] as usize];
             }
         }
-        for (j, &v) in self.vertices.iter().enumerate() {
-            values[cp[j] as usize] = area[v as usize] - row[j];
-        }
+        self.close_rows(&mut values, area, clamp);
         values
     }
 
-    /// [`Restriction::scalar_values`] of the stiffness that [`assemble_face_weights`]
-    /// (`crate::ops::cotan`) would assemble from `weights` on the whole mesh, without
-    /// assembling it: only the faces with an edge inside add, in the same face order,
-    /// so every value is the same to the last bit (the whole mesh's diagonal, which the
-    /// restriction recomputes, is not formed).
-    pub(crate) fn values_from_faces(
-        &self,
-        topology: &Topology,
-        area: &[f64],
-        clamp: bool,
-        weights: impl Fn(usize) -> [f64; 3],
-    ) -> Vec<f64> {
+    /// Given the off-diagonal entries of a restricted system, clamps them (if `clamp`,
+    /// positive ones to 0) and sets each diagonal to the vertex's `area` minus its row's
+    /// off-diagonal sum (Neumann rows), summed column by column in pattern order.
+    fn close_rows(&self, values: &mut [f64], area: &[f64], clamp: bool) {
         let (cp, ri) = (&self.scalar.col_ptr, &self.scalar.row_idx);
         let nv = self.vertices.len();
-        let mut values = vec![0.0; ri.len()];
-        for (f, fe) in topology.face_edges().iter().enumerate() {
-            let entry = fe.map(|e| self.edge_entry[e as usize]);
-            if entry.iter().all(|&s| s == u32::MAX) {
-                continue;
-            }
-            let w = weights(f);
-            for k in 0..3 {
-                if entry[k] != u32::MAX {
-                    values[entry[k] as usize] += w[k];
-                }
-            }
-        }
         let mut row = vec![0.0; nv];
         for j in 0..nv {
             for s in cp[j] as usize + 1..cp[j + 1] as usize {
@@ -270,6 +239,34 @@ impl Restriction {
         for (j, &v) in self.vertices.iter().enumerate() {
             values[cp[j] as usize] = area[v as usize] - row[j];
         }
+    }
+
+    /// [`Restriction::scalar_values`] of the stiffness that [`assemble_face_weights`]
+    /// (`crate::ops::cotan`) would assemble from `weights` on the whole mesh, without
+    /// assembling it: only the faces with an edge inside add, in the same face order,
+    /// so every value is the same to the last bit (the whole mesh's diagonal, which the
+    /// restriction recomputes, is not formed).
+    pub(crate) fn values_from_faces(
+        &self,
+        topology: &Topology,
+        area: &[f64],
+        clamp: bool,
+        weights: impl Fn(usize) -> [f64; 3],
+    ) -> Vec<f64> {
+        let mut values = vec![0.0; self.scalar.row_idx.len()];
+        for (f, fe) in topology.face_edges().iter().enumerate() {
+            let entry = fe.map(|e| self.edge_entry[e as usize]);
+            if entry.iter().all(|&s| s == u32::MAX) {
+                continue;
+            }
+            let w = weights(f);
+            for k in 0..3 {
+                if entry[k] != u32::MAX {
+                    values[entry[k] as usize] += w[k];
+                }
+            }
+        }
+        self.close_rows(&mut values, area, clamp);
         values
     }
 
