@@ -83,8 +83,11 @@ pub fn encode_angles<'py>(
 }
 
 /// Vertex positions `(N, 3)` from corner angles `(F, 3)` and dihedral angles `(E,)`.
+/// `previous` (the previous frame's positions, `(N, 3)`) warm-starts the spectral method
+/// and is what the tracked one follows (it falls back to the warm spectral method when its
+/// rotations do not settle).
 #[pyfunction]
-#[pyo3(signature = (faces, corners, dihedrals, *, reference_face=None, reference_positions=None, refine_iterations=0, method="spectral"))]
+#[pyo3(signature = (faces, corners, dihedrals, *, reference_face=None, reference_positions=None, refine_iterations=0, method="spectral", previous=None))]
 #[allow(clippy::too_many_arguments)]
 pub fn decode_angles<'py>(
     py: Python<'py>,
@@ -95,6 +98,7 @@ pub fn decode_angles<'py>(
     reference_positions: Option<PyReadonlyArray2<'py, f64>>,
     refine_iterations: usize,
     method: &str,
+    previous: Option<PyReadonlyArray2<'py, f64>>,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
     let tris = faces_of(&faces)?;
     let cs = corners.shape();
@@ -121,28 +125,38 @@ pub fn decode_angles<'py>(
             return Err(to_py(AngleError::PlacementIncomplete));
         }
     };
-    let sequential = match method {
-        "spectral" => false,
-        "sequential" => true,
-        _ => {
-            return Err(to_py(AngleError::Method {
-                method: method.into(),
-            }));
-        }
-    };
+    if !matches!(method, "spectral" | "tracked" | "sequential") {
+        return Err(to_py(AngleError::Method {
+            method: method.into(),
+        }));
+    }
     let n = vertex_count(&tris);
+    let previous = previous
+        .map(|p| rows3("previous", &p, Some(n)))
+        .transpose()?;
+    if method == "tracked" && previous.is_none() {
+        return Err(to_py(AngleError::PreviousMissing));
+    }
     let x = py
         .detach(|| {
             let mesh = AngleMesh::new(n, tris)?;
             let angles = Angles { corners, dihedrals };
-            if sequential {
-                mesh.sequential(&angles, placement.as_ref())
-            } else {
-                let opts = ReconstructOptions {
-                    refine_iterations,
-                    placement,
-                };
-                mesh.reconstruct(&angles, &opts).map(|r| r.positions)
+            let opts = ReconstructOptions {
+                refine_iterations,
+                placement,
+            };
+            match (method, previous.as_deref()) {
+                ("sequential", _) => mesh.sequential(&angles, opts.placement.as_ref()),
+                ("tracked", Some(prev)) => match mesh.reconstruct_tracked(&angles, prev, &opts)? {
+                    Some(r) => Ok(r.positions),
+                    None => mesh
+                        .reconstruct_warm(&angles, prev, &opts)
+                        .map(|r| r.positions),
+                },
+                (_, Some(prev)) => mesh
+                    .reconstruct_warm(&angles, prev, &opts)
+                    .map(|r| r.positions),
+                _ => mesh.reconstruct(&angles, &opts).map(|r| r.positions),
             }
         })
         .map_err(to_py)?;

@@ -27,7 +27,8 @@ fn usage(path: &std::path::Path, reason: String) -> PyErr {
 /// closed-loop temporal prediction and range coding, plus a per-frame similarity. Nothing
 /// appears at `path` until `finish()`; `abort()` (or dropping the encoder) removes the
 /// temporary file next to it. Decoding is warm-started from the previous frame, cold every
-/// `keyframe_interval` frames (0: always cold).
+/// `keyframe_interval` frames (0: always cold); `warm` picks the warm frames' method:
+/// `"tracked"` (the default; fast) or `"spectral"` (the warm-started eigen-solve).
 #[pyclass(module = "madder")]
 pub struct MotionEncoder {
     path: PathBuf,
@@ -37,7 +38,7 @@ pub struct MotionEncoder {
 #[pymethods]
 impl MotionEncoder {
     #[new]
-    #[pyo3(signature = (path, faces, *, start=1.0, rate=1.0, bits=12, corner_bits=None, corners="every", keyframe_interval=16))]
+    #[pyo3(signature = (path, faces, *, start=1.0, rate=1.0, bits=12, corner_bits=None, corners="every", keyframe_interval=16, warm="tracked"))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -49,6 +50,7 @@ impl MotionEncoder {
         corner_bits: Option<u32>,
         corners: &str,
         keyframe_interval: u32,
+        warm: &str,
     ) -> PyResult<Self> {
         let shape = faces.shape();
         if shape[1] != 3 || shape[0] == 0 {
@@ -66,6 +68,15 @@ impl MotionEncoder {
                 )));
             }
         };
+        let tracked = match warm {
+            "tracked" => true,
+            "spectral" => false,
+            other => {
+                return Err(ParameterError::new_err(format!(
+                    "warm must be 'tracked' or 'spectral', got {other:?}"
+                )));
+            }
+        };
         let faces: Vec<[u32; 3]> = faces
             .as_array()
             .rows()
@@ -79,6 +90,7 @@ impl MotionEncoder {
             corner_bits: corner_bits.unwrap_or(bits),
             corners_once,
             keyframe_interval,
+            tracked,
         };
         let p = path.clone();
         let inner = py

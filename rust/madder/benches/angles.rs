@@ -105,6 +105,7 @@ fn warm_case(n: usize, frames: usize) {
         .positions;
     let t_first = t.elapsed().as_secs_f64();
     let (mut warm, mut cold, mut gap) = (Vec::new(), Vec::new(), 0.0f64);
+    let (mut tracked, mut tgap, mut trounds) = (Vec::new(), 0.0f64, Vec::new());
     let mut rounds = Vec::new();
     for k in 1..=frames {
         let (_, x) = cloth(n, k as f64 / 25.0);
@@ -116,6 +117,20 @@ fn warm_case(n: usize, frames: usize) {
         let t = Instant::now();
         let c = other.reconstruct(&a, &opts(&x)).unwrap();
         cold.push(t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        let tr = mesh
+            .reconstruct_tracked(&a, &previous, &opts(&x))
+            .unwrap()
+            .expect("the rotations settle");
+        tracked.push(t.elapsed().as_secs_f64());
+        trounds.push(tr.rounds);
+        let d = tr
+            .positions
+            .iter()
+            .zip(&x)
+            .map(|(p, q)| (*p - *q).length())
+            .fold(0.0, f64::max);
+        tgap = tgap.max(d / bbox_diagonal(&x));
         let d = w
             .positions
             .iter()
@@ -136,6 +151,10 @@ fn warm_case(n: usize, frames: usize) {
         x0.len(),
         range(&warm),
         range(&cold),
+    );
+    println!(
+        "  tracked {} per frame (rotation rounds {trounds:?}); max |tracked − true| / diagonal {tgap:.1e}",
+        range(&tracked)
     );
 }
 

@@ -663,11 +663,14 @@ pub enum AngleError {
     #[error("reference_face and reference_positions must be given together")]
     PlacementIncomplete,
     /// A reconstruction method that does not exist (from the binding).
-    #[error("method must be 'spectral' or 'sequential', got {method:?}")]
+    #[error("method must be 'spectral', 'tracked' or 'sequential', got {method:?}")]
     Method {
         /// The method given.
         method: String,
     },
+    /// The tracked reconstruction without the previous frame's positions (from the binding).
+    #[error("method 'tracked' needs the previous frame's positions (previous=, shape (N, 3))")]
+    PreviousMissing,
     /// An array of the wrong shape (from the binding).
     #[error("{name} has shape {got}, expected {expected}")]
     Shape {

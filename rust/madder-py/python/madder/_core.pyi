@@ -96,8 +96,9 @@ def decode_angles(
     reference_positions: _F64 | None = None,
     refine_iterations: int = 0,
     method: str = "spectral",
+    previous: _F64 | None = None,
 ) -> _F64:
-    """Vertex positions (N, 3) from corner and dihedral angles (spectral or sequential)."""
+    """Vertex positions (N, 3) from corner and dihedral angles (spectral, tracked or sequential)."""
 
 def weft_directions(
     topology: Topology,
@@ -342,6 +343,7 @@ class MotionEncoder:
         corner_bits: int | None = None,
         corners: str = "every",
         keyframe_interval: int = 16,
+        warm: str = "tracked",
     ) -> MotionEncoder: ...
     def add_frame(self, positions: _F32 | _F64) -> _F32: ...
     def finish(self) -> dict[str, Any]: ...

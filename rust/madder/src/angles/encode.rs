@@ -6,6 +6,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use super::spectral::SolverCache;
+use super::track::TrackerCache;
 use crate::error::AngleError;
 use crate::mesh::Topology;
 use crate::mesh::geometry::check_positions;
@@ -38,6 +39,8 @@ pub struct AngleMesh {
     unreached: Option<usize>,
     /// Connectivity-only solver state kept between reconstructions.
     solver: SolverCache,
+    /// The tracked reconstruction's factorized Laplacians, built on first use.
+    tracker: TrackerCache,
 }
 
 /// The angles of a mesh: corner angles `corners[f][c]` (radians, at vertex `faces[f][c]`) and
@@ -128,6 +131,7 @@ impl AngleMesh {
             face_interior,
             unreached,
             solver: SolverCache::default(),
+            tracker: TrackerCache::default(),
         })
     }
 
@@ -158,6 +162,9 @@ impl AngleMesh {
 
     pub(crate) fn solver_cache(&self) -> &SolverCache {
         &self.solver
+    }
+    pub(crate) fn tracker_cache(&self) -> &TrackerCache {
+        &self.tracker
     }
     pub(crate) fn topology(&self) -> &Topology {
         &self.topo

@@ -163,6 +163,7 @@ mod place;
 mod refine;
 mod sequential;
 mod spectral;
+mod track;
 
 pub use codec::{CodecOptions, CodecStats, MotionDecoder, MotionEncoder};
 pub use encode::{AngleMesh, Angles};

@@ -17,7 +17,10 @@
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltError;
 use faer::linalg::cholesky::llt::factor::LltRegularization;
-use faer::sparse::linalg::cholesky::{SymbolicCholesky, factorize_symbolic_cholesky};
+use faer::sparse::linalg::SupernodalThreshold;
+use faer::sparse::linalg::cholesky::{
+    CholeskySymbolicParams, SymbolicCholesky, factorize_symbolic_cholesky,
+};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par, Side};
 
@@ -77,11 +80,32 @@ impl<P: LowerCsc> std::fmt::Debug for PrefactoredSpd<P> {
 impl<P: LowerCsc> PrefactoredSpd<P> {
     /// Symbolic analysis of `pattern` (lower triangle).
     pub fn new(pattern: P, par: Par) -> Result<Self, SolveError> {
+        Self::with_params(pattern, par, Default::default())
+    }
+
+    /// Symbolic analysis of `pattern` for a simplicial (column by column) factor, whatever
+    /// its fill. For very sparse factors (a graph Laplacian of a surface mesh: ~30–50
+    /// entries a column) the supernodes are so small that the supernodal triangular solve
+    /// spends its time in per-supernode dense kernels; the simplicial solve streams the
+    /// factor once for up to four right-hand sides at a time (measured in
+    /// `angles::track`).
+    pub fn new_simplicial(pattern: P) -> Result<Self, SolveError> {
+        let params = CholeskySymbolicParams {
+            supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SIMPLICIAL,
+            ..Default::default()
+        };
+        Self::with_params(pattern, Par::Seq, params)
+    }
+
+    fn with_params(
+        pattern: P,
+        par: Par,
+        params: CholeskySymbolicParams<'_>,
+    ) -> Result<Self, SolveError> {
         let n = pattern.n();
         let sym = symbolic_view(&pattern);
-        let symbolic =
-            factorize_symbolic_cholesky(sym, Side::Lower, Default::default(), Default::default())
-                .map_err(|_| SolveError::OutOfMemory)?;
+        let symbolic = factorize_symbolic_cholesky(sym, Side::Lower, Default::default(), params)
+            .map_err(|_| SolveError::OutOfMemory)?;
         let req = symbolic
             .factorize_numeric_llt_scratch::<f64>(par, Default::default())
             .or(symbolic.solve_in_place_scratch::<f64>(1, par));
@@ -160,6 +184,39 @@ impl<P: LowerCsc> PrefactoredSpd<P> {
         );
         let rhs = MatMut::from_column_major_slice_mut(rhs, n, k);
         llt.solve_in_place_with_conj(Conj::No, rhs, self.par, MemStack::new(&mut self.scratch));
+    }
+}
+
+impl<P: LowerCsc + Sync> PrefactoredSpd<P> {
+    /// Solves like [`Self::solve_in_place`], the columns in two fixed groups (the first
+    /// `split` columns, then the rest) solved as two rayon tasks, in parallel when a second
+    /// thread is free. Each group is the same computation whatever the thread count, so the
+    /// result is bit-identical on any number of threads (a group's bits may differ from
+    /// solving all columns at once).
+    pub fn solve_in_place_split(&mut self, rhs: &mut [f64], split: usize) {
+        assert!(
+            self.factorized,
+            "solve_in_place_split called before a successful factorize"
+        );
+        let n = self.pattern.n();
+        assert!(
+            n > 0 && rhs.len() % n == 0 && split * n <= rhs.len(),
+            "right-hand side is not a whole number of columns"
+        );
+        let (first, second) = rhs.split_at_mut(split * n);
+        let (symbolic, values, par) = (&self.symbolic, &self.l_values[..], self.par);
+        let solve = |block: &mut [f64]| {
+            let k = block.len() / n;
+            if k == 0 {
+                return;
+            }
+            let req = symbolic.solve_in_place_scratch::<f64>(k, par);
+            let mut scratch = MemBuffer::new(req);
+            let llt = faer::sparse::linalg::cholesky::LltRef::<'_, u32, f64>::new(symbolic, values);
+            let block = MatMut::from_column_major_slice_mut(block, n, k);
+            llt.solve_in_place_with_conj(Conj::No, block, par, MemStack::new(&mut scratch));
+        };
+        rayon::join(|| solve(first), || solve(second));
     }
 }
 

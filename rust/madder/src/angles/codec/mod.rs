@@ -93,6 +93,8 @@ const MAGIC: &[u8; 8] = b"MADDERMO";
 pub const VERSION: u32 = 1;
 const HEADER: usize = 48;
 const FLAG_CORNERS_ONCE: u8 = 1;
+/// Warm frames by the tracked reconstruction (else the warm-started spectral one).
+const FLAG_TRACKED: u8 = 2;
 
 /// Options of [`MotionEncoder`].
 #[derive(Debug, Clone, PartialEq)]
@@ -110,6 +112,9 @@ pub struct CodecOptions {
     /// Keyframe interval `K` of the warm-started decoding (module docs), 0..=255; 0: every
     /// frame reconstructed cold.
     pub keyframe_interval: u32,
+    /// Warm frames by the tracked reconstruction ([`AngleMesh::reconstruct_tracked`], the
+    /// default) instead of the warm-started spectral one (module docs).
+    pub tracked: bool,
 }
 
 impl Default for CodecOptions {
@@ -121,6 +126,7 @@ impl Default for CodecOptions {
             corner_bits: 12,
             corners_once: false,
             keyframe_interval: 16,
+            tracked: true,
         }
     }
 }
@@ -271,13 +277,17 @@ fn is_key(k: usize, key: u32) -> bool {
 }
 
 /// The decoding shared by encoder and reader: dequantize, reconstruct (normalized), warm
-/// from `previous` when given.
+/// from `previous` when given. With `tracked`, every frame is the tracked reconstruction
+/// started from `previous`, or at a keyframe from the spectral reconstruction; where it
+/// does not settle, the warm spectral reconstruction (or, at a keyframe, the spectral one)
+/// is used instead.
 fn reconstruct(
     mesh: &AngleMesh,
     corners: &[i64],
     dihedrals: &[i64],
     (bits, corner_bits): (u32, u32),
     previous: Option<&[DVec3]>,
+    tracked: bool,
 ) -> Result<Vec<DVec3>, AngleError> {
     let (dc, dd) = (step(corner_bits), step(bits));
     let angles = Angles {
@@ -288,11 +298,30 @@ fn reconstruct(
         dihedrals: dihedrals.iter().map(|&d| d as f64 * dd).collect(),
     };
     let options = ReconstructOptions::default();
-    Ok(match previous {
-        Some(prev) => mesh.reconstruct_warm(&angles, prev, &options)?,
-        None => mesh.reconstruct(&angles, &options)?,
+    if !tracked {
+        return Ok(match previous {
+            Some(prev) => mesh.reconstruct_warm(&angles, prev, &options)?,
+            None => mesh.reconstruct(&angles, &options)?,
+        }
+        .positions);
     }
-    .positions)
+    // every tracked frame is the tracked reconstruction; a keyframe starts it from the
+    // spectral one, so keyframes and the frames between are the same kind of fit
+    match previous {
+        Some(prev) => Ok(match mesh.reconstruct_tracked(&angles, prev, &options)? {
+            Some(r) => r.positions,
+            None => mesh.reconstruct_warm(&angles, prev, &options)?.positions,
+        }),
+        None => {
+            let spectral = mesh.reconstruct(&angles, &options)?.positions;
+            Ok(
+                match mesh.reconstruct_tracked(&angles, &spectral, &options)? {
+                    Some(r) => r.positions,
+                    None => spectral,
+                },
+            )
+        }
+    }
 }
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> CodecError + '_ {
@@ -406,7 +435,8 @@ impl MotionEncoder {
         h.extend_from_slice(&(self.frames as u32).to_le_bytes());
         h.extend_from_slice(&o.start.to_le_bytes());
         h.extend_from_slice(&o.rate.to_le_bytes());
-        let flags = if o.corners_once { FLAG_CORNERS_ONCE } else { 0 };
+        let flags = if o.corners_once { FLAG_CORNERS_ONCE } else { 0 }
+            | if o.tracked { FLAG_TRACKED } else { 0 };
         h.extend_from_slice(&[
             o.bits as u8,
             o.corner_bits as u8,
@@ -480,13 +510,14 @@ impl MotionEncoder {
             (Some(p), false) => Some(p.as_slice()),
             _ => None,
         };
-        let y = reconstruct(&self.mesh, &qc, &qd, (o.bits, o.corner_bits), previous).map_err(
-            |source| CodecError::Reconstruct {
+        let bits = (o.bits, o.corner_bits);
+        let y = reconstruct(&self.mesh, &qc, &qd, bits, previous, o.tracked).map_err(|source| {
+            CodecError::Reconstruct {
                 path: self.path.clone(),
                 frame,
                 source,
-            },
-        )?;
+            }
+        })?;
         let sim = Similarity::fit(&y, positions);
         let out = sim.apply(&y);
         let mut payload = Vec::new();
@@ -587,6 +618,7 @@ pub struct MotionDecoder {
     corner_bits: u32,
     corners_once: bool,
     keyframe_interval: u32,
+    tracked: bool,
     /// Byte range of every frame's payload and its checksum.
     blocks: Vec<(u64, u32, u32)>,
     file: File,
@@ -651,7 +683,7 @@ impl MotionDecoder {
         if crc.finalize() != u32_at(44) {
             return Err(header("checksum mismatch"));
         }
-        if !(4..=20).contains(&bits) || !(4..=20).contains(&corner_bits) || flags > 1 {
+        if !(4..=20).contains(&bits) || !(4..=20).contains(&corner_bits) || flags > 3 {
             return Err(header("quantization bits or flags out of range"));
         }
         if !start.is_finite() || !rate.is_finite() || rate <= 0.0 {
@@ -715,6 +747,7 @@ impl MotionDecoder {
             corner_bits,
             corners_once: flags & FLAG_CORNERS_ONCE != 0,
             keyframe_interval: key,
+            tracked: flags & FLAG_TRACKED != 0,
             blocks,
             file,
             next: 0,
@@ -873,12 +906,14 @@ impl MotionDecoder {
             };
             let qc = self.corners.prev.as_deref().unwrap_or_default();
             let qd = self.dihedrals.prev.as_deref().unwrap_or_default();
-            let yj = reconstruct(&self.mesh, qc, qd, (self.bits, self.corner_bits), previous)
-                .map_err(|source| CodecError::Reconstruct {
+            let bits = (self.bits, self.corner_bits);
+            let yj = reconstruct(&self.mesh, qc, qd, bits, previous, self.tracked).map_err(
+                |source| CodecError::Reconstruct {
                     path: self.path.clone(),
                     frame: j,
                     source,
-                })?;
+                },
+            )?;
             self.last = Some(sim);
             self.last_y = Some(yj);
             y = Some(sim);

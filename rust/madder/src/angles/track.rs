@@ -1,0 +1,397 @@
+//! Tracked reconstruction (issue 15's warm decode): a frame of a sequence from its angles and
+//! the previous frame's positions, by integrating face rotations, face scales and positions
+//! with three fixed graph Laplacians factorized once per mesh. The math is in the module
+//! docs of [`crate::angles`], "Tracked reconstruction".
+
+use std::sync::{Arc, Mutex};
+
+use glam::{DQuat, DVec3};
+use rayon::prelude::*;
+
+use super::encode::{AngleMesh, Angles, NONE};
+use super::local::preprocess;
+use super::place::Placement;
+use super::spectral::{Reconstruction, normalize};
+use crate::error::{AngleError, SolveError};
+use crate::ops::{LowerCsc, PrefactoredSpd};
+
+/// The rotation iteration stops after a round that turned no face by more than this
+/// (radians): the rounds converge quadratically on consistent angles (measured updates
+/// 0.15, 1.5·10⁻³, 3·10⁻⁷, 10⁻¹⁵), so what is left is ~10⁻¹³...
+const SETTLED: f64 = 1e-6;
+/// ... or after this many rounds (then the caller falls back to the spectral method).
+pub(crate) const MAX_ROUNDS: usize = 24;
+
+/// A graph Laplacian's lower triangle in CSC (`n` nodes), anchored at node 0.
+#[derive(Clone)]
+struct Graph {
+    n: usize,
+    col_ptr: Arc<[u32]>,
+    row_idx: Arc<[u32]>,
+}
+
+impl LowerCsc for Graph {
+    fn n(&self) -> usize {
+        self.n
+    }
+    fn col_ptr(&self) -> &[u32] {
+        &self.col_ptr
+    }
+    fn row_idx(&self) -> &[u32] {
+        &self.row_idx
+    }
+}
+
+/// The Laplacian `Σ_(i,j) (δᵢ − δⱼ)(δᵢ − δⱼ)ᵀ + δ₀δ₀ᵀ` of the node pairs `pairs` (a pair
+/// listed twice counts twice), factorized: the `δ₀δ₀ᵀ` anchors the constant, which the
+/// least-squares problems below leave free, at node 0.
+fn laplacian(n: usize, pairs: &[(u32, u32)]) -> Result<PrefactoredSpd<Graph>, SolveError> {
+    let mut keys: Vec<u64> = Vec::with_capacity(pairs.len() + n);
+    for &(i, j) in pairs {
+        let (r, c) = if i > j { (i, j) } else { (j, i) };
+        keys.push(((c as u64) << 32) | r as u64);
+    }
+    for i in 0..n as u32 {
+        keys.push(((i as u64) << 32) | i as u64);
+    }
+    keys.par_sort_unstable();
+    keys.dedup();
+    let mut col_ptr = vec![0u32; n + 1];
+    let mut row_idx = Vec::with_capacity(keys.len());
+    for &k in &keys {
+        col_ptr[(k >> 32) as usize + 1] += 1;
+        row_idx.push(k as u32);
+    }
+    for c in 0..n {
+        col_ptr[c + 1] += col_ptr[c];
+    }
+    let mut values = vec![0.0; row_idx.len()];
+    let at = |r: u32, c: u32| {
+        let (s, e) = (
+            col_ptr[c as usize] as usize,
+            col_ptr[c as usize + 1] as usize,
+        );
+        s + row_idx[s..e]
+            .binary_search(&r)
+            .expect("entry is in the pattern")
+    };
+    for &(i, j) in pairs {
+        let (r, c) = if i > j { (i, j) } else { (j, i) };
+        values[at(i, i)] += 1.0;
+        values[at(j, j)] += 1.0;
+        values[at(r, c)] -= 1.0;
+    }
+    values[at(0, 0)] += 1.0;
+    let graph = Graph {
+        n,
+        col_ptr: col_ptr.into(),
+        row_idx: row_idx.into(),
+    };
+    let mut solver = PrefactoredSpd::new_simplicial(graph)?;
+    solver.factorize(&values)?;
+    Ok(solver)
+}
+
+/// The two factorized Laplacians: the dual graph (faces, one pair per interior edge) and the
+/// vertex graph (one pair per face side, so an interior edge counts twice).
+pub(crate) struct Tracker {
+    dual: PrefactoredSpd<Graph>,
+    primal: PrefactoredSpd<Graph>,
+}
+
+impl Tracker {
+    fn new(mesh: &AngleMesh) -> Result<Self, SolveError> {
+        let dual: Vec<(u32, u32)> = mesh.interior().iter().map(|e| (e.f1, e.f2)).collect();
+        let primal: Vec<(u32, u32)> = mesh
+            .faces()
+            .iter()
+            .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
+            .collect();
+        Ok(Self {
+            dual: laplacian(mesh.n_faces(), &dual)?,
+            primal: laplacian(mesh.n_vertices(), &primal)?,
+        })
+    }
+}
+
+/// The mesh's [`Tracker`], built on first use and kept (same pattern as the spectral
+/// solver's cache: taken out during a call, put back after; a clone starts empty).
+#[derive(Default)]
+pub(crate) struct TrackerCache(Mutex<Option<Tracker>>);
+
+impl TrackerCache {
+    fn take(&self, mesh: &AngleMesh) -> Result<Tracker, SolveError> {
+        let cached = self.0.lock().map(|mut g| g.take()).unwrap_or(None);
+        match cached {
+            Some(t) => Ok(t),
+            None => Tracker::new(mesh),
+        }
+    }
+    fn put(&self, t: Tracker) {
+        if let Ok(mut g) = self.0.lock() {
+            *g = Some(t);
+        }
+    }
+}
+
+impl Clone for TrackerCache {
+    fn clone(&self) -> Self {
+        Self::default()
+    }
+}
+
+impl std::fmt::Debug for TrackerCache {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let built = self.0.lock().map(|g| g.is_some()).unwrap_or(false);
+        f.debug_struct("TrackerCache")
+            .field("built", &built)
+            .finish()
+    }
+}
+
+/// A face's unit-side shape from its corners `α` (module docs): the sines and cosines of
+/// the half corners, from which everything else follows without another transcendental.
+struct Shape {
+    /// `(sin, cos)(α_c / 2)`.
+    half: [(f64, f64); 3],
+}
+
+impl Shape {
+    fn new(a: &[f64; 3]) -> Self {
+        Self {
+            half: a.map(|x| (0.5 * x).sin_cos()),
+        }
+    }
+    /// `sin α_c`.
+    fn sin(&self, c: usize) -> f64 {
+        let (s, co) = self.half[c];
+        2.0 * s * co
+    }
+    /// The turn `R_z(φ_k)` of the side from corner `k` to corner `k + 1`: its direction in
+    /// the face's frame is `φ₀ = 0`, `φ₁ = π − α₁`, `φ₂ = π + α₀`.
+    fn side_turn(&self, k: usize) -> DQuat {
+        let ((s0, c0), (s1, c1)) = (self.half[0], self.half[1]);
+        match k {
+            0 => DQuat::IDENTITY,
+            // half angle π/2 − α₁/2
+            1 => DQuat::from_xyzw(0.0, 0.0, c1, s1),
+            // half angle π/2 + α₀/2
+            _ => DQuat::from_xyzw(0.0, 0.0, c0, -s0),
+        }
+    }
+    /// The corners `p₁ − p₀ = (1, 0, 0)` and `p₂ − p₀ = (sin α₁/sin α₂)(cos α₀, sin α₀, 0)`.
+    fn p2(&self) -> DVec3 {
+        let (s0, c0) = self.half[0];
+        let l = self.sin(1) / self.sin(2);
+        l * DVec3::new(c0 * c0 - s0 * s0, 2.0 * s0 * c0, 0.0)
+    }
+}
+
+/// The rotation (a unit quaternion) of the frame of `p` (vertex positions of a face): `x`
+/// along `p₁ − p₀`, `z` the normal; the identity for a degenerate face.
+fn face_rotation(p: [DVec3; 3]) -> DQuat {
+    let x = (p[1] - p[0]).normalize_or_zero();
+    let z = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+    if x == DVec3::ZERO || z == DVec3::ZERO {
+        return DQuat::IDENTITY;
+    }
+    DQuat::from_mat3(&glam::DMat3::from_cols(x, z.cross(x), z)).normalize()
+}
+
+/// The residual of a rotation that should be the identity: `2 sin(φ/2) n̂` for a turn by `φ`
+/// about `n̂` (twice the quaternion's vector part, the shorter way round). It vanishes
+/// exactly where the rotation vector `φ n̂` does and agrees with it to first order, so the
+/// rounds converge alike, without a transcendental (module docs).
+fn residual(q: DQuat) -> DVec3 {
+    if q.w < 0.0 {
+        -2.0 * q.xyz()
+    } else {
+        2.0 * q.xyz()
+    }
+}
+
+/// `q` turned by the small rotation `ω` (world frame): the unit quaternion of
+/// `(1, ω/2) q`, which turns by `2 atan(|ω|/2)`, `|ω|` to second order.
+fn turned(w: DVec3, q: DQuat) -> DQuat {
+    let h = 0.5 * w;
+    (DQuat::from_xyzw(h.x, h.y, h.z, 1.0) * q).normalize()
+}
+
+/// Per face, the right-hand side `b_f = Σ_e ±d_e` of the dual least-squares problem
+/// `min Σ_e |u_f1 − u_f2 + d_e|²` (`b_f1 −= d_e`, `b_f2 += d_e`), summed in the face's corner
+/// order, for the first `k` components of `d`; the result is `k` columns of `|T|`.
+fn dual_rhs(mesh: &AngleMesh, d: &[[f64; 4]], k: usize) -> Vec<f64> {
+    let nf = mesh.n_faces();
+    let mut out = vec![0.0; nf * k];
+    let per_face: Vec<[f64; 4]> = mesh
+        .face_interior()
+        .par_iter()
+        .enumerate()
+        .map(|(f, fi)| {
+            let mut b = [0.0; 4];
+            for &ie in fi {
+                if ie == NONE {
+                    continue;
+                }
+                let e = &mesh.interior()[ie as usize];
+                let sign = if e.f1 as usize == f { -1.0 } else { 1.0 };
+                for (c, bc) in b.iter_mut().enumerate().take(k) {
+                    *bc += sign * d[ie as usize][c];
+                }
+            }
+            b
+        })
+        .collect();
+    for (f, b) in per_face.iter().enumerate() {
+        for c in 0..k {
+            out[c * nf + f] = b[c];
+        }
+    }
+    out
+}
+
+impl AngleMesh {
+    /// Reconstructs one frame of a sequence from its angles, tracking the previous frame's
+    /// positions `previous` (module docs, "Tracked reconstruction"): the face rotations
+    /// start from `previous`'s and are corrected by a few solves with a fixed, prefactored
+    /// Laplacian of the faces; the face scales and the positions follow by one solve each.
+    /// Exact angles give the exact shape (up to a similarity); on inconsistent angles the
+    /// result is a least-squares fit of rotations, scales and positions in turn, not the
+    /// spectral method's minimizer. Returns `None` if the rotations did not settle within
+    /// [`MAX_ROUNDS`] rounds (a `previous` far from the new shape): the caller then uses
+    /// the spectral reconstruction. The placement works as in [`Self::reconstruct`]; the
+    /// result's `eigenvalues` are zero and `rounds` counts the rotation rounds.
+    ///
+    /// Errors: those of [`Self::reconstruct_warm`].
+    pub fn reconstruct_tracked(
+        &self,
+        angles: &Angles,
+        previous: &[DVec3],
+        options: &super::ReconstructOptions,
+    ) -> Result<Option<Reconstruction>, AngleError> {
+        self.check_angles(angles)?;
+        self.check_connected()?;
+        crate::mesh::geometry::check_positions(self.topology(), previous)?;
+        if let Some(p) = &options.placement {
+            p.check(self.n_faces())?;
+        }
+        let target = preprocess(angles);
+        let cache = self.tracker_cache();
+        let mut tracker = cache.take(self)?;
+        let out = self.track(&target, previous, &mut tracker, options.placement.as_ref());
+        cache.put(tracker);
+        Ok(out)
+    }
+
+    fn track(
+        &self,
+        target: &Angles,
+        previous: &[DVec3],
+        tracker: &mut Tracker,
+        placement: Option<&Placement>,
+    ) -> Option<Reconstruction> {
+        let faces = self.faces();
+        let nf = faces.len();
+        let shape: Vec<Shape> = target.corners.par_iter().map(Shape::new).collect();
+        // R_z(π): the side b → a of the second face, turned round to a → b
+        let half_turn = DQuat::from_xyzw(0.0, 0.0, 1.0, 0.0);
+        // per interior edge: the rotation M with Q₂ = Q₁ M, and the log-ratio of the edge's
+        // lengths in its two faces' unit-side shapes (the side opposite corner c has length
+        // sin α_c / sin α₂)
+        let (turn, ratio): (Vec<DQuat>, Vec<f64>) = self
+            .interior()
+            .par_iter()
+            .zip(target.dihedrals.par_iter())
+            .map(|(e, &theta)| {
+                let (s1, s2) = (&shape[e.f1 as usize], &shape[e.f2 as usize]);
+                let (c1, c2) = (e.c1 as usize, e.c2 as usize);
+                let to2 = s2.side_turn((c2 + 1) % 3) * half_turn;
+                let m =
+                    s1.side_turn((c1 + 1) % 3) * DQuat::from_rotation_x(theta) * to2.conjugate();
+                let r = (s1.sin(c1) * s2.sin(2)) / (s1.sin(2) * s2.sin(c2));
+                (m, r.ln())
+            })
+            .unzip();
+        let mut q: Vec<DQuat> = faces
+            .par_iter()
+            .map(|t| face_rotation(t.map(|v| previous[v as usize])))
+            .collect();
+        // rotations: Q_f ← exp(ω_f) Q_f with L ω = b from c_e = log(Q₁ M Q₂⁻¹); the first
+        // round also solves the log-scales (a fourth column)
+        let mut rounds = 0;
+        let mut log_scale = Vec::new();
+        loop {
+            if rounds == MAX_ROUNDS {
+                return None;
+            }
+            rounds += 1;
+            let k = if rounds == 1 { 4 } else { 3 };
+            let d: Vec<[f64; 4]> = self
+                .interior()
+                .par_iter()
+                .zip(turn.par_iter())
+                .zip(ratio.par_iter())
+                .map(|((e, m), r)| {
+                    let c = residual(q[e.f1 as usize] * *m * q[e.f2 as usize].conjugate());
+                    [c.x, c.y, c.z, *r]
+                })
+                .collect();
+            let mut b = dual_rhs(self, &d, k);
+            tracker.dual.solve_in_place_split(&mut b, 2);
+            if k == 4 {
+                log_scale = b[3 * nf..].to_vec();
+            }
+            let largest = q
+                .par_iter_mut()
+                .enumerate()
+                .map(|(f, qf)| {
+                    let w = DVec3::new(b[f], b[nf + f], b[2 * nf + f]);
+                    *qf = turned(w, *qf);
+                    w.length()
+                })
+                .reduce(|| 0.0, f64::max);
+            if !largest.is_finite() {
+                return None;
+            }
+            if largest <= SETTLED {
+                break;
+            }
+        }
+        // positions: min Σ_faces Σ_sides |x_j − x_i − s_f Q_f (P_j − P_i)|²
+        let nv = self.n_vertices();
+        let sides: Vec<[DVec3; 3]> = shape
+            .par_iter()
+            .zip(q.par_iter())
+            .zip(log_scale.par_iter())
+            .map(|((sh, qf), ls)| {
+                let p = [DVec3::ZERO, DVec3::X, sh.p2()];
+                let s = ls.exp();
+                std::array::from_fn(|k| *qf * ((p[(k + 1) % 3] - p[k]) * s))
+            })
+            .collect();
+        let mut b = vec![0.0; 3 * nv];
+        for (t, side) in faces.iter().zip(&sides) {
+            for k in 0..3 {
+                let (i, j) = (t[k] as usize, t[(k + 1) % 3] as usize);
+                for c in 0..3 {
+                    b[c * nv + i] -= side[k][c];
+                    b[c * nv + j] += side[k][c];
+                }
+            }
+        }
+        tracker.primal.solve_in_place_split(&mut b, 2);
+        let mut positions: Vec<DVec3> = (0..nv)
+            .map(|v| DVec3::new(b[v], b[nv + v], b[2 * nv + v]))
+            .collect();
+        match placement {
+            Some(p) => p.apply(faces, &mut positions),
+            None => normalize(self.edges(), &mut positions),
+        }
+        Some(Reconstruction {
+            positions,
+            residual: Vec::new(),
+            eigenvalues: [0.0; 4],
+            rounds,
+        })
+    }
+}
