@@ -70,7 +70,8 @@ def test_header_bytes(tmp_path):
     data = path.read_bytes()
     magic, version, n, f, frames, start, rate, bits, cbits, flags = struct.unpack_from("<8s4I2d3B", data)
     assert (magic, version, n, f, frames) == (b"MADDERMO", 1, NX * NY, len(FACES), 2)
-    assert (start, rate, bits, cbits, flags) == (3.0, 2.0, 9, 11, 1)
+    # flags: 1 corners once, 2 warm frames tracked (the default)
+    assert (start, rate, bits, cbits, flags) == (3.0, 2.0, 9, 11, 3)
     np.testing.assert_array_equal(np.frombuffer(data, "<u4", 3 * len(FACES), 48).reshape(-1, 3), FACES)
 
 

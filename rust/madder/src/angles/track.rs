@@ -21,6 +21,10 @@ use crate::ops::{LowerCsc, PrefactoredSpd};
 const SETTLED: f64 = 1e-6;
 /// ... or after this many rounds (then the caller falls back to the spectral method).
 pub(crate) const MAX_ROUNDS: usize = 24;
+/// A settled fit whose residual still turns some edge by more than `2 sin(GROSS/2)` is a
+/// wrong fixed point (a start too far from the angles), not noise: refused like an
+/// unsettled one.
+const GROSS: f64 = 1.0;
 
 /// A graph Laplacian's lower triangle in CSC (`n` nodes), anchored at node 0.
 #[derive(Clone)]
@@ -354,6 +358,12 @@ impl AngleMesh {
                 return None;
             }
             if largest <= SETTLED {
+                let gross = 2.0 * (0.5 * GROSS).sin();
+                if d.par_iter()
+                    .any(|c| c[0] * c[0] + c[1] * c[1] + c[2] * c[2] > gross * gross)
+                {
+                    return None;
+                }
                 break;
             }
         }
