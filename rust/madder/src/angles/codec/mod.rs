@@ -2,8 +2,9 @@
 //!
 //! A cloth sequence with fixed connectivity is stored as the angles of §3.3 (corner angles
 //! `α`, signed dihedrals `θ`, the conventions of [`crate::angles`]) plus, per frame, the
-//! similarity the angles do not carry. Decoding is the spectral reconstruction
-//! ([`AngleMesh::reconstruct`]) followed by that similarity.
+//! similarity the angles do not carry. Decoding is the reconstruction from angles (the
+//! tracked one, started at keyframes from the spectral one: below) followed by that
+//! similarity.
 //!
 //! ## Quantization and closed-loop temporal prediction
 //! Every angle is quantized on a uniform grid of step `Δ = 2π / 2^b` (`b` = `bits` for the
@@ -34,12 +35,18 @@
 //! RMS and maximum error. Stored as 8 `f32` (scale, unit quaternion, translation).
 //!
 //! ## Warm-started decoding, keyframes
-//! Frame `k` is reconstructed cold ([`AngleMesh::reconstruct`]) when `k` is a multiple of
-//! the keyframe interval `K` (stored in the header; 0 = every frame cold), else warm-started
-//! from frame `k − 1`'s normalized reconstruction ([`AngleMesh::reconstruct_warm`]). Warm
-//! and cold agree only to the solver's tolerance, not bit for bit, so the encoder runs the
-//! very same chain as the decoder (its placement fit and its error figures are then those
-//! of the decoder's output, bit for bit). A sequential read costs one warm reconstruction;
+//! Frame `k` is decoded by the tracked reconstruction ([`AngleMesh::reconstruct_tracked`],
+//! header flag 2, the default) started from frame `k − 1`'s normalized reconstruction;
+//! at a keyframe (`k` a multiple of the keyframe interval `K`, stored in the header; 0 =
+//! every frame) it is started from the spectral reconstruction ([`AngleMesh::reconstruct`])
+//! of the same angles, so that every frame is the same kind of fit: a rigid motion, whose
+//! angles never change, decodes to one shape moved rigidly. Where the tracked rounds do
+//! not settle, the warm spectral reconstruction (at a keyframe, the spectral one) is used.
+//! Files written with the flag off decode every warm frame by the warm-started spectral
+//! reconstruction ([`AngleMesh::reconstruct_warm`]), as version 1 did before the flag
+//! existed. Neither agrees with a cold decode bit for bit, so the encoder runs the very
+//! same chain as the decoder (its placement fit and its error figures are then those of
+//! the decoder's output, bit for bit). A sequential read costs one tracked reconstruction;
 //! a jump to frame `k` replays the entropy streams and reconstructs from the keyframe
 //! `K⌊k/K⌋` on (at most `K` reconstructions).
 //!
@@ -55,7 +62,8 @@
 //! ## File format (`.madm`, little-endian)
 //! ```text
 //! header  magic "MADDERMO" | version u32 | n_points u32 | n_faces u32 | n_frames u32
-//!         | start f64 | rate f64 | bits u8 | corner_bits u8 | flags u8 (1: corners once)
+//!         | start f64 | rate f64 | bits u8 | corner_bits u8 | flags u8 (1: corners once,
+//!         2: warm frames tracked)
 //!         | keyframe interval u8 | crc32 u32 (of the 44 bytes before it and the faces)
 //! faces   n_faces × 3 u32
 //! frame*  payload length u32 | crc32 u32 of the payload | payload
