@@ -109,3 +109,36 @@ def test_bad_input_is_named():
     assert tuple(e.value.edge) == (0, 1) and e.value.faces == 3
     with pytest.raises(madder.MeshError):
         madder.encode_angles(faces, pos[:-1])
+
+
+def test_tracked_follows_the_previous_frame():
+    faces, pos = torus()
+    corners, dihedrals, _ = madder.encode_angles(faces, pos)
+    # the previous frame: the same torus bent about the z axis by an angle growing with x
+    ang = 0.2 * pos[:, 0]
+    c, s = np.cos(ang), np.sin(ang)
+    previous = np.stack([c * pos[:, 0] - s * pos[:, 1], s * pos[:, 0] + c * pos[:, 1], pos[:, 2]], 1)
+    f = 17
+    x = madder.decode_angles(
+        faces,
+        corners,
+        dihedrals,
+        method="tracked",
+        previous=previous,
+        reference_face=f,
+        reference_positions=pos[faces[f]],
+    )
+    np.testing.assert_allclose(x, pos, atol=1e-9)
+    # the spectral method warm-started from the same frame agrees
+    warm = madder.decode_angles(faces, corners, dihedrals, previous=previous)
+    assert procrustes_rms(warm, pos) < 1e-8
+    with pytest.raises(madder.ParameterError) as e:
+        madder.decode_angles(faces, corners, dihedrals, method="tracked")
+    assert e.value.name == "previous"
+    with pytest.raises(madder.ParameterError):
+        madder.decode_angles(faces, corners, dihedrals, method="tracked", previous=previous[:-1])
+    bad = previous.copy()
+    bad[5, 2] = np.nan
+    with pytest.raises(madder.MeshError) as e:
+        madder.decode_angles(faces, corners, dihedrals, method="tracked", previous=bad)
+    assert e.value.vertex == 5

@@ -37,10 +37,13 @@ def encode(path, frames, **kw):
     return outs, enc.finish()
 
 
-def test_round_trip_and_reader_reproduces_encoder(tmp_path):
+@pytest.mark.parametrize("warm", ["tracked", "spectral"])
+def test_round_trip_and_reader_reproduces_encoder(tmp_path, warm):
     path = tmp_path / "wave.madm"
     frames = [frame(0.15 * k) for k in range(6)]
-    outs, stats = encode(path, frames, start=10.0, rate=0.5, bits=13)
+    outs, stats = encode(path, frames, start=10.0, rate=0.5, bits=13, keyframe_interval=4, warm=warm)
+    # the header's flags byte says which warm decoding the reader must run (2: tracked)
+    assert path.read_bytes()[42] == (2 if warm == "tracked" else 0)
     r = madder.MotionCodec(path)
     assert (r.n_points, r.n_frames, len(r), r.format) == (NX * NY, 6, 6, "madder")
     assert (r.start, r.rate, r.bits) == (10.0, 0.5, (13, 13))
@@ -105,6 +108,8 @@ def test_bad_input_names_file_frame_vertex(tmp_path):
         enc.add_frame(np.zeros((NX * NY, 2)))
     with pytest.raises(madder.ParameterError):
         madder.MotionEncoder(tmp_path / "o.madm", FACES, corners="sometimes")
+    with pytest.raises(madder.ParameterError, match="warm"):
+        madder.MotionEncoder(tmp_path / "o.madm", FACES, warm="lukewarm")
     with pytest.raises(madder.ParameterError, match="bits"):
         madder.MotionEncoder(tmp_path / "o.madm", FACES, bits=30)
     # three faces on one edge: the edge is named
