@@ -32,8 +32,8 @@ from .placement import first_non_finite
 EXT = ".madm"
 PC2_EXT = ".pc2"
 # Compress Motion warns above this largest error (over the bounding box diagonal): 1 %
-# is visible on a cloth; the flag fixture at the default 12 bits is at 0.05 %, at 8 bits
-# (where the reconstruction from coarse angles breaks down) at 36 % (ARCHITECTURE.md)
+# is visible on a cloth; the flag fixture at the default 12 bits is at 0.04 %, at 7 bits
+# 0.8 %, at 6 bits 1.8 % (ARCHITECTURE.md)
 ERROR_WARNING = 0.01
 
 

@@ -214,8 +214,8 @@ class MadderMotionSettings(bpy.types.PropertyGroup):
     bits: IntProperty(
         name="Bits",
         description="Quantization of the angles: 2^Bits steps per turn. More bits: a smaller error and a "
-        "bigger file (each bit halves the angles' rounding); below about 10 the surface rebuilt from "
-        "coarse angles can break down. The panel shows both after Compress Motion",
+        "bigger file (each bit halves the angles' rounding); below about 7 the largest error passes 1 % "
+        "of the cloth's size. The panel shows both after Compress Motion",
         default=12,
         min=4,
         max=20,
