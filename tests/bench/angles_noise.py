@@ -2,8 +2,8 @@
 
 Runs the Rust test `angles_noise` (release) with MADDER_ANGLES_NOISE_CSV set, reads the CSV
 it writes and plots, per mesh, the Procrustes RMS error over the bounding-box diagonal
-against the noise level for the spectral method, the spectral method with descent and the
-sequential baseline. Needs matplotlib (tests/requirements.txt):
+against the noise level for the spectral method, the spectral method with descent, the
+tracked reconstruction started from the spectral one and the sequential baseline. Needs matplotlib (tests/requirements.txt):
 
     .venv/bin/python tests/bench/angles_noise.py [--csv FILE] [--out docs/angles-noise.png]
 
@@ -50,6 +50,7 @@ def main() -> None:
     styles = [
         ("spectral", "spectral + voting", "C0", "o-"),
         ("spectral_descent", "+ 30 descent steps", "C2", "s--"),
+        ("tracked", "tracked (from the spectral fit)", "C1", "d:"),
         ("sequential", "sequential (baseline)", "C3", "^-"),
     ]
     for ax, m in zip(axes[0], meshes, strict=True):
