@@ -3,7 +3,8 @@
 Runs the Rust test `angles_noise` (release) with MADDER_ANGLES_NOISE_CSV set, reads the CSV
 it writes and plots, per mesh, the Procrustes RMS error over the bounding-box diagonal
 against the noise level for the spectral method, the spectral method with descent, the
-tracked reconstruction started from the spectral one and the sequential baseline. Needs matplotlib (tests/requirements.txt):
+tracked reconstruction started from the spectral one and the sequential baseline. Needs
+matplotlib (tests/requirements.txt):
 
     .venv/bin/python tests/bench/angles_noise.py [--csv FILE] [--out docs/angles-noise.png]
 
