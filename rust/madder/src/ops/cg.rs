@@ -205,7 +205,10 @@ impl std::fmt::Debug for WarmCg {
 }
 
 impl WarmCg {
-    /// Expands `pattern` (the lower triangle) into the full symmetric pattern.
+    /// Expands `pattern` (the lower triangle) into the full symmetric pattern; the
+    /// factor's pattern and IC(0)'s updates are analysed at the first scalar solve (a
+    /// solver set to another preconditioner first, or solving only rotated systems, never
+    /// pays for them).
     pub fn new<P: LowerCsc + ?Sized>(pattern: &P) -> Self {
         let mut cg = Self {
             n: 0,
@@ -227,7 +230,8 @@ impl WarmCg {
             l_val: Vec::new(),
             inv_d: Vec::new(),
             inv_diag: Vec::new(),
-            precond: Preconditioner::IncompleteCholesky,
+            // not IC(0) while rebuilt: the analysis is left for the first scalar solve
+            precond: Preconditioner::Jacobi,
             last_shift: 0.0,
             rotated: Vec::new(),
             rotated_lower: Vec::new(),
@@ -236,14 +240,16 @@ impl WarmCg {
             last_iterations: 0,
         };
         cg.rebuild(pattern);
+        cg.precond = Preconditioner::IncompleteCholesky;
         cg
     }
 
     /// Makes this solver [`WarmCg::new`]`(pattern)`'s (its tolerance and preconditioner
-    /// kept) in the memory
-    /// it already holds. A window's solvers are rebuilt with every window; fresh memory
-    /// is paid for in page faults (measured: two thirds of the symbolic analysis of a
-    /// 34k-vertex Bochner system), memory already touched is not.
+    /// kept) in the memory it already holds, the factor analysed now if the
+    /// preconditioner is IC(0) (a window build does it beside the fans), else when a
+    /// scalar solve first needs it. A window's solvers are rebuilt with every window;
+    /// fresh memory is paid for in page faults (measured: two thirds of the symbolic
+    /// analysis of a 34k-vertex Bochner system), memory already touched is not.
     pub fn rebuild<P: LowerCsc + ?Sized>(&mut self, pattern: &P) {
         let n = pattern.n();
         let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
@@ -1540,6 +1546,7 @@ mod tests {
             let mut cg = WarmCg::new(&block)
                 .with_tolerance(1e-10)
                 .with_preconditioner(first);
+            assert!(!cg.analyzed, "a new solver analyses at its first scalar solve");
             solve(&mut cg, &values, block.n());
             for (pattern, vals) in [(&small as &dyn LowerCsc, &small_values), (&block, &values)] {
                 cg.precond = first;
