@@ -426,8 +426,9 @@ impl WarmCg {
         let inv_d = refill(std::mem::take(&mut self.inv_d), n, 0.0);
         (self.l_ptr, self.l_row, self.l_slot, self.upd_ptr, self.upd) =
             (l_ptr, l_row, l_slot, upd_ptr, upd);
-        (self.u_ptr, self.u_col, self.u_pos, self.u_val, self.l_val, self.inv_d) =
-            (u_ptr, u_col, u_pos, u_val, l_val, inv_d);
+        (
+            self.u_ptr, self.u_col, self.u_pos, self.u_val, self.l_val, self.inv_d,
+        ) = (u_ptr, u_col, u_pos, u_val, l_val, inv_d);
         self.analyzed = true;
     }
 
@@ -1541,12 +1542,18 @@ mod tests {
                 Preconditioner::SymmetricGaussSeidel,
                 Some(Preconditioner::IncompleteCholesky),
             ),
-            (Preconditioner::Jacobi, Some(Preconditioner::SymmetricGaussSeidel)),
+            (
+                Preconditioner::Jacobi,
+                Some(Preconditioner::SymmetricGaussSeidel),
+            ),
         ] {
             let mut cg = WarmCg::new(&block)
                 .with_tolerance(1e-10)
                 .with_preconditioner(first);
-            assert!(!cg.analyzed, "a new solver analyses at its first scalar solve");
+            assert!(
+                !cg.analyzed,
+                "a new solver analyses at its first scalar solve"
+            );
             solve(&mut cg, &values, block.n());
             for (pattern, vals) in [(&small as &dyn LowerCsc, &small_values), (&block, &values)] {
                 cg.precond = first;

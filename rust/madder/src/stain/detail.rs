@@ -183,6 +183,7 @@ impl Fine {
             .is_on()
             .then(|| sim.params.irregularity.multiplier(&rest));
         c.boundary = p.boundary();
+        c.congruent = Some(p.congruence());
         c.conductivity = self.conductivity();
         c.rest = rest;
         c.rest_frames = rest_frames;

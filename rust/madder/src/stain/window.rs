@@ -84,7 +84,9 @@ use glam::{DMat3, DVec2, DVec3};
 use rayon::prelude::*;
 
 use super::diffuse::{Conductivity, solvers};
-use super::forces::{frame_angular_velocity, frame_body_acceleration, integrate_velocity};
+use super::forces::{
+    corotating_frames_with, frame_angular_velocity, frame_body_acceleration, integrate_velocity,
+};
 use super::simulate::Simulator;
 use super::state::{Fields, Local};
 use crate::error::Error;
@@ -125,6 +127,9 @@ pub(super) struct Cloth {
     pub(super) boundary: Vec<bool>,
     /// The irregular fabric's multiplier per vertex ([`super::irregular`]), if any.
     pub(super) irregular: Option<Vec<f64>>,
+    /// On a refined cloth, per vertex the coarse element whose fine vertices share one
+    /// Kabsch rotation ([`crate::mesh::refine::Partial::congruence`]; `u32::MAX`: none).
+    pub(super) congruent: Option<Vec<u32>>,
 }
 
 /// The part of the cloth a frame works on (module doc): the *active* vertices
@@ -144,6 +149,10 @@ pub(super) struct Window {
     /// The active vertices and the restricted operators on them (window numbering).
     pub(super) region: Restriction,
     pub(super) cg: Option<(WarmCg, WarmCg)>,
+    /// On a refined cloth, per window vertex the one whose Kabsch rotation it takes (its
+    /// own, or the first active or held vertex of its coarse face or edge, when it is
+    /// active or held itself: a whole one-ring), see [`Window::corotating_frames`].
+    pub(super) share: Option<Vec<u32>>,
     /// Per mesh vertex: active.
     pub(super) mask: Vec<bool>,
     /// Per mesh vertex: active or held.
@@ -218,6 +227,24 @@ impl Window {
                 )
             },
         );
+        let share = cloth.congruent.as_ref().map(|class| {
+            // a coarse element's fine vertices are consecutive in the mesh, hence in the
+            // window: the first whole one of a run serves the run's whole ones
+            let mut run = (u32::MAX, u32::MAX);
+            (0..vertices.len() as u32)
+                .map(|j| {
+                    let v = vertices[j as usize] as usize;
+                    let c = class[v];
+                    if c == u32::MAX || !whole_mask[v] {
+                        return j;
+                    }
+                    if run.0 != c {
+                        run = (c, j);
+                    }
+                    run.1
+                })
+                .collect()
+        });
         let part = Cloth {
             rest,
             rest_frames,
@@ -227,6 +254,7 @@ impl Window {
             topology,
             rings,
             adjacency,
+            congruent: None,
         };
         Ok(Some(Self {
             whole: (0..vertices.len() as u32)
@@ -237,9 +265,25 @@ impl Window {
             pattern,
             region,
             cg,
+            share,
             mask,
             whole_mask,
         }))
+    }
+
+    /// The comoving–corotating frames `F_j = U_j F̄_j` of the window's vertices at
+    /// `positions` (window order): one Kabsch rotation per vertex
+    /// ([`corotating_frames_with`]), or on a refined cloth one per coarse face and edge
+    /// for the fine vertices with whole one-rings there (congruent rings moving
+    /// affinely: the same rotation up to rounding, [`crate::mesh::kabsch`]).
+    pub(super) fn corotating_frames(&self, positions: &[DVec3]) -> VertexFrames {
+        let c = &self.cloth;
+        match &self.share {
+            None => corotating_frames_with(&c.adjacency, &c.rest_frames, &c.rest, positions),
+            Some(share) => c
+                .rest_frames
+                .rotated(&c.adjacency.shared_rotations(&c.rest, positions, share)),
+        }
     }
 
     /// `values` of every mesh vertex, in window order.
