@@ -197,36 +197,42 @@ impl Window {
             local[v as usize] = j as u32;
         }
         // the window's edges and fans are the cloth's, renumbered (module doc); the
-        // solvers' analysis needs only the pattern, so the fans and the rest are derived
-        // beside it (the two analyses are uneven: one core idles through the end of the
-        // larger)
+        // pattern, the restriction and the solvers' analysis need only its topology, so
+        // the fans and the rest are derived beside them (the two sides are uneven: one
+        // core idles through the end of the larger)
         let (topology, edge_local) = topo.restricted(&faces, &vertices, &local);
-        let pattern = VertexPattern::new(&topology);
-        let region = Restriction::new(&pattern, pick(&vertices, &mask));
-        let (cg, (rings, adjacency, rest, rest_frames, boundary, irregular)) = rayon::join(
-            || solvers(&region, reuse),
-            || {
-                let rings = OneRings::restricted(
-                    &cloth.rings,
-                    &topology,
-                    &faces,
-                    &vertices,
-                    &face_local,
-                    &local,
-                    &edge_local,
-                );
-                (
-                    rings,
-                    RingAdjacency::new(&topology),
-                    pick(&vertices, &cloth.rest),
-                    VertexFrames {
-                        frame: pick(&vertices, &cloth.rest_frames.frame),
-                    },
-                    pick(&vertices, &cloth.boundary),
-                    cloth.irregular.as_ref().map(|m| pick(&vertices, m)),
-                )
-            },
-        );
+        let ((pattern, region, cg), (rings, adjacency, rest, rest_frames, boundary, irregular)) =
+            rayon::join(
+                || {
+                    // the pattern and the restriction need only the window's topology: they
+                    // run on the solvers' side too
+                    let pattern = VertexPattern::new(&topology);
+                    let region = Restriction::new(&pattern, pick(&vertices, &mask));
+                    let cg = solvers(&region, reuse);
+                    (pattern, region, cg)
+                },
+                || {
+                    let rings = OneRings::restricted(
+                        &cloth.rings,
+                        &topology,
+                        &faces,
+                        &vertices,
+                        &face_local,
+                        &local,
+                        &edge_local,
+                    );
+                    (
+                        rings,
+                        RingAdjacency::new(&topology),
+                        pick(&vertices, &cloth.rest),
+                        VertexFrames {
+                            frame: pick(&vertices, &cloth.rest_frames.frame),
+                        },
+                        pick(&vertices, &cloth.boundary),
+                        cloth.irregular.as_ref().map(|m| pick(&vertices, m)),
+                    )
+                },
+            );
         let share = cloth.congruent.as_ref().map(|class| {
             // a coarse element's fine vertices are consecutive in the mesh, hence in the
             // window: the first whole one of a run serves the run's whole ones
