@@ -106,6 +106,22 @@ struct Fine {
     area: Vec<f64>,
 }
 
+/// What a growth computes per built vertex or face beside the topology ([`Fine::grow`]).
+struct Side {
+    flipped: Vec<bool>,
+    irregular: Option<Vec<f64>>,
+    rest: Vec<DVec3>,
+    positions: Vec<DVec3>,
+    previous: Option<Vec<DVec3>>,
+    /// Positions, time and world velocities a never-stepped vertex starts from.
+    at: Vec<DVec3>,
+    t_ref: f64,
+    world: Option<Vec<DVec3>>,
+    boundary: Vec<bool>,
+    congruent: Vec<u32>,
+    conductivity: Conductivity,
+}
+
 impl Fine {
     fn conductivity(&self) -> Conductivity {
         let p = &self.partial;
@@ -132,12 +148,52 @@ impl Fine {
         let p = &self.partial;
         let n = p.n_vertices();
         reset.extend(old_n..n);
-        // only the new faces' topology and the fans that changed (module doc)
-        let old = &sim.cloth;
-        let (topology, old_new) = p.extended_topology(&old.topology)?;
-        let flipped = p.face_values(&self.flipped);
-        // the fans beside the neighbour lists and the rest positions (independent)
-        let (rings, (adjacency, rest)) = rayon::join(
+        // only the new faces' topology and the fans that changed (module doc); beside
+        // the topology, what does not need it
+        let this = &*self;
+        let (old, params) = (&sim.cloth, &sim.params);
+        let (topology, side) = rayon::join(
+            || p.extended_topology(&old.topology),
+            || {
+                let rest = p.prolong(&this.rest);
+                let (at, t_ref, world) = match &this.reference {
+                    Some((at, t, u)) => (p.prolong(at), *t, Some(p.prolong(u))),
+                    None => (p.prolong(&this.first), 0.0, None),
+                };
+                Side {
+                    flipped: p.face_values(&this.flipped),
+                    irregular: params
+                        .irregularity
+                        .is_on()
+                        .then(|| params.irregularity.multiplier(&rest)),
+                    rest,
+                    positions: p.prolong(&this.current),
+                    previous: this.previous.as_ref().map(|q| p.prolong(q)),
+                    at,
+                    t_ref,
+                    world,
+                    boundary: p.boundary(),
+                    congruent: p.congruence(),
+                    conductivity: this.conductivity(),
+                }
+            },
+        );
+        let (topology, old_new) = topology?;
+        let Side {
+            flipped,
+            irregular,
+            rest,
+            positions,
+            previous,
+            at,
+            t_ref,
+            world,
+            boundary,
+            congruent,
+            conductivity,
+        } = side;
+        // the fans beside the neighbour lists (independent)
+        let (rings, adjacency) = rayon::join(
             || {
                 if old_new.is_empty() {
                     OneRings::with_orientation(&topology, flipped)
@@ -145,46 +201,34 @@ impl Fine {
                     OneRings::extended(&old.rings, &topology, flipped, &old_new)
                 }
             },
-            || (RingAdjacency::new(&topology), p.prolong(&self.rest)),
+            || RingAdjacency::new(&topology),
         );
-        // a vertex not reset had its whole ring: its rest frame is unchanged
-        let mut rest_frames = old.rest_frames.clone();
-        rest_frames.frame.resize(n, DMat3::IDENTITY);
-        let fresh: Vec<DMat3> = reset
-            .par_iter()
-            .map(|&j| VertexFrames::frame_of(&rings, &rest, j))
-            .collect();
-        for (&j, frame) in reset.iter().zip(fresh) {
-            rest_frames.frame[j] = frame;
-        }
-        let positions = p.prolong(&self.current);
-        let (at, t_ref, world) = match &self.reference {
-            Some((at, t, u)) => (p.prolong(at), *t, Some(p.prolong(u))),
-            None => (p.prolong(&self.first), 0.0, None),
-        };
-        // the frames and areas of the reset vertices (the others keep theirs); each area
-        // summed over its faces in face order, as `vertex_areas` does
+        // the rest frames, frames and areas of the reset vertices, in one pass (a vertex not
+        // reset had its whole ring: it keeps its own); each area summed over its faces in
+        // face order, as `vertex_areas` does
         let faces = topology.faces();
-        let reset_state: Vec<(DMat3, f64)> = reset
+        let reset_state: Vec<(DMat3, DMat3, f64)> = reset
             .par_iter()
             .map(|&j| {
-                let frame = adjacency.rotation(&rest, &at, j) * rest_frames.frame[j];
+                let rest_frame = VertexFrames::frame_of(&rings, &rest, j);
+                let frame = adjacency.rotation(&rest, &at, j) * rest_frame;
                 let mut around: Vec<u32> = rings.wedges(j).iter().map(|w| w.face).collect();
                 around.sort_unstable();
                 let area = vertex_area(around.iter().map(|&f| faces[f as usize]), &positions);
-                (frame, area)
+                (rest_frame, frame, area)
             })
             .collect();
+        let mut rest_frames = old.rest_frames.clone();
+        rest_frames.frame.resize(n, DMat3::IDENTITY);
+        for (&j, state) in reset.iter().zip(&reset_state) {
+            rest_frames.frame[j] = state.0;
+        }
 
         let c = &mut sim.cloth;
-        c.irregular = sim
-            .params
-            .irregularity
-            .is_on()
-            .then(|| sim.params.irregularity.multiplier(&rest));
-        c.boundary = p.boundary();
-        c.congruent = Some(p.congruence());
-        c.conductivity = self.conductivity();
+        c.irregular = irregular;
+        c.boundary = boundary;
+        c.congruent = Some(congruent);
+        c.conductivity = conductivity;
         c.rest = rest;
         c.rest_frames = rest_frames;
         c.rings = rings;
@@ -193,7 +237,7 @@ impl Fine {
         c.topology = topology;
 
         let st = &mut sim.state;
-        st.previous = self.previous.as_ref().map(|q| p.prolong(q));
+        st.previous = previous;
         st.positions = positions;
         st.frames.frame.resize(n, DMat3::IDENTITY);
         st.stamp.resize(n, t_ref);
@@ -213,7 +257,7 @@ impl Fine {
         for c in [&mut f.color_free, &mut f.color_held].into_iter().flatten() {
             c.resize(n, [0.0; 3]);
         }
-        for (j, (frame, area)) in reset.into_iter().zip(reset_state) {
+        for (j, (_, frame, area)) in reset.into_iter().zip(reset_state) {
             st.frames.frame[j] = frame;
             st.stamp[j] = t_ref;
             let to_local = |w: DVec3| DVec2::new(w.dot(frame.x_axis), w.dot(frame.y_axis));
