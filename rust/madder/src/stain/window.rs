@@ -371,19 +371,33 @@ pub(super) fn find_liquid(
 }
 
 /// `seeds` grown by `rings` rings of neighbours (loose vertices excluded), as a mask and
-/// as a list.
+/// as a list; also the last ring added (to grow further with [`grow_on`]).
 pub(super) fn grow(
     adjacency: &RingAdjacency,
     loose: &[bool],
     seeds: &[u32],
     rings: usize,
-) -> (Vec<bool>, Vec<u32>) {
+) -> (Vec<bool>, Vec<u32>, Vec<u32>) {
     let mut mask = vec![false; loose.len()];
-    let mut front = seeds.to_vec();
-    let mut all = seeds.to_vec();
     for &v in seeds {
         mask[v as usize] = true;
     }
+    let mut all = seeds.to_vec();
+    let front = grow_on(adjacency, loose, &mut mask, &mut all, seeds.to_vec(), rings);
+    (mask, all, front)
+}
+
+/// Grows the region `mask` (listed in `all`) whose last ring is `front` by `rings` more
+/// rings: the region [`grow`] would give with that many more rings, without walking the
+/// first ones again. Returns the last ring.
+pub(super) fn grow_on(
+    adjacency: &RingAdjacency,
+    loose: &[bool],
+    mask: &mut [bool],
+    all: &mut Vec<u32>,
+    mut front: Vec<u32>,
+    rings: usize,
+) -> Vec<u32> {
     for _ in 0..rings {
         let mut next = Vec::new();
         for &v in &front {
@@ -397,7 +411,7 @@ pub(super) fn grow(
         all.extend_from_slice(&next);
         front = next;
     }
-    (mask, all)
+    front
 }
 
 /// What the next frame's window is to be ([`Simulator::plan_window`]).
@@ -476,7 +490,8 @@ impl Simulator {
             find_liquid(&scan, &self.loose, &st.fields, &st.vertex_area, mobile_held);
         // liquid moves at most one ring per transport sub-cycle
         let reach = ACTIVE_RINGS + self.last_frame_cycles;
-        let (_, needed) = grow(&self.cloth.adjacency, &self.loose, &flowing, reach);
+        let (mut mask, mut needed, front) =
+            grow(&self.cloth.adjacency, &self.loose, &flowing, reach);
         let fits = self.window.as_ref().is_some_and(|w| {
             needed.iter().all(|&v| w.mask[v as usize])
                 && held.iter().all(|&v| w.whole_mask[v as usize])
@@ -486,12 +501,15 @@ impl Simulator {
         if fits {
             return WindowPlan::Keep;
         }
-        let (mask, _) = grow(
+        // room for about two more frames of the same flow: `2 reach + WINDOW_SLACK_RINGS −
+        // ACTIVE_RINGS` rings in all, grown on from the needed region's
+        grow_on(
             &self.cloth.adjacency,
             &self.loose,
-            &flowing,
-            // room for about two more frames of the same flow
-            2 * reach + WINDOW_SLACK_RINGS - ACTIVE_RINGS,
+            &mut mask,
+            &mut needed,
+            front,
+            reach + WINDOW_SLACK_RINGS - ACTIVE_RINGS,
         );
         let mut is_held = vec![false; n];
         held.iter().for_each(|&v| is_held[v as usize] = true);
