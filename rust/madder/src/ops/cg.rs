@@ -23,6 +23,11 @@
 //! right-hand sides instead: the columns (solvent and solute, colour) are solved side by
 //! side on the rayon pool.
 //!
+//! The expansion is all a solver of rotated blocks ([`WarmCg::solve_rotated`]) needs; the
+//! factor's pattern and IC(0)'s updates (below) are analysed when a solver is rebuilt for
+//! IC(0), or else at its first scalar solve, so the window's velocity solver never pays
+//! for them.
+//!
 //! The iteration itself is faer's. A hand-written Jacobi-PCG with the same stopping rule
 //! (three fused passes per iteration, no allocation) measured a little faster (faer runs
 //! a single column's vector updates through its dense block product); we keep the

@@ -53,7 +53,15 @@
 //! [`vertex_areas`] does). The results are those of rebuilding it all, bit for bit. The
 //! window a growth drops leaves its solvers to the next one (built in their memory, as a
 //! window replacing another is), and the growth, the window build, the placement and the
-//! cloth's areas run in the rayon pool, their independent parts side by side.
+//! cloth's areas run in the rayon pool, their independent parts side by side (a growth
+//! computes the built part's per-vertex and per-face arrays beside its topology).
+//!
+//! The fine vertices inside one coarse face or on one coarse edge have congruent
+//! one-rings moved by the same affine maps, so the window gives them one Kabsch rotation
+//! per face and edge (module doc of [`crate::mesh::kabsch`]): at level 2, 5 rotations
+//! for the 15 fine vertices around a cloth vertex that are not cloth vertices. It is
+//! their own rotation up to rounding (measured on the Detail bench: the stain moves by
+//! 4.5e-15 of its peak).
 
 use std::borrow::Cow;
 use std::time::Instant;

@@ -42,9 +42,15 @@
 //! proportional to the window, and the solvers are rebuilt in the memory of the window
 //! they replace ([`WarmCg::rebuild`]: fresh pages cost more than the analysis), or of
 //! one a growth of the refined cloth dropped ([`super::detail`]); the fans, neighbour
-//! lists and gathers are derived beside the solvers' analysis, which needs only the
-//! pattern. The result is the window built from scratch, bit for bit (a test compares every array on
-//! a mesh with a hole, a fin, a bow-tie and a flipped face).
+//! lists and gathers are derived beside the pattern, the restriction and the solvers'
+//! analysis, which need only the window's topology. The result is the window built from
+//! scratch, bit for bit (a test compares every array on a mesh with a hole, a fin, a
+//! bow-tie and a flipped face).
+//!
+//! On a refined cloth the window also knows, per vertex, which fine vertices lie inside
+//! one coarse face or on one coarse edge ([`crate::mesh::refine::Partial::congruence`]):
+//! those with whole one-rings there share one Kabsch rotation per face and edge
+//! ([`Window::corotating_frames`], module doc of [`crate::mesh::kabsch`]).
 //!
 //! - **Diffusion.** `(M + h K_A) σ' = m` on the active vertices, `K_A` the stiffness
 //!   restricted to them with a Neumann (no-flux) boundary at the region's edge
