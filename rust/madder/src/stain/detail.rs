@@ -226,19 +226,18 @@ impl Fine {
                 (rest_frame, frame, area)
             })
             .collect();
-        let mut rest_frames = old.rest_frames.clone();
-        rest_frames.frame.resize(n, DMat3::IDENTITY);
-        for (&j, state) in reset.iter().zip(&reset_state) {
-            rest_frames.frame[j] = state.0;
-        }
-
         let c = &mut sim.cloth;
+        // the rest frames extended in place (the old part's were replaced, not copied)
+        let rest_frames = &mut c.rest_frames.frame;
+        rest_frames.resize(n, DMat3::IDENTITY);
+        for (&j, state) in reset.iter().zip(&reset_state) {
+            rest_frames[j] = state.0;
+        }
         c.irregular = irregular;
         c.boundary = boundary;
         c.congruent = Some(congruent);
         c.conductivity = conductivity;
         c.rest = rest;
-        c.rest_frames = rest_frames;
         c.rings = rings;
         c.adjacency = adjacency;
         sim.loose = topology.loose_vertices();
