@@ -473,3 +473,29 @@ fn the_lazily_built_refinement_is_the_whole_refined_cloth() {
         );
     }
 }
+
+#[test]
+fn the_same_bits_with_one_two_or_three_threads() {
+    // level 2, lazily built, grown as the stain runs (growths, window builds, the shared
+    // Kabsch rotations of the fine vertices inside coarse faces and on coarse edges)
+    let run_in = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| {
+                let sim = run_on(20, 2, 5);
+                let bits = |v: Vec<f64>| v.into_iter().map(f64::to_bits).collect::<Vec<_>>();
+                (
+                    bits(sim.fine_solute_density()),
+                    bits(sim.fine_wetness()),
+                    sim.n_built_vertices(),
+                )
+            })
+    };
+    let one = run_in(1);
+    assert!(one.0.iter().any(|&b| b != 0), "no stain");
+    for threads in [2, 3] {
+        assert!(run_in(threads) == one, "{threads} threads differ from one");
+    }
+}

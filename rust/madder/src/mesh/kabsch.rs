@@ -41,6 +41,18 @@
 //!
 //! [`one_ring_rotations`] runs every vertex independently in parallel with a fixed
 //! summation order: the result is bit-identical whatever the number of threads.
+//!
+//! ## Congruent one-rings (issue 12's Detail)
+//! On a refined cloth ([`super::refine`]) a fine vertex inside a coarse face, or on a
+//! coarse edge, has a one-ring made of the same lattice offsets as every other fine
+//! vertex of that face (edge), `p_j = B δ_j` with `B` the face's rest map and `δ_j` the
+//! same lattice steps, and the fine vertices are placed affinely on the coarse faces
+//! (`q_j = A_f p_j` on the ring's part in face `f`, `A_f` the coarse face's current
+//! map). So `H = Σ_f A_f Σ_{j ∈ f} p_j p_jᵀ` is the same matrix for all of them, and so is
+//! `U_i`: [`RingAdjacency::shared_rotations`] computes it once, at the first such vertex
+//! of a face or edge, and gives it to the others. It equals their own Kabsch rotation up
+//! to the rounding of their positions (each placed by its own barycentric sum), not bit
+//! for bit; ARCHITECTURE.md (Stain detail) gives the measured effect on the stain.
 
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
@@ -189,6 +201,41 @@ impl RingAdjacency {
             .into_par_iter()
             .map(|i| self.rotation(rest, current, i))
             .collect()
+    }
+
+    /// `U_i` of every vertex as [`Self::rotations`], except that vertex `i` with
+    /// `share[i] = r ≠ i` takes `U_r` (a vertex whose one-ring is congruent to `r`'s and
+    /// moves with the same affine maps, module doc); `share[r] = r` for every such `r`.
+    /// Parallel over vertices, deterministic.
+    pub(crate) fn shared_rotations(
+        &self,
+        rest: &[DVec3],
+        current: &[DVec3],
+        share: &[u32],
+    ) -> Vec<DMat3> {
+        let n = self.n_vertices();
+        assert!(
+            rest.len() == n && current.len() == n && share.len() == n,
+            "one position and one share per vertex"
+        );
+        let mut rotation: Vec<DMat3> = (0..n)
+            .into_par_iter()
+            .map(|i| {
+                if share[i] as usize == i {
+                    self.rotation(rest, current, i)
+                } else {
+                    DMat3::ZERO
+                }
+            })
+            .collect();
+        for i in 0..n {
+            let r = share[i] as usize;
+            if r != i {
+                debug_assert_eq!(share[r] as usize, r, "a shared rotation is its own");
+                rotation[i] = rotation[r];
+            }
+        }
+        rotation
     }
 }
 

@@ -491,6 +491,23 @@ impl Partial {
             .collect()
     }
 
+    /// Per local vertex, the coarse element all of whose fine vertices have congruent
+    /// one-rings moving with the same affine maps (their Kabsch rotations are one,
+    /// [`crate::mesh::RingAdjacency::shared_rotations`]): coarse edge `e` → `e`, coarse
+    /// face `f` → `E + f`; `u32::MAX` at a coarse vertex (its ring is its own). The fine
+    /// vertices of one element are built together, so they are consecutive.
+    pub(crate) fn congruence(&self) -> Vec<u32> {
+        let e = self.coarse.n_edges() as u32;
+        self.site
+            .iter()
+            .map(|s| match *s {
+                Site::Vertex(_) => u32::MAX,
+                Site::Edge(ed) => ed,
+                Site::Face(f) => e + f,
+            })
+            .collect()
+    }
+
     /// [`Refinement::prolong`] on the built vertices.
     pub(crate) fn prolong<T>(&self, coarse: &[T]) -> Vec<T>
     where
@@ -639,6 +656,99 @@ mod tests {
             assert_eq!(lattice_triangles(n).len(), (n * n) as usize);
             let m = (n as usize - 1) * (n as usize).saturating_sub(2) / 2;
             assert_eq!(interior_points(n).count(), m);
+        }
+    }
+
+    #[test]
+    fn congruent_rings_share_their_kabsch_rotation() {
+        use crate::mesh::RingAdjacency;
+        use glam::DVec3;
+        // a 5×4 grid of coarse vertices, bent and sheared: the rest sheet is flat, the
+        // current one folded along a curve (each coarse face moves by its own affine map)
+        let (nx, ny) = (5usize, 4usize);
+        let mut faces = Vec::new();
+        for j in 0..ny - 1 {
+            for i in 0..nx - 1 {
+                let v = (j * nx + i) as u32;
+                faces.push([v, v + 1, v + nx as u32 + 1]);
+                faces.push([v, v + nx as u32 + 1, v + nx as u32]);
+            }
+        }
+        let coarse = Topology::from_triangles(nx * ny, faces).unwrap();
+        let rest: Vec<DVec3> = (0..nx * ny)
+            .map(|v| DVec3::new((v % nx) as f64 * 0.3, (v / nx) as f64 * 0.25, 0.0))
+            .collect();
+        let now: Vec<DVec3> = rest
+            .iter()
+            .map(|p| {
+                DVec3::new(
+                    p.x + 0.2 * p.y,
+                    0.4 * (2.0 * p.x).sin(),
+                    p.y + 0.1 * p.x * p.x,
+                )
+            })
+            .collect();
+        for level in 1..=3 {
+            let mut part = Partial::new(&coarse, level).unwrap();
+            part.build(&(0..coarse.n_faces() as u32).collect::<Vec<_>>());
+            let adjacency = RingAdjacency::new(&part.topology().unwrap());
+            let (r, q) = (part.prolong(&rest), part.prolong(&now));
+            let class = part.congruence();
+            // the first vertex of each run of a class serves the run
+            let share: Vec<u32> = (0..class.len())
+                .map(|j| match class[j] {
+                    u32::MAX => j as u32,
+                    c => (0..=j).find(|&k| class[k] == c).unwrap() as u32,
+                })
+                .collect();
+            assert!(share.iter().enumerate().all(|(j, &k)| k as usize == j
+                || (k as usize) < j && class[k as usize..=j].iter().all(|&c| c == class[j])));
+            let own = adjacency.rotations(&r, &q);
+            let shared = adjacency.shared_rotations(&r, &q, &share);
+            let shared_count = share.iter().enumerate().filter(|&(j, &k)| k as usize != j);
+            assert!(level == 1 || shared_count.count() > 0);
+            let worst = own
+                .iter()
+                .zip(&shared)
+                .map(|(a, b)| {
+                    (*a - *b)
+                        .to_cols_array()
+                        .iter()
+                        .fold(0.0, |m: f64, x| m.max(x.abs()))
+                })
+                .fold(0.0, f64::max);
+            assert!(
+                worst < 1e-13,
+                "level {level}: shared rotations off by {worst:e}"
+            );
+            for (j, &k) in share.iter().enumerate() {
+                if k as usize == j {
+                    assert_eq!(own[j], shared[j], "a vertex's own rotation is unchanged");
+                }
+            }
+            // placed off the affine maps (a bump inside the faces), the rings are no
+            // longer moved alike, and sharing would be wrong
+            let bumped: Vec<DVec3> = q
+                .iter()
+                .zip(&r)
+                .map(|(p, x)| *p + DVec3::Z * 0.05 * (7.0 * x.x).sin() * (9.0 * x.y).cos())
+                .collect();
+            let own = adjacency.rotations(&r, &bumped);
+            let shared = adjacency.shared_rotations(&r, &bumped, &share);
+            let worst = own
+                .iter()
+                .zip(&shared)
+                .map(|(a, b)| {
+                    (*a - *b)
+                        .to_cols_array()
+                        .iter()
+                        .fold(0.0, |m: f64, x| m.max(x.abs()))
+                })
+                .fold(0.0, f64::max);
+            assert!(
+                level == 1 || worst > 1e-3,
+                "level {level}: the bump changed nothing ({worst:e})"
+            );
         }
     }
 }

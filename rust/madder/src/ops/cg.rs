@@ -23,6 +23,11 @@
 //! right-hand sides instead: the columns (solvent and solute, colour) are solved side by
 //! side on the rayon pool.
 //!
+//! The expansion is all a solver of rotated blocks ([`WarmCg::solve_rotated`]) needs; the
+//! factor's pattern and IC(0)'s updates (below) are analysed when a solver is rebuilt for
+//! IC(0), or else at its first scalar solve, so the window's velocity solver never pays
+//! for them.
+//!
 //! The iteration itself is faer's. A hand-written Jacobi-PCG with the same stopping rule
 //! (three fused passes per iteration, no allocation) measured a little faster (faer runs
 //! a single column's vector updates through its dense block product); we keep the
@@ -171,6 +176,10 @@ pub struct WarmCg {
     u_col: Vec<u32>,
     u_pos: Vec<u32>,
     u_val: Vec<f64>,
+    /// Whether the factor's pattern and IC(0)'s updates above are this pattern's: left
+    /// for later when the preconditioner is not IC(0) (the rotated solve never needs
+    /// them; a scalar solve analyses first).
+    analyzed: bool,
     /// The factor's values, rebuilt every solve: `l` on `l_row`, and `D̃⁻¹`.
     l_val: Vec<f64>,
     inv_d: Vec<f64>,
@@ -201,7 +210,10 @@ impl std::fmt::Debug for WarmCg {
 }
 
 impl WarmCg {
-    /// Expands `pattern` (the lower triangle) into the full symmetric pattern.
+    /// Expands `pattern` (the lower triangle) into the full symmetric pattern; the
+    /// factor's pattern and IC(0)'s updates are analysed at the first scalar solve (a
+    /// solver set to another preconditioner first, or solving only rotated systems, never
+    /// pays for them).
     pub fn new<P: LowerCsc + ?Sized>(pattern: &P) -> Self {
         let mut cg = Self {
             n: 0,
@@ -219,10 +231,12 @@ impl WarmCg {
             u_col: Vec::new(),
             u_pos: Vec::new(),
             u_val: Vec::new(),
+            analyzed: false,
             l_val: Vec::new(),
             inv_d: Vec::new(),
             inv_diag: Vec::new(),
-            precond: Preconditioner::IncompleteCholesky,
+            // not IC(0) while rebuilt: the analysis is left for the first scalar solve
+            precond: Preconditioner::Jacobi,
             last_shift: 0.0,
             rotated: Vec::new(),
             rotated_lower: Vec::new(),
@@ -231,14 +245,16 @@ impl WarmCg {
             last_iterations: 0,
         };
         cg.rebuild(pattern);
+        cg.precond = Preconditioner::IncompleteCholesky;
         cg
     }
 
     /// Makes this solver [`WarmCg::new`]`(pattern)`'s (its tolerance and preconditioner
-    /// kept) in the memory
-    /// it already holds. A window's solvers are rebuilt with every window; fresh memory
-    /// is paid for in page faults (measured: two thirds of the symbolic analysis of a
-    /// 34k-vertex Bochner system), memory already touched is not.
+    /// kept) in the memory it already holds, the factor analysed now if the
+    /// preconditioner is IC(0) (a window build does it beside the fans), else when a
+    /// scalar solve first needs it. A window's solvers are rebuilt with every window;
+    /// fresh memory is paid for in page faults (measured: two thirds of the symbolic
+    /// analysis of a 34k-vertex Bochner system), memory already touched is not.
     pub fn rebuild<P: LowerCsc + ?Sized>(&mut self, pattern: &P) {
         let n = pattern.n();
         let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
@@ -307,6 +323,35 @@ impl WarmCg {
             )
         };
         let full = refill(std::mem::take(&mut self.full), slot.len(), 0.0);
+        let inv_diag = refill(std::mem::take(&mut self.inv_diag), n, 0.0);
+        self.scratch.clear();
+        (
+            self.n,
+            self.col_ptr,
+            self.row_idx,
+            self.slot,
+            self.diag,
+            self.full,
+            self.inv_diag,
+        ) = (n, col_ptr, row_idx, slot, diag, full, inv_diag);
+        self.last_shift = 0.0;
+        self.last_iterations = 0;
+        self.analyzed = false;
+        // the factor's pattern and updates now if IC(0) needs them every solve; the
+        // rotated solve never reads them, a scalar solve analyses on its first call
+        if self.precond == Preconditioner::IncompleteCholesky {
+            self.analyze();
+        }
+    }
+
+    /// The factor's pattern (the strict lower triangle by columns and by rows) and IC(0)'s
+    /// updates, from the full pattern: what [`Self::solve`] needs beyond the product
+    /// (module doc). Done once per pattern, when a scalar solve first needs it, or at
+    /// [`Self::rebuild`] for IC(0).
+    fn analyze(&mut self) {
+        let n = self.n;
+        let (col_ptr, row_idx, slot) = (&self.col_ptr, &self.row_idx, &self.slot);
+        let nnz = slot.len();
         // the strict lower triangle, rows increasing in each column: the entries of the
         // full columns below their diagonal
         let mut l_ptr = refill(std::mem::take(&mut self.l_ptr), 0, 0u32);
@@ -384,35 +429,12 @@ impl WarmCg {
         let l_val = refill(std::mem::take(&mut self.l_val), l_row.len(), 0.0);
         let u_val = refill(std::mem::take(&mut self.u_val), l_row.len(), 0.0);
         let inv_d = refill(std::mem::take(&mut self.inv_d), n, 0.0);
-        let inv_diag = refill(std::mem::take(&mut self.inv_diag), n, 0.0);
-        self.scratch.clear();
-        *self = Self {
-            n,
-            col_ptr,
-            row_idx,
-            slot,
-            diag,
-            full,
-            l_ptr,
-            l_row,
-            l_slot,
-            upd_ptr,
-            upd,
-            u_ptr,
-            u_col,
-            u_pos,
-            u_val,
-            l_val,
-            inv_d,
-            inv_diag,
-            precond: self.precond,
-            last_shift: 0.0,
-            rotated: std::mem::take(&mut self.rotated),
-            rotated_lower: std::mem::take(&mut self.rotated_lower),
-            scratch: std::mem::take(&mut self.scratch),
-            tolerance: self.tolerance,
-            last_iterations: 0,
-        };
+        (self.l_ptr, self.l_row, self.l_slot, self.upd_ptr, self.upd) =
+            (l_ptr, l_row, l_slot, upd_ptr, upd);
+        (
+            self.u_ptr, self.u_col, self.u_pos, self.u_val, self.l_val, self.inv_d,
+        ) = (u_ptr, u_col, u_pos, u_val, l_val, inv_d);
+        self.analyzed = true;
     }
 
     /// The same solver stopping at relative residual `tolerance` (clamped to
@@ -465,6 +487,9 @@ impl WarmCg {
         let n = self.n;
         assert!(n > 0 && b.len() % n == 0, "rhs is not whole columns");
         assert_eq!(b.len(), x.len(), "warm start and rhs differ in size");
+        if !self.analyzed {
+            self.analyze();
+        }
         for (f, &s) in self.full.iter_mut().zip(&self.slot) {
             *f = values[s as usize];
         }
@@ -1501,6 +1526,58 @@ mod tests {
             }
             assert!(!expected.is_empty());
             assert_eq!(cg.upd, expected);
+        }
+    }
+
+    #[test]
+    fn analysis_left_for_later_is_the_same() {
+        // a solver rebuilt with another preconditioner than IC(0) analyses at its first
+        // scalar solve (or never, if it only solves rotated): the same bits as a fresh one
+        let (block, values) = bochner_system(9);
+        let (small, small_values) = obtuse_anisotropic_system(7);
+        let solve = |cg: &mut WarmCg, values: &[f64], m: usize| {
+            let b: Vec<f64> = (0..2 * m).map(|i| ((i * 7 % 11) as f64).cos()).collect();
+            let mut x = vec![0.0; b.len()];
+            cg.solve(values, &b, &mut x).unwrap();
+            (x, cg.last_iterations)
+        };
+        for (first, then) in [
+            (Preconditioner::SymmetricGaussSeidel, None),
+            (
+                Preconditioner::SymmetricGaussSeidel,
+                Some(Preconditioner::IncompleteCholesky),
+            ),
+            (
+                Preconditioner::Jacobi,
+                Some(Preconditioner::SymmetricGaussSeidel),
+            ),
+        ] {
+            let mut cg = WarmCg::new(&block)
+                .with_tolerance(1e-10)
+                .with_preconditioner(first);
+            assert!(
+                !cg.analyzed,
+                "a new solver analyses at its first scalar solve"
+            );
+            solve(&mut cg, &values, block.n());
+            for (pattern, vals) in [(&small as &dyn LowerCsc, &small_values), (&block, &values)] {
+                cg.precond = first;
+                cg.rebuild(pattern);
+                assert!(!cg.analyzed, "{first:?}: analysed before a scalar solve");
+                if let Some(p) = then {
+                    cg.precond = p;
+                }
+                let mut fresh = WarmCg::new(pattern)
+                    .with_tolerance(1e-10)
+                    .with_preconditioner(then.unwrap_or(first));
+                let (x, it) = solve(&mut cg, vals, pattern.n());
+                let (y, jt) = solve(&mut fresh, vals, pattern.n());
+                assert!(cg.analyzed);
+                assert_eq!(it, jt);
+                assert!(x.iter().zip(&y).all(|(a, b)| a.to_bits() == b.to_bits()));
+                assert_eq!(cg.upd, fresh.upd);
+                assert_eq!(cg.u_pos, fresh.u_pos);
+            }
         }
     }
 

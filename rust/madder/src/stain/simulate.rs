@@ -345,6 +345,7 @@ impl Simulator {
                 rings,
                 adjacency,
                 topology,
+                congruent: None,
             },
             params,
             solute_color,
@@ -511,9 +512,7 @@ impl Simulator {
         let clock = Instant::now();
         // the frames at the frame's end: the sub-step count reads them, and the last
         // sub-step's frames are these (the same formula at the same positions)
-        let cloth = &w.cloth;
-        let end_frames =
-            corotating_frames_with(&cloth.adjacency, &cloth.rest_frames, &cloth.rest, &next);
+        let end_frames = w.corotating_frames(&next);
         let s_count = self.substeps(w, &end_frames, &local.frames, dt);
         let mut end_frames = Some(end_frames);
         prof.geometry += clock.elapsed().as_secs_f64();
@@ -586,9 +585,7 @@ impl Simulator {
         let n = w.vertices.len();
         let topo = &w.cloth.topology;
         let geometry = Geometry::new(topo, q)?;
-        let frames = frames.unwrap_or_else(|| {
-            corotating_frames_with(&w.cloth.adjacency, &w.cloth.rest_frames, &w.cloth.rest, q)
-        });
+        let frames = frames.unwrap_or_else(|| w.corotating_frames(q));
         let transport = Transport::new(topo, &w.cloth.rings, &geometry, &frames, q);
         prof.active_vertices += w.region.vertices.len();
         prof.window_vertices += n;

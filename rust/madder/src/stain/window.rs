@@ -42,9 +42,15 @@
 //! proportional to the window, and the solvers are rebuilt in the memory of the window
 //! they replace ([`WarmCg::rebuild`]: fresh pages cost more than the analysis), or of
 //! one a growth of the refined cloth dropped ([`super::detail`]); the fans, neighbour
-//! lists and gathers are derived beside the solvers' analysis, which needs only the
-//! pattern. The result is the window built from scratch, bit for bit (a test compares every array on
-//! a mesh with a hole, a fin, a bow-tie and a flipped face).
+//! lists and gathers are derived beside the pattern, the restriction and the solvers'
+//! analysis, which need only the window's topology. The result is the window built from
+//! scratch, bit for bit (a test compares every array on a mesh with a hole, a fin, a
+//! bow-tie and a flipped face).
+//!
+//! On a refined cloth the window also knows, per vertex, which fine vertices lie inside
+//! one coarse face or on one coarse edge ([`crate::mesh::refine::Partial::congruence`]):
+//! those with whole one-rings there share one Kabsch rotation per face and edge
+//! ([`Window::corotating_frames`], module doc of [`crate::mesh::kabsch`]).
 //!
 //! - **Diffusion.** `(M + h K_A) σ' = m` on the active vertices, `K_A` the stiffness
 //!   restricted to them with a Neumann (no-flux) boundary at the region's edge
@@ -84,7 +90,9 @@ use glam::{DMat3, DVec2, DVec3};
 use rayon::prelude::*;
 
 use super::diffuse::{Conductivity, solvers};
-use super::forces::{frame_angular_velocity, frame_body_acceleration, integrate_velocity};
+use super::forces::{
+    corotating_frames_with, frame_angular_velocity, frame_body_acceleration, integrate_velocity,
+};
 use super::simulate::Simulator;
 use super::state::{Fields, Local};
 use crate::error::Error;
@@ -125,6 +133,9 @@ pub(super) struct Cloth {
     pub(super) boundary: Vec<bool>,
     /// The irregular fabric's multiplier per vertex ([`super::irregular`]), if any.
     pub(super) irregular: Option<Vec<f64>>,
+    /// On a refined cloth, per vertex the coarse element whose fine vertices share one
+    /// Kabsch rotation ([`crate::mesh::refine::Partial::congruence`]; `u32::MAX`: none).
+    pub(super) congruent: Option<Vec<u32>>,
 }
 
 /// The part of the cloth a frame works on (module doc): the *active* vertices
@@ -144,6 +155,10 @@ pub(super) struct Window {
     /// The active vertices and the restricted operators on them (window numbering).
     pub(super) region: Restriction,
     pub(super) cg: Option<(WarmCg, WarmCg)>,
+    /// On a refined cloth, per window vertex the one whose Kabsch rotation it takes (its
+    /// own, or the first active or held vertex of its coarse face or edge, when it is
+    /// active or held itself: a whole one-ring), see [`Window::corotating_frames`].
+    pub(super) share: Option<Vec<u32>>,
     /// Per mesh vertex: active.
     pub(super) mask: Vec<bool>,
     /// Per mesh vertex: active or held.
@@ -188,36 +203,60 @@ impl Window {
             local[v as usize] = j as u32;
         }
         // the window's edges and fans are the cloth's, renumbered (module doc); the
-        // solvers' analysis needs only the pattern, so the fans and the rest are derived
-        // beside it (the two analyses are uneven: one core idles through the end of the
-        // larger)
+        // pattern, the restriction and the solvers' analysis need only its topology, so
+        // the fans and the rest are derived beside them (the two sides are uneven: one
+        // core idles through the end of the larger)
         let (topology, edge_local) = topo.restricted(&faces, &vertices, &local);
-        let pattern = VertexPattern::new(&topology);
-        let region = Restriction::new(&pattern, pick(&vertices, &mask));
-        let (cg, (rings, adjacency, rest, rest_frames, boundary, irregular)) = rayon::join(
-            || solvers(&region, reuse),
-            || {
-                let rings = OneRings::restricted(
-                    &cloth.rings,
-                    &topology,
-                    &faces,
-                    &vertices,
-                    &face_local,
-                    &local,
-                    &edge_local,
-                );
-                (
-                    rings,
-                    RingAdjacency::new(&topology),
-                    pick(&vertices, &cloth.rest),
-                    VertexFrames {
-                        frame: pick(&vertices, &cloth.rest_frames.frame),
-                    },
-                    pick(&vertices, &cloth.boundary),
-                    cloth.irregular.as_ref().map(|m| pick(&vertices, m)),
-                )
-            },
-        );
+        let ((pattern, region, cg), (rings, adjacency, rest, rest_frames, boundary, irregular)) =
+            rayon::join(
+                || {
+                    // the pattern and the restriction need only the window's topology: they
+                    // run on the solvers' side too
+                    let pattern = VertexPattern::new(&topology);
+                    let region = Restriction::new(&pattern, pick(&vertices, &mask));
+                    let cg = solvers(&region, reuse);
+                    (pattern, region, cg)
+                },
+                || {
+                    let rings = OneRings::restricted(
+                        &cloth.rings,
+                        &topology,
+                        &faces,
+                        &vertices,
+                        &face_local,
+                        &local,
+                        &edge_local,
+                    );
+                    (
+                        rings,
+                        RingAdjacency::new(&topology),
+                        pick(&vertices, &cloth.rest),
+                        VertexFrames {
+                            frame: pick(&vertices, &cloth.rest_frames.frame),
+                        },
+                        pick(&vertices, &cloth.boundary),
+                        cloth.irregular.as_ref().map(|m| pick(&vertices, m)),
+                    )
+                },
+            );
+        let share = cloth.congruent.as_ref().map(|class| {
+            // a coarse element's fine vertices are consecutive in the mesh, hence in the
+            // window: the first whole one of a run serves the run's whole ones
+            let mut run = (u32::MAX, u32::MAX);
+            (0..vertices.len() as u32)
+                .map(|j| {
+                    let v = vertices[j as usize] as usize;
+                    let c = class[v];
+                    if c == u32::MAX || !whole_mask[v] {
+                        return j;
+                    }
+                    if run.0 != c {
+                        run = (c, j);
+                    }
+                    run.1
+                })
+                .collect()
+        });
         let part = Cloth {
             rest,
             rest_frames,
@@ -227,6 +266,7 @@ impl Window {
             topology,
             rings,
             adjacency,
+            congruent: None,
         };
         Ok(Some(Self {
             whole: (0..vertices.len() as u32)
@@ -237,9 +277,25 @@ impl Window {
             pattern,
             region,
             cg,
+            share,
             mask,
             whole_mask,
         }))
+    }
+
+    /// The comoving–corotating frames `F_j = U_j F̄_j` of the window's vertices at
+    /// `positions` (window order): one Kabsch rotation per vertex
+    /// ([`corotating_frames_with`]), or on a refined cloth one per coarse face and edge
+    /// for the fine vertices with whole one-rings there (congruent rings moving
+    /// affinely: the same rotation up to rounding, [`crate::mesh::kabsch`]).
+    pub(super) fn corotating_frames(&self, positions: &[DVec3]) -> VertexFrames {
+        let c = &self.cloth;
+        match &self.share {
+            None => corotating_frames_with(&c.adjacency, &c.rest_frames, &c.rest, positions),
+            Some(share) => c
+                .rest_frames
+                .rotated(&c.adjacency.shared_rotations(&c.rest, positions, share)),
+        }
     }
 
     /// `values` of every mesh vertex, in window order.
@@ -321,19 +377,33 @@ pub(super) fn find_liquid(
 }
 
 /// `seeds` grown by `rings` rings of neighbours (loose vertices excluded), as a mask and
-/// as a list.
+/// as a list; also the last ring added (to grow further with [`grow_on`]).
 pub(super) fn grow(
     adjacency: &RingAdjacency,
     loose: &[bool],
     seeds: &[u32],
     rings: usize,
-) -> (Vec<bool>, Vec<u32>) {
+) -> (Vec<bool>, Vec<u32>, Vec<u32>) {
     let mut mask = vec![false; loose.len()];
-    let mut front = seeds.to_vec();
-    let mut all = seeds.to_vec();
     for &v in seeds {
         mask[v as usize] = true;
     }
+    let mut all = seeds.to_vec();
+    let front = grow_on(adjacency, loose, &mut mask, &mut all, seeds.to_vec(), rings);
+    (mask, all, front)
+}
+
+/// Grows the region `mask` (listed in `all`) whose last ring is `front` by `rings` more
+/// rings: the region [`grow`] would give with that many more rings, without walking the
+/// first ones again. Returns the last ring.
+pub(super) fn grow_on(
+    adjacency: &RingAdjacency,
+    loose: &[bool],
+    mask: &mut [bool],
+    all: &mut Vec<u32>,
+    mut front: Vec<u32>,
+    rings: usize,
+) -> Vec<u32> {
     for _ in 0..rings {
         let mut next = Vec::new();
         for &v in &front {
@@ -347,7 +417,7 @@ pub(super) fn grow(
         all.extend_from_slice(&next);
         front = next;
     }
-    (mask, all)
+    front
 }
 
 /// What the next frame's window is to be ([`Simulator::plan_window`]).
@@ -426,7 +496,8 @@ impl Simulator {
             find_liquid(&scan, &self.loose, &st.fields, &st.vertex_area, mobile_held);
         // liquid moves at most one ring per transport sub-cycle
         let reach = ACTIVE_RINGS + self.last_frame_cycles;
-        let (_, needed) = grow(&self.cloth.adjacency, &self.loose, &flowing, reach);
+        let (mut mask, mut needed, front) =
+            grow(&self.cloth.adjacency, &self.loose, &flowing, reach);
         let fits = self.window.as_ref().is_some_and(|w| {
             needed.iter().all(|&v| w.mask[v as usize])
                 && held.iter().all(|&v| w.whole_mask[v as usize])
@@ -436,12 +507,15 @@ impl Simulator {
         if fits {
             return WindowPlan::Keep;
         }
-        let (mask, _) = grow(
+        // room for about two more frames of the same flow: `2 reach + WINDOW_SLACK_RINGS −
+        // ACTIVE_RINGS` rings in all, grown on from the needed region's
+        grow_on(
             &self.cloth.adjacency,
             &self.loose,
-            &flowing,
-            // room for about two more frames of the same flow
-            2 * reach + WINDOW_SLACK_RINGS - ACTIVE_RINGS,
+            &mut mask,
+            &mut needed,
+            front,
+            reach + WINDOW_SLACK_RINGS - ACTIVE_RINGS,
         );
         let mut is_held = vec![false; n];
         held.iter().for_each(|&v| is_held[v as usize] = true);
