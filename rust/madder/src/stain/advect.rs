@@ -177,7 +177,7 @@ use rayon::prelude::*;
 
 use crate::error::ParamError;
 use crate::mesh::transport::wrap_angle;
-use crate::mesh::{EdgeKind, Geometry, OneRings, Topology, Transport, VertexFrames};
+use crate::mesh::{EdgeKind, Geometry, OneRings, Topology, Transport, VertexFrames, Wedge};
 
 /// Most triangle crossings of one back-trace. Reached only when `h|u|` spans hundreds of
 /// edges; the trace then stops at its last crossing point.
@@ -225,38 +225,21 @@ struct Placed {
 /// The rotation of a [`Placed`] vertex: a matrix (`i` and its one-ring), or, for a vertex
 /// placed by the unfolding, what it is computed from. Only the vertices whose velocity is
 /// read (the last triangle's, a crossing's where the walk stops) need it, and most
-/// vertices a long strip passes are not read: their `atan2`s and `sin_cos` are left
-/// undone. When read it is computed by the same operations as if it had been computed at
-/// once, so the values are the same.
+/// vertices a long strip passes are not read: their `atan2`s and `sin_cos`, and the look-up
+/// of their polar angles, are left undone. When read it is computed by the same operations
+/// as if it had been computed at once, so the values are the same.
 #[derive(Clone, Copy)]
 enum Turn {
     Matrix(DMat2),
-    /// Layout directions of the edges `c → r` and `c → l`, and their polar angles
-    /// `α + δ_c` in `F_c`.
+    /// Layout directions of the edges `c → r` and `c → l` (`c` the placed vertex), and the
+    /// vertices `r` and `l`, whose spokes' polar angles `α + δ_c` in `F_c` the rotation
+    /// subtracts.
     Unfolded {
         to_r: DVec2,
         to_l: DVec2,
-        polar_r: f64,
-        polar_l: f64,
+        r: u32,
+        l: u32,
     },
-}
-
-impl Turn {
-    fn matrix(self) -> DMat2 {
-        match self {
-            Turn::Matrix(q) => q,
-            Turn::Unfolded {
-                to_r,
-                to_l,
-                polar_r,
-                polar_l,
-            } => {
-                let a_r = to_r.y.atan2(to_r.x) - polar_r;
-                let a_l = to_l.y.atan2(to_l.x) - polar_l;
-                DMat2::from_angle(a_r + 0.5 * wrap_angle(a_l - a_r))
-            }
-        }
-    }
 }
 
 /// Semi-Lagrangian advection of the velocity over `h` (see the module doc): the value at
@@ -388,8 +371,34 @@ impl Trace<'_> {
         }
     }
 
+    /// The velocity of a placed vertex, turned into the layout (`F_i`).
     fn value(&self, a: &Placed) -> DVec2 {
-        a.q.matrix() * self.velocity[a.v]
+        self.turn(a) * self.velocity[a.v]
+    }
+
+    /// The rotation `F_v → layout` of a placed vertex `v` (the module doc): for an
+    /// unfolded one, the layout angle of each of its edges to `r` and `l` minus that
+    /// spoke's polar angle, averaged. The identity if a spoke cannot be found (a
+    /// topology whose fans miss one of the face's edges: not built by [`OneRings`]).
+    fn turn(&self, a: &Placed) -> DMat2 {
+        match a.q {
+            Turn::Matrix(q) => q,
+            Turn::Unfolded { to_r, to_l, r, l } => {
+                let spokes_c = self.rings.spokes(a.v);
+                let alpha_c = self.transport.polar_angles(a.v);
+                let delta_c = self.transport.frame_offset(a.v);
+                let polar = |m: u32| {
+                    let k = spokes_c.iter().position(|&s| s == m)?;
+                    Some(alpha_c[k] + delta_c)
+                };
+                let (Some(polar_r), Some(polar_l)) = (polar(r), polar(l)) else {
+                    return DMat2::IDENTITY;
+                };
+                let a_r = to_r.y.atan2(to_r.x) - polar_r;
+                let a_l = to_l.y.atan2(to_l.x) - polar_l;
+                DMat2::from_angle(a_r + 0.5 * wrap_angle(a_l - a_r))
+            }
+        }
     }
 
     /// The walk from vertex `i` with points on the line counted as left (`ties_left`) or
@@ -408,9 +417,20 @@ impl Trace<'_> {
             let (sin, cos) = (alpha[s] + delta).sin_cos();
             len * DVec2::new(cos, sin)
         };
+        // a wedge whose polar sector is well clear of the foot's direction cannot pass the
+        // test below: skip it without placing its spokes (the module doc, "First wedge")
+        let psi = rough_atan2(target.y, target.x);
+        let may_hold = |w: &Wedge| {
+            let (a, b) = (w.from as usize, w.to as usize);
+            let finite = |s: usize| self.geometry.edge_length[spoke_edges[s] as usize].is_finite();
+            !(finite(a) && finite(b)) || in_sector(psi, alpha[a] + delta, alpha[b] + delta)
+        };
         // consecutive wedges of a fan share a spoke: place each spoke once
         let mut last = (u32::MAX, DVec2::ZERO);
         let (wedge, pj, pk) = rings.wedges(i).iter().find_map(|w| {
+            if !may_hold(w) {
+                return None;
+            }
             let pa = if last.0 == w.from {
                 last.1
             } else {
@@ -495,8 +515,7 @@ impl Trace<'_> {
     /// third vertex, placed in the layout. `None` at a border or non-manifold edge, or if the
     /// geometry is too degenerate to place it.
     fn across(&self, face: usize, r: &Placed, l: &Placed, f: f64) -> Option<(usize, Placed)> {
-        let (topology, rings, geometry, transport) =
-            (self.topology, self.rings, self.geometry, self.transport);
+        let (topology, rings, geometry) = (self.topology, self.rings, self.geometry);
         let local_l = rings.spokes(r.v).iter().position(|&s| s as usize == l.v)?;
         let e = rings.spoke_edges(r.v)[local_l] as usize;
         if topology.edge_kind(e) != EdgeKind::Interior {
@@ -528,15 +547,7 @@ impl Trace<'_> {
         if !p.is_finite() {
             return None;
         }
-        // rotation F_c → layout from the directions of c → r and c → l
-        let spokes_c = rings.spokes(c);
-        let alpha_c = transport.polar_angles(c);
-        let delta_c = transport.frame_offset(c);
-        let polar = |m: usize| {
-            let k = spokes_c.iter().position(|&s| s as usize == m)?;
-            Some(alpha_c[k] + delta_c)
-        };
-        let (polar_r, polar_l) = (polar(r.v)?, polar(l.v)?);
+        // rotation F_c → layout from the directions of c → r and c → l, evaluated if read
         Some((
             g,
             Placed {
@@ -546,12 +557,72 @@ impl Trace<'_> {
                 q: Turn::Unfolded {
                     to_r: r_star - p,
                     to_l: l_star - p,
-                    polar_r,
-                    polar_l,
+                    r: r.v as u32,
+                    l: l.v as u32,
                 },
             },
         ))
     }
+}
+
+/// Margin (radians) of the first wedge's angular pre-test, [`in_sector`]: far above the
+/// error of [`rough_atan2`] (below `10⁻⁵`) and the rounding of the polar angles and of
+/// [`SIDE_TOLERANCE`] (below `10⁻¹¹`), far below a wedge's opening.
+const SECTOR_MARGIN: f64 = 1e-3;
+
+/// Whether the direction of polar angle `psi` may lie in the counter-clockwise sector from
+/// angle `a` to angle `b` (any real angles), [`SECTOR_MARGIN`] included on both sides. A
+/// wedge that passes the exact test of the back-trace (`P_a` right of the foot's line,
+/// `P_b` on or left of it, `P_a × P_b > 0`) contains the direction of the foot up to
+/// rounding, so it always passes this one; a sector of nearly `2π` lets everything pass.
+/// `false` for NaN angles.
+fn in_sector(psi: f64, a: f64, b: f64) -> bool {
+    use std::f64::consts::TAU;
+    // psi − a into [−margin, 2π − margin), b − a into [0, 2π); the angles are polar
+    // angles within a few turns of each other, so the loops run at most a few times
+    let (mut d, mut w) = (psi - a, b - a);
+    if !(d.is_finite() && w.is_finite()) {
+        return false;
+    }
+    while d < -SECTOR_MARGIN {
+        d += TAU;
+    }
+    while d >= TAU - SECTOR_MARGIN {
+        d -= TAU;
+    }
+    while w < 0.0 {
+        w += TAU;
+    }
+    while w >= TAU {
+        w -= TAU;
+    }
+    d <= w + SECTOR_MARGIN
+}
+
+/// `atan2(y, x)` to within `10⁻⁵` radians, without the library call: a pre-test only
+/// ([`in_sector`]), never a value the results depend on. An odd minimax polynomial for
+/// `atan` on `[0, 1]`, extended to the plane by the octant's symmetries.
+fn rough_atan2(y: f64, x: f64) -> f64 {
+    use std::f64::consts::{FRAC_PI_2, PI};
+    let (ax, ay) = (x.abs(), y.abs());
+    let (lo, hi) = (ax.min(ay), ax.max(ay));
+    if hi == 0.0 || !hi.is_finite() {
+        return y.atan2(x);
+    }
+    let t = lo / hi;
+    let t2 = t * t;
+    let mut a = t
+        * (0.999_977_26
+            + t2 * (-0.332_623_47
+                + t2 * (0.193_543_46
+                    + t2 * (-0.116_432_87 + t2 * (0.052_653_32 + t2 * -0.011_721_20)))));
+    if ay > ax {
+        a = FRAC_PI_2 - a;
+    }
+    if x < 0.0 {
+        a = PI - a;
+    }
+    if y < 0.0 { -a } else { a }
 }
 
 /// Barycentric coordinates of `p` in the triangle `(a, b, c)`, clamped to `[0, 1]` and
@@ -1350,6 +1421,54 @@ mod tests {
                 ..
             })
         ));
+    }
+
+    #[test]
+    fn rough_atan2_is_within_its_bound_and_the_sector_test_keeps_every_containing_wedge() {
+        use std::f64::consts::{PI, TAU};
+        let mut worst = 0.0f64;
+        for k in 0..200_000 {
+            let t = -PI + TAU * (k as f64 + 0.5) / 200_000.0;
+            for r in [1e-300, 1e-3, 1.0, 7.5e5] {
+                let (y, x) = (r * t.sin(), r * t.cos());
+                worst = worst.max(wrap_angle(rough_atan2(y, x) - y.atan2(x)).abs());
+            }
+        }
+        assert!(worst < 1e-5, "rough atan2 off by {worst:e}");
+        for (y, x) in [(0.0, 1.0), (0.0, -1.0), (1.0, 0.0), (-1.0, 0.0), (1.0, 1.0)] {
+            assert!((rough_atan2(y, x) - f64::atan2(y, x)).abs() < 1e-5, "({y}, {x})");
+        }
+        // a direction inside a sector (by an independent test: the turn from a to psi
+        // and from psi to b both counter-clockwise and below π) passes, in any turn of
+        // the angles; one clearly outside fails
+        let ccw = |from: f64, to: f64| {
+            let (u, v) = ((from.cos(), from.sin()), (to.cos(), to.sin()));
+            u.0 * v.1 - u.1 * v.0 >= 0.0 && u.0 * v.0 + u.1 * v.1 > -1.0
+        };
+        let (mut inside, mut outside) = (0, 0);
+        for a_k in 0..24 {
+            let a = -PI + a_k as f64 * 0.55;
+            for open_k in 1..12 {
+                let b = a + open_k as f64 * 0.27;
+                for turn in [-TAU, 0.0, TAU] {
+                    for psi_k in 0..97 {
+                        let psi = wrap_angle(a - 0.4 + psi_k as f64 * 0.041);
+                        let inner = ccw(a, psi) && ccw(psi, b) && ccw(a, b);
+                        if inner {
+                            inside += 1;
+                            assert!(in_sector(psi, a + turn, b), "{psi} in ({a}, {b})");
+                        }
+                        let gap = wrap_angle(psi - a).min(wrap_angle(b - psi));
+                        if gap < -2.0 * SECTOR_MARGIN && (b - a) < PI {
+                            outside += 1;
+                            assert!(!in_sector(psi, a, b + turn), "{psi} not in ({a}, {b})");
+                        }
+                    }
+                }
+            }
+        }
+        assert!(inside > 1000 && outside > 1000, "{inside} {outside}");
+        assert!(!in_sector(f64::NAN, 0.0, 1.0) && !in_sector(0.5, 0.0, f64::NAN));
     }
 
     #[test]
