@@ -305,11 +305,21 @@ fn advect_velocity_where(
         n,
         "geometry of another topology"
     );
+    let edge_faces = edge_faces(topology);
     (0..n)
         .into_par_iter()
         .map(|i| {
             if active.is_none_or(|a| a[i]) {
-                back_trace(topology, rings, geometry, transport, velocity, h, i)
+                back_trace(
+                    topology,
+                    &edge_faces,
+                    rings,
+                    geometry,
+                    transport,
+                    velocity,
+                    h,
+                    i,
+                )
             } else {
                 velocity[i]
             }
@@ -317,8 +327,27 @@ fn advect_velocity_where(
         .collect()
 }
 
+/// The first two faces of every edge, in face order (`u32::MAX` where there are fewer):
+/// both faces of an interior edge, read by the back-trace to cross it.
+fn edge_faces(topology: &Topology) -> Vec<[u32; 2]> {
+    let mut faces = vec![[u32::MAX; 2]; topology.n_edges()];
+    for (f, fe) in topology.face_edges().iter().enumerate() {
+        for &e in fe {
+            let slot = &mut faces[e as usize];
+            if slot[0] == u32::MAX {
+                slot[0] = f as u32;
+            } else if slot[1] == u32::MAX {
+                slot[1] = f as u32;
+            }
+        }
+    }
+    faces
+}
+
+#[allow(clippy::too_many_arguments)]
 fn back_trace(
     topology: &Topology,
+    edge_faces: &[[u32; 2]],
     rings: &OneRings,
     geometry: &Geometry,
     transport: &Transport,
@@ -333,6 +362,7 @@ fn back_trace(
     }
     let trace = Trace {
         topology,
+        edge_faces,
         rings,
         geometry,
         transport,
@@ -351,6 +381,8 @@ fn back_trace(
 /// One back-trace: the mesh, the field and the foot `target` in the layout of `F_i`.
 struct Trace<'a> {
     topology: &'a Topology,
+    /// The two faces of every interior edge ([`edge_faces`]).
+    edge_faces: &'a [[u32; 2]],
     rings: &'a OneRings,
     geometry: &'a Geometry,
     transport: &'a Transport,
@@ -469,9 +501,10 @@ impl Trace<'_> {
         };
         let mut face = wedge.face as usize;
         // the last entry point (`i`, or a crossing of an edge at a fraction), whose value
-        // the degenerate fallbacks return
-        let start = behind;
-        let mut entry: Option<(Placed, Placed, f64)> = None;
+        // the degenerate fallbacks return: the crossed edge is (right, behind) if the
+        // vertex placed beyond it became `left`, else (behind, left); it is kept as that
+        // choice and the fraction, not as copies of the two vertices
+        let mut entry: Option<(bool, f64)> = None;
         let at =
             |right: &Placed, left: &Placed, f: f64| self.value(right).lerp(self.value(left), f);
 
@@ -483,9 +516,10 @@ impl Trace<'_> {
                     Some([a, b, c]) => {
                         a * self.value(&behind) + b * self.value(&right) + c * self.value(&left)
                     }
-                    None => match &entry {
-                        None => self.value(&start),
-                        Some((r, l, f)) => at(r, l, *f),
+                    None => match entry {
+                        None => self.value(&behind),
+                        Some((true, f)) => at(&right, &behind, f),
+                        Some((false, f)) => at(&behind, &left, f),
                     },
                 });
             }
@@ -495,12 +529,13 @@ impl Trace<'_> {
             if crossing == MAX_CROSSINGS {
                 return Some(at(&right, &left, f));
             }
-            entry = Some((right, left, f));
-            let Some((g, c)) = self.across(face, &right, &left, f) else {
+            let Some((g, c)) = self.across(face, behind.v, &right, &left, f) else {
                 return Some(at(&right, &left, f));
             };
             face = g;
-            if is_left(c.side) {
+            let went_left = is_left(c.side);
+            entry = Some((went_left, f));
+            if went_left {
                 behind = left;
                 left = c;
             } else {
@@ -514,17 +549,26 @@ impl Trace<'_> {
     /// Unfolds the face across edge `(r, l)` of `face` (see the module doc): its index and its
     /// third vertex, placed in the layout. `None` at a border or non-manifold edge, or if the
     /// geometry is too degenerate to place it.
-    fn across(&self, face: usize, r: &Placed, l: &Placed, f: f64) -> Option<(usize, Placed)> {
-        let (topology, rings, geometry) = (self.topology, self.rings, self.geometry);
-        let local_l = rings.spokes(r.v).iter().position(|&s| s as usize == l.v)?;
-        let e = rings.spoke_edges(r.v)[local_l] as usize;
+    fn across(
+        &self,
+        face: usize,
+        behind: usize,
+        r: &Placed,
+        l: &Placed,
+        f: f64,
+    ) -> Option<(usize, Placed)> {
+        let (topology, geometry) = (self.topology, self.geometry);
+        // the edge (r, l) is the face's edge opposite its third corner, `behind`
+        let k_behind = topology.faces()[face]
+            .iter()
+            .position(|&x| x as usize == behind)?;
+        let e = topology.face_edges()[face][k_behind] as usize;
         if topology.edge_kind(e) != EdgeKind::Interior {
             return None;
         }
-        let g = rings.wedges(r.v).iter().find_map(|w| {
-            (w.face as usize != face && (w.from as usize == local_l || w.to as usize == local_l))
-                .then_some(w.face as usize)
-        })?;
+        // an interior edge has two faces: the other one
+        let [f0, f1] = self.edge_faces[e];
+        let g = if f0 as usize == face { f1 } else { f0 } as usize;
         let tri = topology.faces()[g];
         let corner = |v: usize| tri.iter().position(|&x| x as usize == v);
         let (kr, kl) = (corner(r.v)?, corner(l.v)?);
@@ -1075,12 +1119,20 @@ impl UpwindPlan {
             None => (None, Vec::new()),
         };
         let mut p_next = vec![DVec2::ZERO; p.len()];
+        // the rotation of every received transfer, gathered once when several sub-cycles
+        // read it
+        let turns = match transport {
+            Some(t) if self.substeps > 1 => Turns::Table(self.flows.turns(t)),
+            Some(t) => Turns::Edges(t.edge_cos_sin()),
+            None => Turns::Edges(&[]),
+        };
         for _ in 0..self.substeps {
             match transport {
                 None => self.flows.cycle(&m, k, &mut next),
-                Some(t) => self
-                    .flows
-                    .cycle_with_momentum(&m, k, &mut next, t, &p, &mut p_next),
+                Some(_) => {
+                    self.flows
+                        .cycle_with_momentum(&m, k, &mut next, &turns, &p, &mut p_next)
+                }
             }
             std::mem::swap(&mut m, &mut next);
             std::mem::swap(&mut p, &mut p_next);
@@ -1112,6 +1164,14 @@ struct Flows {
 struct Run {
     outflow: Vec<f64>,
     flows: Flows,
+}
+
+/// The rotations `R_vd` of the received transfers, as `(cos, sin)` of `[cos −sin; sin cos]`:
+/// a table in [`Flows::received`] order ([`Flows::turns`]), or read off the edges'
+/// rotations (transposed where `v > d`) each time.
+enum Turns<'a> {
+    Table(Vec<[f64; 2]>),
+    Edges(&'a [[f64; 2]]),
 }
 
 /// Vertices per task of the transfer passes (rayon's splitting below this costs more
@@ -1156,13 +1216,45 @@ impl Flows {
             .for_each(|(v, out)| self.fields_at(v, m, k, out));
     }
 
-    /// [`Flows::cycle`], and the momentum `p` into `p_next` in the same pass.
+    /// The rotation `R_vd` of each received transfer, in [`Flows::received`] order, as
+    /// `(cos, sin)` of the matrix `[cos −sin; sin cos]`: the stored rotation of the edge or
+    /// its transpose (the sine negated: exact), read once per plan instead of once per
+    /// sub-cycle.
+    fn turns(&self, transport: &Transport) -> Vec<[f64; 2]> {
+        let cos_sin = transport.edge_cos_sin();
+        let n = self.in_ptr.len() - 1;
+        let mut turns = vec![[0.0; 2]; self.in_from.len()];
+        // runs of vertices, each filling its own stretch of the table
+        let mut runs = Vec::with_capacity(n.div_ceil(VERTICES_PER_TASK));
+        let mut rest = turns.as_mut_slice();
+        for start in (0..n).step_by(VERTICES_PER_TASK) {
+            let end = (start + VERTICES_PER_TASK).min(n);
+            let len = (self.in_ptr[end] - self.in_ptr[start]) as usize;
+            let (head, tail) = rest.split_at_mut(len);
+            runs.push((start..end, head));
+            rest = tail;
+        }
+        runs.into_par_iter().for_each(|(vertices, out)| {
+            let base = self.in_ptr[vertices.start] as usize;
+            for v in vertices {
+                for t in self.in_ptr[v] as usize..self.in_ptr[v + 1] as usize {
+                    let (_, d, e) = self.in_from[t];
+                    let [c, s] = cos_sin[e as usize];
+                    out[t - base] = if v < d as usize { [c, s] } else { [c, -s] };
+                }
+            }
+        });
+        turns
+    }
+
+    /// [`Flows::cycle`], and the momentum `p` into `p_next` in the same pass (`turns` from
+    /// [`Flows::turns`]).
     fn cycle_with_momentum(
         &self,
         m: &[f64],
         k: usize,
         next: &mut [f64],
-        transport: &Transport,
+        turns: &Turns<'_>,
         p: &[DVec2],
         p_next: &mut [DVec2],
     ) {
@@ -1172,15 +1264,51 @@ impl Flows {
             .with_min_len(VERTICES_PER_TASK)
             .for_each(|(v, (out, pv))| {
                 self.fields_at(v, m, k, out);
-                *pv = self.momentum_at(v, transport, p);
+                *pv = self.momentum_at(v, turns, p);
             });
     }
 
     /// Vertex `v`'s fields after one sub-cycle: it gives `fraction · m_v` across each of
     /// its outgoing edges and receives `fraction · m_donor` across each incoming one — the
     /// same product on both sides, so the transfer is conservative to rounding — clamped
-    /// at zero against rounding.
+    /// at zero against rounding. The transfers are read once for all fields, each field
+    /// summed in transfer order (the same sums as one field at a time).
     fn fields_at(&self, v: usize, m: &[f64], k: usize, out: &mut [f64]) {
+        match k {
+            1 => self.fields_at_k::<1>(v, m, out),
+            2 => self.fields_at_k::<2>(v, m, out),
+            3 => self.fields_at_k::<3>(v, m, out),
+            4 => self.fields_at_k::<4>(v, m, out),
+            5 => self.fields_at_k::<5>(v, m, out),
+            _ => self.fields_at_one_by_one(v, m, k, out),
+        }
+    }
+
+    /// [`Flows::fields_at`] for `K` fields.
+    fn fields_at_k<const K: usize>(&self, v: usize, m: &[f64], out: &mut [f64]) {
+        let mv: [f64; K] = m[v * K..(v + 1) * K].try_into().expect("K fields");
+        let mut gone = [0.0; K];
+        for &fraction in self.given(v) {
+            for c in 0..K {
+                gone[c] += fraction * mv[c];
+            }
+        }
+        let mut inflow = [0.0; K];
+        for &(fraction, d, _) in self.received(v) {
+            let md: [f64; K] = m[d as usize * K..(d as usize + 1) * K]
+                .try_into()
+                .expect("K fields");
+            for c in 0..K {
+                inflow[c] += fraction * md[c];
+            }
+        }
+        for c in 0..K {
+            out[c] = (mv[c] - gone[c]).max(0.0) + inflow[c];
+        }
+    }
+
+    /// [`Flows::fields_at`] for more than five fields, one field at a time.
+    fn fields_at_one_by_one(&self, v: usize, m: &[f64], k: usize, out: &mut [f64]) {
         for (c, o) in out.iter_mut().enumerate() {
             let mv = m[v * k + c];
             let mut gone = 0.0;
@@ -1196,15 +1324,22 @@ impl Flows {
     }
 
     /// Vertex `v`'s momentum after one sub-cycle: the same fractions of the donors'
-    /// momenta, turned into `F_v` by `R_vd`.
-    fn momentum_at(&self, v: usize, transport: &Transport, p: &[DVec2]) -> DVec2 {
+    /// momenta, turned into `F_v` by `R_vd` (from `turns`).
+    fn momentum_at(&self, v: usize, turns: &Turns<'_>, p: &[DVec2]) -> DVec2 {
         let (mut out, mut inflow) = (DVec2::ZERO, DVec2::ZERO);
         for &fraction in self.given(v) {
             out += fraction * p[v];
         }
-        for &(fraction, d, e) in self.received(v) {
-            let r = transport.edge_rotation(e as usize);
-            let r = if v < d as usize { r } else { r.transpose() };
+        let (start, end) = (self.in_ptr[v] as usize, self.in_ptr[v + 1] as usize);
+        for (t, &(fraction, d, e)) in self.in_from[start..end].iter().enumerate() {
+            let [c, s] = match turns {
+                Turns::Table(table) => table[start + t],
+                Turns::Edges(cos_sin) => {
+                    let [c, s] = cos_sin[e as usize];
+                    if v < d as usize { [c, s] } else { [c, -s] }
+                }
+            };
+            let r = DMat2::from_cols_array(&[c, s, -s, c]);
             inflow += r * (fraction * p[d as usize]);
         }
         (p[v] - out) + inflow
@@ -1436,7 +1571,10 @@ mod tests {
         }
         assert!(worst < 1e-5, "rough atan2 off by {worst:e}");
         for (y, x) in [(0.0, 1.0), (0.0, -1.0), (1.0, 0.0), (-1.0, 0.0), (1.0, 1.0)] {
-            assert!((rough_atan2(y, x) - f64::atan2(y, x)).abs() < 1e-5, "({y}, {x})");
+            assert!(
+                (rough_atan2(y, x) - f64::atan2(y, x)).abs() < 1e-5,
+                "({y}, {x})"
+            );
         }
         // a direction inside a sector (by an independent test: the turn from a to psi
         // and from psi to b both counter-clockwise and below π) passes, in any turn of
