@@ -396,11 +396,18 @@ impl Trace<'_> {
     /// to 0 within [`SIDE_TOLERANCE`].
     fn side(&self, p: DVec2) -> f64 {
         let s = self.target.perp_dot(p);
-        if s.abs() <= SIDE_TOLERANCE * self.scale * p.length() {
-            0.0
+        // `|p|` lies between `m` and `√2 m`: away from the threshold the answer is known
+        // without the square root (the walk waits on it); near it, the exact test
+        let (a, m) = (s.abs(), p.x.abs().max(p.y.abs()));
+        let t = SIDE_TOLERANCE * self.scale;
+        let on_line = if a > 1.5 * t * m {
+            false
+        } else if a <= 0.9 * t * m {
+            true
         } else {
-            s
-        }
+            a <= t * p.length()
+        };
+        if on_line { 0.0 } else { s }
     }
 
     /// The velocity of a placed vertex, turned into the layout (`F_i`).
@@ -877,7 +884,20 @@ impl UpwindPlan {
             .into_par_iter()
             .map(|c| {
                 let vertices = c * VERTICES_PER_TASK..((c + 1) * VERTICES_PER_TASK).min(n);
-                let mut run = Run::default();
+                // each edge end gives at most one transfer, given or received
+                let ends: usize = vertices
+                    .clone()
+                    .map(|v| topology.vertex_edges(v).len())
+                    .sum();
+                let mut run = Run {
+                    outflow: Vec::with_capacity(vertices.len()),
+                    flows: Flows {
+                        out_ptr: Vec::with_capacity(vertices.len()),
+                        out_fraction: Vec::with_capacity(ends),
+                        in_ptr: Vec::with_capacity(vertices.len()),
+                        in_from: Vec::with_capacity(ends),
+                    },
+                };
                 for v in vertices {
                     let o: f64 = topology
                         .vertex_edges(v)
@@ -947,29 +967,35 @@ impl UpwindPlan {
             .into_par_iter()
             .enumerate()
             .map(|(c, run)| {
-                let f = run.flows;
-                let mut out = Flows::default();
-                let (mut o, mut i) = (0, 0);
+                // in place: the fractions overwrite the |Φ| they come from, the ones that
+                // round to nothing are squeezed out
+                let mut f = run.flows;
+                let (mut o, mut i, mut o_to, mut i_to) = (0, 0, 0, 0);
                 for (k, v) in (c * VERTICES_PER_TASK..).take(f.out_ptr.len()).enumerate() {
                     let o_end = f.out_ptr[k] as usize;
-                    for &phi in &f.out_fraction[o..o_end] {
-                        let x = fraction(v, phi);
+                    for t in o..o_end {
+                        let x = fraction(v, f.out_fraction[t]);
                         if x != 0.0 {
-                            out.out_fraction.push(x);
+                            f.out_fraction[o_to] = x;
+                            o_to += 1;
                         }
                     }
                     let i_end = f.in_ptr[k] as usize;
-                    for &(phi, d, e) in &f.in_from[i..i_end] {
+                    for t in i..i_end {
+                        let (phi, d, e) = f.in_from[t];
                         let x = fraction(d as usize, phi);
                         if x != 0.0 {
-                            out.in_from.push((x, d, e));
+                            f.in_from[i_to] = (x, d, e);
+                            i_to += 1;
                         }
                     }
                     (o, i) = (o_end, i_end);
-                    out.out_ptr.push(out.out_fraction.len() as u32);
-                    out.in_ptr.push(out.in_from.len() as u32);
+                    f.out_ptr[k] = o_to as u32;
+                    f.in_ptr[k] = i_to as u32;
                 }
-                out
+                f.out_fraction.truncate(o_to);
+                f.in_from.truncate(i_to);
+                f
             })
             .collect();
         let flows = Flows::concat(n, runs);
@@ -1182,11 +1208,13 @@ impl Flows {
     /// Runs of consecutive vertices' transfers (each with ends relative to its own
     /// start) laid end to end.
     fn concat(n: usize, runs: Vec<Flows>) -> Self {
+        let given: usize = runs.iter().map(|r| r.out_fraction.len()).sum();
+        let received: usize = runs.iter().map(|r| r.in_from.len()).sum();
         let mut f = Flows {
             out_ptr: Vec::with_capacity(n + 1),
-            out_fraction: Vec::new(),
+            out_fraction: Vec::with_capacity(given),
             in_ptr: Vec::with_capacity(n + 1),
-            in_from: Vec::new(),
+            in_from: Vec::with_capacity(received),
         };
         f.out_ptr.push(0);
         f.in_ptr.push(0);
