@@ -54,7 +54,16 @@
 //! keeps the rotation it was given when first placed while the strip passes it. The
 //! rotation (two `atan2` and a `sin_cos`) is only evaluated for the vertices whose velocity
 //! is read, the last triangle's or a crossing's where the walk stops: the others a long
-//! strip passes never need it (the same operations when read, so the same values).
+//! strip passes never need it, nor the look-up of their polar angles (the same operations
+//! when read, so the same values).
+//!
+//! *First wedge.* Placing a spoke costs a `sin_cos`, and the wedge is searched in fan
+//! order. A pre-test skips, without placing their spokes, the wedges whose polar sector
+//! `[α_ij + δ_i, α_ik + δ_i]` (counter-clockwise, any turn) is more than 10⁻³ rad away
+//! from the foot's direction, measured by a polynomial `atan2` good to 10⁻⁵: the exact
+//! test above can only pass inside the sector (up to rounding and [`SIDE_TOLERANCE`],
+//! below 10⁻¹¹), so the same wedge is found with the same placed spokes, and about two
+//! `sin_cos` are done instead of one per wedge passed.
 //!
 //! The walk is the "straight walk" of point location: each new vertex is classified once
 //! as left or right of the line `0 → p`, the exit edge is the one whose endpoints are on
@@ -69,6 +78,13 @@
 //! line = right". A segment along a straight border (a wind parallel to the hem) thus
 //! follows the border instead of stopping at `i` or crossing the border edge at an
 //! arbitrary point.
+//!
+//! Each crossing is a chain of dependent reads, so it is kept short: the crossed edge is
+//! the current face's edge opposite the vertex behind, the face beyond it is read from a
+//! table of every edge's two faces (built once per call), and the side of a new vertex is
+//! decided from `|target × p|` against `max(|p_x|, |p_y|)` (which bounds `|p|` within
+//! `√2`), taking the square root only within a factor 1.5 of the threshold, where the
+//! exact test decides. Same results bit for bit as the fan searches and the plain test.
 //!
 //! It stops, and interpolates linearly along the edge at the crossing point, when it
 //! meets a **border** (an edge with one face: the fluid cannot come from outside the
@@ -161,7 +177,11 @@
 //! so it is not transported twice. Each value is computed by the same operations in the
 //! same order as the former one-field-at-a-time passes: the outputs are bit-identical.
 //! The fluxes ([`dual_fluxes`]) inside the simulator's active region visit only the faces
-//! with an active edge.
+//! with an active edge. The runs are sized from their vertices' edge counts and their
+//! fractions written over the `|Φ|` they replace (no regrowth, one copy into the table);
+//! a sub-cycle reads each transfer once for up to five fields (per-field sums kept in
+//! transfer order), and with several sub-cycles the momentum's rotations `R_vd` are
+//! gathered once per plan in transfer order instead of from the edges in every cycle.
 //!
 //! ## Momentum advection (§4.3.2)
 //! The alternative of §4.3.2 moves the momentum `p_i = m_i u_i` with the same transfers as
@@ -231,14 +251,16 @@ struct Placed {
 #[derive(Clone, Copy)]
 enum Turn {
     Matrix(DMat2),
-    /// Layout directions of the edges `c → r` and `c → l` (`c` the placed vertex), and the
-    /// vertices `r` and `l`, whose spokes' polar angles `α + δ_c` in `F_c` the rotation
-    /// subtracts.
+    /// Layout directions of the edges `c → r` and `c → l` (`c` the placed vertex), and
+    /// where the polar angles `α + δ_c` of those edges in `F_c` are stored: each edge and
+    /// the end that is `c` ([`Transport::edge_polar`]).
     Unfolded {
         to_r: DVec2,
         to_l: DVec2,
-        r: u32,
-        l: u32,
+        edge_r: u32,
+        edge_l: u32,
+        end_r: u8,
+        end_l: u8,
     },
 }
 
@@ -417,22 +439,20 @@ impl Trace<'_> {
 
     /// The rotation `F_v → layout` of a placed vertex `v` (the module doc): for an
     /// unfolded one, the layout angle of each of its edges to `r` and `l` minus that
-    /// spoke's polar angle, averaged. The identity if a spoke cannot be found (a
-    /// topology whose fans miss one of the face's edges: not built by [`OneRings`]).
+    /// spoke's polar angle, averaged.
     fn turn(&self, a: &Placed) -> DMat2 {
         match a.q {
             Turn::Matrix(q) => q,
-            Turn::Unfolded { to_r, to_l, r, l } => {
-                let spokes_c = self.rings.spokes(a.v);
-                let alpha_c = self.transport.polar_angles(a.v);
-                let delta_c = self.transport.frame_offset(a.v);
-                let polar = |m: u32| {
-                    let k = spokes_c.iter().position(|&s| s == m)?;
-                    Some(alpha_c[k] + delta_c)
-                };
-                let (Some(polar_r), Some(polar_l)) = (polar(r), polar(l)) else {
-                    return DMat2::IDENTITY;
-                };
+            Turn::Unfolded {
+                to_r,
+                to_l,
+                edge_r,
+                edge_l,
+                end_r,
+                end_l,
+            } => {
+                let polar_r = self.transport.edge_polar(edge_r as usize)[end_r as usize];
+                let polar_l = self.transport.edge_polar(edge_l as usize)[end_l as usize];
                 let a_r = to_r.y.atan2(to_r.x) - polar_r;
                 let a_l = to_l.y.atan2(to_l.x) - polar_l;
                 DMat2::from_angle(a_r + 0.5 * wrap_angle(a_l - a_r))
@@ -608,8 +628,10 @@ impl Trace<'_> {
                 q: Turn::Unfolded {
                     to_r: r_star - p,
                     to_l: l_star - p,
-                    r: r.v as u32,
-                    l: l.v as u32,
+                    edge_r: fe[kl],
+                    edge_l: fe[kr],
+                    end_r: u8::from(c > r.v),
+                    end_l: u8::from(c > l.v),
                 },
             },
         ))
