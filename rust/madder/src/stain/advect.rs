@@ -1179,7 +1179,7 @@ impl UpwindPlan {
                 None => self.flows.cycle(&m, k, &mut next),
                 Some(_) => {
                     self.flows
-                        .cycle_with_momentum(&m, k, &mut next, &turns, &p, &mut p_next)
+                        .cycle_with_momentum(&m, k, &mut next, &turns, &p, &mut p_next);
                 }
             }
             std::mem::swap(&mut m, &mut next);
