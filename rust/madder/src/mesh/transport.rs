@@ -151,7 +151,8 @@ impl Transport {
             .unzip();
         // θ_ab from the angle of each edge in the frame of each endpoint, and its rotation
         let edges = topology.edges();
-        let per_edge: Vec<(f64, [f64; 2], [f64; 2])> = edges
+        #[allow(clippy::type_complexity)]
+        let (theta, (cos_sin, edge_polar)): (Vec<f64>, (Vec<[f64; 2]>, Vec<[f64; 2]>)) = edges
             .par_iter()
             .zip(&rings.edge_spoke)
             .map(|(&[a, b], &[sa, sb])| {
@@ -163,12 +164,9 @@ impl Transport {
                 debug_assert!(ta.is_finite() && tb.is_finite(), "every edge is in a fan");
                 let theta = wrap_angle(ta - tb + PI);
                 let (sin, cos) = theta.sin_cos();
-                (theta, [cos, sin], [ta, tb])
+                (theta, ([cos, sin], [ta, tb]))
             })
-            .collect();
-        let theta = per_edge.iter().map(|x| x.0).collect();
-        let cos_sin = per_edge.iter().map(|x| x.1).collect();
-        let edge_polar = per_edge.iter().map(|x| x.2).collect();
+            .unzip();
         Self {
             alpha,
             spoke_ptr: rings.spoke_ptr.clone(),
