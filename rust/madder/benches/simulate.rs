@@ -337,7 +337,14 @@ fn parts(nx: usize, ny: usize, reps: usize) {
     let q = wave(&rest, 0.3);
     let rings = OneRings::new(&topo);
     let rf = VertexFrames::new(&rings, &rest).unwrap();
+    // MADDER_BENCH_ONLY=name: repeat only that piece (the others run once), e.g. to count
+    // one piece's instructions under valgrind
+    let only = std::env::var("MADDER_BENCH_ONLY").ok();
     let time = |name: &str, f: &mut dyn FnMut()| {
+        if only.as_ref().is_some_and(|o| o != name) {
+            f();
+            return;
+        }
         let t = Instant::now();
         for _ in 0..reps {
             f();
@@ -366,12 +373,32 @@ fn parts(nx: usize, ny: usize, reps: usize) {
     time("advect velocity", &mut || {
         a = advect_velocity(&topo, &rings, &g, &transport, &u, 1.0 / 24.0);
     });
+    // the same field scaled so that a trace crosses about 7 cells, as on the Blender flag
+    let mean_edge = g.edge_length.iter().sum::<f64>() / g.edge_length.len() as f64;
+    let long: Vec<glam::DVec2> = u
+        .iter()
+        .map(|&x| x * (7.0 * mean_edge * 24.0 / 0.11))
+        .collect();
+    let mut b = Vec::new();
+    time("advect velocity, ~7 cells", &mut || {
+        b = advect_velocity(&topo, &rings, &g, &transport, &long, 1.0 / 24.0);
+    });
     let mut fl = Vec::new();
     time("dual fluxes", &mut || fl = dual_fluxes(&topo, &q, &fr, &a));
     let mut m: Vec<f64> = (0..topo.n_vertices()).map(|i| (i % 7) as f64).collect();
+    time("upwind plan", &mut || {
+        std::hint::black_box(UpwindPlan::new(&topo, &g.vertex_area, &fl, 1.0 / 24.0).unwrap());
+    });
     time("plan + transport 2 fields", &mut || {
         let plan = UpwindPlan::new(&topo, &g.vertex_area, &fl, 1.0 / 24.0).unwrap();
         let mut m2 = m.clone();
         plan.transport_all(&topo, &mut [&mut m, &mut m2]);
+    });
+    // the Blender flag's case: five fields and the momentum
+    let mut five: Vec<Vec<f64>> = (0..5).map(|_| m.clone()).collect();
+    time("plan + 5 fields + momentum", &mut || {
+        let plan = UpwindPlan::new(&topo, &g.vertex_area, &fl, 1.0 / 24.0).unwrap();
+        let mut fields: Vec<&mut [f64]> = five.iter_mut().map(|f| f.as_mut_slice()).collect();
+        std::hint::black_box(plan.transport_with_momentum(&topo, &transport, &mut fields, &a, &a));
     });
 }

@@ -105,6 +105,9 @@ pub struct Transport {
     theta: Vec<f64>,
     /// `(cos θ_ab, sin θ_ab)` per edge: the rotation, computed once per frame.
     cos_sin: Vec<[f64; 2]>,
+    /// Per edge `(a, b)`: the polar angle of its spoke in the frame of `a` and of `b`
+    /// (`α + δ`, the operands of `θ_ab`).
+    edge_polar: Vec<[f64; 2]>,
     edge_ptr: Vec<u32>,
     edge_end: Vec<u32>,
 }
@@ -148,7 +151,8 @@ impl Transport {
             .unzip();
         // θ_ab from the angle of each edge in the frame of each endpoint, and its rotation
         let edges = topology.edges();
-        let (theta, cos_sin): (Vec<f64>, Vec<[f64; 2]>) = edges
+        #[allow(clippy::type_complexity)]
+        let (theta, (cos_sin, edge_polar)): (Vec<f64>, (Vec<[f64; 2]>, Vec<[f64; 2]>)) = edges
             .par_iter()
             .zip(&rings.edge_spoke)
             .map(|(&[a, b], &[sa, sb])| {
@@ -160,7 +164,7 @@ impl Transport {
                 debug_assert!(ta.is_finite() && tb.is_finite(), "every edge is in a fan");
                 let theta = wrap_angle(ta - tb + PI);
                 let (sin, cos) = theta.sin_cos();
-                (theta, [cos, sin])
+                (theta, ([cos, sin], [ta, tb]))
             })
             .unzip();
         Self {
@@ -170,6 +174,7 @@ impl Transport {
             offset,
             theta,
             cos_sin,
+            edge_polar,
             edge_ptr: rings.edge_ptr.clone(),
             edge_end: rings.edge_end.clone(),
         }
@@ -200,6 +205,12 @@ impl Transport {
     /// `(cos θ_ab, sin θ_ab)` of every edge (the entries of [`Self::edge_rotation`]).
     pub(crate) fn edge_cos_sin(&self) -> &[[f64; 2]] {
         &self.cos_sin
+    }
+
+    /// The polar angles `α + δ` of edge `e = (a, b)`'s spoke in the frames of `a` and `b`:
+    /// the same values as [`Self::polar_angles`] plus [`Self::frame_offset`] give.
+    pub(crate) fn edge_polar(&self, e: usize) -> [f64; 2] {
+        self.edge_polar[e]
     }
 
     /// `R_ab` of edge `e = (a, b)`, `a < b` (transport from `F_b` to `F_a`); the same

@@ -54,7 +54,16 @@
 //! keeps the rotation it was given when first placed while the strip passes it. The
 //! rotation (two `atan2` and a `sin_cos`) is only evaluated for the vertices whose velocity
 //! is read, the last triangle's or a crossing's where the walk stops: the others a long
-//! strip passes never need it (the same operations when read, so the same values).
+//! strip passes never need it, nor the look-up of their polar angles (the same operations
+//! when read, so the same values).
+//!
+//! *First wedge.* Placing a spoke costs a `sin_cos`, and the wedge is searched in fan
+//! order. A pre-test skips, without placing their spokes, the wedges whose polar sector
+//! `[α_ij + δ_i, α_ik + δ_i]` (counter-clockwise, any turn) is more than 10⁻³ rad away
+//! from the foot's direction, measured by a polynomial `atan2` good to 10⁻⁵: the exact
+//! test above can only pass inside the sector (up to rounding and [`SIDE_TOLERANCE`],
+//! below 10⁻¹¹), so the same wedge is found with the same placed spokes, and about two
+//! `sin_cos` are done instead of one per wedge passed.
 //!
 //! The walk is the "straight walk" of point location: each new vertex is classified once
 //! as left or right of the line `0 → p`, the exit edge is the one whose endpoints are on
@@ -69,6 +78,13 @@
 //! line = right". A segment along a straight border (a wind parallel to the hem) thus
 //! follows the border instead of stopping at `i` or crossing the border edge at an
 //! arbitrary point.
+//!
+//! Each crossing is a chain of dependent reads, so it is kept short: the crossed edge is
+//! the current face's edge opposite the vertex behind, the face beyond it is read from a
+//! table of every edge's two faces (built once per call), and the side of a new vertex is
+//! decided from `|target × p|` against `max(|p_x|, |p_y|)` (which bounds `|p|` within
+//! `√2`), taking the square root only within a factor 1.5 of the threshold, where the
+//! exact test decides. Same results bit for bit as the fan searches and the plain test.
 //!
 //! It stops, and interpolates linearly along the edge at the crossing point, when it
 //! meets a **border** (an edge with one face: the fluid cannot come from outside the
@@ -161,7 +177,11 @@
 //! so it is not transported twice. Each value is computed by the same operations in the
 //! same order as the former one-field-at-a-time passes: the outputs are bit-identical.
 //! The fluxes ([`dual_fluxes`]) inside the simulator's active region visit only the faces
-//! with an active edge.
+//! with an active edge. The runs are sized from their vertices' edge counts and their
+//! fractions written over the `|Φ|` they replace (no regrowth, one copy into the table);
+//! a sub-cycle reads each transfer once for up to five fields (per-field sums kept in
+//! transfer order), and with several sub-cycles the momentum's rotations `R_vd` are
+//! gathered once per plan in transfer order instead of from the edges in every cycle.
 //!
 //! ## Momentum advection (§4.3.2)
 //! The alternative of §4.3.2 moves the momentum `p_i = m_i u_i` with the same transfers as
@@ -177,7 +197,7 @@ use rayon::prelude::*;
 
 use crate::error::ParamError;
 use crate::mesh::transport::wrap_angle;
-use crate::mesh::{EdgeKind, Geometry, OneRings, Topology, Transport, VertexFrames};
+use crate::mesh::{EdgeKind, Geometry, OneRings, Topology, Transport, VertexFrames, Wedge};
 
 /// Most triangle crossings of one back-trace. Reached only when `h|u|` spans hundreds of
 /// edges; the trace then stops at its last crossing point.
@@ -225,38 +245,23 @@ struct Placed {
 /// The rotation of a [`Placed`] vertex: a matrix (`i` and its one-ring), or, for a vertex
 /// placed by the unfolding, what it is computed from. Only the vertices whose velocity is
 /// read (the last triangle's, a crossing's where the walk stops) need it, and most
-/// vertices a long strip passes are not read: their `atan2`s and `sin_cos` are left
-/// undone. When read it is computed by the same operations as if it had been computed at
-/// once, so the values are the same.
+/// vertices a long strip passes are not read: their `atan2`s and `sin_cos`, and the look-up
+/// of their polar angles, are left undone. When read it is computed by the same operations
+/// as if it had been computed at once, so the values are the same.
 #[derive(Clone, Copy)]
 enum Turn {
     Matrix(DMat2),
-    /// Layout directions of the edges `c → r` and `c → l`, and their polar angles
-    /// `α + δ_c` in `F_c`.
+    /// Layout directions of the edges `c → r` and `c → l` (`c` the placed vertex), and
+    /// where the polar angles `α + δ_c` of those edges in `F_c` are stored: each edge and
+    /// the end that is `c` ([`Transport::edge_polar`]).
     Unfolded {
         to_r: DVec2,
         to_l: DVec2,
-        polar_r: f64,
-        polar_l: f64,
+        edge_r: u32,
+        edge_l: u32,
+        end_r: u8,
+        end_l: u8,
     },
-}
-
-impl Turn {
-    fn matrix(self) -> DMat2 {
-        match self {
-            Turn::Matrix(q) => q,
-            Turn::Unfolded {
-                to_r,
-                to_l,
-                polar_r,
-                polar_l,
-            } => {
-                let a_r = to_r.y.atan2(to_r.x) - polar_r;
-                let a_l = to_l.y.atan2(to_l.x) - polar_l;
-                DMat2::from_angle(a_r + 0.5 * wrap_angle(a_l - a_r))
-            }
-        }
-    }
 }
 
 /// Semi-Lagrangian advection of the velocity over `h` (see the module doc): the value at
@@ -322,11 +327,21 @@ fn advect_velocity_where(
         n,
         "geometry of another topology"
     );
+    let edge_faces = edge_faces(topology);
     (0..n)
         .into_par_iter()
         .map(|i| {
             if active.is_none_or(|a| a[i]) {
-                back_trace(topology, rings, geometry, transport, velocity, h, i)
+                back_trace(
+                    topology,
+                    &edge_faces,
+                    rings,
+                    geometry,
+                    transport,
+                    velocity,
+                    h,
+                    i,
+                )
             } else {
                 velocity[i]
             }
@@ -334,8 +349,27 @@ fn advect_velocity_where(
         .collect()
 }
 
+/// The first two faces of every edge, in face order (`u32::MAX` where there are fewer):
+/// both faces of an interior edge, read by the back-trace to cross it.
+fn edge_faces(topology: &Topology) -> Vec<[u32; 2]> {
+    let mut faces = vec![[u32::MAX; 2]; topology.n_edges()];
+    for (f, fe) in topology.face_edges().iter().enumerate() {
+        for &e in fe {
+            let slot = &mut faces[e as usize];
+            if slot[0] == u32::MAX {
+                slot[0] = f as u32;
+            } else if slot[1] == u32::MAX {
+                slot[1] = f as u32;
+            }
+        }
+    }
+    faces
+}
+
+#[allow(clippy::too_many_arguments)]
 fn back_trace(
     topology: &Topology,
+    edge_faces: &[[u32; 2]],
     rings: &OneRings,
     geometry: &Geometry,
     transport: &Transport,
@@ -350,6 +384,7 @@ fn back_trace(
     }
     let trace = Trace {
         topology,
+        edge_faces,
         rings,
         geometry,
         transport,
@@ -368,6 +403,8 @@ fn back_trace(
 /// One back-trace: the mesh, the field and the foot `target` in the layout of `F_i`.
 struct Trace<'a> {
     topology: &'a Topology,
+    /// The two faces of every interior edge ([`edge_faces`]).
+    edge_faces: &'a [[u32; 2]],
     rings: &'a OneRings,
     geometry: &'a Geometry,
     transport: &'a Transport,
@@ -381,15 +418,46 @@ impl Trace<'_> {
     /// to 0 within [`SIDE_TOLERANCE`].
     fn side(&self, p: DVec2) -> f64 {
         let s = self.target.perp_dot(p);
-        if s.abs() <= SIDE_TOLERANCE * self.scale * p.length() {
-            0.0
+        // `|p|` lies between `m` and `√2 m`: away from the threshold the answer is known
+        // without the square root (the walk waits on it); near it, the exact test
+        let (a, m) = (s.abs(), p.x.abs().max(p.y.abs()));
+        let t = SIDE_TOLERANCE * self.scale;
+        let on_line = if a > 1.5 * t * m {
+            false
+        } else if a <= 0.9 * t * m {
+            true
         } else {
-            s
-        }
+            a <= t * p.length()
+        };
+        if on_line { 0.0 } else { s }
     }
 
+    /// The velocity of a placed vertex, turned into the layout (`F_i`).
     fn value(&self, a: &Placed) -> DVec2 {
-        a.q.matrix() * self.velocity[a.v]
+        self.turn(a) * self.velocity[a.v]
+    }
+
+    /// The rotation `F_v → layout` of a placed vertex `v` (the module doc): for an
+    /// unfolded one, the layout angle of each of its edges to `r` and `l` minus that
+    /// spoke's polar angle, averaged.
+    fn turn(&self, a: &Placed) -> DMat2 {
+        match a.q {
+            Turn::Matrix(q) => q,
+            Turn::Unfolded {
+                to_r,
+                to_l,
+                edge_r,
+                edge_l,
+                end_r,
+                end_l,
+            } => {
+                let polar_r = self.transport.edge_polar(edge_r as usize)[end_r as usize];
+                let polar_l = self.transport.edge_polar(edge_l as usize)[end_l as usize];
+                let a_r = to_r.y.atan2(to_r.x) - polar_r;
+                let a_l = to_l.y.atan2(to_l.x) - polar_l;
+                DMat2::from_angle(a_r + 0.5 * wrap_angle(a_l - a_r))
+            }
+        }
     }
 
     /// The walk from vertex `i` with points on the line counted as left (`ties_left`) or
@@ -408,9 +476,20 @@ impl Trace<'_> {
             let (sin, cos) = (alpha[s] + delta).sin_cos();
             len * DVec2::new(cos, sin)
         };
+        // a wedge whose polar sector is well clear of the foot's direction cannot pass the
+        // test below: skip it without placing its spokes (the module doc, "First wedge")
+        let psi = rough_atan2(target.y, target.x);
+        let may_hold = |w: &Wedge| {
+            let (a, b) = (w.from as usize, w.to as usize);
+            let finite = |s: usize| self.geometry.edge_length[spoke_edges[s] as usize].is_finite();
+            !(finite(a) && finite(b)) || in_sector(psi, alpha[a] + delta, alpha[b] + delta)
+        };
         // consecutive wedges of a fan share a spoke: place each spoke once
         let mut last = (u32::MAX, DVec2::ZERO);
         let (wedge, pj, pk) = rings.wedges(i).iter().find_map(|w| {
+            if !may_hold(w) {
+                return None;
+            }
             let pa = if last.0 == w.from {
                 last.1
             } else {
@@ -449,9 +528,10 @@ impl Trace<'_> {
         };
         let mut face = wedge.face as usize;
         // the last entry point (`i`, or a crossing of an edge at a fraction), whose value
-        // the degenerate fallbacks return
-        let start = behind;
-        let mut entry: Option<(Placed, Placed, f64)> = None;
+        // the degenerate fallbacks return: the crossed edge is (right, behind) if the
+        // vertex placed beyond it became `left`, else (behind, left); it is kept as that
+        // choice and the fraction, not as copies of the two vertices
+        let mut entry: Option<(bool, f64)> = None;
         let at =
             |right: &Placed, left: &Placed, f: f64| self.value(right).lerp(self.value(left), f);
 
@@ -463,9 +543,10 @@ impl Trace<'_> {
                     Some([a, b, c]) => {
                         a * self.value(&behind) + b * self.value(&right) + c * self.value(&left)
                     }
-                    None => match &entry {
-                        None => self.value(&start),
-                        Some((r, l, f)) => at(r, l, *f),
+                    None => match entry {
+                        None => self.value(&behind),
+                        Some((true, f)) => at(&right, &behind, f),
+                        Some((false, f)) => at(&behind, &left, f),
                     },
                 });
             }
@@ -475,12 +556,13 @@ impl Trace<'_> {
             if crossing == MAX_CROSSINGS {
                 return Some(at(&right, &left, f));
             }
-            entry = Some((right, left, f));
-            let Some((g, c)) = self.across(face, &right, &left, f) else {
+            let Some((g, c)) = self.across(face, behind.v, &right, &left, f) else {
                 return Some(at(&right, &left, f));
             };
             face = g;
-            if is_left(c.side) {
+            let went_left = is_left(c.side);
+            entry = Some((went_left, f));
+            if went_left {
                 behind = left;
                 left = c;
             } else {
@@ -494,18 +576,26 @@ impl Trace<'_> {
     /// Unfolds the face across edge `(r, l)` of `face` (see the module doc): its index and its
     /// third vertex, placed in the layout. `None` at a border or non-manifold edge, or if the
     /// geometry is too degenerate to place it.
-    fn across(&self, face: usize, r: &Placed, l: &Placed, f: f64) -> Option<(usize, Placed)> {
-        let (topology, rings, geometry, transport) =
-            (self.topology, self.rings, self.geometry, self.transport);
-        let local_l = rings.spokes(r.v).iter().position(|&s| s as usize == l.v)?;
-        let e = rings.spoke_edges(r.v)[local_l] as usize;
+    fn across(
+        &self,
+        face: usize,
+        behind: usize,
+        r: &Placed,
+        l: &Placed,
+        f: f64,
+    ) -> Option<(usize, Placed)> {
+        let (topology, geometry) = (self.topology, self.geometry);
+        // the edge (r, l) is the face's edge opposite its third corner, `behind`
+        let k_behind = topology.faces()[face]
+            .iter()
+            .position(|&x| x as usize == behind)?;
+        let e = topology.face_edges()[face][k_behind] as usize;
         if topology.edge_kind(e) != EdgeKind::Interior {
             return None;
         }
-        let g = rings.wedges(r.v).iter().find_map(|w| {
-            (w.face as usize != face && (w.from as usize == local_l || w.to as usize == local_l))
-                .then_some(w.face as usize)
-        })?;
+        // an interior edge has two faces: the other one
+        let [f0, f1] = self.edge_faces[e];
+        let g = if f0 as usize == face { f1 } else { f0 } as usize;
         let tri = topology.faces()[g];
         let corner = |v: usize| tri.iter().position(|&x| x as usize == v);
         let (kr, kl) = (corner(r.v)?, corner(l.v)?);
@@ -528,15 +618,7 @@ impl Trace<'_> {
         if !p.is_finite() {
             return None;
         }
-        // rotation F_c → layout from the directions of c → r and c → l
-        let spokes_c = rings.spokes(c);
-        let alpha_c = transport.polar_angles(c);
-        let delta_c = transport.frame_offset(c);
-        let polar = |m: usize| {
-            let k = spokes_c.iter().position(|&s| s as usize == m)?;
-            Some(alpha_c[k] + delta_c)
-        };
-        let (polar_r, polar_l) = (polar(r.v)?, polar(l.v)?);
+        // rotation F_c → layout from the directions of c → r and c → l, evaluated if read
         Some((
             g,
             Placed {
@@ -546,12 +628,74 @@ impl Trace<'_> {
                 q: Turn::Unfolded {
                     to_r: r_star - p,
                     to_l: l_star - p,
-                    polar_r,
-                    polar_l,
+                    edge_r: fe[kl],
+                    edge_l: fe[kr],
+                    end_r: u8::from(c > r.v),
+                    end_l: u8::from(c > l.v),
                 },
             },
         ))
     }
+}
+
+/// Margin (radians) of the first wedge's angular pre-test, [`in_sector`]: far above the
+/// error of [`rough_atan2`] (below `10⁻⁵`) and the rounding of the polar angles and of
+/// [`SIDE_TOLERANCE`] (below `10⁻¹¹`), far below a wedge's opening.
+const SECTOR_MARGIN: f64 = 1e-3;
+
+/// Whether the direction of polar angle `psi` may lie in the counter-clockwise sector from
+/// angle `a` to angle `b` (any real angles), [`SECTOR_MARGIN`] included on both sides. A
+/// wedge that passes the exact test of the back-trace (`P_a` right of the foot's line,
+/// `P_b` on or left of it, `P_a × P_b > 0`) contains the direction of the foot up to
+/// rounding, so it always passes this one; a sector of nearly `2π` lets everything pass.
+/// `false` for NaN angles.
+fn in_sector(psi: f64, a: f64, b: f64) -> bool {
+    use std::f64::consts::TAU;
+    // psi − a into [−margin, 2π − margin), b − a into [0, 2π); the angles are polar
+    // angles within a few turns of each other, so the loops run at most a few times
+    let (mut d, mut w) = (psi - a, b - a);
+    if !(d.is_finite() && w.is_finite()) {
+        return false;
+    }
+    while d < -SECTOR_MARGIN {
+        d += TAU;
+    }
+    while d >= TAU - SECTOR_MARGIN {
+        d -= TAU;
+    }
+    while w < 0.0 {
+        w += TAU;
+    }
+    while w >= TAU {
+        w -= TAU;
+    }
+    d <= w + SECTOR_MARGIN
+}
+
+/// `atan2(y, x)` to within `10⁻⁵` radians, without the library call: a pre-test only
+/// ([`in_sector`]), never a value the results depend on. An odd minimax polynomial for
+/// `atan` on `[0, 1]`, extended to the plane by the octant's symmetries.
+fn rough_atan2(y: f64, x: f64) -> f64 {
+    use std::f64::consts::{FRAC_PI_2, PI};
+    let (ax, ay) = (x.abs(), y.abs());
+    let (lo, hi) = (ax.min(ay), ax.max(ay));
+    if hi == 0.0 || !hi.is_finite() {
+        return y.atan2(x);
+    }
+    let t = lo / hi;
+    let t2 = t * t;
+    let mut a = t
+        * (0.999_977_26
+            + t2 * (-0.332_623_47
+                + t2 * (0.193_543_46
+                    + t2 * (-0.116_432_87 + t2 * (0.052_653_32 + t2 * -0.011_721_20)))));
+    if ay > ax {
+        a = FRAC_PI_2 - a;
+    }
+    if x < 0.0 {
+        a = PI - a;
+    }
+    if y < 0.0 { -a } else { a }
 }
 
 /// Barycentric coordinates of `p` in the triangle `(a, b, c)`, clamped to `[0, 1]` and
@@ -762,7 +906,20 @@ impl UpwindPlan {
             .into_par_iter()
             .map(|c| {
                 let vertices = c * VERTICES_PER_TASK..((c + 1) * VERTICES_PER_TASK).min(n);
-                let mut run = Run::default();
+                // each edge end gives at most one transfer, given or received
+                let ends: usize = vertices
+                    .clone()
+                    .map(|v| topology.vertex_edges(v).len())
+                    .sum();
+                let mut run = Run {
+                    outflow: Vec::with_capacity(vertices.len()),
+                    flows: Flows {
+                        out_ptr: Vec::with_capacity(vertices.len()),
+                        out_fraction: Vec::with_capacity(ends),
+                        in_ptr: Vec::with_capacity(vertices.len()),
+                        in_from: Vec::with_capacity(ends),
+                    },
+                };
                 for v in vertices {
                     let o: f64 = topology
                         .vertex_edges(v)
@@ -832,29 +989,35 @@ impl UpwindPlan {
             .into_par_iter()
             .enumerate()
             .map(|(c, run)| {
-                let f = run.flows;
-                let mut out = Flows::default();
-                let (mut o, mut i) = (0, 0);
+                // in place: the fractions overwrite the |Φ| they come from, the ones that
+                // round to nothing are squeezed out
+                let mut f = run.flows;
+                let (mut o, mut i, mut o_to, mut i_to) = (0, 0, 0, 0);
                 for (k, v) in (c * VERTICES_PER_TASK..).take(f.out_ptr.len()).enumerate() {
                     let o_end = f.out_ptr[k] as usize;
-                    for &phi in &f.out_fraction[o..o_end] {
-                        let x = fraction(v, phi);
+                    for t in o..o_end {
+                        let x = fraction(v, f.out_fraction[t]);
                         if x != 0.0 {
-                            out.out_fraction.push(x);
+                            f.out_fraction[o_to] = x;
+                            o_to += 1;
                         }
                     }
                     let i_end = f.in_ptr[k] as usize;
-                    for &(phi, d, e) in &f.in_from[i..i_end] {
+                    for t in i..i_end {
+                        let (phi, d, e) = f.in_from[t];
                         let x = fraction(d as usize, phi);
                         if x != 0.0 {
-                            out.in_from.push((x, d, e));
+                            f.in_from[i_to] = (x, d, e);
+                            i_to += 1;
                         }
                     }
                     (o, i) = (o_end, i_end);
-                    out.out_ptr.push(out.out_fraction.len() as u32);
-                    out.in_ptr.push(out.in_from.len() as u32);
+                    f.out_ptr[k] = o_to as u32;
+                    f.in_ptr[k] = i_to as u32;
                 }
-                out
+                f.out_fraction.truncate(o_to);
+                f.in_from.truncate(i_to);
+                f
             })
             .collect();
         let flows = Flows::concat(n, runs);
@@ -1004,12 +1167,20 @@ impl UpwindPlan {
             None => (None, Vec::new()),
         };
         let mut p_next = vec![DVec2::ZERO; p.len()];
+        // the rotation of every received transfer, gathered once when several sub-cycles
+        // read it
+        let turns = match transport {
+            Some(t) if self.substeps > 1 => Turns::Table(self.flows.turns(t)),
+            Some(t) => Turns::Edges(t.edge_cos_sin()),
+            None => Turns::Edges(&[]),
+        };
         for _ in 0..self.substeps {
             match transport {
                 None => self.flows.cycle(&m, k, &mut next),
-                Some(t) => self
-                    .flows
-                    .cycle_with_momentum(&m, k, &mut next, t, &p, &mut p_next),
+                Some(_) => {
+                    self.flows
+                        .cycle_with_momentum(&m, k, &mut next, &turns, &p, &mut p_next);
+                }
             }
             std::mem::swap(&mut m, &mut next);
             std::mem::swap(&mut p, &mut p_next);
@@ -1043,6 +1214,14 @@ struct Run {
     flows: Flows,
 }
 
+/// The rotations `R_vd` of the received transfers, as `(cos, sin)` of `[cos −sin; sin cos]`:
+/// a table in [`Flows::received`] order ([`Flows::turns`]), or read off the edges'
+/// rotations (transposed where `v > d`) each time.
+enum Turns<'a> {
+    Table(Vec<[f64; 2]>),
+    Edges(&'a [[f64; 2]]),
+}
+
 /// Vertices per task of the transfer passes (rayon's splitting below this costs more
 /// than the work).
 const VERTICES_PER_TASK: usize = 1024;
@@ -1051,11 +1230,13 @@ impl Flows {
     /// Runs of consecutive vertices' transfers (each with ends relative to its own
     /// start) laid end to end.
     fn concat(n: usize, runs: Vec<Flows>) -> Self {
+        let given: usize = runs.iter().map(|r| r.out_fraction.len()).sum();
+        let received: usize = runs.iter().map(|r| r.in_from.len()).sum();
         let mut f = Flows {
             out_ptr: Vec::with_capacity(n + 1),
-            out_fraction: Vec::new(),
+            out_fraction: Vec::with_capacity(given),
             in_ptr: Vec::with_capacity(n + 1),
-            in_from: Vec::new(),
+            in_from: Vec::with_capacity(received),
         };
         f.out_ptr.push(0);
         f.in_ptr.push(0);
@@ -1085,13 +1266,45 @@ impl Flows {
             .for_each(|(v, out)| self.fields_at(v, m, k, out));
     }
 
-    /// [`Flows::cycle`], and the momentum `p` into `p_next` in the same pass.
+    /// The rotation `R_vd` of each received transfer, in [`Flows::received`] order, as
+    /// `(cos, sin)` of the matrix `[cos −sin; sin cos]`: the stored rotation of the edge or
+    /// its transpose (the sine negated: exact), read once per plan instead of once per
+    /// sub-cycle.
+    fn turns(&self, transport: &Transport) -> Vec<[f64; 2]> {
+        let cos_sin = transport.edge_cos_sin();
+        let n = self.in_ptr.len() - 1;
+        let mut turns = vec![[0.0; 2]; self.in_from.len()];
+        // runs of vertices, each filling its own stretch of the table
+        let mut runs = Vec::with_capacity(n.div_ceil(VERTICES_PER_TASK));
+        let mut rest = turns.as_mut_slice();
+        for start in (0..n).step_by(VERTICES_PER_TASK) {
+            let end = (start + VERTICES_PER_TASK).min(n);
+            let len = (self.in_ptr[end] - self.in_ptr[start]) as usize;
+            let (head, tail) = rest.split_at_mut(len);
+            runs.push((start..end, head));
+            rest = tail;
+        }
+        runs.into_par_iter().for_each(|(vertices, out)| {
+            let base = self.in_ptr[vertices.start] as usize;
+            for v in vertices {
+                for t in self.in_ptr[v] as usize..self.in_ptr[v + 1] as usize {
+                    let (_, d, e) = self.in_from[t];
+                    let [c, s] = cos_sin[e as usize];
+                    out[t - base] = if v < d as usize { [c, s] } else { [c, -s] };
+                }
+            }
+        });
+        turns
+    }
+
+    /// [`Flows::cycle`], and the momentum `p` into `p_next` in the same pass (`turns` from
+    /// [`Flows::turns`]).
     fn cycle_with_momentum(
         &self,
         m: &[f64],
         k: usize,
         next: &mut [f64],
-        transport: &Transport,
+        turns: &Turns<'_>,
         p: &[DVec2],
         p_next: &mut [DVec2],
     ) {
@@ -1101,15 +1314,51 @@ impl Flows {
             .with_min_len(VERTICES_PER_TASK)
             .for_each(|(v, (out, pv))| {
                 self.fields_at(v, m, k, out);
-                *pv = self.momentum_at(v, transport, p);
+                *pv = self.momentum_at(v, turns, p);
             });
     }
 
     /// Vertex `v`'s fields after one sub-cycle: it gives `fraction · m_v` across each of
     /// its outgoing edges and receives `fraction · m_donor` across each incoming one — the
     /// same product on both sides, so the transfer is conservative to rounding — clamped
-    /// at zero against rounding.
+    /// at zero against rounding. The transfers are read once for all fields, each field
+    /// summed in transfer order (the same sums as one field at a time).
     fn fields_at(&self, v: usize, m: &[f64], k: usize, out: &mut [f64]) {
+        match k {
+            1 => self.fields_at_k::<1>(v, m, out),
+            2 => self.fields_at_k::<2>(v, m, out),
+            3 => self.fields_at_k::<3>(v, m, out),
+            4 => self.fields_at_k::<4>(v, m, out),
+            5 => self.fields_at_k::<5>(v, m, out),
+            _ => self.fields_at_one_by_one(v, m, k, out),
+        }
+    }
+
+    /// [`Flows::fields_at`] for `K` fields.
+    fn fields_at_k<const K: usize>(&self, v: usize, m: &[f64], out: &mut [f64]) {
+        let mv: [f64; K] = m[v * K..(v + 1) * K].try_into().expect("K fields");
+        let mut gone = [0.0; K];
+        for &fraction in self.given(v) {
+            for c in 0..K {
+                gone[c] += fraction * mv[c];
+            }
+        }
+        let mut inflow = [0.0; K];
+        for &(fraction, d, _) in self.received(v) {
+            let md: [f64; K] = m[d as usize * K..(d as usize + 1) * K]
+                .try_into()
+                .expect("K fields");
+            for c in 0..K {
+                inflow[c] += fraction * md[c];
+            }
+        }
+        for c in 0..K {
+            out[c] = (mv[c] - gone[c]).max(0.0) + inflow[c];
+        }
+    }
+
+    /// [`Flows::fields_at`] for more than five fields, one field at a time.
+    fn fields_at_one_by_one(&self, v: usize, m: &[f64], k: usize, out: &mut [f64]) {
         for (c, o) in out.iter_mut().enumerate() {
             let mv = m[v * k + c];
             let mut gone = 0.0;
@@ -1125,15 +1374,22 @@ impl Flows {
     }
 
     /// Vertex `v`'s momentum after one sub-cycle: the same fractions of the donors'
-    /// momenta, turned into `F_v` by `R_vd`.
-    fn momentum_at(&self, v: usize, transport: &Transport, p: &[DVec2]) -> DVec2 {
+    /// momenta, turned into `F_v` by `R_vd` (from `turns`).
+    fn momentum_at(&self, v: usize, turns: &Turns<'_>, p: &[DVec2]) -> DVec2 {
         let (mut out, mut inflow) = (DVec2::ZERO, DVec2::ZERO);
         for &fraction in self.given(v) {
             out += fraction * p[v];
         }
-        for &(fraction, d, e) in self.received(v) {
-            let r = transport.edge_rotation(e as usize);
-            let r = if v < d as usize { r } else { r.transpose() };
+        let (start, end) = (self.in_ptr[v] as usize, self.in_ptr[v + 1] as usize);
+        for (t, &(fraction, d, e)) in self.in_from[start..end].iter().enumerate() {
+            let [c, s] = match turns {
+                Turns::Table(table) => table[start + t],
+                Turns::Edges(cos_sin) => {
+                    let [c, s] = cos_sin[e as usize];
+                    if v < d as usize { [c, s] } else { [c, -s] }
+                }
+            };
+            let r = DMat2::from_cols_array(&[c, s, -s, c]);
             inflow += r * (fraction * p[d as usize]);
         }
         (p[v] - out) + inflow
@@ -1350,6 +1606,57 @@ mod tests {
                 ..
             })
         ));
+    }
+
+    #[test]
+    fn rough_atan2_is_within_its_bound_and_the_sector_test_keeps_every_containing_wedge() {
+        use std::f64::consts::{PI, TAU};
+        let mut worst = 0.0f64;
+        for k in 0..200_000 {
+            let t = -PI + TAU * (k as f64 + 0.5) / 200_000.0;
+            for r in [1e-300, 1e-3, 1.0, 7.5e5] {
+                let (y, x) = (r * t.sin(), r * t.cos());
+                worst = worst.max(wrap_angle(rough_atan2(y, x) - y.atan2(x)).abs());
+            }
+        }
+        assert!(worst < 1e-5, "rough atan2 off by {worst:e}");
+        for (y, x) in [(0.0, 1.0), (0.0, -1.0), (1.0, 0.0), (-1.0, 0.0), (1.0, 1.0)] {
+            assert!(
+                (rough_atan2(y, x) - f64::atan2(y, x)).abs() < 1e-5,
+                "({y}, {x})"
+            );
+        }
+        // a direction inside a sector (by an independent test: the turn from a to psi
+        // and from psi to b both counter-clockwise and below π) passes, in any turn of
+        // the angles; one clearly outside fails
+        let ccw = |from: f64, to: f64| {
+            let (u, v) = ((from.cos(), from.sin()), (to.cos(), to.sin()));
+            u.0 * v.1 - u.1 * v.0 >= 0.0 && u.0 * v.0 + u.1 * v.1 > -1.0
+        };
+        let (mut inside, mut outside) = (0, 0);
+        for a_k in 0..24 {
+            let a = -PI + a_k as f64 * 0.55;
+            for open_k in 1..12 {
+                let b = a + open_k as f64 * 0.27;
+                for turn in [-TAU, 0.0, TAU] {
+                    for psi_k in 0..97 {
+                        let psi = wrap_angle(a - 0.4 + psi_k as f64 * 0.041);
+                        let inner = ccw(a, psi) && ccw(psi, b) && ccw(a, b);
+                        if inner {
+                            inside += 1;
+                            assert!(in_sector(psi, a + turn, b), "{psi} in ({a}, {b})");
+                        }
+                        let gap = wrap_angle(psi - a).min(wrap_angle(b - psi));
+                        if gap < -2.0 * SECTOR_MARGIN && (b - a) < PI {
+                            outside += 1;
+                            assert!(!in_sector(psi, a, b + turn), "{psi} not in ({a}, {b})");
+                        }
+                    }
+                }
+            }
+        }
+        assert!(inside > 1000 && outside > 1000, "{inside} {outside}");
+        assert!(!in_sector(f64::NAN, 0.0, 1.0) && !in_sector(0.5, 0.0, f64::NAN));
     }
 
     #[test]

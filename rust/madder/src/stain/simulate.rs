@@ -645,6 +645,7 @@ impl Simulator {
         // the densities move with the sub-step's mean velocity: the exact mean under the
         // forces, plus half the change the advection made at its end (module doc)
         let centred: Vec<DVec2> = (0..n)
+            .into_par_iter()
             .map(|j| {
                 if active[j] {
                     mean[j] + 0.5 * (advected[j] - forced[j])
