@@ -17,8 +17,11 @@ use crate::ops::{LowerCsc, PrefactoredSpd};
 
 /// The rotation iteration stops after a round that turned no face by more than this
 /// (radians): the rounds converge quadratically on consistent angles (measured updates
-/// 0.15, 1.5·10⁻³, 3·10⁻⁷, 10⁻¹⁵), so what is left is ~10⁻¹³...
-const SETTLED: f64 = 1e-6;
+/// 0.15, 1.5·10⁻³, 3·10⁻⁷, 10⁻¹⁵ from the previous frame; 10⁻², 1.3·10⁻⁵, 1.5·10⁻¹¹ from
+/// the codec's extrapolated start: the next update is ~0.1 δ²), so what is left after an
+/// update of 2·10⁻⁵ is ~10⁻¹¹; on noisy angles the rounds converge linearly at a rate of
+/// the order of the noise, and what is left is ~10⁻⁸ at 12-bit quantization...
+const SETTLED: f64 = 2e-5;
 /// ... or after this many rounds (then the caller falls back to the spectral method).
 pub(crate) const MAX_ROUNDS: usize = 24;
 /// A settled fit whose residual still turns some edge by more than `2 sin(GROSS/2)` is a

@@ -36,7 +36,11 @@
 //!
 //! ## Warm-started decoding, keyframes
 //! Frame `k` is decoded by the tracked reconstruction ([`AngleMesh::reconstruct_tracked`],
-//! header flag 2, the default) started from frame `k − 1`'s normalized reconstruction;
+//! header flag 2, the default) started from frame `k − 1`'s normalized reconstruction,
+//! extrapolated linearly with frame `k − 2`'s (`2y_{k−1} − y_{k−2}`) when neither `k` nor
+//! `k − 1` is a keyframe (a keyframe's decode is placed differently from the frame before
+//! it): the start is then ~10⁻² rad from the answer instead of a frame's turn, and the
+//! rotations settle in two rounds instead of three;
 //! at a keyframe (`k` a multiple of the keyframe interval `K`, stored in the header; 0 =
 //! every frame) it is started from the spectral reconstruction ([`AngleMesh::reconstruct`])
 //! of the same angles, so that every frame is the same kind of fit: a rigid motion, whose
@@ -90,6 +94,7 @@ use std::io::{BufWriter, Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
 use glam::{DMat3, DQuat, DVec3};
+use rayon::prelude::*;
 
 use super::encode::{AngleMesh, Angles};
 use super::place::similarity;
@@ -284,17 +289,25 @@ fn is_key(k: usize, key: u32) -> bool {
     key == 0 || k % key as usize == 0
 }
 
+/// Whether frame `k` starts from the extrapolation of frames `k − 1` and `k − 2`: both
+/// of its chain (neither `k` nor `k − 1` a keyframe; a keyframe's decode and the frame
+/// before it are placed differently).
+fn extrapolates(k: usize, key: u32) -> bool {
+    k >= 2 && !is_key(k, key) && !is_key(k - 1, key)
+}
+
 /// The decoding shared by encoder and reader: dequantize, reconstruct (normalized), warm
 /// from `previous` when given. With `tracked`, every frame is the tracked reconstruction
-/// started from `previous`, or at a keyframe from the spectral reconstruction; where it
-/// does not settle, the warm spectral reconstruction (or, at a keyframe, the spectral one)
+/// started from `previous` (extrapolated to `2 previous − before` when the frame before it
+/// is given), or at a keyframe from the spectral reconstruction; where it does not settle,
+/// the warm spectral reconstruction from `previous` (or, at a keyframe, the spectral one)
 /// is used instead.
 fn reconstruct(
     mesh: &AngleMesh,
     corners: &[i64],
     dihedrals: &[i64],
     (bits, corner_bits): (u32, u32),
-    previous: Option<&[DVec3]>,
+    (previous, before): (Option<&[DVec3]>, Option<&[DVec3]>),
     tracked: bool,
 ) -> Result<Vec<DVec3>, AngleError> {
     let (dc, dd) = (step(corner_bits), step(bits));
@@ -316,10 +329,19 @@ fn reconstruct(
     // every tracked frame is the tracked reconstruction; a keyframe starts it from the
     // spectral one, so keyframes and the frames between are the same kind of fit
     match previous {
-        Some(prev) => Ok(match mesh.reconstruct_tracked(&angles, prev, &options)? {
-            Some(r) => r.positions,
-            None => mesh.reconstruct_warm(&angles, prev, &options)?.positions,
-        }),
+        Some(prev) => {
+            let start: Option<Vec<DVec3>> = before.map(|b| {
+                prev.par_iter()
+                    .zip(b.par_iter())
+                    .map(|(p, q)| 2.0 * *p - *q)
+                    .collect()
+            });
+            let start = start.as_deref().unwrap_or(prev);
+            Ok(match mesh.reconstruct_tracked(&angles, start, &options)? {
+                Some(r) => r.positions,
+                None => mesh.reconstruct_warm(&angles, prev, &options)?.positions,
+            })
+        }
         None => {
             let spectral = mesh.reconstruct(&angles, &options)?.positions;
             Ok(
@@ -351,6 +373,8 @@ pub struct MotionEncoder {
     dihedrals: History,
     /// The previous frame's normalized reconstruction (the warm start).
     prev_y: Option<Vec<DVec3>>,
+    /// The one before, when it is of the same chain (the extrapolated start).
+    before_y: Option<Vec<DVec3>>,
     frames: usize,
     bytes: u64,
     max_abs: f64,
@@ -421,6 +445,7 @@ impl MotionEncoder {
             corners: History::default(),
             dihedrals: History::default(),
             prev_y: None,
+            before_y: None,
             frames: 0,
             bytes: 0,
             max_abs: 0.0,
@@ -514,18 +539,23 @@ impl MotionEncoder {
         } else {
             self.corners.prev.clone().unwrap_or_default()
         };
-        let previous = match (&self.prev_y, is_key(frame, o.keyframe_interval)) {
+        let key = o.keyframe_interval;
+        let previous = match (&self.prev_y, is_key(frame, key)) {
             (Some(p), false) => Some(p.as_slice()),
             _ => None,
         };
+        let before = match (&self.before_y, extrapolates(frame, key)) {
+            (Some(p), true) => Some(p.as_slice()),
+            _ => None,
+        };
         let bits = (o.bits, o.corner_bits);
-        let y = reconstruct(&self.mesh, &qc, &qd, bits, previous, o.tracked).map_err(|source| {
-            CodecError::Reconstruct {
+        let y = reconstruct(&self.mesh, &qc, &qd, bits, (previous, before), o.tracked).map_err(
+            |source| CodecError::Reconstruct {
                 path: self.path.clone(),
                 frame,
                 source,
-            }
-        })?;
+            },
+        )?;
         let sim = Similarity::fit(&y, positions);
         let out = sim.apply(&y);
         let mut payload = Vec::new();
@@ -545,7 +575,7 @@ impl MotionEncoder {
         block.extend_from_slice(&crc32fast::hash(&payload).to_le_bytes());
         block.extend(payload);
         self.write(&block)?;
-        self.prev_y = Some(y);
+        self.before_y = self.prev_y.replace(y);
         for (p, q) in positions.iter().zip(&out) {
             let d = (*p - DVec3::new(q[0] as f64, q[1] as f64, q[2] as f64)).length();
             self.max_abs = self.max_abs.max(d);
@@ -638,6 +668,8 @@ pub struct MotionDecoder {
     last: Option<Similarity>,
     /// The normalized reconstruction of frame `next − 1`, when it was reconstructed.
     last_y: Option<Vec<DVec3>>,
+    /// The normalized reconstruction before `last_y`, when of the same chain.
+    before_y: Option<Vec<DVec3>>,
 }
 
 impl MotionDecoder {
@@ -763,6 +795,7 @@ impl MotionDecoder {
             dihedrals: History::default(),
             last: None,
             last_y: None,
+            before_y: None,
         })
     }
 
@@ -880,6 +913,7 @@ impl MotionDecoder {
         self.dihedrals = History::default();
         self.last = None;
         self.last_y = None;
+        self.before_y = None;
     }
 
     fn read_frame_inner(&mut self, k: usize) -> Result<Vec<[f32; 3]>, CodecError> {
@@ -904,6 +938,7 @@ impl MotionDecoder {
         while self.next < from {
             self.last = Some(self.step_streams()?);
             self.last_y = None;
+            self.before_y = None;
         }
         let mut y = None;
         for j in from..=k {
@@ -912,18 +947,21 @@ impl MotionDecoder {
                 (Some(p), false) => Some(p.as_slice()),
                 _ => None,
             };
+            let before = match (&self.before_y, extrapolates(j, key)) {
+                (Some(p), true) => Some(p.as_slice()),
+                _ => None,
+            };
             let qc = self.corners.prev.as_deref().unwrap_or_default();
             let qd = self.dihedrals.prev.as_deref().unwrap_or_default();
             let bits = (self.bits, self.corner_bits);
-            let yj = reconstruct(&self.mesh, qc, qd, bits, previous, self.tracked).map_err(
-                |source| CodecError::Reconstruct {
+            let yj = reconstruct(&self.mesh, qc, qd, bits, (previous, before), self.tracked)
+                .map_err(|source| CodecError::Reconstruct {
                     path: self.path.clone(),
                     frame: j,
                     source,
-                },
-            )?;
+                })?;
             self.last = Some(sim);
-            self.last_y = Some(yj);
+            self.before_y = self.last_y.replace(yj);
             y = Some(sim);
         }
         let sim = y.ok_or_else(|| self.corrupt(k, "no frame decoded".into()))?;
