@@ -137,6 +137,11 @@ def test_tracked_follows_the_previous_frame():
     assert e.value.name == "previous"
     with pytest.raises(madder.ParameterError):
         madder.decode_angles(faces, corners, dihedrals, method="tracked", previous=previous[:-1])
+    with pytest.raises(madder.ParameterError, match="sequential"):
+        madder.decode_angles(faces, corners, dihedrals, method="sequential", previous=previous)
+    # the optional descent runs after the tracked fit too (exact angles: nothing to lower)
+    refined = madder.decode_angles(faces, corners, dihedrals, method="tracked", previous=previous, refine_iterations=2)
+    assert procrustes_rms(refined, pos) < 1e-8
     bad = previous.copy()
     bad[5, 2] = np.nan
     with pytest.raises(madder.MeshError) as e:

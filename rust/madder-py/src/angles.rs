@@ -10,7 +10,7 @@ use pyo3::prelude::*;
 use madder::AngleError;
 use madder::angles::{AngleMesh, Angles, Placement, ReconstructOptions};
 
-use crate::errors::to_py;
+use crate::errors::{ParameterError, to_py};
 
 fn shape_error(name: &str, expected: &str, got: &[usize]) -> PyErr {
     to_py(AngleError::Shape {
@@ -136,6 +136,11 @@ pub fn decode_angles<'py>(
         .transpose()?;
     if method == "tracked" && previous.is_none() {
         return Err(to_py(AngleError::PreviousMissing));
+    }
+    if method == "sequential" && previous.is_some() {
+        return Err(ParameterError::new_err(
+            "previous= is not used by method 'sequential' (only 'spectral' and 'tracked' start from it)",
+        ));
     }
     let x = py
         .detach(|| {

@@ -215,3 +215,34 @@ fn bad_previous_positions_are_named() {
         .unwrap_err();
     assert!(matches!(e, AngleError::DihedralCount { .. }), "{e:?}");
 }
+
+#[test]
+fn the_descent_after_a_tracked_fit_never_raises_the_residual() {
+    let (f, x) = flag(0.4);
+    let mesh = AngleMesh::new(x.len(), f).unwrap();
+    let a = noisy(&mesh.encode(&x).unwrap(), 1.0, 1.0, 5);
+    let start = mesh
+        .reconstruct(&a, &ReconstructOptions::default())
+        .unwrap()
+        .positions;
+    let plain = mesh
+        .reconstruct_tracked(&a, &start, &ReconstructOptions::default())
+        .unwrap()
+        .unwrap();
+    assert!(plain.residual.is_empty());
+    let opts = ReconstructOptions {
+        refine_iterations: 10,
+        ..Default::default()
+    };
+    let refined = mesh
+        .reconstruct_tracked(&a, &start, &opts)
+        .unwrap()
+        .unwrap();
+    let h = &refined.residual;
+    assert!(h.len() >= 2, "no descent step taken: {h:?}");
+    assert!(h.windows(2).all(|w| w[1] <= w[0]), "residual rose: {h:?}");
+    assert!(h.last().unwrap() < &h[0], "{h:?}");
+    // the residual before the descent is the tracked fit's own
+    let own = mesh.angle_residual(&a, &plain.positions).unwrap();
+    assert!((h[0] - own).abs() <= 1e-9 * own, "{} vs {own}", h[0]);
+}

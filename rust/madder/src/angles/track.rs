@@ -5,12 +5,12 @@
 
 use std::sync::{Arc, Mutex};
 
-use glam::{DQuat, DVec3};
+use glam::{DMat3, DQuat, DVec3};
 use rayon::prelude::*;
 
 use super::encode::{AngleMesh, Angles, NONE};
 use super::local::preprocess;
-use super::place::Placement;
+use super::refine::{descend, embed};
 use super::spectral::{Reconstruction, normalize};
 use crate::error::{AngleError, SolveError};
 use crate::ops::{LowerCsc, PrefactoredSpd};
@@ -202,7 +202,7 @@ fn face_rotation(p: [DVec3; 3]) -> DQuat {
     if x == DVec3::ZERO || z == DVec3::ZERO {
         return DQuat::IDENTITY;
     }
-    DQuat::from_mat3(&glam::DMat3::from_cols(x, z.cross(x), z)).normalize()
+    DQuat::from_mat3(&DMat3::from_cols(x, z.cross(x), z)).normalize()
 }
 
 /// The residual of a rotation that should be the identity: `2 sin(φ/2) n̂` for a turn by `φ`
@@ -266,8 +266,11 @@ impl AngleMesh {
     /// result is a least-squares fit of rotations, scales and positions in turn, not the
     /// spectral method's minimizer. Returns `None` if the rotations did not settle within
     /// [`MAX_ROUNDS`] rounds (a `previous` far from the new shape): the caller then uses
-    /// the spectral reconstruction. The placement works as in [`Self::reconstruct`]; the
-    /// result's `eigenvalues` are zero and `rounds` counts the rotation rounds.
+    /// the spectral reconstruction; so does a settled fit that still turns some edge by more
+    /// than 1 rad (a wrong fixed point). The placement and the optional descent work as in
+    /// [`Self::reconstruct`] (the descent on a linear map of the tracked positions); the
+    /// result's `eigenvalues` are zero, `residual` is empty without the descent (its
+    /// history with it), and `rounds` counts the rotation rounds.
     ///
     /// Errors: those of [`Self::reconstruct_warm`].
     pub fn reconstruct_tracked(
@@ -285,7 +288,7 @@ impl AngleMesh {
         let target = preprocess(angles);
         let cache = self.tracker_cache();
         let mut tracker = cache.take(self)?;
-        let out = self.track(&target, previous, &mut tracker, options.placement.as_ref());
+        let out = self.track(&target, previous, &mut tracker, options);
         cache.put(tracker);
         Ok(out)
     }
@@ -295,7 +298,7 @@ impl AngleMesh {
         target: &Angles,
         previous: &[DVec3],
         tracker: &mut Tracker,
-        placement: Option<&Placement>,
+        options: &super::ReconstructOptions,
     ) -> Option<Reconstruction> {
         let faces = self.faces();
         let nf = faces.len();
@@ -396,13 +399,27 @@ impl AngleMesh {
         let mut positions: Vec<DVec3> = (0..nv)
             .map(|v| DVec3::new(b[v], b[nv + v], b[2 * nv + v]))
             .collect();
-        match placement {
+        // the optional descent (§3.3.3) on a linear map of the positions, as after the
+        // spectral method's voting
+        let mut residual = Vec::new();
+        if options.refine_iterations > 0 {
+            let (l, history) = descend(
+                self,
+                target,
+                &positions,
+                DMat3::IDENTITY,
+                options.refine_iterations,
+            );
+            positions = embed(l, &positions);
+            residual = history;
+        }
+        match &options.placement {
             Some(p) => p.apply(faces, &mut positions),
             None => normalize(self.edges(), &mut positions),
         }
         Some(Reconstruction {
             positions,
-            residual: Vec::new(),
+            residual,
             eigenvalues: [0.0; 4],
             rounds,
         })
