@@ -152,12 +152,9 @@ pub fn decode_angles<'py>(
             };
             match (method, previous.as_deref()) {
                 ("sequential", _) => mesh.sequential(&angles, opts.placement.as_ref()),
-                ("tracked", Some(prev)) => match mesh.reconstruct_tracked(&angles, prev, &opts)? {
-                    Some(r) => Ok(r.positions),
-                    None => mesh
-                        .reconstruct_warm(&angles, prev, &opts)
-                        .map(|r| r.positions),
-                },
+                ("tracked", Some(prev)) => mesh
+                    .reconstruct_following(&angles, prev, prev, &opts)
+                    .map(|r| r.positions),
                 (_, Some(prev)) => mesh
                     .reconstruct_warm(&angles, prev, &opts)
                     .map(|r| r.positions),

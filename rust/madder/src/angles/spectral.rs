@@ -3,18 +3,19 @@
 //! affine correction by voting, and the optional descent (§3.3.3). The math is in the
 //! module docs of [`crate::angles`].
 
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 
-use super::encode::{AngleMesh, Angles};
+use super::encode::{AngleMesh, Angles, Kept};
 use super::local::{frame, preprocess, transitions};
 use super::place::Placement;
 use super::refine::{descend, embed, residual};
 use crate::error::{AngleError, SolveError};
 use crate::mesh::kabsch::svd3;
-use crate::ops::{LowerCsc, PrefactoredSpd};
+use crate::ops::restrict::entry_index;
+use crate::ops::{CscPattern, LowerCsc, PrefactoredSpd};
 use crate::rng::SplitMix64;
 
 /// The shift `σ` relative to the mean diagonal of `A₁` (see the module docs).
@@ -58,7 +59,7 @@ pub struct Reconstruction {
 /// `A₁`'s lower triangle in CSC: unknown `v` for vertex `v`, `V + f` for face `f`'s frame
 /// column `m_f` (one coordinate). The arrays are shared, so a copy is cheap.
 #[derive(Clone)]
-struct Pattern {
+pub(crate) struct Pattern {
     n: usize,
     col_ptr: Arc<[u32]>,
     row_idx: Arc<[u32]>,
@@ -154,21 +155,8 @@ fn pattern_of(mesh: &AngleMesh) -> Pattern {
     for el in &ee {
         el.for_each(&mut push);
     }
-    for i in 0..n as u32 {
-        keys.push(((i as u64) << 32) | i as u64);
-    }
-    keys.par_sort_unstable();
-    keys.dedup();
-    let mut col_ptr = vec![0u32; n + 1];
-    let mut row_idx = Vec::with_capacity(keys.len());
-    for &k in &keys {
-        col_ptr[(k >> 32) as usize + 1] += 1;
-        row_idx.push(k as u32);
-    }
-    drop(keys);
-    for c in 0..n {
-        col_ptr[c + 1] += col_ptr[c];
-    }
+    keys.extend((0..n as u64).map(|i| (i << 32) | i));
+    let (col_ptr, row_idx) = CscPattern::from_keys(n, keys).into_parts();
     Pattern {
         n,
         col_ptr: col_ptr.into(),
@@ -181,16 +169,7 @@ fn values_of(mesh: &AngleMesh, pattern: &Pattern, r: &[DMat3]) -> Vec<f64> {
     let ee = elements(mesh, Some(r));
     let (col_ptr, row_idx) = (&pattern.col_ptr, &pattern.row_idx);
     let mut values = vec![0.0; row_idx.len()];
-    let mut add = |r: u32, c: u32, v: f64| {
-        let (s, e) = (
-            col_ptr[c as usize] as usize,
-            col_ptr[c as usize + 1] as usize,
-        );
-        let at = row_idx[s..e]
-            .binary_search(&r)
-            .expect("entry is in the pattern");
-        values[s + at] += v;
-    };
+    let mut add = |r: u32, c: u32, v: f64| values[entry_index(col_ptr, row_idx, r, c)] += v;
     for el in &ee {
         el.for_each(&mut add);
     }
@@ -202,40 +181,7 @@ fn values_of(mesh: &AngleMesh, pattern: &Pattern, r: &[DMat3]) -> Vec<f64> {
 /// the connectivity only. Taken out while a reconstruction runs and put back after, so
 /// concurrent reconstructions of one mesh never share it (a second one builds its own).
 /// The cache changes no result: the numeric factorization is redone for every matrix.
-#[derive(Default)]
-pub(crate) struct SolverCache(Mutex<Option<PrefactoredSpd<Pattern>>>);
-
-impl SolverCache {
-    fn take(&self, mesh: &AngleMesh) -> Result<PrefactoredSpd<Pattern>, SolveError> {
-        let cached = self.0.lock().map(|mut g| g.take()).unwrap_or(None);
-        match cached {
-            Some(s) => Ok(s),
-            None => PrefactoredSpd::new(pattern_of(mesh), faer::Par::Seq),
-        }
-    }
-
-    fn put(&self, solver: PrefactoredSpd<Pattern>) {
-        if let Ok(mut g) = self.0.lock() {
-            *g = Some(solver);
-        }
-    }
-}
-
-impl Clone for SolverCache {
-    /// A clone starts empty (the analysis is rebuilt on its first use).
-    fn clone(&self) -> Self {
-        Self::default()
-    }
-}
-
-impl std::fmt::Debug for SolverCache {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let filled = self.0.lock().map(|g| g.is_some()).unwrap_or(false);
-        f.debug_struct("SolverCache")
-            .field("filled", &filled)
-            .finish()
-    }
-}
+pub(crate) type SolverCache = Kept<PrefactoredSpd<Pattern>>;
 
 /// `y = A x` for the symmetric matrix whose lower triangle is `values` on `p`.
 fn sym_matvec(p: &Pattern, values: &[f64], x: &[f64], y: &mut [f64]) {
@@ -507,7 +453,7 @@ impl AngleMesh {
         let tr = transitions(self, &target);
         let nv = self.n_vertices();
         let cache = self.solver_cache();
-        let mut solver = cache.take(self)?;
+        let mut solver = cache.take_or(|| PrefactoredSpd::new(pattern_of(self), faer::Par::Seq))?;
         let values = values_of(self, solver.pattern(), &tr.r);
         let start = previous.map(|x| start_block(self, x));
         let found = lowest(&mut solver, &values, nv, start.as_deref());

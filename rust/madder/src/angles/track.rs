@@ -3,17 +3,16 @@
 //! with three fixed graph Laplacians factorized once per mesh. The math is in the module
 //! docs of [`crate::angles`], "Tracked reconstruction".
 
-use std::sync::{Arc, Mutex};
-
 use glam::{DMat3, DQuat, DVec3};
 use rayon::prelude::*;
 
-use super::encode::{AngleMesh, Angles, NONE};
+use super::encode::{AngleMesh, Angles, Kept, NONE};
 use super::local::preprocess;
 use super::refine::{descend, embed};
 use super::spectral::{Reconstruction, normalize};
 use crate::error::{AngleError, SolveError};
-use crate::ops::{LowerCsc, PrefactoredSpd};
+use crate::ops::restrict::entry_index;
+use crate::ops::{CscPattern, LowerCsc, PrefactoredSpd};
 
 /// The rotation iteration stops after a round that turned no face by more than this
 /// (radians): the rounds converge quadratically on consistent angles (measured updates
@@ -29,71 +28,29 @@ pub(crate) const MAX_ROUNDS: usize = 24;
 /// unsettled one.
 const GROSS: f64 = 1.0;
 
-/// A graph Laplacian's lower triangle in CSC (`n` nodes), anchored at node 0.
-#[derive(Clone)]
-struct Graph {
-    n: usize,
-    col_ptr: Arc<[u32]>,
-    row_idx: Arc<[u32]>,
-}
-
-impl LowerCsc for Graph {
-    fn n(&self) -> usize {
-        self.n
-    }
-    fn col_ptr(&self) -> &[u32] {
-        &self.col_ptr
-    }
-    fn row_idx(&self) -> &[u32] {
-        &self.row_idx
-    }
-}
-
 /// The Laplacian `Σ_(i,j) (δᵢ − δⱼ)(δᵢ − δⱼ)ᵀ + δ₀δ₀ᵀ` of the node pairs `pairs` (a pair
 /// listed twice counts twice), factorized: the `δ₀δ₀ᵀ` anchors the constant, which the
 /// least-squares problems below leave free, at node 0.
-fn laplacian(n: usize, pairs: &[(u32, u32)]) -> Result<PrefactoredSpd<Graph>, SolveError> {
-    let mut keys: Vec<u64> = Vec::with_capacity(pairs.len() + n);
-    for &(i, j) in pairs {
-        let (r, c) = if i > j { (i, j) } else { (j, i) };
-        keys.push(((c as u64) << 32) | r as u64);
-    }
-    for i in 0..n as u32 {
-        keys.push(((i as u64) << 32) | i as u64);
-    }
-    keys.par_sort_unstable();
-    keys.dedup();
-    let mut col_ptr = vec![0u32; n + 1];
-    let mut row_idx = Vec::with_capacity(keys.len());
-    for &k in &keys {
-        col_ptr[(k >> 32) as usize + 1] += 1;
-        row_idx.push(k as u32);
-    }
-    for c in 0..n {
-        col_ptr[c + 1] += col_ptr[c];
-    }
-    let mut values = vec![0.0; row_idx.len()];
-    let at = |r: u32, c: u32| {
-        let (s, e) = (
-            col_ptr[c as usize] as usize,
-            col_ptr[c as usize + 1] as usize,
-        );
-        s + row_idx[s..e]
-            .binary_search(&r)
-            .expect("entry is in the pattern")
-    };
-    for &(i, j) in pairs {
-        let (r, c) = if i > j { (i, j) } else { (j, i) };
-        values[at(i, i)] += 1.0;
-        values[at(j, j)] += 1.0;
+fn laplacian(n: usize, pairs: &[(u32, u32)]) -> Result<PrefactoredSpd<CscPattern>, SolveError> {
+    let lower = |&(i, j): &(u32, u32)| if i > j { (i, j) } else { (j, i) };
+    let keys = pairs
+        .iter()
+        .map(|p| {
+            let (r, c) = lower(p);
+            ((c as u64) << 32) | r as u64
+        })
+        .chain((0..n as u64).map(|i| (i << 32) | i))
+        .collect();
+    let graph = CscPattern::from_keys(n, keys);
+    let at = |r: u32, c: u32| entry_index(graph.col_ptr(), graph.row_idx(), r, c);
+    let mut values = vec![0.0; graph.nnz()];
+    for p in pairs {
+        let (r, c) = lower(p);
+        values[at(r, r)] += 1.0;
+        values[at(c, c)] += 1.0;
         values[at(r, c)] -= 1.0;
     }
     values[at(0, 0)] += 1.0;
-    let graph = Graph {
-        n,
-        col_ptr: col_ptr.into(),
-        row_idx: row_idx.into(),
-    };
     let mut solver = PrefactoredSpd::new_simplicial(graph)?;
     solver.factorize(&values)?;
     Ok(solver)
@@ -102,8 +59,8 @@ fn laplacian(n: usize, pairs: &[(u32, u32)]) -> Result<PrefactoredSpd<Graph>, So
 /// The two factorized Laplacians: the dual graph (faces, one pair per interior edge) and the
 /// vertex graph (one pair per face side, so an interior edge counts twice).
 pub(crate) struct Tracker {
-    dual: PrefactoredSpd<Graph>,
-    primal: PrefactoredSpd<Graph>,
+    dual: PrefactoredSpd<CscPattern>,
+    primal: PrefactoredSpd<CscPattern>,
 }
 
 impl Tracker {
@@ -121,40 +78,8 @@ impl Tracker {
     }
 }
 
-/// The mesh's [`Tracker`], built on first use and kept (same pattern as the spectral
-/// solver's cache: taken out during a call, put back after; a clone starts empty).
-#[derive(Default)]
-pub(crate) struct TrackerCache(Mutex<Option<Tracker>>);
-
-impl TrackerCache {
-    fn take(&self, mesh: &AngleMesh) -> Result<Tracker, SolveError> {
-        let cached = self.0.lock().map(|mut g| g.take()).unwrap_or(None);
-        match cached {
-            Some(t) => Ok(t),
-            None => Tracker::new(mesh),
-        }
-    }
-    fn put(&self, t: Tracker) {
-        if let Ok(mut g) = self.0.lock() {
-            *g = Some(t);
-        }
-    }
-}
-
-impl Clone for TrackerCache {
-    fn clone(&self) -> Self {
-        Self::default()
-    }
-}
-
-impl std::fmt::Debug for TrackerCache {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let built = self.0.lock().map(|g| g.is_some()).unwrap_or(false);
-        f.debug_struct("TrackerCache")
-            .field("built", &built)
-            .finish()
-    }
-}
+/// The mesh's [`Tracker`], built on first use and kept between frames.
+pub(crate) type TrackerCache = Kept<Tracker>;
 
 /// A face's unit-side shape from its corners `α` (module docs): the sines and cosines of
 /// the half corners, from which everything else follows without another transcendental.
@@ -287,10 +212,25 @@ impl AngleMesh {
         }
         let target = preprocess(angles);
         let cache = self.tracker_cache();
-        let mut tracker = cache.take(self)?;
+        let mut tracker = cache.take_or(|| Tracker::new(self))?;
         let out = self.track(&target, previous, &mut tracker, options);
         cache.put(tracker);
         Ok(out)
+    }
+
+    /// The tracked reconstruction from `start`, or, where it does not settle, the
+    /// spectral one warm-started from `previous` (the callers' fallback, written once).
+    pub fn reconstruct_following(
+        &self,
+        angles: &Angles,
+        start: &[DVec3],
+        previous: &[DVec3],
+        options: &super::ReconstructOptions,
+    ) -> Result<Reconstruction, AngleError> {
+        match self.reconstruct_tracked(angles, start, options)? {
+            Some(r) => Ok(r),
+            None => self.reconstruct_warm(angles, previous, options),
+        }
     }
 
     fn track(

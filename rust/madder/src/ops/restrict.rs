@@ -29,6 +29,8 @@
 
 use std::sync::OnceLock;
 
+use rayon::prelude::*;
+
 use super::{LowerCsc, VertexPattern};
 use crate::mesh::{Topology, Transport};
 
@@ -50,6 +52,46 @@ impl LowerCsc for CscPattern {
     fn row_idx(&self) -> &[u32] {
         &self.row_idx
     }
+}
+
+impl CscPattern {
+    /// The pattern of the lower-triangle entries `keys`, each `column << 32 | row` with
+    /// `row ≥ column` (repeats allowed; the caller includes the diagonal).
+    pub(crate) fn from_keys(n: usize, mut keys: Vec<u64>) -> Self {
+        keys.par_sort_unstable();
+        keys.dedup();
+        let mut col_ptr = vec![0u32; n + 1];
+        let mut row_idx = Vec::with_capacity(keys.len());
+        for &k in &keys {
+            col_ptr[(k >> 32) as usize + 1] += 1;
+            row_idx.push(k as u32);
+        }
+        for c in 0..n {
+            col_ptr[c + 1] += col_ptr[c];
+        }
+        Self {
+            n,
+            col_ptr,
+            row_idx,
+        }
+    }
+
+    /// The column pointers and row indices.
+    pub(crate) fn into_parts(self) -> (Vec<u32>, Vec<u32>) {
+        (self.col_ptr, self.row_idx)
+    }
+}
+
+/// Where entry `(r, c)` (`r ≥ c`) is stored in the lower-triangle pattern `col_ptr`,
+/// `row_idx`; panics if it is not in it (a programming error).
+pub(crate) fn entry_index(col_ptr: &[u32], row_idx: &[u32], r: u32, c: u32) -> usize {
+    let (s, e) = (
+        col_ptr[c as usize] as usize,
+        col_ptr[c as usize + 1] as usize,
+    );
+    s + row_idx[s..e]
+        .binary_search(&r)
+        .expect("entry is in the pattern")
 }
 
 /// The `2×2` block expansion of the lower-triangle `scalar` pattern whose every column

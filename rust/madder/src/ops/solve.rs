@@ -178,13 +178,30 @@ impl<P: LowerCsc> PrefactoredSpd<P> {
             self.scratch = MemBuffer::new(req);
             self.scratch_cols = k;
         }
-        let llt = faer::sparse::linalg::cholesky::LltRef::<'_, u32, f64>::new(
+        solve_block(
             &self.symbolic,
             &self.l_values,
+            self.par,
+            &mut self.scratch,
+            rhs,
+            n,
         );
-        let rhs = MatMut::from_column_major_slice_mut(rhs, n, k);
-        llt.solve_in_place_with_conj(Conj::No, rhs, self.par, MemStack::new(&mut self.scratch));
     }
+}
+
+/// `k = rhs.len() / n` columns solved with the factor `symbolic`, `values`.
+fn solve_block(
+    symbolic: &SymbolicCholesky<u32>,
+    values: &[f64],
+    par: Par,
+    scratch: &mut MemBuffer,
+    rhs: &mut [f64],
+    n: usize,
+) {
+    let k = rhs.len() / n;
+    let llt = faer::sparse::linalg::cholesky::LltRef::<'_, u32, f64>::new(symbolic, values);
+    let rhs = MatMut::from_column_major_slice_mut(rhs, n, k);
+    llt.solve_in_place_with_conj(Conj::No, rhs, par, MemStack::new(scratch));
 }
 
 impl<P: LowerCsc + Sync> PrefactoredSpd<P> {
@@ -207,14 +224,10 @@ impl<P: LowerCsc + Sync> PrefactoredSpd<P> {
         let (symbolic, values, par) = (&self.symbolic, &self.l_values[..], self.par);
         let solve = |block: &mut [f64]| {
             let k = block.len() / n;
-            if k == 0 {
-                return;
+            if k > 0 {
+                let req = symbolic.solve_in_place_scratch::<f64>(k, par);
+                solve_block(symbolic, values, par, &mut MemBuffer::new(req), block, n);
             }
-            let req = symbolic.solve_in_place_scratch::<f64>(k, par);
-            let mut scratch = MemBuffer::new(req);
-            let llt = faer::sparse::linalg::cholesky::LltRef::<'_, u32, f64>::new(symbolic, values);
-            let block = MatMut::from_column_major_slice_mut(block, n, k);
-            llt.solve_in_place_with_conj(Conj::No, block, par, MemStack::new(&mut scratch));
         };
         rayon::join(|| solve(first), || solve(second));
     }

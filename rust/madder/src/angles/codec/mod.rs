@@ -337,10 +337,9 @@ fn reconstruct(
                     .collect()
             });
             let start = start.as_deref().unwrap_or(prev);
-            Ok(match mesh.reconstruct_tracked(&angles, start, &options)? {
-                Some(r) => r.positions,
-                None => mesh.reconstruct_warm(&angles, prev, &options)?.positions,
-            })
+            Ok(mesh
+                .reconstruct_following(&angles, start, prev, &options)?
+                .positions)
         }
         None => {
             let spectral = mesh.reconstruct(&angles, &options)?.positions;
