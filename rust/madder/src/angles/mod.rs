@@ -197,8 +197,10 @@
 //! `c_e = 2 sin(φ/2) n̂` (twice the vector part of the quaternion `E_e`; it vanishes where
 //! the rotation vector `φ n̂` does and agrees with it to first order) and the update is the
 //! normalized `(1, ω/2) Q_t` (a turn by `2 atan(|ω|/2)`, `|ω|` to second order): no
-//! transcendental per round. A round that turned no face by more than `2·10⁻⁵` rad ends
-//! the rounds (what is left, by the quadratic convergence, is ~0.1 δ² ≈ 10⁻¹¹; the codec
+//! transcendental per round. A round that turned no face by more than `10⁻⁴` rad ends
+//! the rounds (what is left, by the quadratic convergence, is ~0.1 δ² ≈ 10⁻⁹; on
+//! quantized angles, which converge linearly at a rate of the order of the noise, about
+//! 10⁻⁴ of the quantization error; the codec
 //! starts from the previous two frames extrapolated, which leaves 10⁻² rad for the first
 //! round and makes two rounds the rule). A fit that settles
 //! with some edge still turned by more than 1 rad is a wrong fixed point of a start too

@@ -183,8 +183,20 @@ impl<'a> Bytes<'a> {
     }
 }
 
-/// Reads `n` residuals written by [`encode`]. Errors (never panics) on a malformed stream.
-pub(crate) fn decode(bytes: &mut Bytes<'_>, n: usize) -> Result<Vec<i32>, String> {
+/// One stream's coded residuals, parsed but not yet decoded: [`parse`] only reads the
+/// header and finds the end of the words, so the streams of a frame can be decoded side by
+/// side ([`Coded::decode`]).
+pub(crate) struct Coded<'a> {
+    n: usize,
+    k: i32,
+    rho: f64,
+    escapes: Vec<i32>,
+    raw: &'a [u8],
+}
+
+/// Reads the header of `n` residuals written by [`encode`] and skips their words. Errors
+/// (never panics) on a malformed header.
+pub(crate) fn parse<'a>(bytes: &mut Bytes<'a>, n: usize) -> Result<Coded<'a>, String> {
     let k = bytes.u16()? as i32;
     if k > K_MAX {
         return Err(format!("residual range {k} exceeds {K_MAX}"));
@@ -207,38 +219,66 @@ pub(crate) fn decode(bytes: &mut Bytes<'_>, n: usize) -> Result<Vec<i32>, String
     }
     let n_words = bytes.u32()? as usize;
     let raw = bytes.take(n_words.checked_mul(4).ok_or("word count overflows")?)?;
-    let words: Vec<u32> = raw
-        .chunks_exact(4)
-        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-        .collect();
-    if n_esc == n && n > 0 {
-        // every residual escaped: the model has no mass for the others
-        return Ok(escapes);
-    }
-    let probs = probabilities(k, rho, n, n_esc);
-    let model = DefaultContiguousCategoricalEntropyModel::from_floating_point_probabilities_fast(
-        &probs, None,
-    )
-    .map_err(|()| "the stored model is degenerate".to_string())?;
-    let mut decoder = DefaultRangeDecoder::from_compressed(words)
-        .map_err(|_| "the coded stream is malformed".to_string())?;
-    let esc_symbol = 2 * k as usize + 1;
-    let mut out = Vec::with_capacity(n);
-    let mut esc = escapes.into_iter();
-    for _ in 0..n {
-        let s = decoder
-            .decode_symbol(&model)
-            .map_err(|_| "the coded stream is malformed".to_string())?;
-        if s == esc_symbol {
-            out.push(esc.next().ok_or("more escapes coded than stored")?);
-        } else {
-            out.push(s as i32 - k);
+    Ok(Coded {
+        n,
+        k,
+        rho,
+        escapes,
+        raw,
+    })
+}
+
+impl Coded<'_> {
+    /// The residuals. Errors (never panics) on a malformed stream.
+    pub(crate) fn decode(self) -> Result<Vec<i32>, String> {
+        let Self {
+            n,
+            k,
+            rho,
+            escapes,
+            raw,
+        } = self;
+        let n_esc = escapes.len();
+        if n_esc == n && n > 0 {
+            // every residual escaped: the model has no mass for the others
+            return Ok(escapes);
         }
+        let words: Vec<u32> = raw
+            .chunks_exact(4)
+            .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect();
+        let probs = probabilities(k, rho, n, n_esc);
+        let model =
+            DefaultContiguousCategoricalEntropyModel::from_floating_point_probabilities_fast(
+                &probs, None,
+            )
+            .map_err(|()| "the stored model is degenerate".to_string())?;
+        let mut decoder = DefaultRangeDecoder::from_compressed(words)
+            .map_err(|_| "the coded stream is malformed".to_string())?;
+        let esc_symbol = 2 * k as usize + 1;
+        let mut out = Vec::with_capacity(n);
+        let mut esc = escapes.into_iter();
+        for _ in 0..n {
+            let s = decoder
+                .decode_symbol(&model)
+                .map_err(|_| "the coded stream is malformed".to_string())?;
+            if s == esc_symbol {
+                out.push(esc.next().ok_or("more escapes coded than stored")?);
+            } else {
+                out.push(s as i32 - k);
+            }
+        }
+        if esc.next().is_some() {
+            return Err("fewer escapes coded than stored".into());
+        }
+        Ok(out)
     }
-    if esc.next().is_some() {
-        return Err("fewer escapes coded than stored".into());
-    }
-    Ok(out)
+}
+
+/// Reads `n` residuals written by [`encode`]. Errors (never panics) on a malformed stream.
+#[cfg(test)]
+fn decode(bytes: &mut Bytes<'_>, n: usize) -> Result<Vec<i32>, String> {
+    parse(bytes, n)?.decode()
 }
 
 #[cfg(test)]

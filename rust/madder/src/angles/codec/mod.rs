@@ -224,25 +224,41 @@ fn encode_stream(q: &[i64], history: &History, bits: u32, out: &mut Vec<u8>) {
     out.extend(best.unwrap_or_default());
 }
 
-fn decode_stream(
-    bytes: &mut entropy::Bytes<'_>,
+/// One stream of a frame, parsed: its predictor order and its coded residuals.
+struct Stream<'a> {
+    order: u8,
+    coded: entropy::Coded<'a>,
+}
+
+/// Reads one stream's header (the words are decoded later, [`Stream::indices`]).
+fn parse_stream<'a>(
+    bytes: &mut entropy::Bytes<'a>,
     n: usize,
     history: &History,
-    bits: u32,
-) -> Result<Vec<i64>, String> {
+) -> Result<Stream<'a>, String> {
     let order = bytes.u8()?;
     if !history.orders().contains(&order) {
         return Err(format!("predictor order {order} is not valid here"));
     }
-    let r = entropy::decode(bytes, n)?;
-    let half = 1i64 << (bits - 1);
-    if let Some(x) = r.iter().find(|&&x| (x as i64) < -half || x as i64 >= half) {
-        return Err(format!("residual {x} is outside the {bits}-bit range"));
+    Ok(Stream {
+        order,
+        coded: entropy::parse(bytes, n)?,
+    })
+}
+
+impl Stream<'_> {
+    /// The quantization indices: the residuals decoded and added to the prediction.
+    fn indices(self, history: &History, bits: u32) -> Result<Vec<i64>, String> {
+        let r = self.coded.decode()?;
+        let half = 1i64 << (bits - 1);
+        if let Some(x) = r.iter().find(|&&x| (x as i64) < -half || x as i64 >= half) {
+            return Err(format!("residual {x} is outside the {bits}-bit range"));
+        }
+        Ok(r.iter()
+            .enumerate()
+            .map(|(i, &x)| wrap(x as i64 + history.predict(self.order, i), bits))
+            .collect())
     }
-    Ok(r.iter()
-        .enumerate()
-        .map(|(i, &x)| wrap(x as i64 + history.predict(order, i), bits))
-        .collect())
 }
 
 /// The similarity of a frame, as stored: scale, unit quaternion (x, y, z, w), translation.
@@ -862,20 +878,25 @@ impl MotionDecoder {
             let sim = Similarity(sim);
             sim.check()?;
             let send_corners = !(this.corners_once && frame > 0);
-            let qc = if send_corners {
-                Some(decode_stream(
-                    b,
-                    3 * this.mesh.n_faces(),
-                    &this.corners,
-                    this.corner_bits,
-                )?)
+            let corners = if send_corners {
+                Some(parse_stream(b, 3 * this.mesh.n_faces(), &this.corners)?)
             } else {
                 None
             };
-            let qd = decode_stream(b, this.mesh.n_interior(), &this.dihedrals, this.bits)?;
+            let dihedrals = parse_stream(b, this.mesh.n_interior(), &this.dihedrals)?;
             if !b.is_empty() {
                 return Err("bytes left over after the frame's streams".into());
             }
+            // the two streams are independent: decoded side by side
+            let (qc, qd) = rayon::join(
+                || {
+                    corners
+                        .map(|c| c.indices(&this.corners, this.corner_bits))
+                        .transpose()
+                },
+                || dihedrals.indices(&this.dihedrals, this.bits),
+            );
+            let (qc, qd) = (qc?, qd?);
             Ok((sim, qc, qd))
         };
         let (sim, qc, qd) = parse(&mut b, self).map_err(|r| self.corrupt(frame, r))?;
