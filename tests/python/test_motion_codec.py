@@ -43,7 +43,7 @@ def test_round_trip_and_reader_reproduces_encoder(tmp_path, warm):
     frames = [frame(0.15 * k) for k in range(6)]
     outs, stats = encode(path, frames, start=10.0, rate=0.5, bits=13, keyframe_interval=4, warm=warm)
     # the header's flags byte says which warm decoding the reader must run (2: tracked)
-    assert path.read_bytes()[42] == (2 if warm == "tracked" else 0)
+    assert path.read_bytes()[42] == (2 | 4 if warm == "tracked" else 0)
     r = madder.MotionCodec(path)
     assert (r.n_points, r.n_frames, len(r), r.format) == (NX * NY, 6, 6, "madder")
     assert (r.start, r.rate, r.bits) == (10.0, 0.5, (13, 13))
@@ -73,8 +73,8 @@ def test_header_bytes(tmp_path):
     data = path.read_bytes()
     magic, version, n, f, frames, start, rate, bits, cbits, flags = struct.unpack_from("<8s4I2d3B", data)
     assert (magic, version, n, f, frames) == (b"MADDERMO", 1, NX * NY, len(FACES), 2)
-    # flags: 1 corners once, 2 warm frames tracked (the default)
-    assert (start, rate, bits, cbits, flags) == (3.0, 2.0, 9, 11, 3)
+    # flags: 1 corners once, 2 warm frames tracked (the default), 4 keyframes from the tree
+    assert (start, rate, bits, cbits, flags) == (3.0, 2.0, 9, 11, 7)
     np.testing.assert_array_equal(np.frombuffer(data, "<u4", 3 * len(FACES), 48).reshape(-1, 3), FACES)
 
 

@@ -131,6 +131,64 @@ fn noisy_angles_are_fitted_as_closely_as_by_the_spectral_method() {
 }
 
 #[test]
+fn the_cold_start_composes_exact_rotations_along_a_tree() {
+    // without a previous frame the rotations start composed along a spanning tree of the
+    // faces: exact angles make that start exact, so one round settles on the exact shape
+    for (name, (f, x)) in [
+        ("cloth", cloth(24, 0.4)),
+        ("flag", flag(0.4)),
+        ("blob", blob(3)),
+        ("torus", torus(24, 16)),
+        ("genus 2", genus2(6)),
+    ] {
+        let mesh = AngleMesh::new(x.len(), f.clone()).unwrap();
+        let r = mesh
+            .reconstruct_tracked_cold(&mesh.encode(&x).unwrap(), &ReconstructOptions::default())
+            .unwrap()
+            .expect("settles");
+        let err = procrustes_rms(&r.positions, &x);
+        println!("{name}: rounds {}, RMS {err:.1e}", r.rounds);
+        assert!(err <= 1e-10, "{name}: relative RMS error {err:e}");
+        assert_eq!(r.rounds, 1, "{name}: an exact start moves nothing");
+    }
+}
+
+#[test]
+fn the_cold_start_on_noisy_angles_reaches_the_fit_from_the_spectral_start() {
+    // quantization-like noise: the rotations composed along the tree drift from the fit,
+    // but the rounds bring them to the same least-squares fit the spectral start reaches
+    for (name, (f, x), (corner, dihedral)) in [
+        ("flag", flag(0.4), (0.5, 0.5)),
+        ("cloth", cloth(40, 0.4), (1.0, 2.0)),
+        ("torus", torus(24, 16), (0.0, 10.0)),
+    ] {
+        let mesh = AngleMesh::new(x.len(), f.clone()).unwrap();
+        let a = noisy(&mesh.encode(&x).unwrap(), corner, dihedral, 11);
+        let o = ReconstructOptions::default();
+        let spectral = mesh.reconstruct(&a, &o).unwrap();
+        let from_spectral = mesh
+            .reconstruct_tracked(&a, &spectral.positions, &o)
+            .unwrap()
+            .expect("settles");
+        let cold = mesh
+            .reconstruct_tracked_cold(&a, &o)
+            .unwrap()
+            .expect("settles");
+        let gap = procrustes_rms(&cold.positions, &from_spectral.positions);
+        let err = procrustes_rms(&cold.positions, &x);
+        println!(
+            "{name} {corner}/{dihedral} %: rounds {}, gap to the spectral start's fit {gap:.1e}, \
+             error {err:.1e}",
+            cold.rounds
+        );
+        assert!(
+            gap <= 1e-3 * err,
+            "{name}: gap {gap:e} against error {err:e}"
+        );
+    }
+}
+
+#[test]
 fn a_start_it_cannot_follow_is_refused_not_misfitted() {
     // starts far from the shape: random positions, the shape mirrored, everything on a
     // line (degenerate faces); each result is either refused or the exact shape

@@ -59,10 +59,14 @@ fn laplacian(n: usize, pairs: &[(u32, u32)]) -> Result<PrefactoredSpd<CscPattern
 }
 
 /// The two factorized Laplacians: the dual graph (faces, one pair per interior edge) and the
-/// vertex graph (one pair per face side, so an interior edge counts twice).
+/// vertex graph (one pair per face side, so an interior edge counts twice); and a
+/// breadth-first spanning tree of the dual graph from face 0, for the cold start.
 pub(crate) struct Tracker {
     dual: PrefactoredSpd<CscPattern>,
     primal: PrefactoredSpd<CscPattern>,
+    /// Every face but face 0 in breadth-first order, with the interior edge to its parent
+    /// (the face across it, reached earlier).
+    tree: Vec<(u32, u32)>,
 }
 
 impl Tracker {
@@ -76,8 +80,40 @@ impl Tracker {
         Ok(Self {
             dual: laplacian(mesh.n_faces(), &dual)?,
             primal: laplacian(mesh.n_vertices(), &primal)?,
+            tree: spanning_tree(mesh),
         })
     }
+}
+
+/// The faces reached from face 0 across interior edges, breadth first (each face's edges in
+/// corner order), each with the edge it was reached across. The callers have checked that
+/// every face is reached.
+fn spanning_tree(mesh: &AngleMesh) -> Vec<(u32, u32)> {
+    let nf = mesh.n_faces();
+    let mut seen = vec![false; nf];
+    let mut tree = Vec::with_capacity(nf.saturating_sub(1));
+    seen[0] = true;
+    let mut head = 0;
+    let mut visit = |f: usize, tree: &mut Vec<(u32, u32)>| {
+        for &ie in &mesh.face_interior()[f] {
+            if ie == NONE {
+                continue;
+            }
+            let e = &mesh.interior()[ie as usize];
+            let g = if e.f1 as usize == f { e.f2 } else { e.f1 };
+            if !seen[g as usize] {
+                seen[g as usize] = true;
+                tree.push((g, ie));
+            }
+        }
+    };
+    visit(0, &mut tree);
+    while head < tree.len() {
+        let f = tree[head].0 as usize;
+        visit(f, &mut tree);
+        head += 1;
+    }
+    tree
 }
 
 /// The mesh's [`Tracker`], built on first use and kept between frames.
@@ -215,7 +251,34 @@ impl AngleMesh {
         let target = preprocess(angles);
         let cache = self.tracker_cache();
         let mut tracker = cache.take_or(|| Tracker::new(self))?;
-        let out = self.track(&target, previous, &mut tracker, options);
+        let out = self.track(&target, Some(previous), &mut tracker, options);
+        cache.put(tracker);
+        Ok(out)
+    }
+
+    /// The tracked reconstruction without a previous frame: the face rotations start from
+    /// the transition rotations composed along a breadth-first spanning tree of the faces
+    /// (module docs, "Tracked reconstruction"), the rest as [`Self::reconstruct_tracked`].
+    /// On angles a few quantization steps from consistent the start is within a few
+    /// hundredths of a radian of the fit; `None` where the rounds do not settle (noisy
+    /// angles: the composed rotations drift along the tree), and the caller then uses the
+    /// spectral reconstruction.
+    ///
+    /// Errors: those of [`Self::reconstruct`].
+    pub fn reconstruct_tracked_cold(
+        &self,
+        angles: &Angles,
+        options: &super::ReconstructOptions,
+    ) -> Result<Option<Reconstruction>, AngleError> {
+        self.check_angles(angles)?;
+        self.check_connected()?;
+        if let Some(p) = &options.placement {
+            p.check(self.n_faces())?;
+        }
+        let target = preprocess(angles);
+        let cache = self.tracker_cache();
+        let mut tracker = cache.take_or(|| Tracker::new(self))?;
+        let out = self.track(&target, None, &mut tracker, options);
         cache.put(tracker);
         Ok(out)
     }
@@ -238,7 +301,7 @@ impl AngleMesh {
     fn track(
         &self,
         target: &Angles,
-        previous: &[DVec3],
+        previous: Option<&[DVec3]>,
         tracker: &mut Tracker,
         options: &super::ReconstructOptions,
     ) -> Option<Reconstruction> {
@@ -264,10 +327,26 @@ impl AngleMesh {
                 (m, r.ln())
             })
             .unzip();
-        let mut q: Vec<DQuat> = faces
-            .par_iter()
-            .map(|t| face_rotation(t.map(|v| previous[v as usize])))
-            .collect();
+        let mut q: Vec<DQuat> = match previous {
+            Some(previous) => faces
+                .par_iter()
+                .map(|t| face_rotation(t.map(|v| previous[v as usize])))
+                .collect(),
+            None => {
+                // Q₂ = Q₁ M across every tree edge, from Q = 1 at face 0
+                let mut q = vec![DQuat::IDENTITY; nf];
+                for &(g, ie) in &tracker.tree {
+                    let e = &self.interior()[ie as usize];
+                    let m = turn[ie as usize];
+                    q[g as usize] = if e.f2 == g {
+                        (q[e.f1 as usize] * m).normalize()
+                    } else {
+                        (q[e.f2 as usize] * m.conjugate()).normalize()
+                    };
+                }
+                q
+            }
+        };
         // rotations: Q_f ← exp(ω_f) Q_f with L ω = b from c_e = log(Q₁ M Q₂⁻¹); the first
         // round also solves the log-scales (a fourth column)
         let mut rounds = 0;
