@@ -85,7 +85,9 @@ pub fn encode_angles<'py>(
 /// Vertex positions `(N, 3)` from corner angles `(F, 3)` and dihedral angles `(E,)`.
 /// `previous` (the previous frame's positions, `(N, 3)`) warm-starts the spectral method
 /// and is what the tracked one follows (it falls back to the warm spectral method when its
-/// rotations do not settle).
+/// rotations do not settle); without it the tracked method starts from rotations composed
+/// along a tree of the faces (falling back to the spectral method's start, then to the
+/// spectral method itself).
 #[pyfunction]
 #[pyo3(signature = (faces, corners, dihedrals, *, reference_face=None, reference_positions=None, refine_iterations=0, method="spectral", previous=None))]
 #[allow(clippy::too_many_arguments)]
@@ -134,9 +136,6 @@ pub fn decode_angles<'py>(
     let previous = previous
         .map(|p| rows3("previous", &p, Some(n)))
         .transpose()?;
-    if method == "tracked" && previous.is_none() {
-        return Err(to_py(AngleError::PreviousMissing));
-    }
     if method == "sequential" && previous.is_some() {
         return Err(ParameterError::new_err(
             "previous= is not used by method 'sequential' (only 'spectral' and 'tracked' start from it)",
@@ -155,6 +154,7 @@ pub fn decode_angles<'py>(
                 ("tracked", Some(prev)) => mesh
                     .reconstruct_following(&angles, prev, prev, &opts)
                     .map(|r| r.positions),
+                ("tracked", None) => mesh.reconstruct_cold(&angles, &opts),
                 (_, Some(prev)) => mesh
                     .reconstruct_warm(&angles, prev, &opts)
                     .map(|r| r.positions),

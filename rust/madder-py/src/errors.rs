@@ -426,7 +426,6 @@ fn angle_class_fields<'py>(
         A::PlacementPositions => (param, f.set("name", "reference_positions")),
         A::PlacementIncomplete => (param, f.set("name", "reference_face")),
         A::Method { method } => (param, f.set("name", "method").set("value", method)),
-        A::PreviousMissing => (param, f.set("name", "previous")),
         A::Shape {
             name,
             expected,

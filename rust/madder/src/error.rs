@@ -668,9 +668,6 @@ pub enum AngleError {
         /// The method given.
         method: String,
     },
-    /// The tracked reconstruction without the previous frame's positions (from the binding).
-    #[error("method 'tracked' needs the previous frame's positions (previous=, shape (N, 3))")]
-    PreviousMissing,
     /// An array of the wrong shape (from the binding).
     #[error("{name} has shape {got}, expected {expected}")]
     Shape {

@@ -298,6 +298,37 @@ impl AngleMesh {
         }
     }
 
+    /// A frame without a previous one, tracked: from the tree's start
+    /// ([`Self::reconstruct_tracked_cold`]), else from the spectral reconstruction
+    /// ([`Self::reconstruct_tracked_from_spectral`]).
+    pub fn reconstruct_cold(
+        &self,
+        angles: &Angles,
+        options: &super::ReconstructOptions,
+    ) -> Result<Vec<DVec3>, AngleError> {
+        match self.reconstruct_tracked_cold(angles, options)? {
+            Some(r) => Ok(r.positions),
+            None => self.reconstruct_tracked_from_spectral(angles, options),
+        }
+    }
+
+    /// The tracked reconstruction started from the spectral one, or where it does not
+    /// settle the spectral one itself (the keyframes of files of flag 2 alone, the cold
+    /// start's fallback).
+    pub fn reconstruct_tracked_from_spectral(
+        &self,
+        angles: &Angles,
+        options: &super::ReconstructOptions,
+    ) -> Result<Vec<DVec3>, AngleError> {
+        let spectral = self.reconstruct(angles, options)?.positions;
+        Ok(
+            match self.reconstruct_tracked(angles, &spectral, options)? {
+                Some(r) => r.positions,
+                None => spectral,
+            },
+        )
+    }
+
     fn track(
         &self,
         target: &Angles,

@@ -391,18 +391,10 @@ fn reconstruct(
     }
     // a keyframe: rotations composed along a tree are cheap and, on angles a tracked fit
     // can follow, close enough to start it; the spectral reconstruction is the robust start
-    if decoding == Decoding::Tracked {
-        if let Some(r) = mesh.reconstruct_tracked_cold(&angles, &options)? {
-            return Ok(r.positions);
-        }
+    match decoding {
+        Decoding::Tracked => mesh.reconstruct_cold(&angles, &options),
+        _ => mesh.reconstruct_tracked_from_spectral(&angles, &options),
     }
-    let spectral = mesh.reconstruct(&angles, &options)?.positions;
-    Ok(
-        match mesh.reconstruct_tracked(&angles, &spectral, &options)? {
-            Some(r) => r.positions,
-            None => spectral,
-        },
-    )
 }
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> CodecError + '_ {
