@@ -212,11 +212,11 @@ fn dual_rhs(mesh: &AngleMesh, d: &[[f64; 4]], k: usize) -> Vec<f64> {
             b
         })
         .collect();
-    for (f, b) in per_face.iter().enumerate() {
-        for c in 0..k {
-            out[c * nf + f] = b[c];
+    out.par_chunks_mut(nf).enumerate().for_each(|(c, col)| {
+        for (o, b) in col.iter_mut().zip(&per_face) {
+            *o = b[c];
         }
-    }
+    });
     out
 }
 
