@@ -242,18 +242,7 @@ impl AngleMesh {
         previous: &[DVec3],
         options: &super::ReconstructOptions,
     ) -> Result<Option<Reconstruction>, AngleError> {
-        self.check_angles(angles)?;
-        self.check_connected()?;
-        crate::mesh::geometry::check_positions(self.topology(), previous)?;
-        if let Some(p) = &options.placement {
-            p.check(self.n_faces())?;
-        }
-        let target = preprocess(angles);
-        let cache = self.tracker_cache();
-        let mut tracker = cache.take_or(|| Tracker::new(self))?;
-        let out = self.track(&target, Some(previous), &mut tracker, options);
-        cache.put(tracker);
-        Ok(out)
+        self.tracked(angles, Some(previous), options)
     }
 
     /// The tracked reconstruction without a previous frame: the face rotations start from
@@ -270,15 +259,28 @@ impl AngleMesh {
         angles: &Angles,
         options: &super::ReconstructOptions,
     ) -> Result<Option<Reconstruction>, AngleError> {
+        self.tracked(angles, None, options)
+    }
+
+    /// The checks, the kept [`Tracker`] and [`Self::track`], for both entries.
+    fn tracked(
+        &self,
+        angles: &Angles,
+        previous: Option<&[DVec3]>,
+        options: &super::ReconstructOptions,
+    ) -> Result<Option<Reconstruction>, AngleError> {
         self.check_angles(angles)?;
         self.check_connected()?;
+        if let Some(previous) = previous {
+            crate::mesh::geometry::check_positions(self.topology(), previous)?;
+        }
         if let Some(p) = &options.placement {
             p.check(self.n_faces())?;
         }
         let target = preprocess(angles);
         let cache = self.tracker_cache();
         let mut tracker = cache.take_or(|| Tracker::new(self))?;
-        let out = self.track(&target, None, &mut tracker, options);
+        let out = self.track(&target, previous, &mut tracker, options);
         cache.put(tracker);
         Ok(out)
     }
