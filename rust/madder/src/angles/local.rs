@@ -17,7 +17,7 @@ pub const EPS: f64 = 0.02;
 pub(crate) fn preprocess(angles: &Angles) -> Angles {
     let corners = angles
         .corners
-        .iter()
+        .par_iter()
         .map(|c| {
             let c = c.map(|a| a.clamp(EPS, PI - EPS));
             let s = PI / (c[0] + c[1] + c[2]);
@@ -26,7 +26,7 @@ pub(crate) fn preprocess(angles: &Angles) -> Angles {
         .collect();
     let dihedrals = angles
         .dihedrals
-        .iter()
+        .par_iter()
         .map(|d| d.clamp(-PI + EPS, PI - EPS))
         .collect();
     Angles { corners, dihedrals }

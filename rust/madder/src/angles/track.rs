@@ -451,6 +451,7 @@ impl AngleMesh {
         });
         tracker.primal.solve_in_place_split(&mut b, 2);
         let mut positions: Vec<DVec3> = (0..nv)
+            .into_par_iter()
             .map(|v| DVec3::new(b[v], b[nv + v], b[2 * nv + v]))
             .collect();
         // the optional descent (§3.3.3) on a linear map of the positions, as after the

@@ -325,7 +325,7 @@ impl Similarity {
         let q = DQuat::from_xyzw(v[1], v[2], v[3], v[4]).normalize();
         let r = DMat3::from_quat(q);
         let t = DVec3::new(v[5], v[6], v[7]);
-        y.iter()
+        y.par_iter()
             .map(|p| {
                 let w = v[0] * (r * *p) + t;
                 [w.x as f32, w.y as f32, w.z as f32]
@@ -364,10 +364,10 @@ fn reconstruct(
     let (dc, dd) = (step(corner_bits), step(bits));
     let angles = Angles {
         corners: corners
-            .chunks_exact(3)
+            .par_chunks_exact(3)
             .map(|c| [c[0] as f64 * dc, c[1] as f64 * dc, c[2] as f64 * dc])
             .collect(),
-        dihedrals: dihedrals.iter().map(|&d| d as f64 * dd).collect(),
+        dihedrals: dihedrals.par_iter().map(|&d| d as f64 * dd).collect(),
     };
     let options = ReconstructOptions::default();
     if decoding == Decoding::Spectral {
