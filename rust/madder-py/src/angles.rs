@@ -148,6 +148,7 @@ pub fn decode_angles<'py>(
             let opts = ReconstructOptions {
                 refine_iterations,
                 placement,
+                ..Default::default()
             };
             match (method, previous.as_deref()) {
                 ("sequential", _) => mesh.sequential(&angles, opts.placement.as_ref()),

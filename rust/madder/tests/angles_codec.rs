@@ -221,9 +221,10 @@ fn keyframes_start_from_the_tree_and_older_files_still_read() {
         p
     };
     // flag 2 alone (files of the previous version): keyframes start from the spectral
-    // reconstruction and reach the same fit, to far below the quantization's error, but
-    // turned otherwise (each start fixes face 0's frame), so the placements stored for the
-    // tree's fit are compared up to a similarity
+    // reconstruction and the rounds settle fully; the same fit as flag 4's, whose rounds
+    // may stop a twentieth of a quantization step short, so within a few percent of the
+    // quantization's own error, but turned otherwise (each start fixes face 0's frame):
+    // compared up to a similarity
     let mut d = MotionDecoder::open(with_flags(2, "spectral-keys.madm")).unwrap();
     let f64s = |y: &[[f32; 3]]| -> Vec<DVec3> {
         y.iter()
@@ -235,7 +236,7 @@ fn keyframes_start_from_the_tree_and_older_files_still_read() {
         let gap = procrustes_rms(&y, &f64s(out));
         let err = procrustes_rms(&f64s(out), &frames[k]);
         println!("frame {k}: gap {gap:.1e}, error {err:.1e}");
-        assert!(gap <= 1e-2 * err, "frame {k}: {gap:e} against {err:e}");
+        assert!(gap <= 0.05 * err, "frame {k}: {gap:e} against {err:e}");
     }
     // flag 4 means nothing without flag 2
     assert!(matches!(

@@ -189,6 +189,43 @@ fn the_cold_start_on_noisy_angles_reaches_the_fit_from_the_spectral_start() {
 }
 
 #[test]
+fn a_tolerance_saves_rounds_and_costs_a_fraction_of_the_angles_error() {
+    // 12-bit-like rounding on every angle of a moving cloth, tracked from the previous
+    // frame: a tolerance of a twentieth of the step (the codec's) stops the rounds once
+    // the next one would move less than that, and moves the fit by little against its error
+    let (f, x0) = cloth(40, 0.0);
+    let (_, x) = cloth(40, DT);
+    let mesh = AngleMesh::new(x.len(), f.clone()).unwrap();
+    let step = std::f64::consts::TAU / 4096.0;
+    let round = |a: f64| (a / step).round() * step;
+    let exact = mesh.encode(&x).unwrap();
+    let a = madder::angles::Angles {
+        corners: exact.corners.iter().map(|c| c.map(round)).collect(),
+        dihedrals: exact.dihedrals.iter().map(|&d| round(d)).collect(),
+    };
+    let full = mesh
+        .reconstruct_tracked(&a, &x0, &ReconstructOptions::default())
+        .unwrap()
+        .expect("settles");
+    let o = ReconstructOptions {
+        tolerance: step / 20.0,
+        ..Default::default()
+    };
+    let early = mesh
+        .reconstruct_tracked(&a, &x0, &o)
+        .unwrap()
+        .expect("settles");
+    let err = procrustes_rms(&full.positions, &x);
+    let gap = procrustes_rms(&early.positions, &full.positions);
+    println!(
+        "rounds {} → {}, error {err:.1e}, gap {gap:.1e}",
+        full.rounds, early.rounds
+    );
+    assert!(early.rounds < full.rounds);
+    assert!(gap <= 0.05 * err, "gap {gap:e} against error {err:e}");
+}
+
+#[test]
 fn a_start_it_cannot_follow_is_refused_not_misfitted() {
     // starts far from the shape: random positions, the shape mirrored, everything on a
     // line (degenerate faces); each result is either refused or the exact shape

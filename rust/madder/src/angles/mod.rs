@@ -204,7 +204,11 @@
 //! quantized angles, which converge linearly at a rate of the order of the noise, about
 //! 10⁻⁴ of the quantization error; the codec
 //! starts from the previous two frames extrapolated, which leaves 10⁻² rad for the first
-//! round and makes two rounds the rule). A fit that settles
+//! round and makes two rounds the rule). With a tolerance
+//! ([`ReconstructOptions::tolerance`]) the rounds also stop once the next is predicted to
+//! move less than it (`0.1 δ²` after a round of `δ`, while the convergence is
+//! quadratic): the codec gives a twentieth of its quantization step, which makes one round
+//! the rule for its frames. A fit that settles
 //! with some edge still turned by more than 1 rad is a wrong fixed point of a start too
 //! far from the angles, and is refused (`None`), as is one that has not settled after 24
 //! rounds; the caller then uses the spectral method.

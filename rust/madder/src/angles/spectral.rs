@@ -38,6 +38,11 @@ pub struct ReconstructOptions {
     pub refine_iterations: usize,
     /// Where to put the result; `None`: centroid at the origin, mean edge length 1.
     pub placement: Option<Placement>,
+    /// The tracked reconstruction only: the rotation error (radians) its rounds may leave
+    /// when the angles carry a larger one anyway (the codec: a twentieth of the
+    /// quantization step). 0, the default: the rounds settle fully. See
+    /// [`AngleMesh::reconstruct_tracked`](super::AngleMesh::reconstruct_tracked).
+    pub tolerance: f64,
 }
 
 /// The result of a reconstruction.

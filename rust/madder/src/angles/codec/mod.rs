@@ -40,7 +40,9 @@
 //! extrapolated linearly with frame `k − 2`'s (`2y_{k−1} − y_{k−2}`) when neither `k` nor
 //! `k − 1` is a keyframe (a keyframe's decode is placed differently from the frame before
 //! it): the start is then ~10⁻² rad from the answer instead of a frame's turn, and the
-//! rotations settle in two rounds instead of three;
+//! rotations settle in two rounds instead of three, and in one where the rounds may stop a
+//! twentieth of the finer quantization step short of settling (files of flag 4: the
+//! angles carry `Δ/2` of rounding anyway; [`ReconstructOptions::tolerance`]);
 //! at a keyframe (`k` a multiple of the keyframe interval `K`, stored in the header; 0 =
 //! every frame) it is started without a previous frame, from the transition rotations
 //! composed along a spanning tree of the faces ([`AngleMesh::reconstruct_tracked_cold`],
@@ -369,7 +371,15 @@ fn reconstruct(
             .collect(),
         dihedrals: dihedrals.par_iter().map(|&d| d as f64 * dd).collect(),
     };
-    let options = ReconstructOptions::default();
+    // the rounds may leave a rotation error of a twentieth of the finer step (files of
+    // flag 4; older ones settle fully, as they were encoded)
+    let options = ReconstructOptions {
+        tolerance: match decoding {
+            Decoding::Tracked => dc.min(dd) / 20.0,
+            _ => 0.0,
+        },
+        ..Default::default()
+    };
     if decoding == Decoding::Spectral {
         return Ok(match previous {
             Some(prev) => mesh.reconstruct_warm(&angles, prev, &options)?,
