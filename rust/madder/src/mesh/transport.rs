@@ -63,6 +63,18 @@
 //! reproduced exactly; the tests check that arbitrarily turned frames keep a flat cloth's
 //! transport exact.
 //!
+//! ## Similar faces (issue 12, Detail)
+//! On a refined cloth ([`super::refine`]) the `4^L` fine faces of one coarse face are
+//! its translates scaled by `±1/N` (the lattice's up and down triangles on the planar
+//! coarse face), so their tip angles are the coarse face's, corner for corner up to a
+//! cyclic shift ([`super::refine::Partial::face_congruence`]).
+//! [`Transport::with_shared_tips`] computes them on the first fine face of each coarse
+//! face and copies them to the others: one set of three `atan2` per coarse face instead
+//! of per fine face. They are the others' own angles up to the rounding of each fine
+//! vertex's barycentric placement (a test: within 1e-14 rad on a folded refined sheet,
+//! levels 1–3). The mollification adds one length to every edge, which breaks the
+//! similarity: a mollified geometry computes every face's own.
+//!
 //! The polar map of an irregular vertex (several fans, [`super::FanKind::Irregular`]) lays
 //! its fans side by side without rescaling; see [`super::rings`].
 
@@ -76,18 +88,52 @@ use super::rings::{FanKind, OneRings, find_edge};
 use super::{Geometry, Topology};
 
 /// Tip angles of the three corners of every face from the intrinsic edge lengths (in
-/// parallel; each corner's angle is computed once and read by the fan of its vertex).
-fn tip_angles(topology: &Topology, geometry: &Geometry) -> Vec<[f64; 3]> {
-    topology
-        .face_edges()
+/// parallel; each corner's angle is computed once and read by the fan of its vertex). With
+/// `share`, a face `t` with `share[t] = (r, c)`, `r ≠ t`, takes the angles of face `r`
+/// turned by `c` (its corner `k` gets `r`'s corner `(k + c) % 3`): similar faces, module
+/// doc, "Similar faces".
+fn tip_angles(
+    topology: &Topology,
+    geometry: &Geometry,
+    share: Option<&[(u32, u8)]>,
+) -> Vec<[f64; 3]> {
+    let own = |f: usize| -> [f64; 3] {
+        let fe = topology.face_edges()[f];
+        let area = geometry.face_area[f];
+        let l = |c: usize| geometry.edge_length[fe[c % 3] as usize];
+        std::array::from_fn(|k| {
+            let (a, b, c) = (l(k), l(k + 1), l(k + 2));
+            (4.0 * area).atan2(b * b + c * c - a * a)
+        })
+    };
+    // the mollification adds the same length to every edge, which does not scale with
+    // the faces: similar faces stay similar only without it
+    let Some(share) = share.filter(|_| geometry.mollify_delta == 0.0) else {
+        return (0..topology.n_faces()).into_par_iter().map(own).collect();
+    };
+    assert_eq!(share.len(), topology.n_faces(), "one share per face");
+    let first: Vec<[f64; 3]> = share
         .par_iter()
-        .zip(&geometry.face_area)
-        .map(|(fe, &area)| {
-            let l = |c: usize| geometry.edge_length[fe[c % 3] as usize];
-            std::array::from_fn(|k| {
-                let (a, b, c) = (l(k), l(k + 1), l(k + 2));
-                (4.0 * area).atan2(b * b + c * c - a * a)
-            })
+        .enumerate()
+        .map(|(t, &(r, _))| {
+            if r as usize == t {
+                own(t)
+            } else {
+                [f64::NAN; 3]
+            }
+        })
+        .collect();
+    share
+        .par_iter()
+        .zip(&first)
+        .map(|(&(r, c), &mine)| {
+            let theirs = first[r as usize];
+            debug_assert!(theirs[0].is_finite(), "a shared face's angles are its own");
+            if mine[0].is_nan() {
+                std::array::from_fn(|k| theirs[(k + c as usize) % 3])
+            } else {
+                mine
+            }
         })
         .collect()
 }
@@ -126,11 +172,29 @@ impl Transport {
         frames: &VertexFrames,
         positions: &[DVec3],
     ) -> Self {
+        Self::with_shared_tips(topology, rings, geometry, frames, positions, None)
+    }
+
+    /// [`Self::new`], with the tip angles of similar faces computed once (module doc,
+    /// "Similar faces"): face `t` with `share[t] = (r, c)`, `r ≠ t`, takes the angles of
+    /// face `r` (which has `share[r].0 = r`), its corner `k` that of `r`'s corner
+    /// `(k + c) % 3`. Ignored when the geometry is mollified.
+    ///
+    /// # Panics
+    /// As [`Self::new`], and if `share` does not have one entry per face.
+    pub(crate) fn with_shared_tips(
+        topology: &Topology,
+        rings: &OneRings,
+        geometry: &Geometry,
+        frames: &VertexFrames,
+        positions: &[DVec3],
+        share: Option<&[(u32, u8)]>,
+    ) -> Self {
         let n = topology.n_vertices();
         assert_eq!(rings.n_vertices(), n, "rings of another topology");
         assert_eq!(frames.len(), n, "one frame per vertex");
         assert_eq!(positions.len(), n, "one position per vertex");
-        let tip = tip_angles(topology, geometry);
+        let tip = tip_angles(topology, geometry, share);
         // polar angles written in place: one slice of the flat array per vertex
         let mut alpha = vec![f64::NAN; rings.spoke_vertex.len()];
         let mut slices: Vec<&mut [f64]> = Vec::with_capacity(n);

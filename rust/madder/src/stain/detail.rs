@@ -127,6 +127,7 @@ struct Side {
     world: Option<Vec<DVec3>>,
     boundary: Vec<bool>,
     congruent: Vec<u32>,
+    face_congruent: Vec<u32>,
     conductivity: Conductivity,
 }
 
@@ -182,6 +183,7 @@ impl Fine {
                     world,
                     boundary: p.boundary(),
                     congruent: p.congruence(),
+                    face_congruent: p.face_congruence(),
                     conductivity: this.conductivity(),
                 }
             },
@@ -198,6 +200,7 @@ impl Fine {
             world,
             boundary,
             congruent,
+            face_congruent,
             conductivity,
         } = side;
         // the fans beside the neighbour lists (independent)
@@ -236,6 +239,7 @@ impl Fine {
         c.irregular = irregular;
         c.boundary = boundary;
         c.congruent = Some(congruent);
+        c.face_congruent = Some(face_congruent);
         c.conductivity = conductivity;
         c.rest = rest;
         c.rings = rings;

@@ -346,6 +346,7 @@ impl Simulator {
                 adjacency,
                 topology,
                 congruent: None,
+                face_congruent: None,
             },
             params,
             solute_color,
@@ -600,7 +601,14 @@ impl Simulator {
         let topo = &w.cloth.topology;
         let geometry = Geometry::new(topo, q)?;
         let frames = frames.unwrap_or_else(|| w.corotating_frames(q));
-        let transport = Transport::new(topo, &w.cloth.rings, &geometry, &frames, q);
+        let transport = Transport::with_shared_tips(
+            topo,
+            &w.cloth.rings,
+            &geometry,
+            &frames,
+            q,
+            w.tip_share.as_deref(),
+        );
         prof.active_vertices += w.region.vertices.len();
         prof.window_vertices += n;
         prof.window_edges += topo.n_edges();
