@@ -215,22 +215,29 @@ impl Transport {
             .unzip();
         // θ_ab from the angle of each edge in the frame of each endpoint, and its rotation
         let edges = topology.edges();
-        #[allow(clippy::type_complexity)]
-        let (theta, (cos_sin, edge_polar)): (Vec<f64>, (Vec<[f64; 2]>, Vec<[f64; 2]>)) = edges
-            .par_iter()
-            .zip(&rings.edge_spoke)
-            .map(|(&[a, b], &[sa, sb])| {
+        // written in place, in one parallel pass (a nested unzip collects into lists
+        // of chunks and copies them)
+        let m = edges.len();
+        let (mut theta, mut cos_sin, mut edge_polar) =
+            (vec![0.0; m], vec![[0.0; 2]; m], vec![[0.0; 2]; m]);
+        theta
+            .par_iter_mut()
+            .zip(&mut cos_sin)
+            .zip(&mut edge_polar)
+            .zip(edges.par_iter().zip(&rings.edge_spoke))
+            .with_min_len(1024)
+            .for_each(|(((theta, cos_sin), polar), (&[a, b], &[sa, sb]))| {
                 let angle = |v: u32, s: u32| match alpha.get(s as usize) {
                     Some(&x) => x + offset[v as usize],
                     None => f64::NAN,
                 };
                 let (ta, tb) = (angle(a, sa), angle(b, sb));
                 debug_assert!(ta.is_finite() && tb.is_finite(), "every edge is in a fan");
-                let theta = wrap_angle(ta - tb + PI);
+                *theta = wrap_angle(ta - tb + PI);
                 let (sin, cos) = theta.sin_cos();
-                (theta, ([cos, sin], [ta, tb]))
-            })
-            .unzip();
+                *cos_sin = [cos, sin];
+                *polar = [ta, tb];
+            });
         Self {
             alpha,
             spoke_ptr: rings.spoke_ptr.clone(),
@@ -346,9 +353,21 @@ fn frame_offset(rings: &OneRings, v: usize, alpha: &[f64], frame: &DMat3, pos: &
         .map_or(0.0, wrap_angle)
 }
 
-/// `a` wrapped to `(−π, π]`.
+/// `a` wrapped to `(−π, π]`: `(a + π).rem_euclid(2π) − π`, with the remainder taken
+/// without the library's `fmod` for `|a + π| < 4π` (every angle the transport and the
+/// back-trace wrap: sums and differences of a few polar angles). There `x − 2π sign(x)`
+/// is exact (Sterbenz), so it is the exact remainder `fmod` returns, and the result has
+/// the same bits (a test compares them).
 pub(crate) fn wrap_angle(a: f64) -> f64 {
-    let r = (a + PI).rem_euclid(TAU) - PI;
+    let x = a + PI;
+    let m = if x.abs() < TAU {
+        x
+    } else if x.abs() < 2.0 * TAU {
+        x - TAU.copysign(x)
+    } else {
+        x % TAU
+    };
+    let r = if m < 0.0 { m + TAU } else { m } - PI;
     if r == -PI { PI } else { r }
 }
 
@@ -379,6 +398,31 @@ mod tests {
         let c = Transport::new(&t, &r, &g, &f, &p);
         assert!((c.angle_sum(0) - 4.0 * TAU / 6.0).abs() < 1e-14);
         assert!((c.polar_angles(0)[4] - 4.0 * TAU / 6.0).abs() < 1e-14);
+    }
+
+    #[test]
+    fn wrap_angle_is_rem_euclid_to_the_bit() {
+        let reference = |a: f64| {
+            let r = (a + PI).rem_euclid(TAU) - PI;
+            if r == -PI { PI } else { r }
+        };
+        let mut special = vec![0.0, -0.0, PI, -PI, TAU, -TAU, 3.0 * PI, -3.0 * PI];
+        special.extend([f64::INFINITY, f64::NEG_INFINITY, 1e300, -1e300, 5.0 * PI]);
+        for &a in &special {
+            for x in [a, f64::from_bits(a.to_bits() + 1), f64::from_bits(a.to_bits() - 1)] {
+                let (w, r) = (wrap_angle(x), reference(x));
+                assert!(w.to_bits() == r.to_bits() || (w.is_nan() && r.is_nan()), "{x}: {w} vs {r}");
+            }
+        }
+        // a pseudo-random sweep over ±5π (both branches and the fallback)
+        let mut s = 0x9e37_79b9_7f4a_7c15_u64;
+        for _ in 0..200_000 {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            let x = ((s >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 10.0 * PI;
+            assert_eq!(wrap_angle(x).to_bits(), reference(x).to_bits(), "{x}");
+        }
     }
 
     #[test]
