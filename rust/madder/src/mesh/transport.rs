@@ -409,9 +409,16 @@ mod tests {
         let mut special = vec![0.0, -0.0, PI, -PI, TAU, -TAU, 3.0 * PI, -3.0 * PI];
         special.extend([f64::INFINITY, f64::NEG_INFINITY, 1e300, -1e300, 5.0 * PI]);
         for &a in &special {
-            for x in [a, f64::from_bits(a.to_bits() + 1), f64::from_bits(a.to_bits() - 1)] {
+            for x in [
+                a,
+                f64::from_bits(a.to_bits() + 1),
+                f64::from_bits(a.to_bits() - 1),
+            ] {
                 let (w, r) = (wrap_angle(x), reference(x));
-                assert!(w.to_bits() == r.to_bits() || (w.is_nan() && r.is_nan()), "{x}: {w} vs {r}");
+                assert!(
+                    w.to_bits() == r.to_bits() || (w.is_nan() && r.is_nan()),
+                    "{x}: {w} vs {r}"
+                );
             }
         }
         // a pseudo-random sweep over ±5π (both branches and the fallback)

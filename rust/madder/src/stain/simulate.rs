@@ -681,7 +681,7 @@ impl Simulator {
                 }
             })
             .collect();
-        let flux = dual_fluxes_in(topo, q, &frames, &centred, active);
+        let flux = dual_fluxes_in(topo, q, &frames, &centred, active, w.tip_share.as_deref());
         let plan = UpwindPlan::new(topo, &geometry.vertex_area, &flux, h)?;
         prof.transport_cycles += plan.substeps();
         loc.cycles += plan.substeps();
