@@ -48,11 +48,17 @@
 //! that maps its polar directions onto the layout: the layout angle of the edge `c → m`
 //! minus its polar angle `α_cm + δ_c`, for `m = r` and `m = l`, averaged (the two differ by
 //! `(s_c − 1) φ_c`, the holonomy share of the corner at a curved `c`; they agree on
-//! developable cloth). For `j` and `k` of the first triangle this formula is eq. 4.4
+//! developable cloth). The average is taken on unit complex numbers: `e^{i a}` of each
+//! edge is its layout direction normalized times `e^{−i(α + δ_c)}`, and the mean angle
+//! (on the shorter arc, as the wrapped difference gave it) is the direction of their sum:
+//! two `sin_cos` and three square roots instead of two `atan2` and a `sin_cos` (issue 12:
+//! at Detail 2 most back-traces end in an unfolded triangle, whose three vertices all
+//! need it). The same rotation up to rounding (the Detail bench's stain moved by 2e-15
+//! of its peak). For `j` and `k` of the first triangle this formula is eq. 4.4
 //! itself (`α_ij + δ_i + π − (α_ji + δ_j) = θ_ij`), so `R_ij` is taken from the
 //! [`Transport`] and the one-ring case is bit-identical to the seed's formula. A vertex
 //! keeps the rotation it was given when first placed while the strip passes it. The
-//! rotation (two `atan2` and a `sin_cos`) is only evaluated for the vertices whose velocity
+//! rotation (two `sin_cos` and three square roots) is only evaluated for the vertices whose velocity
 //! is read, the last triangle's or a crossing's where the walk stops: the others a long
 //! strip passes never need it, nor the look-up of their polar angles (the same operations
 //! when read, so the same values).
@@ -236,6 +242,13 @@ pub(crate) const FLAT_FACE_REL: f64 = 1e-12;
 /// `10⁻¹⁶ × (number of unfoldings)` relative; a segment running along a straight border
 /// must see the border vertices *on* its line, whatever the rounding, to follow it.
 pub(crate) const SIDE_TOLERANCE: f64 = 1e-12;
+
+/// Below this length of the sum of two unit complex numbers (two angles within
+/// `2 acos(10⁻³/2) ≈ π − 10⁻³` of each other) an unfolded vertex's turn is the mean of
+/// the angles themselves ([`Trace`]'s turn, module doc): the bisector's direction is
+/// then ill-conditioned. Its two angles differ by the holonomy share of one corner, far
+/// from π on any cloth.
+const BISECTOR_MIN: f64 = 1e-3;
 
 /// Solvent mass, relative to the largest mass before the step, below which the momentum
 /// velocity is not formed. The momentum of a vertex carries an absolute rounding error of
@@ -468,9 +481,7 @@ impl Trace<'_> {
             } => {
                 let polar_r = self.transport.edge_polar(edge_r as usize)[end_r as usize];
                 let polar_l = self.transport.edge_polar(edge_l as usize)[end_l as usize];
-                let a_r = to_r.y.atan2(to_r.x) - polar_r;
-                let a_l = to_l.y.atan2(to_l.x) - polar_l;
-                DMat2::from_angle(a_r + 0.5 * wrap_angle(a_l - a_r))
+                unfolded_turn(to_r, to_l, polar_r, polar_l)
             }
         }
     }
@@ -650,6 +661,28 @@ impl Trace<'_> {
                 },
             },
         ))
+    }
+}
+
+/// The rotation `F_c → layout` of a vertex `c` placed by the unfolding, from the layout
+/// directions `to_r`, `to_l` of its edges to `r` and `l` and their polar angles in `F_c`:
+/// the mean of `arg(to_m) − polar_m` over the two edges, on the shorter arc (module doc),
+/// taken on unit complex numbers: `e^{i a} = (to / |to|) e^{−i polar}` per edge, the mean
+/// the direction of their sum. Two nearly opposite ([`BISECTOR_MIN`]): the angles.
+fn unfolded_turn(to_r: DVec2, to_l: DVec2, polar_r: f64, polar_l: f64) -> DMat2 {
+    let unit = |to: DVec2, polar: f64| {
+        let (sin, cos) = polar.sin_cos();
+        DVec2::new(to.x * cos + to.y * sin, to.y * cos - to.x * sin) / to.length()
+    };
+    let sum = unit(to_r, polar_r) + unit(to_l, polar_l);
+    let len = sum.length();
+    if len > BISECTOR_MIN {
+        let (cos, sin) = (sum.x / len, sum.y / len);
+        DMat2::from_cols_array(&[cos, sin, -sin, cos])
+    } else {
+        let a_r = to_r.y.atan2(to_r.x) - polar_r;
+        let a_l = to_l.y.atan2(to_l.x) - polar_l;
+        DMat2::from_angle(a_r + 0.5 * wrap_angle(a_l - a_r))
     }
 }
 
@@ -1520,6 +1553,42 @@ mod tests {
 
     fn advect(m: &Mesh, u: &[DVec2], h: f64) -> Vec<DVec2> {
         advect_velocity(&m.t, &m.rings, &m.geometry, &m.transport, u, h)
+    }
+
+    #[test]
+    fn unfolded_turn_is_the_mean_angle() {
+        use std::f64::consts::{PI, TAU};
+        // against the angles themselves: a_m = arg(to_m) − polar_m, the mean on the
+        // shorter arc, over random directions, lengths and polar angles, differences up
+        // to nearly π (the fallback below BISECTOR_MIN included)
+        let mut s = 0x2545_f491_4f6c_dd1d_u64;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for case in 0..20_000 {
+            let (a_r, len_r, len_l) = (TAU * next() - PI, 0.01 + next(), 0.01 + next());
+            // the two angles' difference, up to ±(π − 1e-9)
+            let gap = if case % 4 == 0 {
+                (PI - 1e-9) * (2.0 * next() - 1.0)
+            } else {
+                0.3 * (2.0 * next() - 1.0)
+            };
+            let (polar_r, polar_l) = (4.0 * TAU * next() - 2.0 * TAU, TAU * next());
+            let dir = |a: f64| DVec2::new(a.cos(), a.sin());
+            let to_r = len_r * dir(a_r + polar_r);
+            let to_l = len_l * dir(a_r + gap + polar_l);
+            let want = DMat2::from_angle(a_r + 0.5 * gap);
+            let got = unfolded_turn(to_r, to_l, polar_r, polar_l);
+            let err = (got - want)
+                .to_cols_array()
+                .iter()
+                .fold(0.0, |m: f64, x| m.max(x.abs()));
+            assert!(err < 1e-12, "{case}: gap {gap}, off by {err:e}");
+            assert!((got.determinant() - 1.0).abs() < 1e-14, "a rotation");
+        }
     }
 
     #[test]
