@@ -14,7 +14,8 @@
 //!    tangential gravity and rectilinear force in `F_i`, `k` the drag of the fibres on
 //!    the liquid (`k = 0` is the seed's frictionless liquid), `ω` the frames' angular
 //!    velocity over the sub-step: integrated exactly for constant `a` and `ω`
-//!    ([`super::forces::integrate_velocity`]), so the liquid reaches its terminal
+//!    ([`super::forces::integrate_velocity`]; each vertex's propagator computed once
+//!    for the two half kicks, [`super::forces::VelocityStep`]), so the liquid reaches its terminal
 //!    velocity `a/k` at any step (a kick followed by the decay `e^{−kh}` reaches 30 % of
 //!    it at 24 fps), and the Coriolis force turns it without changing its speed. The
 //!    velocity is then **extended** over the dry cloth from the wet region
@@ -66,7 +67,9 @@
 //! about its normal to [`MAX_TURN`] (0.1 rad) per sub-step, on top of the ones asked for
 //! ([`StainParams::substeps`]): 1 at 2 rad/s, 4 at 8 rad/s at 25 fps, and the path stays
 //! within 5 %. The turn is measured on the window's active vertices only (where liquid can
-//! be), from the frames at the start of the frame to the Kabsch frames at its end.
+//! be), from the frames at the start of the frame to the Kabsch frames at its end; its
+//! `ω_z` is computed for every window vertex, so that with one sub-step (the usual case)
+//! the forces take it instead of computing it again.
 //!
 //! ## Failure
 //! [`Simulator::step`] works on the window's copy of the state and writes it back only

@@ -50,7 +50,11 @@
 //! On a refined cloth the window also knows, per vertex, which fine vertices lie inside
 //! one coarse face or on one coarse edge ([`crate::mesh::refine::Partial::congruence`]):
 //! those with whole one-rings there share one Kabsch rotation per face and edge
-//! ([`Window::corotating_frames`], module doc of [`crate::mesh::kabsch`]).
+//! ([`Window::corotating_frames`], module doc of [`crate::mesh::kabsch`]). Per window
+//! face it keeps the first window face of the same coarse face and the shift of its
+//! corners ([`crate::mesh::refine::Partial::face_congruence`]): the similar fine faces
+//! share their tip angles ([`crate::mesh::Transport::with_shared_tips`]) and their
+//! median-dual area vectors ([`super::advect`], "Congruent faces").
 //!
 //! - **Diffusion.** `(M + h K_A) σ' = m` on the active vertices, `K_A` the stiffness
 //!   restricted to them with a Neumann (no-flux) boundary at the region's edge
