@@ -621,17 +621,14 @@ impl Simulator {
         // 1. body forces (§4.4), friction and the Coriolis turn, exactly over half the
         // sub-step at the vertex the liquid leaves (kick–drift–kick, module doc); the
         // densities drift with the exact mean velocity of a whole sub-step under them
-        // each vertex's half kick is the same propagator before and after the advection
-        // (the same turn, friction and h/2), and the decay e^{-kh} is every vertex's:
-        // both computed once (`VelocityStep`, the same bits as separate calls)
+        // — each vertex's half kick is the same propagator before and after the
+        // advection (the same turn, friction and h/2), and the decay e^{-kh} is every
+        // vertex's: both computed once (`VelocityStep`, the same bits as separate calls)
         let (decay_half, decay_full) = (
             VelocityStep::decay(p.friction, 0.5 * h),
             VelocityStep::decay(p.friction, h),
         );
-        let (force, (mut forced, mut mean)): (
-            Vec<(DVec2, VelocityStep)>,
-            (Vec<DVec2>, Vec<DVec2>),
-        ) = (0..n)
+        let force: Vec<(DVec2, f64, VelocityStep)> = (0..n)
             .into_par_iter()
             .map(|j| {
                 let f = &frames.frame[j];
@@ -644,9 +641,15 @@ impl Simulator {
                     None => 0.0,
                 };
                 let half = VelocityStep::with_decay(decay_half, turn, p.friction, 0.5 * h);
+                (a, turn, half)
+            })
+            .collect();
+        let (mut forced, mut mean): (Vec<DVec2>, Vec<DVec2>) = force
+            .par_iter()
+            .zip(&loc.velocity)
+            .map(|(&(a, turn, half), &u)| {
                 let full = VelocityStep::with_decay(decay_full, turn, p.friction, h);
-                let u = loc.velocity[j];
-                ((a, half), (half.end(u, a), full.mean(u, a)))
+                (half.end(u, a), full.mean(u, a))
             })
             .unzip();
         // the velocity is the liquid's: on the dry cloth it is the wet region's, extended
@@ -716,7 +719,7 @@ impl Simulator {
         loc.velocity = arrived
             .into_par_iter()
             .zip(&force)
-            .map(|(u, (a, half))| half.end(u, *a))
+            .map(|(u, (a, _, half))| half.end(u, *a))
             .collect();
         lap(&mut prof.forces);
 
