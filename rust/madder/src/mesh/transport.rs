@@ -71,7 +71,7 @@
 //! [`Transport::with_shared_tips`] computes them on the first fine face of each coarse
 //! face and copies them to the others: one set of three `atan2` per coarse face instead
 //! of per fine face. They are the others' own angles up to the rounding of each fine
-//! vertex's barycentric placement (a test: within 1e-14 rad on a folded refined sheet,
+//! vertex's barycentric placement (a test: within 1e-13 rad on a folded refined sheet,
 //! levels 1–3). The mollification adds one length to every edge, which breaks the
 //! similarity: a mollified geometry computes every face's own.
 //!
