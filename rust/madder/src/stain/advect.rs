@@ -58,10 +58,10 @@
 //! itself (`α_ij + δ_i + π − (α_ji + δ_j) = θ_ij`), so `R_ij` is taken from the
 //! [`Transport`] and the one-ring case is bit-identical to the seed's formula. A vertex
 //! keeps the rotation it was given when first placed while the strip passes it. The
-//! rotation (two `sin_cos` and three square roots) is only evaluated for the vertices whose velocity
-//! is read, the last triangle's or a crossing's where the walk stops: the others a long
-//! strip passes never need it, nor the look-up of their polar angles (the same operations
-//! when read, so the same values).
+//! rotation (two `sin_cos` and three square roots) is only evaluated for the vertices
+//! whose velocity is read, the last triangle's or a crossing's where the walk stops: the
+//! others a long strip passes never need it, nor the look-up of their polar angles (the
+//! same operations when read, so the same values).
 //!
 //! *First wedge.* Placing a spoke costs a `sin_cos`, and the wedge is searched in fan
 //! order. A pre-test skips, without placing their spokes, the wedges whose polar sector

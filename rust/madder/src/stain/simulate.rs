@@ -15,12 +15,12 @@
 //!    the liquid (`k = 0` is the seed's frictionless liquid), `ω` the frames' angular
 //!    velocity over the sub-step: integrated exactly for constant `a` and `ω`
 //!    ([`super::forces::integrate_velocity`]; each vertex's propagator computed once
-//!    for the two half kicks, [`super::forces::VelocityStep`]), so the liquid reaches its terminal
-//!    velocity `a/k` at any step (a kick followed by the decay `e^{−kh}` reaches 30 % of
-//!    it at 24 fps), and the Coriolis force turns it without changing its speed. The
-//!    velocity is then **extended** over the dry cloth from the wet region
-//!    ([`super::extend`]): it is the liquid's, and the dry value is what arriving liquid
-//!    reads.
+//!    for the two half kicks, [`super::forces::VelocityStep`]), so the liquid reaches
+//!    its terminal velocity `a/k` at any step (a kick followed by the decay `e^{−kh}`
+//!    reaches 30 % of it at 24 fps), and the Coriolis force turns it without changing
+//!    its speed. The velocity is then **extended** over the dry cloth from the wet
+//!    region ([`super::extend`]): it is the liquid's, and the dry value is what arriving
+//!    liquid reads.
 //! 2. **Advection** (§4.3.1–4.3.2): the densities by upwind finite volumes
 //!    ([`super::advect`]); the velocity with the solvent's momentum (§4.3.2, the
 //!    default: `u = p/m`, the mass-weighted velocity), or semi-Lagrangian (§4.3.1) with
