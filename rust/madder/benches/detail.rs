@@ -118,11 +118,12 @@ fn bench(level: u32, radius: Option<f64>, frames: usize, report: bool) -> (usize
             (h ^ b).wrapping_mul(0x0100_0000_01b3)
         });
     println!(
-        "detail {level}, {:>3.0} % wet at the end (pour radius {}): {n} cloth vertices, {fine_n} refined, {built} built ({wet} wet above 1 g/m²); {total:7.2} ms/frame (read-outs {:.2}), {:.0} active vertices per sub-step, setup {setup:.0} ms ({:.1} MB)",
+        "detail {level}, {:>3.0} % wet at the end (pour radius {}): {n} cloth vertices, {fine_n} refined, {built} built ({wet} wet above 1 g/m²); {total:7.2} ms/frame (read-outs {:.2}), {:.0} active vertices per sub-step ({:.0} in the window), setup {setup:.0} ms ({:.1} MB)",
         100.0 * wet as f64 / fine_n as f64,
         radius.map_or("the whole flag".into(), |r| format!("{:.1} cm", 100.0 * r)),
         read * 1e3 / frames as f64,
         p.active_vertices as f64 / p.substeps as f64,
+        p.window_vertices as f64 / p.substeps as f64,
         at_setup as f64 / 1e6,
     );
     println!(

@@ -477,7 +477,9 @@ fn the_lazily_built_refinement_is_the_whole_refined_cloth() {
 #[test]
 fn the_same_bits_with_one_two_or_three_threads() {
     // level 2, lazily built, grown as the stain runs (growths, window builds, the shared
-    // Kabsch rotations of the fine vertices inside coarse faces and on coarse edges)
+    // Kabsch rotations of the fine vertices inside coarse faces and on coarse edges, the
+    // fine faces' shared tip angles and area vectors, the velocity extension's parallel
+    // rings)
     let run_in = |threads: usize| {
         rayon::ThreadPoolBuilder::new()
             .num_threads(threads)

@@ -508,6 +508,21 @@ impl Partial {
             .collect()
     }
 
+    /// Per local fine face, its class of similar faces and how its corners map onto its
+    /// coarse face's: `4 b + c`, `b` the position of its coarse face among the built ones
+    /// and corner `k` having the angle of coarse corner `(k + c) % 3` ([`corner_shift`]).
+    /// The lattice triangles of one planar coarse face are its translates scaled by
+    /// `±1/N`, so their tip angles are the coarse face's
+    /// ([`crate::mesh::Transport::with_shared_tips`]). The faces of one class are
+    /// consecutive.
+    pub(crate) fn face_congruence(&self) -> Vec<u32> {
+        let shift: Vec<u32> = self.template.iter().map(corner_shift).collect();
+        let per = self.template.len();
+        (0..self.faces.len())
+            .map(|t| 4 * (t / per) as u32 + shift[t % per])
+            .collect()
+    }
+
     /// [`Refinement::prolong`] on the built vertices.
     pub(crate) fn prolong<T>(&self, coarse: &[T]) -> Vec<T>
     where
@@ -581,6 +596,29 @@ fn lattice_triangles(n: u32) -> Vec<[[u32; 2]; 3]> {
         }
     }
     t
+}
+
+/// The coarse corner whose angle corner 0 of lattice triangle `t` has, which is also the
+/// shift `c` taking every corner `k` of `t` to coarse corner `(k + c) % 3`: a corner's angle
+/// is the coarse face's at the corner whose two edges lie along the same two lattice
+/// lines (`i`, `j` or the diagonal), up triangles being translates of the coarse face and
+/// down ones its point reflections.
+fn corner_shift(t: &[[u32; 2]; 3]) -> u32 {
+    // the line of a lattice step: 0 along i (v₀v₁), 1 along j (v₀v₂), 2 diagonal (v₁v₂)
+    let line = |a: [u32; 2], b: [u32; 2]| match (a[0] == b[0], a[1] == b[1]) {
+        (false, true) => 0,
+        (true, false) => 1,
+        _ => 2,
+    };
+    // coarse corner from the set of its two lines: {i, j} → 0, {i, diag} → 1, {j, diag} → 2
+    let corner = |k: usize| match line(t[k], t[(k + 1) % 3]) + line(t[k], t[(k + 2) % 3]) {
+        1 => 0,
+        2 => 1,
+        _ => 2,
+    };
+    let c = corner(0);
+    debug_assert!((0..3).all(|k| corner(k) == (k as u32 + c) % 3));
+    c
 }
 
 /// The lattice points strictly inside a face, in the fine numbering's order.
@@ -657,6 +695,89 @@ mod tests {
             let m = (n as usize - 1) * (n as usize).saturating_sub(2) / 2;
             assert_eq!(interior_points(n).count(), m);
         }
+    }
+
+    #[test]
+    fn similar_faces_share_their_tip_angles() {
+        use crate::mesh::{Geometry, OneRings, Transport, VertexFrames};
+        use glam::DVec3;
+        // a 4×3 grid of coarse vertices, triangles of unequal angles, folded (each coarse
+        // face moves by its own affine map, so its fine faces stay similar to it)
+        let (nx, ny) = (4usize, 3usize);
+        let mut faces = Vec::new();
+        for j in 0..ny - 1 {
+            for i in 0..nx - 1 {
+                let v = (j * nx + i) as u32;
+                faces.push([v, v + 1, v + nx as u32 + 1]);
+                faces.push([v, v + nx as u32 + 1, v + nx as u32]);
+            }
+        }
+        let coarse = Topology::from_triangles(nx * ny, faces).unwrap();
+        let now: Vec<DVec3> = (0..nx * ny)
+            .map(|v| {
+                let (x, y) = ((v % nx) as f64 * 0.3, (v / nx) as f64 * 0.25);
+                DVec3::new(x + 0.2 * y, 0.4 * (2.0 * x).sin(), y + 0.1 * x * x)
+            })
+            .collect();
+        for level in 1..=3 {
+            let mut part = Partial::new(&coarse, level).unwrap();
+            part.build(&(0..coarse.n_faces() as u32).collect::<Vec<_>>());
+            let topo = part.topology().unwrap();
+            let q = part.prolong(&now);
+            let class = part.face_congruence();
+            // the first face of each class serves it, as the window does
+            let share: Vec<(u32, u8)> = (0..class.len())
+                .map(|t| {
+                    let r = (0..=t).find(|&k| class[k] / 4 == class[t] / 4).unwrap();
+                    (r as u32, ((class[t] % 4 + 3 - class[r] % 4) % 3) as u8)
+                })
+                .collect();
+            assert!(share.iter().any(|&(_, c)| c != 0), "down faces are shifted");
+            let rings = OneRings::new(&topo);
+            let geometry = Geometry::new(&topo, &q).unwrap();
+            let frames = VertexFrames::new(&rings, &q).unwrap();
+            let own = Transport::new(&topo, &rings, &geometry, &frames, &q);
+            let shared =
+                Transport::with_shared_tips(&topo, &rings, &geometry, &frames, &q, Some(&share));
+            let mut worst: f64 = 0.0;
+            for v in 0..topo.n_vertices() {
+                for (a, b) in own.polar_angles(v).iter().zip(shared.polar_angles(v)) {
+                    worst = worst.max((a - b).abs());
+                }
+                worst = worst.max((own.angle_sum(v) - shared.angle_sum(v)).abs());
+            }
+            for (a, b) in own.edge_angles().iter().zip(shared.edge_angles()) {
+                worst = worst.max(wrap(a - b).abs());
+            }
+            assert!(worst < 1e-13, "level {level}: shared tips off by {worst:e}");
+            // the shift matters: without it the down faces get the wrong corners
+            let unshifted: Vec<(u32, u8)> = share.iter().map(|&(r, _)| (r, 0)).collect();
+            let wrong = Transport::with_shared_tips(
+                &topo,
+                &rings,
+                &geometry,
+                &frames,
+                &q,
+                Some(&unshifted),
+            );
+            let off = (0..topo.n_vertices())
+                .flat_map(|v| {
+                    own.polar_angles(v)
+                        .iter()
+                        .zip(wrong.polar_angles(v))
+                        .map(|(a, b)| (a - b).abs())
+                        .collect::<Vec<_>>()
+                })
+                .fold(0.0, f64::max);
+            assert!(
+                off > 1e-2,
+                "level {level}: the shift changed nothing ({off:e})"
+            );
+        }
+    }
+
+    fn wrap(a: f64) -> f64 {
+        crate::mesh::transport::wrap_angle(a)
     }
 
     #[test]

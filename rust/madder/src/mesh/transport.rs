@@ -63,6 +63,18 @@
 //! reproduced exactly; the tests check that arbitrarily turned frames keep a flat cloth's
 //! transport exact.
 //!
+//! ## Similar faces (issue 12, Detail)
+//! On a refined cloth ([`super::refine`]) the `4^L` fine faces of one coarse face are
+//! its translates scaled by `±1/N` (the lattice's up and down triangles on the planar
+//! coarse face), so their tip angles are the coarse face's, corner for corner up to a
+//! cyclic shift ([`super::refine::Partial::face_congruence`]).
+//! [`Transport::with_shared_tips`] computes them on the first fine face of each coarse
+//! face and copies them to the others: one set of three `atan2` per coarse face instead
+//! of per fine face. They are the others' own angles up to the rounding of each fine
+//! vertex's barycentric placement (a test: within 1e-13 rad on a folded refined sheet,
+//! levels 1–3). The mollification adds one length to every edge, which breaks the
+//! similarity: a mollified geometry computes every face's own.
+//!
 //! The polar map of an irregular vertex (several fans, [`super::FanKind::Irregular`]) lays
 //! its fans side by side without rescaling; see [`super::rings`].
 
@@ -76,18 +88,52 @@ use super::rings::{FanKind, OneRings, find_edge};
 use super::{Geometry, Topology};
 
 /// Tip angles of the three corners of every face from the intrinsic edge lengths (in
-/// parallel; each corner's angle is computed once and read by the fan of its vertex).
-fn tip_angles(topology: &Topology, geometry: &Geometry) -> Vec<[f64; 3]> {
-    topology
-        .face_edges()
+/// parallel; each corner's angle is computed once and read by the fan of its vertex). With
+/// `share`, a face `t` with `share[t] = (r, c)`, `r ≠ t`, takes the angles of face `r`
+/// turned by `c` (its corner `k` gets `r`'s corner `(k + c) % 3`): similar faces, module
+/// doc, "Similar faces".
+fn tip_angles(
+    topology: &Topology,
+    geometry: &Geometry,
+    share: Option<&[(u32, u8)]>,
+) -> Vec<[f64; 3]> {
+    let own = |f: usize| -> [f64; 3] {
+        let fe = topology.face_edges()[f];
+        let area = geometry.face_area[f];
+        let l = |c: usize| geometry.edge_length[fe[c % 3] as usize];
+        std::array::from_fn(|k| {
+            let (a, b, c) = (l(k), l(k + 1), l(k + 2));
+            (4.0 * area).atan2(b * b + c * c - a * a)
+        })
+    };
+    // the mollification adds the same length to every edge, which does not scale with
+    // the faces: similar faces stay similar only without it
+    let Some(share) = share.filter(|_| geometry.mollify_delta == 0.0) else {
+        return (0..topology.n_faces()).into_par_iter().map(own).collect();
+    };
+    assert_eq!(share.len(), topology.n_faces(), "one share per face");
+    let first: Vec<[f64; 3]> = share
         .par_iter()
-        .zip(&geometry.face_area)
-        .map(|(fe, &area)| {
-            let l = |c: usize| geometry.edge_length[fe[c % 3] as usize];
-            std::array::from_fn(|k| {
-                let (a, b, c) = (l(k), l(k + 1), l(k + 2));
-                (4.0 * area).atan2(b * b + c * c - a * a)
-            })
+        .enumerate()
+        .map(|(t, &(r, _))| {
+            if r as usize == t {
+                own(t)
+            } else {
+                [f64::NAN; 3]
+            }
+        })
+        .collect();
+    share
+        .par_iter()
+        .zip(&first)
+        .map(|(&(r, c), &mine)| {
+            let theirs = first[r as usize];
+            debug_assert!(theirs[0].is_finite(), "a shared face's angles are its own");
+            if mine[0].is_nan() {
+                std::array::from_fn(|k| theirs[(k + c as usize) % 3])
+            } else {
+                mine
+            }
         })
         .collect()
 }
@@ -126,11 +172,29 @@ impl Transport {
         frames: &VertexFrames,
         positions: &[DVec3],
     ) -> Self {
+        Self::with_shared_tips(topology, rings, geometry, frames, positions, None)
+    }
+
+    /// [`Self::new`], with the tip angles of similar faces computed once (module doc,
+    /// "Similar faces"): face `t` with `share[t] = (r, c)`, `r ≠ t`, takes the angles of
+    /// face `r` (which has `share[r].0 = r`), its corner `k` that of `r`'s corner
+    /// `(k + c) % 3`. Ignored when the geometry is mollified.
+    ///
+    /// # Panics
+    /// As [`Self::new`], and if `share` does not have one entry per face.
+    pub(crate) fn with_shared_tips(
+        topology: &Topology,
+        rings: &OneRings,
+        geometry: &Geometry,
+        frames: &VertexFrames,
+        positions: &[DVec3],
+        share: Option<&[(u32, u8)]>,
+    ) -> Self {
         let n = topology.n_vertices();
         assert_eq!(rings.n_vertices(), n, "rings of another topology");
         assert_eq!(frames.len(), n, "one frame per vertex");
         assert_eq!(positions.len(), n, "one position per vertex");
-        let tip = tip_angles(topology, geometry);
+        let tip = tip_angles(topology, geometry, share);
         // polar angles written in place: one slice of the flat array per vertex
         let mut alpha = vec![f64::NAN; rings.spoke_vertex.len()];
         let mut slices: Vec<&mut [f64]> = Vec::with_capacity(n);
@@ -151,22 +215,29 @@ impl Transport {
             .unzip();
         // θ_ab from the angle of each edge in the frame of each endpoint, and its rotation
         let edges = topology.edges();
-        #[allow(clippy::type_complexity)]
-        let (theta, (cos_sin, edge_polar)): (Vec<f64>, (Vec<[f64; 2]>, Vec<[f64; 2]>)) = edges
-            .par_iter()
-            .zip(&rings.edge_spoke)
-            .map(|(&[a, b], &[sa, sb])| {
+        // written in place, in one parallel pass (a nested unzip collects into lists
+        // of chunks and copies them)
+        let m = edges.len();
+        let (mut theta, mut cos_sin, mut edge_polar) =
+            (vec![0.0; m], vec![[0.0; 2]; m], vec![[0.0; 2]; m]);
+        theta
+            .par_iter_mut()
+            .zip(&mut cos_sin)
+            .zip(&mut edge_polar)
+            .zip(edges.par_iter().zip(&rings.edge_spoke))
+            .with_min_len(1024)
+            .for_each(|(((theta, cos_sin), polar), (&[a, b], &[sa, sb]))| {
                 let angle = |v: u32, s: u32| match alpha.get(s as usize) {
                     Some(&x) => x + offset[v as usize],
                     None => f64::NAN,
                 };
                 let (ta, tb) = (angle(a, sa), angle(b, sb));
                 debug_assert!(ta.is_finite() && tb.is_finite(), "every edge is in a fan");
-                let theta = wrap_angle(ta - tb + PI);
+                *theta = wrap_angle(ta - tb + PI);
                 let (sin, cos) = theta.sin_cos();
-                (theta, ([cos, sin], [ta, tb]))
-            })
-            .unzip();
+                *cos_sin = [cos, sin];
+                *polar = [ta, tb];
+            });
         Self {
             alpha,
             spoke_ptr: rings.spoke_ptr.clone(),
@@ -282,9 +353,21 @@ fn frame_offset(rings: &OneRings, v: usize, alpha: &[f64], frame: &DMat3, pos: &
         .map_or(0.0, wrap_angle)
 }
 
-/// `a` wrapped to `(−π, π]`.
+/// `a` wrapped to `(−π, π]`: `(a + π).rem_euclid(2π) − π`, with the remainder taken
+/// without the library's `fmod` for `|a + π| < 4π` (every angle the transport and the
+/// back-trace wrap: sums and differences of a few polar angles). There `x − 2π sign(x)`
+/// is exact (Sterbenz), so it is the exact remainder `fmod` returns, and the result has
+/// the same bits (a test compares them).
 pub(crate) fn wrap_angle(a: f64) -> f64 {
-    let r = (a + PI).rem_euclid(TAU) - PI;
+    let x = a + PI;
+    let m = if x.abs() < TAU {
+        x
+    } else if x.abs() < 2.0 * TAU {
+        x - TAU.copysign(x)
+    } else {
+        x % TAU
+    };
+    let r = if m < 0.0 { m + TAU } else { m } - PI;
     if r == -PI { PI } else { r }
 }
 
@@ -315,6 +398,38 @@ mod tests {
         let c = Transport::new(&t, &r, &g, &f, &p);
         assert!((c.angle_sum(0) - 4.0 * TAU / 6.0).abs() < 1e-14);
         assert!((c.polar_angles(0)[4] - 4.0 * TAU / 6.0).abs() < 1e-14);
+    }
+
+    #[test]
+    fn wrap_angle_is_rem_euclid_to_the_bit() {
+        let reference = |a: f64| {
+            let r = (a + PI).rem_euclid(TAU) - PI;
+            if r == -PI { PI } else { r }
+        };
+        let mut special = vec![0.0, -0.0, PI, -PI, TAU, -TAU, 3.0 * PI, -3.0 * PI];
+        special.extend([f64::INFINITY, f64::NEG_INFINITY, 1e300, -1e300, 5.0 * PI]);
+        for &a in &special {
+            for x in [
+                a,
+                f64::from_bits(a.to_bits() + 1),
+                f64::from_bits(a.to_bits() - 1),
+            ] {
+                let (w, r) = (wrap_angle(x), reference(x));
+                assert!(
+                    w.to_bits() == r.to_bits() || (w.is_nan() && r.is_nan()),
+                    "{x}: {w} vs {r}"
+                );
+            }
+        }
+        // a pseudo-random sweep over ±5π (both branches and the fallback)
+        let mut s = 0x9e37_79b9_7f4a_7c15_u64;
+        for _ in 0..200_000 {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            let x = ((s >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 10.0 * PI;
+            assert_eq!(wrap_angle(x).to_bits(), reference(x).to_bits(), "{x}");
+        }
     }
 
     #[test]

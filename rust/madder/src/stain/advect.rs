@@ -48,14 +48,20 @@
 //! that maps its polar directions onto the layout: the layout angle of the edge `c → m`
 //! minus its polar angle `α_cm + δ_c`, for `m = r` and `m = l`, averaged (the two differ by
 //! `(s_c − 1) φ_c`, the holonomy share of the corner at a curved `c`; they agree on
-//! developable cloth). For `j` and `k` of the first triangle this formula is eq. 4.4
+//! developable cloth). The average is taken on unit complex numbers: `e^{i a}` of each
+//! edge is its layout direction normalized times `e^{−i(α + δ_c)}`, and the mean angle
+//! (on the shorter arc, as the wrapped difference gave it) is the direction of their sum:
+//! two `sin_cos` and three square roots instead of two `atan2` and a `sin_cos` (issue 12:
+//! at Detail 2 most back-traces end in an unfolded triangle, whose three vertices all
+//! need it). The same rotation up to rounding (the Detail bench's stain moved by 2e-15
+//! of its peak). For `j` and `k` of the first triangle this formula is eq. 4.4
 //! itself (`α_ij + δ_i + π − (α_ji + δ_j) = θ_ij`), so `R_ij` is taken from the
 //! [`Transport`] and the one-ring case is bit-identical to the seed's formula. A vertex
 //! keeps the rotation it was given when first placed while the strip passes it. The
-//! rotation (two `atan2` and a `sin_cos`) is only evaluated for the vertices whose velocity
-//! is read, the last triangle's or a crossing's where the walk stops: the others a long
-//! strip passes never need it, nor the look-up of their polar angles (the same operations
-//! when read, so the same values).
+//! rotation (two `sin_cos` and three square roots) is only evaluated for the vertices
+//! whose velocity is read, the last triangle's or a crossing's where the walk stops: the
+//! others a long strip passes never need it, nor the look-up of their polar angles (the
+//! same operations when read, so the same values).
 //!
 //! *First wedge.* Placing a spoke costs a `sin_cos`, and the wedge is searched in fan
 //! order. A pre-test skips, without placing their spokes, the wedges whose polar sector
@@ -183,6 +189,21 @@
 //! transfer order), and with several sub-cycles the momentum's rotations `R_vd` are
 //! gathered once per plan in transfer order instead of from the edges in every cycle.
 //!
+//! ### Congruent faces (issue 12, Detail)
+//! On a refined cloth the fine faces of one coarse face are congruent: translates of one
+//! lattice triangle (the up ones) or of its point reflection (the down ones), on the
+//! planar coarse face ([`crate::mesh::refine::Partial::face_congruence`]). Their area
+//! vectors are therefore one face's: `S` of the edge opposite corner `k`, oriented along
+//! the corners `k+1 → k+2`, is the run's first face's `S` of its corresponding corner
+//! `k + c` (the cyclic shift of the corners), negated for a face of the other
+//! orientation (the point reflection reverses the edge and the segment `c_T − m` alike,
+//! and keeps the normal); it is then oriented from the lower- to the higher-numbered
+//! vertex as above. So [`dual_fluxes`] computes the normal, its length and the centroid
+//! once per coarse face in the simulator's window, and per fine face only the three dot
+//! products. The vectors are the face's own up to the rounding of the fine vertices'
+//! barycentric placement (a test compares the fluxes on a folded refined sheet, levels
+//! 1–3, to 1e-13 of the largest).
+//!
 //! ## Momentum advection (§4.3.2)
 //! The alternative of §4.3.2 moves the momentum `p_i = m_i u_i` with the same transfers as
 //! the solvent: a transfer of fraction `φ` of the donor's mass takes `φ p_donor` with it,
@@ -221,6 +242,13 @@ pub(crate) const FLAT_FACE_REL: f64 = 1e-12;
 /// `10⁻¹⁶ × (number of unfoldings)` relative; a segment running along a straight border
 /// must see the border vertices *on* its line, whatever the rounding, to follow it.
 pub(crate) const SIDE_TOLERANCE: f64 = 1e-12;
+
+/// Below this length of the sum of two unit complex numbers (two angles within
+/// `2 acos(10⁻³/2) ≈ π − 10⁻³` of each other) an unfolded vertex's turn is the mean of
+/// the angles themselves ([`Trace`]'s turn, module doc): the bisector's direction is
+/// then ill-conditioned. Its two angles differ by the holonomy share of one corner, far
+/// from π on any cloth.
+const BISECTOR_MIN: f64 = 1e-3;
 
 /// Solvent mass, relative to the largest mass before the step, below which the momentum
 /// velocity is not formed. The momentum of a vertex carries an absolute rounding error of
@@ -453,9 +481,7 @@ impl Trace<'_> {
             } => {
                 let polar_r = self.transport.edge_polar(edge_r as usize)[end_r as usize];
                 let polar_l = self.transport.edge_polar(edge_l as usize)[end_l as usize];
-                let a_r = to_r.y.atan2(to_r.x) - polar_r;
-                let a_l = to_l.y.atan2(to_l.x) - polar_l;
-                DMat2::from_angle(a_r + 0.5 * wrap_angle(a_l - a_r))
+                unfolded_turn(to_r, to_l, polar_r, polar_l)
             }
         }
     }
@@ -638,6 +664,28 @@ impl Trace<'_> {
     }
 }
 
+/// The rotation `F_c → layout` of a vertex `c` placed by the unfolding, from the layout
+/// directions `to_r`, `to_l` of its edges to `r` and `l` and their polar angles in `F_c`:
+/// the mean of `arg(to_m) − polar_m` over the two edges, on the shorter arc (module doc),
+/// taken on unit complex numbers: `e^{i a} = (to / |to|) e^{−i polar}` per edge, the mean
+/// the direction of their sum. Two nearly opposite ([`BISECTOR_MIN`]): the angles.
+fn unfolded_turn(to_r: DVec2, to_l: DVec2, polar_r: f64, polar_l: f64) -> DMat2 {
+    let unit = |to: DVec2, polar: f64| {
+        let (sin, cos) = polar.sin_cos();
+        DVec2::new(to.x * cos + to.y * sin, to.y * cos - to.x * sin) / to.length()
+    };
+    let sum = unit(to_r, polar_r) + unit(to_l, polar_l);
+    let len = sum.length();
+    if len > BISECTOR_MIN {
+        let (cos, sin) = (sum.x / len, sum.y / len);
+        DMat2::from_cols_array(&[cos, sin, -sin, cos])
+    } else {
+        let a_r = to_r.y.atan2(to_r.x) - polar_r;
+        let a_l = to_l.y.atan2(to_l.x) - polar_l;
+        DMat2::from_angle(a_r + 0.5 * wrap_angle(a_l - a_r))
+    }
+}
+
 /// Margin (radians) of the first wedge's angular pre-test, [`in_sector`]: far above the
 /// error of [`rough_atan2`] (below `10⁻⁵`) and the rounding of the polar angles and of
 /// [`SIDE_TOLERANCE`] (below `10⁻¹¹`), far below a wedge's opening.
@@ -729,7 +777,7 @@ pub fn dual_fluxes(
     frames: &VertexFrames,
     velocity: &[DVec2],
 ) -> Vec<f64> {
-    dual_fluxes_where(topology, positions, frames, velocity, None)
+    dual_fluxes_where(topology, positions, frames, velocity, None, None)
 }
 
 /// [`dual_fluxes`] through the edges whose two ends are `active` (the simulator's active
@@ -739,15 +787,20 @@ pub fn dual_fluxes(
 ///
 /// # Panics
 /// As [`dual_fluxes`], and if `active` does not have one entry per vertex.
+///
+/// With `share` (a refined cloth's congruent faces, as
+/// [`crate::mesh::Transport::with_shared_tips`] takes them), the median-dual area vectors
+/// of each run of congruent faces are computed once (module doc, "Congruent faces").
 pub(crate) fn dual_fluxes_in(
     topology: &Topology,
     positions: &[DVec3],
     frames: &VertexFrames,
     velocity: &[DVec2],
     active: &[bool],
+    share: Option<&[(u32, u8)]>,
 ) -> Vec<f64> {
     assert_eq!(active.len(), topology.n_vertices(), "one flag per vertex");
-    dual_fluxes_where(topology, positions, frames, velocity, Some(active))
+    dual_fluxes_where(topology, positions, frames, velocity, Some(active), share)
 }
 
 fn dual_fluxes_where(
@@ -756,6 +809,7 @@ fn dual_fluxes_where(
     frames: &VertexFrames,
     velocity: &[DVec2],
     active: Option<&[bool]>,
+    share: Option<&[(u32, u8)]>,
 ) -> Vec<f64> {
     let n = topology.n_vertices();
     assert_eq!(positions.len(), n, "one position per vertex");
@@ -774,18 +828,66 @@ fn dual_fluxes_where(
         })
         .collect();
     // a face with fewer than two active corners has no active edge
-    let per_face: Vec<[f64; 3]> = topology
-        .faces()
-        .par_iter()
-        .with_min_len(VERTICES_PER_TASK)
-        .map(|tri| {
-            if tri.iter().filter(|&&v| on(v)).count() >= 2 {
-                face_fluxes(tri.map(|v| v as usize), positions, &world)
-            } else {
-                [0.0; 3]
-            }
-        })
-        .collect();
+    let needed = |tri: &[u32; 3]| tri.iter().filter(|&&v| on(v)).count() >= 2;
+    let per_face: Vec<[f64; 3]> = match share {
+        None => topology
+            .faces()
+            .par_iter()
+            .with_min_len(VERTICES_PER_TASK)
+            .map(|tri| {
+                if needed(tri) {
+                    face_fluxes(tri.map(|v| v as usize), positions, &world)
+                } else {
+                    [0.0; 3]
+                }
+            })
+            .collect(),
+        Some(share) => {
+            // runs of congruent faces (consecutive, each led by the face they share),
+            // one set of area vectors per run (module doc, "Congruent faces")
+            let faces = topology.faces();
+            assert_eq!(share.len(), faces.len(), "one share per face");
+            let starts: Vec<usize> = (0..faces.len())
+                .filter(|&t| share[t].0 as usize == t)
+                .collect();
+            starts
+                .par_iter()
+                .enumerate()
+                .with_min_len(VERTICES_PER_TASK / 16)
+                .flat_map_iter(|(i, &lead)| {
+                    let end = starts.get(i + 1).copied().unwrap_or(faces.len());
+                    let (world, needed) = (&world, &needed);
+                    let lead_tri = faces[lead].map(|v| v as usize);
+                    // the lead's vectors only if a face of the run needs them
+                    let area = faces[lead..end]
+                        .iter()
+                        .any(needed)
+                        .then(|| face_area_vectors(lead_tri, positions));
+                    (lead..end).map(move |t| {
+                        let tri = faces[t];
+                        match area {
+                            Some(area) if needed(&tri) => {
+                                debug_assert_eq!(
+                                    share[t].0 as usize, lead,
+                                    "a run shares its lead"
+                                );
+                                let c = share[t].1 as usize;
+                                // a face of the other orientation is the lead turned by π
+                                let sign = if c == 0 { 1.0 } else { -1.0 };
+                                std::array::from_fn(|k| {
+                                    let s = area[(k + c) % 3] * sign;
+                                    let (a, b) = (tri[(k + 1) % 3], tri[(k + 2) % 3]);
+                                    let s = if a > b { -s } else { s };
+                                    0.5 * (world[a as usize] + world[b as usize]).dot(s)
+                                })
+                            }
+                            _ => [0.0; 3],
+                        }
+                    })
+                })
+                .collect()
+        }
+    };
     // gather per edge in face order (deterministic)
     let mut flux = vec![0.0; topology.n_edges()];
     for (fe, contrib) in topology.face_edges().iter().zip(&per_face) {
@@ -801,6 +903,30 @@ fn dual_fluxes_where(
         }
     }
     flux
+}
+
+/// The median-dual area vectors `S^T` of the edges opposite the corners `k` of a face,
+/// each oriented from corner `k + 1` to corner `k + 2` (`S · (p_{k+2} − p_{k+1}) ≥ 0`);
+/// zero for a flat face ([`FLAT_FACE_REL`]). The same operations as [`face_fluxes`],
+/// with the orientation taken from the corners instead of the vertex numbers.
+fn face_area_vectors(tri: [usize; 3], pos: &[DVec3]) -> [DVec3; 3] {
+    let p = tri.map(|v| pos[v]);
+    let normal = (p[1] - p[0]).cross(p[2] - p[0]);
+    let longest = (0..3)
+        .map(|k| p[(k + 1) % 3].distance_squared(p[(k + 2) % 3]))
+        .fold(0.0, f64::max);
+    let area2 = normal.length();
+    if area2.is_nan() || area2 <= FLAT_FACE_REL * longest {
+        return [DVec3::ZERO; 3];
+    }
+    let unit = normal / area2;
+    let centroid = (p[0] + p[1] + p[2]) / 3.0;
+    std::array::from_fn(|k| {
+        let (a, b) = ((k + 1) % 3, (k + 2) % 3);
+        let mid = 0.5 * (p[a] + p[b]);
+        let s = (centroid - mid).cross(unit);
+        if s.dot(p[b] - p[a]) < 0.0 { -s } else { s }
+    })
 }
 
 /// `u_ab · S_ab^T` for the edge opposite each corner `k` of a face, from its lower- to its
@@ -1427,6 +1553,109 @@ mod tests {
 
     fn advect(m: &Mesh, u: &[DVec2], h: f64) -> Vec<DVec2> {
         advect_velocity(&m.t, &m.rings, &m.geometry, &m.transport, u, h)
+    }
+
+    #[test]
+    fn unfolded_turn_is_the_mean_angle() {
+        use std::f64::consts::{PI, TAU};
+        // against the angles themselves: a_m = arg(to_m) − polar_m, the mean on the
+        // shorter arc, over random directions, lengths and polar angles, differences up
+        // to nearly π (the fallback below BISECTOR_MIN included)
+        let mut s = 0x2545_f491_4f6c_dd1d_u64;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for case in 0..20_000 {
+            let (a_r, len_r, len_l) = (TAU * next() - PI, 0.01 + next(), 0.01 + next());
+            // the two angles' difference, up to ±(π − 1e-9)
+            let gap = if case % 4 == 0 {
+                (PI - 1e-9) * (2.0 * next() - 1.0)
+            } else {
+                0.3 * (2.0 * next() - 1.0)
+            };
+            let (polar_r, polar_l) = (4.0 * TAU * next() - 2.0 * TAU, TAU * next());
+            let dir = |a: f64| DVec2::new(a.cos(), a.sin());
+            let to_r = len_r * dir(a_r + polar_r);
+            let to_l = len_l * dir(a_r + gap + polar_l);
+            let want = DMat2::from_angle(a_r + 0.5 * gap);
+            let got = unfolded_turn(to_r, to_l, polar_r, polar_l);
+            let err = (got - want)
+                .to_cols_array()
+                .iter()
+                .fold(0.0, |m: f64, x| m.max(x.abs()));
+            assert!(err < 1e-12, "{case}: gap {gap}, off by {err:e}");
+            assert!((got.determinant() - 1.0).abs() < 1e-14, "a rotation");
+        }
+    }
+
+    #[test]
+    fn congruent_faces_share_their_area_vectors() {
+        use crate::mesh::refine::Partial;
+        // a 4×3 grid of coarse vertices, triangles of unequal angles, folded: each coarse
+        // face moves by its own affine map, so its fine faces stay congruent
+        let (nx, ny) = (4usize, 3usize);
+        let mut faces = Vec::new();
+        for j in 0..ny - 1 {
+            for i in 0..nx - 1 {
+                let v = (j * nx + i) as u32;
+                faces.push([v, v + 1, v + nx as u32 + 1]);
+                faces.push([v, v + nx as u32 + 1, v + nx as u32]);
+            }
+        }
+        let coarse = Topology::from_triangles(nx * ny, faces).unwrap();
+        let now: Vec<DVec3> = (0..nx * ny)
+            .map(|v| {
+                let (x, y) = ((v % nx) as f64 * 0.3, (v / nx) as f64 * 0.25);
+                DVec3::new(x + 0.2 * y, 0.4 * (2.0 * x).sin(), y + 0.1 * x * x)
+            })
+            .collect();
+        for level in 1..=3 {
+            let mut part = Partial::new(&coarse, level).unwrap();
+            part.build(&(0..coarse.n_faces() as u32).collect::<Vec<_>>());
+            let t = part.topology().unwrap();
+            let q = part.prolong(&now);
+            let class = part.face_congruence();
+            let share: Vec<(u32, u8)> = (0..class.len())
+                .map(|f| {
+                    let r = (0..=f).find(|&k| class[k] / 4 == class[f] / 4).unwrap();
+                    (r as u32, ((class[f] % 4 + 3 - class[r] % 4) % 3) as u8)
+                })
+                .collect();
+            let frames = VertexFrames::new(&OneRings::new(&t), &q).unwrap();
+            let u: Vec<DVec2> = (0..t.n_vertices())
+                .map(|v| DVec2::new((v as f64 * 0.7).sin(), (v as f64 * 1.3).cos()))
+                .collect();
+            // half the vertices active: faces with one active corner get no flux
+            let active: Vec<bool> = (0..t.n_vertices()).map(|v| v % 7 != 3).collect();
+            let own = dual_fluxes_where(&t, &q, &frames, &u, Some(&active), None);
+            let shared = dual_fluxes_where(&t, &q, &frames, &u, Some(&active), Some(&share));
+            let peak = own.iter().fold(0.0, |m: f64, x| m.max(x.abs()));
+            let worst = own
+                .iter()
+                .zip(&shared)
+                .fold(0.0, |m: f64, (a, b)| m.max((a - b).abs()));
+            assert!(
+                peak > 0.0 && worst < 1e-13 * peak,
+                "level {level}: {worst:e} of {peak:e}"
+            );
+            for (a, b) in own.iter().zip(&shared) {
+                assert_eq!(*a == 0.0, *b == 0.0, "the same edges carry a flux");
+            }
+            // the orientation matters: without the reflection's sign the fluxes are wrong
+            let unsigned: Vec<(u32, u8)> = share.iter().map(|&(r, _)| (r, 0)).collect();
+            let wrong = dual_fluxes_where(&t, &q, &frames, &u, Some(&active), Some(&unsigned));
+            let off = own
+                .iter()
+                .zip(&wrong)
+                .fold(0.0, |m: f64, (a, b)| m.max((a - b).abs()));
+            assert!(
+                off > 1e-2 * peak,
+                "level {level}: the shift changed nothing"
+            );
+        }
     }
 
     #[test]

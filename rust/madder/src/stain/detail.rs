@@ -61,7 +61,11 @@
 //! per face and edge (module doc of [`crate::mesh::kabsch`]): at level 2, 5 rotations
 //! for the 15 fine vertices around a cloth vertex that are not cloth vertices. It is
 //! their own rotation up to rounding (measured on the Detail bench: the stain moves by
-//! 4.5e-15 of its peak).
+//! 4.5e-15 of its peak). The 16 fine faces of a coarse face at level 2 are congruent
+//! (translates of one lattice triangle and of its point reflection): they share their
+//! tip angles (the transport's `atan2`s) and their median-dual area vectors (the
+//! fluxes), computed once per coarse face in the window (the stain moves by 5e-14 of its
+//! peak).
 
 use std::borrow::Cow;
 use std::time::Instant;
@@ -127,6 +131,7 @@ struct Side {
     world: Option<Vec<DVec3>>,
     boundary: Vec<bool>,
     congruent: Vec<u32>,
+    face_congruent: Vec<u32>,
     conductivity: Conductivity,
 }
 
@@ -182,6 +187,7 @@ impl Fine {
                     world,
                     boundary: p.boundary(),
                     congruent: p.congruence(),
+                    face_congruent: p.face_congruence(),
                     conductivity: this.conductivity(),
                 }
             },
@@ -198,6 +204,7 @@ impl Fine {
             world,
             boundary,
             congruent,
+            face_congruent,
             conductivity,
         } = side;
         // the fans beside the neighbour lists (independent)
@@ -236,6 +243,7 @@ impl Fine {
         c.irregular = irregular;
         c.boundary = boundary;
         c.congruent = Some(congruent);
+        c.face_congruent = Some(face_congruent);
         c.conductivity = conductivity;
         c.rest = rest;
         c.rings = rings;

@@ -38,6 +38,7 @@
 //! motion, and the mass it moves is invisible.
 
 use glam::DVec2;
+use rayon::prelude::*;
 
 use crate::mesh::{Topology, Transport};
 
@@ -63,11 +64,15 @@ pub(crate) fn wet_vertices(mass: &[f64], area: &[f64], region: &[bool]) -> Vec<b
         .collect()
 }
 
+/// Vertices per task of the extension's parallel passes.
+const EXTEND_PER_TASK: usize = 1024;
+
 /// Replaces the velocity of every vertex that is not `wet` in each of `fields` by the
 /// extension of the module doc: ring by ring from the wet vertices, the mean of the known
 /// neighbours' values transported by `transport`'s `R_ij`; zero where no wet vertex
-/// reaches. Every field gets the same weights. Sequential and in edge order: the result
-/// does not depend on the thread count.
+/// reaches. Every field gets the same weights. Each ring is found and computed in
+/// parallel (a sorted set; each mean summed in edge order from earlier rings only): the
+/// result does not depend on the thread count.
 ///
 /// # Panics
 /// If `wet` or a field does not have one entry per vertex of `topology`.
@@ -88,25 +93,33 @@ pub fn extend_velocity(
     let mut ring: Vec<u32> = Vec::new();
     let mut values: Vec<DVec2> = Vec::new();
     while !front.is_empty() {
-        // the dry neighbours of the front, each once, in increasing order
+        // the dry neighbours of the front, each once, in increasing order (found in
+        // parallel: a set, sorted, whatever the split)
         ring.clear();
-        for &v in &front {
-            for &e in topology.vertex_edges(v as usize) {
-                let w = topology.other_end(e as usize, v as usize);
-                if !known[w as usize] {
-                    ring.push(w);
-                }
-            }
-        }
-        ring.sort_unstable();
+        ring.par_extend(
+            front
+                .par_iter()
+                .with_min_len(EXTEND_PER_TASK)
+                .flat_map_iter(|&v| {
+                    let known = &known;
+                    topology
+                        .vertex_edges(v as usize)
+                        .iter()
+                        .filter_map(move |&e| {
+                            let w = topology.other_end(e as usize, v as usize);
+                            (!known[w as usize]).then_some(w)
+                        })
+                }),
+        );
+        ring.par_sort_unstable();
         ring.dedup();
         for field in fields.iter_mut() {
-            values.clear();
-            for &i in &ring {
-                values.push(mean_of_known(
-                    topology, transport, &known, field, i as usize,
-                ));
-            }
+            // each value reads only earlier rings: computed in parallel, then written
+            let field_now: &[DVec2] = field;
+            ring.par_iter()
+                .with_min_len(EXTEND_PER_TASK)
+                .map(|&i| mean_of_known(topology, transport, &known, field_now, i as usize))
+                .collect_into_vec(&mut values);
             for (&i, &u) in ring.iter().zip(&values) {
                 field[i as usize] = u;
             }

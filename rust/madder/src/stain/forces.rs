@@ -148,17 +148,85 @@ pub(crate) fn integrate_velocity(
     friction: f64,
     h: f64,
 ) -> (DVec2, DVec2) {
-    let (e, phi1, phi2) = phi(c64::new(-friction * h, -2.0 * omega_z * h));
-    let (u, a) = (c64::new(u.x, u.y), c64::new(a.x, a.y));
-    let end = e * u + phi1 * a * h;
-    let mean = phi1 * u + phi2 * a * h;
-    (DVec2::new(end.re, end.im), DVec2::new(mean.re, mean.im))
+    VelocityStep::new(omega_z, friction, h).apply(u, a)
 }
 
-/// `(e^z, φ₁(z), φ₂(z))`; by their Taylor series for small `|z|`, where the closed forms
-/// cancel (six terms: the error is below `|z|⁶/5040 ≤ 2e-22` for `|z| ≤ 0.05`).
-fn phi(z: c64) -> (c64, c64, c64) {
-    let r = z.re.exp();
+/// The propagator of [`integrate_velocity`] for one `(ω_z, k, h)`: `e^{λh}`, `φ₁(λh)` and
+/// `φ₂(λh)`, computed once and applied to any `(u₀, a)`. The simulator's two half kicks
+/// of a vertex share one (the same `ω_z`, `k` and `h/2`), and the decay `e^{−kh}`, the
+/// real part of every vertex's `e^{λh}`, is computed once per step
+/// ([`Self::with_decay`]): the same operations on the same numbers, so the same bits as
+/// separate calls of [`integrate_velocity`].
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct VelocityStep {
+    e: c64,
+    phi1: c64,
+    phi2: c64,
+    h: f64,
+}
+
+impl VelocityStep {
+    /// The propagator over `h` for the rotation `omega_z` and friction `friction`.
+    pub(crate) fn new(omega_z: f64, friction: f64, h: f64) -> Self {
+        Self::with_decay(Self::decay(friction, h), omega_z, friction, h)
+    }
+
+    /// `e^{−kh}`, the modulus of `e^{λh}` whatever `ω_z` (the argument of
+    /// [`Self::with_decay`]).
+    pub(crate) fn decay(friction: f64, h: f64) -> f64 {
+        (-friction * h).exp()
+    }
+
+    /// [`Self::new`] with `decay` = [`Self::decay`]`(friction, h)` computed by the caller
+    /// (once for many vertices).
+    pub(crate) fn with_decay(decay: f64, omega_z: f64, friction: f64, h: f64) -> Self {
+        let (e, phi1, phi2) = phi(decay, c64::new(-friction * h, -2.0 * omega_z * h));
+        Self { e, phi1, phi2, h }
+    }
+
+    /// The velocity at the end of the step from `u` under the constant force `a`, and its
+    /// mean over the step ([`integrate_velocity`]).
+    pub(crate) fn apply(&self, u: DVec2, a: DVec2) -> (DVec2, DVec2) {
+        let (e, phi1, phi2, h) = (self.e, self.phi1, self.phi2, self.h);
+        let (u, a) = (c64::new(u.x, u.y), c64::new(a.x, a.y));
+        let end = e * u + phi1 * a * h;
+        let mean = phi1 * u + phi2 * a * h;
+        (DVec2::new(end.re, end.im), DVec2::new(mean.re, mean.im))
+    }
+
+    /// The velocity at the end of the step alone (the first of [`Self::apply`]).
+    pub(crate) fn end(&self, u: DVec2, a: DVec2) -> DVec2 {
+        let (u, a) = (c64::new(u.x, u.y), c64::new(a.x, a.y));
+        let end = self.e * u + self.phi1 * a * self.h;
+        DVec2::new(end.re, end.im)
+    }
+
+    /// The mean velocity over the step alone (the second of [`Self::apply`]).
+    pub(crate) fn mean(&self, u: DVec2, a: DVec2) -> DVec2 {
+        let (u, a) = (c64::new(u.x, u.y), c64::new(a.x, a.y));
+        let mean = self.phi1 * u + self.phi2 * a * self.h;
+        DVec2::new(mean.re, mean.im)
+    }
+}
+
+/// `1/k!` for `k = 0..=7`: the Taylor coefficients of [`phi`]'s series (each factorial an
+/// exact integer in `f64`, so `1.0 / k!` is the correctly rounded reciprocal, as the
+/// product computed on the fly gave).
+const INV_FACTORIAL: [f64; 8] = [
+    1.0,
+    1.0,
+    1.0 / 2.0,
+    1.0 / 6.0,
+    1.0 / 24.0,
+    1.0 / 120.0,
+    1.0 / 720.0,
+    1.0 / 5040.0,
+];
+
+/// `(e^z, φ₁(z), φ₂(z))` with `r = e^{Re z}` given; by their Taylor series for small `|z|`,
+/// where the closed forms cancel (six terms: the error is below `|z|⁶/5040 ≤ 2e-22` for
+/// `|z| ≤ 0.05`).
+fn phi(r: f64, z: c64) -> (c64, c64, c64) {
     let (sin, cos) = z.im.sin_cos();
     let e = c64::new(r * cos, r * sin);
     if z.re.hypot(z.im) > 0.05 {
@@ -167,11 +235,10 @@ fn phi(z: c64) -> (c64, c64, c64) {
         return (e, phi1, phi2);
     }
     // φ₁ = Σ z^k/(k+1)!, φ₂ = Σ z^k/(k+2)!, k = 0..5 (Horner)
-    let horner = |first: u32| {
+    let horner = |first: usize| {
         let mut acc = c64::new(0.0, 0.0);
-        for k in (0..6u32).rev() {
-            let fact: f64 = (1..=k + first).map(f64::from).product();
-            acc = acc * z + c64::new(1.0 / fact, 0.0);
+        for k in (0..6).rev() {
+            acc = acc * z + c64::new(INV_FACTORIAL[k + first], 0.0);
         }
         acc
     };

@@ -14,12 +14,13 @@
 //!    tangential gravity and rectilinear force in `F_i`, `k` the drag of the fibres on
 //!    the liquid (`k = 0` is the seed's frictionless liquid), `ω` the frames' angular
 //!    velocity over the sub-step: integrated exactly for constant `a` and `ω`
-//!    ([`super::forces::integrate_velocity`]), so the liquid reaches its terminal
-//!    velocity `a/k` at any step (a kick followed by the decay `e^{−kh}` reaches 30 % of
-//!    it at 24 fps), and the Coriolis force turns it without changing its speed. The
-//!    velocity is then **extended** over the dry cloth from the wet region
-//!    ([`super::extend`]): it is the liquid's, and the dry value is what arriving liquid
-//!    reads.
+//!    ([`super::forces::integrate_velocity`]; each vertex's propagator computed once
+//!    for the two half kicks, [`super::forces::VelocityStep`]), so the liquid reaches
+//!    its terminal velocity `a/k` at any step (a kick followed by the decay `e^{−kh}`
+//!    reaches 30 % of it at 24 fps), and the Coriolis force turns it without changing
+//!    its speed. The velocity is then **extended** over the dry cloth from the wet
+//!    region ([`super::extend`]): it is the liquid's, and the dry value is what arriving
+//!    liquid reads.
 //! 2. **Advection** (§4.3.1–4.3.2): the densities by upwind finite volumes
 //!    ([`super::advect`]); the velocity with the solvent's momentum (§4.3.2, the
 //!    default: `u = p/m`, the mass-weighted velocity), or semi-Lagrangian (§4.3.1) with
@@ -66,7 +67,9 @@
 //! about its normal to [`MAX_TURN`] (0.1 rad) per sub-step, on top of the ones asked for
 //! ([`StainParams::substeps`]): 1 at 2 rad/s, 4 at 8 rad/s at 25 fps, and the path stays
 //! within 5 %. The turn is measured on the window's active vertices only (where liquid can
-//! be), from the frames at the start of the frame to the Kabsch frames at its end.
+//! be), from the frames at the start of the frame to the Kabsch frames at its end; its
+//! `ω_z` is computed for every window vertex, so that with one sub-step (the usual case)
+//! the forces take it instead of computing it again.
 //!
 //! ## Failure
 //! [`Simulator::step`] works on the window's copy of the state and writes it back only
@@ -86,8 +89,8 @@ use super::diffuse::{
 };
 use super::extend::{extend_velocity, wet_vertices};
 use super::forces::{
-    Forces, corotating_frames_with, frame_angular_velocity, frame_body_acceleration,
-    integrate_velocity, rest_frames, second_difference,
+    Forces, VelocityStep, corotating_frames_with, frame_angular_velocity, frame_body_acceleration,
+    rest_frames, second_difference,
 };
 use super::interact::{InteractionRates, exposure, interact_varied, vapour_exposure};
 use super::irregular::{Irregularity, face_means};
@@ -346,6 +349,7 @@ impl Simulator {
                 adjacency,
                 topology,
                 congruent: None,
+                face_congruent: None,
             },
             params,
             solute_color,
@@ -513,7 +517,9 @@ impl Simulator {
         // the frames at the frame's end: the sub-step count reads them, and the last
         // sub-step's frames are these (the same formula at the same positions)
         let end_frames = w.corotating_frames(&next);
-        let s_count = self.substeps(w, &end_frames, &local.frames, dt);
+        let (s_count, omega) = self.substeps(w, &end_frames, &local.frames, dt);
+        // one sub-step: its turn is the frame's, just computed
+        let omega = omega.filter(|_| s_count == 1);
         let mut end_frames = Some(end_frames);
         prof.geometry += clock.elapsed().as_secs_f64();
         let h = dt / s_count as f64;
@@ -526,7 +532,8 @@ impl Simulator {
                 between = cur.iter().zip(&next).map(|(a, b)| a.lerp(*b, t)).collect();
                 (&between[..], None)
             };
-            self.substep(w, &mut local, q, frames, h, &acceleration, prof)?;
+            let turns = if s == s_count { omega.as_deref() } else { None };
+            self.substep(w, &mut local, q, frames, turns, h, &acceleration, prof)?;
         }
         Ok(local)
     }
@@ -536,34 +543,44 @@ impl Simulator {
     /// [`StainParams::substeps`], or more so that the frames of the active vertices turn
     /// (about their normals) by at most [`MAX_TURN`] per sub-step (module doc, "Fast
     /// rotation").
-    fn substeps(&self, w: &Window, end: &VertexFrames, start: &VertexFrames, dt: f64) -> usize {
+    ///
+    /// Also returns, with the Coriolis force on, every window vertex's `ω_z` over the
+    /// whole frame: with one sub-step it is the sub-step's own, which the forces then
+    /// take instead of computing it again (the same call on the same frames and `h = dt`).
+    fn substeps(
+        &self,
+        w: &Window,
+        end: &VertexFrames,
+        start: &VertexFrames,
+        dt: f64,
+    ) -> (usize, Option<Vec<f64>>) {
         let asked = self.params.substeps as usize;
         if !self.params.forces.coriolis {
-            return asked;
+            return (asked, None);
         }
+        let omega: Vec<f64> = (0..w.vertices.len())
+            .into_par_iter()
+            .map(|j| frame_angular_velocity(&start.frame[j], &end.frame[j], dt).z)
+            .collect();
         let turn = w
             .region
             .vertices
             .par_iter()
-            .map(|&j| {
-                let j = j as usize;
-                frame_angular_velocity(&start.frame[j], &end.frame[j], dt)
-                    .z
-                    .abs()
-                    * dt
-            })
+            .map(|&j| omega[j as usize].abs() * dt)
             .reduce(|| 0.0, f64::max);
         // a NaN turn (never from finite positions) keeps the user's count
         let needed = (turn / MAX_TURN).ceil();
-        if needed > asked as f64 {
+        let count = if needed > asked as f64 {
             (needed as usize).min(MAX_AUTO_SUBSTEPS)
         } else {
             asked
-        }
+        };
+        (count, Some(omega))
     }
 
     /// One sub-step `h` of the window to positions `q` (window order), whose vertex frames
-    /// are `frames` if the caller has them.
+    /// are `frames` and whose frames' turns `ω_z` over the sub-step are `turns` if the
+    /// caller has them.
     #[allow(clippy::too_many_arguments)]
     fn substep(
         &self,
@@ -571,6 +588,7 @@ impl Simulator {
         loc: &mut Local,
         q: &[DVec3],
         frames: Option<VertexFrames>,
+        turns: Option<&[f64]>,
         h: f64,
         acceleration: &[DVec3],
         prof: &mut Profile,
@@ -586,7 +604,14 @@ impl Simulator {
         let topo = &w.cloth.topology;
         let geometry = Geometry::new(topo, q)?;
         let frames = frames.unwrap_or_else(|| w.corotating_frames(q));
-        let transport = Transport::new(topo, &w.cloth.rings, &geometry, &frames, q);
+        let transport = Transport::with_shared_tips(
+            topo,
+            &w.cloth.rings,
+            &geometry,
+            &frames,
+            q,
+            w.tip_share.as_deref(),
+        );
         prof.active_vertices += w.region.vertices.len();
         prof.window_vertices += n;
         prof.window_edges += topo.n_edges();
@@ -596,27 +621,35 @@ impl Simulator {
         // 1. body forces (§4.4), friction and the Coriolis turn, exactly over half the
         // sub-step at the vertex the liquid leaves (kick–drift–kick, module doc); the
         // densities drift with the exact mean velocity of a whole sub-step under them
-        let force: Vec<(DVec2, f64)> = (0..n)
+        // — each vertex's half kick is the same propagator before and after the
+        // advection (the same turn, friction and h/2), and the decay e^{-kh} is every
+        // vertex's: both computed once (`VelocityStep`, the same bits as separate calls)
+        let (decay_half, decay_full) = (
+            VelocityStep::decay(p.friction, 0.5 * h),
+            VelocityStep::decay(p.friction, h),
+        );
+        let force: Vec<(DVec2, f64, VelocityStep)> = (0..n)
             .into_par_iter()
             .map(|j| {
                 let f = &frames.frame[j];
                 let a = frame_body_acceleration(f, acceleration[j], p.gravity, p.forces);
-                let turn = if p.forces.coriolis {
-                    frame_angular_velocity(&loc.frames.frame[j], f, h).z
-                } else {
-                    0.0
+                let turn = match turns {
+                    Some(t) => t[j],
+                    None if p.forces.coriolis => {
+                        frame_angular_velocity(&loc.frames.frame[j], f, h).z
+                    }
+                    None => 0.0,
                 };
-                (a, turn)
+                let half = VelocityStep::with_decay(decay_half, turn, p.friction, 0.5 * h);
+                (a, turn, half)
             })
             .collect();
-        let kick = |u: DVec2, (a, turn): (DVec2, f64), t: f64| {
-            integrate_velocity(u, a, turn, p.friction, t)
-        };
-        let (mut forced, mut mean): (Vec<DVec2>, Vec<DVec2>) = (0..n)
-            .into_par_iter()
-            .map(|j| {
-                let u = loc.velocity[j];
-                (kick(u, force[j], 0.5 * h).0, kick(u, force[j], h).1)
+        let (mut forced, mut mean): (Vec<DVec2>, Vec<DVec2>) = force
+            .par_iter()
+            .zip(&loc.velocity)
+            .map(|(&(a, turn, half), &u)| {
+                let full = VelocityStep::with_decay(decay_full, turn, p.friction, h);
+                (half.end(u, a), full.mean(u, a))
             })
             .unzip();
         // the velocity is the liquid's: on the dry cloth it is the wet region's, extended
@@ -654,7 +687,7 @@ impl Simulator {
                 }
             })
             .collect();
-        let flux = dual_fluxes_in(topo, q, &frames, &centred, active);
+        let flux = dual_fluxes_in(topo, q, &frames, &centred, active, w.tip_share.as_deref());
         let plan = UpwindPlan::new(topo, &geometry.vertex_area, &flux, h)?;
         prof.transport_cycles += plan.substeps();
         loc.cycles += plan.substeps();
@@ -686,7 +719,7 @@ impl Simulator {
         loc.velocity = arrived
             .into_par_iter()
             .zip(&force)
-            .map(|(u, &f)| kick(u, f, 0.5 * h).0)
+            .map(|(u, (a, _, half))| half.end(u, *a))
             .collect();
         lap(&mut prof.forces);
 

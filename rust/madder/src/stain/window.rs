@@ -50,7 +50,11 @@
 //! On a refined cloth the window also knows, per vertex, which fine vertices lie inside
 //! one coarse face or on one coarse edge ([`crate::mesh::refine::Partial::congruence`]):
 //! those with whole one-rings there share one Kabsch rotation per face and edge
-//! ([`Window::corotating_frames`], module doc of [`crate::mesh::kabsch`]).
+//! ([`Window::corotating_frames`], module doc of [`crate::mesh::kabsch`]). Per window
+//! face it keeps the first window face of the same coarse face and the shift of its
+//! corners ([`crate::mesh::refine::Partial::face_congruence`]): the similar fine faces
+//! share their tip angles ([`crate::mesh::Transport::with_shared_tips`]) and their
+//! median-dual area vectors ([`super::advect`], "Congruent faces").
 //!
 //! - **Diffusion.** `(M + h K_A) σ' = m` on the active vertices, `K_A` the stiffness
 //!   restricted to them with a Neumann (no-flux) boundary at the region's edge
@@ -136,6 +140,9 @@ pub(super) struct Cloth {
     /// On a refined cloth, per vertex the coarse element whose fine vertices share one
     /// Kabsch rotation ([`crate::mesh::refine::Partial::congruence`]; `u32::MAX`: none).
     pub(super) congruent: Option<Vec<u32>>,
+    /// On a refined cloth, per face its class of similar faces and corner shift
+    /// ([`crate::mesh::refine::Partial::face_congruence`]).
+    pub(super) face_congruent: Option<Vec<u32>>,
 }
 
 /// The part of the cloth a frame works on (module doc): the *active* vertices
@@ -159,6 +166,10 @@ pub(super) struct Window {
     /// own, or the first active or held vertex of its coarse face or edge, when it is
     /// active or held itself: a whole one-ring), see [`Window::corotating_frames`].
     pub(super) share: Option<Vec<u32>>,
+    /// On a refined cloth, per window face the window face whose tip angles it takes and
+    /// the shift of its corners ([`crate::mesh::Transport::with_shared_tips`]): the first
+    /// window face of its coarse face.
+    pub(super) tip_share: Option<Vec<(u32, u8)>>,
     /// Per mesh vertex: active.
     pub(super) mask: Vec<bool>,
     /// Per mesh vertex: active or held.
@@ -257,6 +268,20 @@ impl Window {
                 })
                 .collect()
         });
+        let tip_share = cloth.face_congruent.as_ref().map(|class| {
+            // a coarse face's fine faces are consecutive in the mesh, hence in the window:
+            // the first of a run serves the run
+            let mut run = (u32::MAX, 0u32, 0u32);
+            (0..faces.len() as u32)
+                .map(|k| {
+                    let c = class[faces[k as usize] as usize];
+                    if run.0 != c / 4 {
+                        run = (c / 4, k, c % 4);
+                    }
+                    (run.1, ((c % 4 + 3 - run.2) % 3) as u8)
+                })
+                .collect()
+        });
         let part = Cloth {
             rest,
             rest_frames,
@@ -267,6 +292,7 @@ impl Window {
             rings,
             adjacency,
             congruent: None,
+            face_congruent: None,
         };
         Ok(Some(Self {
             whole: (0..vertices.len() as u32)
@@ -278,6 +304,7 @@ impl Window {
             region,
             cg,
             share,
+            tip_share,
             mask,
             whole_mask,
         }))
