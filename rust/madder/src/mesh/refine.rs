@@ -621,6 +621,52 @@ fn corner_shift(t: &[[u32; 2]; 3]) -> u32 {
     c
 }
 
+/// The shares of [`crate::mesh::Transport::with_shared_tips`] for faces whose classes
+/// ([`Partial::face_congruence`], in the faces' order) come in runs, one run per coarse
+/// face: the first face of a run serves the run, each face with its corner shift relative
+/// to that first one.
+pub(crate) fn tip_shares(classes: impl Iterator<Item = u32>) -> Vec<(u32, u8)> {
+    let mut run = (u32::MAX, 0u32, 0u32);
+    classes
+        .enumerate()
+        .map(|(k, c)| {
+            if run.0 != c / 4 {
+                run = (c / 4, k as u32, c % 4);
+            }
+            (run.1, ((c % 4 + 3 - run.2) % 3) as u8)
+        })
+        .collect()
+}
+
+/// Tests' coarse sheet: an `nx × ny` grid of triangles of unequal angles, flat at rest
+/// and folded now (each coarse face moved by its own affine map); `(topology, rest, now)`.
+#[cfg(test)]
+pub(crate) fn folded_grid(nx: usize, ny: usize) -> (Topology, Vec<glam::DVec3>, Vec<glam::DVec3>) {
+    use glam::DVec3;
+    let mut faces = Vec::new();
+    for j in 0..ny - 1 {
+        for i in 0..nx - 1 {
+            let v = (j * nx + i) as u32;
+            faces.push([v, v + 1, v + nx as u32 + 1]);
+            faces.push([v, v + nx as u32 + 1, v + nx as u32]);
+        }
+    }
+    let rest: Vec<DVec3> = (0..nx * ny)
+        .map(|v| DVec3::new((v % nx) as f64 * 0.3, (v / nx) as f64 * 0.25, 0.0))
+        .collect();
+    let now = rest
+        .iter()
+        .map(|p| {
+            DVec3::new(
+                p.x + 0.2 * p.y,
+                0.4 * (2.0 * p.x).sin(),
+                p.y + 0.1 * p.x * p.x,
+            )
+        })
+        .collect();
+    (Topology::from_triangles(nx * ny, faces).unwrap(), rest, now)
+}
+
 /// The lattice points strictly inside a face, in the fine numbering's order.
 fn interior_points(n: u32) -> impl Iterator<Item = (u32, u32)> {
     (1..n).flat_map(move |j| (1..n - j).map(move |i| (i, j)))
@@ -700,38 +746,15 @@ mod tests {
     #[test]
     fn similar_faces_share_their_tip_angles() {
         use crate::mesh::{Geometry, OneRings, Transport, VertexFrames};
-        use glam::DVec3;
-        // a 4×3 grid of coarse vertices, triangles of unequal angles, folded (each coarse
-        // face moves by its own affine map, so its fine faces stay similar to it)
-        let (nx, ny) = (4usize, 3usize);
-        let mut faces = Vec::new();
-        for j in 0..ny - 1 {
-            for i in 0..nx - 1 {
-                let v = (j * nx + i) as u32;
-                faces.push([v, v + 1, v + nx as u32 + 1]);
-                faces.push([v, v + nx as u32 + 1, v + nx as u32]);
-            }
-        }
-        let coarse = Topology::from_triangles(nx * ny, faces).unwrap();
-        let now: Vec<DVec3> = (0..nx * ny)
-            .map(|v| {
-                let (x, y) = ((v % nx) as f64 * 0.3, (v / nx) as f64 * 0.25);
-                DVec3::new(x + 0.2 * y, 0.4 * (2.0 * x).sin(), y + 0.1 * x * x)
-            })
-            .collect();
+        // folded: each coarse face moves by its own affine map, so its fine faces stay
+        // similar to it
+        let (coarse, _, now) = folded_grid(4, 3);
         for level in 1..=3 {
             let mut part = Partial::new(&coarse, level).unwrap();
             part.build(&(0..coarse.n_faces() as u32).collect::<Vec<_>>());
             let topo = part.topology().unwrap();
             let q = part.prolong(&now);
-            let class = part.face_congruence();
-            // the first face of each class serves it, as the window does
-            let share: Vec<(u32, u8)> = (0..class.len())
-                .map(|t| {
-                    let r = (0..=t).find(|&k| class[k] / 4 == class[t] / 4).unwrap();
-                    (r as u32, ((class[t] % 4 + 3 - class[r] % 4) % 3) as u8)
-                })
-                .collect();
+            let share = tip_shares(part.face_congruence().into_iter());
             assert!(share.iter().any(|&(_, c)| c != 0), "down faces are shifted");
             let rings = OneRings::new(&topo);
             let geometry = Geometry::new(&topo, &q).unwrap();
@@ -784,31 +807,9 @@ mod tests {
     fn congruent_rings_share_their_kabsch_rotation() {
         use crate::mesh::RingAdjacency;
         use glam::DVec3;
-        // a 5×4 grid of coarse vertices, bent and sheared: the rest sheet is flat, the
-        // current one folded along a curve (each coarse face moves by its own affine map)
-        let (nx, ny) = (5usize, 4usize);
-        let mut faces = Vec::new();
-        for j in 0..ny - 1 {
-            for i in 0..nx - 1 {
-                let v = (j * nx + i) as u32;
-                faces.push([v, v + 1, v + nx as u32 + 1]);
-                faces.push([v, v + nx as u32 + 1, v + nx as u32]);
-            }
-        }
-        let coarse = Topology::from_triangles(nx * ny, faces).unwrap();
-        let rest: Vec<DVec3> = (0..nx * ny)
-            .map(|v| DVec3::new((v % nx) as f64 * 0.3, (v / nx) as f64 * 0.25, 0.0))
-            .collect();
-        let now: Vec<DVec3> = rest
-            .iter()
-            .map(|p| {
-                DVec3::new(
-                    p.x + 0.2 * p.y,
-                    0.4 * (2.0 * p.x).sin(),
-                    p.y + 0.1 * p.x * p.x,
-                )
-            })
-            .collect();
+        // bent and sheared: the rest sheet is flat, the current one folded along a curve
+        // (each coarse face moves by its own affine map)
+        let (coarse, rest, now) = folded_grid(5, 4);
         for level in 1..=3 {
             let mut part = Partial::new(&coarse, level).unwrap();
             part.build(&(0..coarse.n_faces() as u32).collect::<Vec<_>>());

@@ -1481,16 +1481,19 @@ mod tests {
         ));
     }
 
+    /// A solve of a fixed right-hand side for an `m`-vertex block system: the solution
+    /// and the iterations.
+    fn solve(cg: &mut WarmCg, values: &[f64], m: usize) -> (Vec<f64>, usize) {
+        let b: Vec<f64> = (0..2 * m).map(|i| ((i * 7 % 11) as f64).cos()).collect();
+        let mut x = vec![0.0; b.len()];
+        cg.solve(values, &b, &mut x).unwrap();
+        (x, cg.last_iterations)
+    }
+
     #[test]
     fn rebuilt_in_old_memory_is_new_and_its_updates_are_ic0s() {
         let (block, values) = bochner_system(12);
         let (small, small_values) = obtuse_anisotropic_system(7);
-        let solve = |cg: &mut WarmCg, values: &[f64], m: usize| {
-            let b: Vec<f64> = (0..2 * m).map(|i| ((i * 7 % 11) as f64).cos()).collect();
-            let mut x = vec![0.0; b.len()];
-            cg.solve(values, &b, &mut x).unwrap();
-            (x, cg.last_iterations)
-        };
         let m = block.n();
         // large → small → large, against fresh solvers: the same iterations, the same bits
         let mut cg = WarmCg::new(&block).with_tolerance(1e-10);
@@ -1535,12 +1538,6 @@ mod tests {
         // scalar solve (or never, if it only solves rotated): the same bits as a fresh one
         let (block, values) = bochner_system(9);
         let (small, small_values) = obtuse_anisotropic_system(7);
-        let solve = |cg: &mut WarmCg, values: &[f64], m: usize| {
-            let b: Vec<f64> = (0..2 * m).map(|i| ((i * 7 % 11) as f64).cos()).collect();
-            let mut x = vec![0.0; b.len()];
-            cg.solve(values, &b, &mut x).unwrap();
-            (x, cg.last_iterations)
-        };
         for (first, then) in [
             (Preconditioner::SymmetricGaussSeidel, None),
             (

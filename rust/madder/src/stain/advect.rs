@@ -907,8 +907,7 @@ fn dual_fluxes_where(
 
 /// The median-dual area vectors `S^T` of the edges opposite the corners `k` of a face,
 /// each oriented from corner `k + 1` to corner `k + 2` (`S · (p_{k+2} − p_{k+1}) ≥ 0`);
-/// zero for a flat face ([`FLAT_FACE_REL`]). The same operations as [`face_fluxes`],
-/// with the orientation taken from the corners instead of the vertex numbers.
+/// zero for a flat face ([`FLAT_FACE_REL`]).
 fn face_area_vectors(tri: [usize; 3], pos: &[DVec3]) -> [DVec3; 3] {
     let p = tri.map(|v| pos[v]);
     let normal = (p[1] - p[0]).cross(p[2] - p[0]);
@@ -930,30 +929,14 @@ fn face_area_vectors(tri: [usize; 3], pos: &[DVec3]) -> [DVec3; 3] {
 }
 
 /// `u_ab · S_ab^T` for the edge opposite each corner `k` of a face, from its lower- to its
-/// higher-numbered vertex.
+/// higher-numbered vertex: [`face_area_vectors`] turned round where the corners run from
+/// the higher-numbered one (an exact negation), dotted with the edge's mean velocity.
 fn face_fluxes(tri: [usize; 3], pos: &[DVec3], world: &[DVec3]) -> [f64; 3] {
-    let p = tri.map(|v| pos[v]);
-    let normal = (p[1] - p[0]).cross(p[2] - p[0]);
-    let longest = (0..3)
-        .map(|k| p[(k + 1) % 3].distance_squared(p[(k + 2) % 3]))
-        .fold(0.0, f64::max);
-    let area2 = normal.length();
-    if area2.is_nan() || area2 <= FLAT_FACE_REL * longest {
-        return [0.0; 3];
-    }
-    let unit = normal / area2;
-    let centroid = (p[0] + p[1] + p[2]) / 3.0;
+    let s = face_area_vectors(tri, pos);
     std::array::from_fn(|k| {
-        let (mut a, mut b) = ((k + 1) % 3, (k + 2) % 3);
-        if tri[a] > tri[b] {
-            std::mem::swap(&mut a, &mut b);
-        }
-        let mid = 0.5 * (p[a] + p[b]);
-        let mut s = (centroid - mid).cross(unit);
-        if s.dot(p[b] - p[a]) < 0.0 {
-            s = -s;
-        }
-        0.5 * (world[tri[a]] + world[tri[b]]).dot(s)
+        let (a, b) = (tri[(k + 1) % 3], tri[(k + 2) % 3]);
+        let s = if a > b { -s[k] } else { s[k] };
+        0.5 * (world[a] + world[b]).dot(s)
     })
 }
 
@@ -1593,37 +1576,16 @@ mod tests {
 
     #[test]
     fn congruent_faces_share_their_area_vectors() {
-        use crate::mesh::refine::Partial;
-        // a 4×3 grid of coarse vertices, triangles of unequal angles, folded: each coarse
-        // face moves by its own affine map, so its fine faces stay congruent
-        let (nx, ny) = (4usize, 3usize);
-        let mut faces = Vec::new();
-        for j in 0..ny - 1 {
-            for i in 0..nx - 1 {
-                let v = (j * nx + i) as u32;
-                faces.push([v, v + 1, v + nx as u32 + 1]);
-                faces.push([v, v + nx as u32 + 1, v + nx as u32]);
-            }
-        }
-        let coarse = Topology::from_triangles(nx * ny, faces).unwrap();
-        let now: Vec<DVec3> = (0..nx * ny)
-            .map(|v| {
-                let (x, y) = ((v % nx) as f64 * 0.3, (v / nx) as f64 * 0.25);
-                DVec3::new(x + 0.2 * y, 0.4 * (2.0 * x).sin(), y + 0.1 * x * x)
-            })
-            .collect();
+        use crate::mesh::refine::{Partial, folded_grid, tip_shares};
+        // folded: each coarse face moves by its own affine map, so its fine faces stay
+        // congruent
+        let (coarse, _, now) = folded_grid(4, 3);
         for level in 1..=3 {
             let mut part = Partial::new(&coarse, level).unwrap();
             part.build(&(0..coarse.n_faces() as u32).collect::<Vec<_>>());
             let t = part.topology().unwrap();
             let q = part.prolong(&now);
-            let class = part.face_congruence();
-            let share: Vec<(u32, u8)> = (0..class.len())
-                .map(|f| {
-                    let r = (0..=f).find(|&k| class[k] / 4 == class[f] / 4).unwrap();
-                    (r as u32, ((class[f] % 4 + 3 - class[r] % 4) % 3) as u8)
-                })
-                .collect();
+            let share = tip_shares(part.face_congruence().into_iter());
             let frames = VertexFrames::new(&OneRings::new(&t), &q).unwrap();
             let u: Vec<DVec2> = (0..t.n_vertices())
                 .map(|v| DVec2::new((v as f64 * 0.7).sin(), (v as f64 * 1.3).cos()))

@@ -268,20 +268,11 @@ impl Window {
                 })
                 .collect()
         });
-        let tip_share = cloth.face_congruent.as_ref().map(|class| {
-            // a coarse face's fine faces are consecutive in the mesh, hence in the window:
-            // the first of a run serves the run
-            let mut run = (u32::MAX, 0u32, 0u32);
-            (0..faces.len() as u32)
-                .map(|k| {
-                    let c = class[faces[k as usize] as usize];
-                    if run.0 != c / 4 {
-                        run = (c / 4, k, c % 4);
-                    }
-                    (run.1, ((c % 4 + 3 - run.2) % 3) as u8)
-                })
-                .collect()
-        });
+        // a coarse face's fine faces are consecutive in the mesh, hence in the window
+        let tip_share = cloth
+            .face_congruent
+            .as_ref()
+            .map(|class| crate::mesh::refine::tip_shares(faces.iter().map(|&f| class[f as usize])));
         let part = Cloth {
             rest,
             rest_frames,
