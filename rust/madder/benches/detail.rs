@@ -8,6 +8,11 @@
 //! writes a case's last-frame fine stain and wetness there (little-endian f64s; run one
 //! `--case` at a time), to compare two builds whose checksums differ.
 //!
+//! A third case runs Detail 0 with Detail 2's pour (the same local stain at the cloth's
+//! resolution) and the bench prints the ratio's three factors: active vertices, a local
+//! stain's cost per vertex over the all-wet cloth's, and Detail 2's cost per vertex over
+//! Detail 0's on the same stain (ARCHITECTURE, "Stain detail", the fifth look).
+//!
 //! The wet share is counted as in `tests/bench/bench_dynamic_paint.py`: the pour's radius
 //! is found by bisection, on untimed runs in a process of their own, until the fine
 //! vertices wetter than 1 g/m² at the last frame are within 5 % of 10 % of the refined
@@ -205,21 +210,34 @@ fn main() {
         String::from_utf8_lossy(&out.stdout).into_owned()
     };
     let radius = run(&["--calibrate", "2", "0.1"]);
-    let mut times = Vec::new();
-    for (level, radius) in [("0", "0"), ("2", radius.trim())] {
+    // the two cases, then Detail 0 with Detail 2's pour (the same local stain at
+    // the cloth's resolution), which splits the ratio into its factors
+    let mut cases = Vec::new();
+    for (level, radius) in [("0", "0"), ("2", radius.trim()), ("0", radius.trim())] {
         let out = run(&["--case", level, radius]);
         print!("{out}");
-        // the figure before " ms/frame" on the case's first line
-        times.extend(
-            out.split(" ms/frame")
+        // the figures before " ms/frame" and " active vertices" on the case's first line
+        let figure = |unit: &str| {
+            out.split(unit)
                 .next()
-                .and_then(|head| head.rsplit(' ').next().and_then(|t| t.parse::<f64>().ok())),
-        );
+                .and_then(|head| head.rsplit(' ').next())
+                .and_then(|t| t.parse::<f64>().ok())
+        };
+        cases.extend(figure(" ms/frame").zip(figure(" active vertices")));
     }
-    if let [coarse, fine] = times[..] {
+    if let [(coarse, a_coarse), (fine, a_fine), (local, a_local)] = cases[..] {
         println!(
             "detail 2 at 10 % wet / detail 0 all wet: {:.2}× per frame (target ≤ 2×)",
             fine / coarse
+        );
+        let per = |ms: f64, active: f64| 1e3 * ms / active;
+        let (c_coarse, c_fine, c_local) =
+            (per(coarse, a_coarse), per(fine, a_fine), per(local, a_local));
+        println!(
+            "    per active vertex and frame: detail 0 all wet {c_coarse:.2} µs, detail 0 with the same pour {c_local:.2} µs, detail 2 {c_fine:.2} µs; the ratio is {:.2} (active vertices) × {:.2} (a local stain's cost per vertex over the all-wet cloth's, at detail 0) × {:.2} (detail 2's over detail 0's on the same stain)",
+            a_fine / a_coarse,
+            c_local / c_coarse,
+            c_fine / c_local,
         );
     }
 }
