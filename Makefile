@@ -148,6 +148,7 @@ gallery: $(ZIP) $(BPY_VENV)/.stamp
 bench: $(ZIP) $(WHEELDIR)/.stamp
 	cargo bench -p madder
 	MADDER_ZIP=$(abspath $(ZIP)) $(PY) tests/bench/bench_playback.py
+	MADDER_ZIP=$(abspath $(ZIP)) $(PY) tests/bench/bench_image_bake.py
 	PYTHONPATH=$(abspath $(WHEELDIR)) $(PY) tests/bench/bench_dynamic_paint.py --size 316 --frames 12
 	PYTHONPATH=$(abspath $(WHEELDIR)) $(PY) tests/bench/bench_dynamic_paint.py --size 100 --frames 12
 	@# the angle codec against position coding (full run: drop --quick; it redraws docs/codec-curve.png)

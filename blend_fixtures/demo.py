@@ -107,6 +107,32 @@ def build_scene(blend):
     bpy.ops.wm.save_as_mainfile(filepath=blend, check_existing=False)
 
 
+def configure(image_size):
+    """Sets up the spill on the open demo scene as a user would (the fabric, the Liquid and
+    its look, Detail 1, the image sequence at `image_size` px, no vertex colours); returns
+    the tablecloth. `tests/bench/bench_image_bake.py` bakes the same setting."""
+    import bpy
+
+    cloth = bpy.data.objects["Tablecloth"]
+    fab = bpy.data.materials["Linen"].madder_fabric  # the fabric: plain weave, 5 threads/cm
+    fab.enabled, fab.weave, fab.thread_count = True, "PLAIN", 5.0
+    bpy.context.view_layer.objects.active = cloth
+    s = cloth.madder
+    s.enabled = True
+    s.source_group = "stain_source"
+    s.liquid = "RED_WINE"
+    s.amount = 1.2  # kg/m² where the group's weight is 1: a glass knocked over, 12× what linen holds
+    s.wicking = 2.0  # a sharp front that slows as the spill thins
+    s.irregularity, s.irregularity_length, s.irregularity_seed = 0.5, 6.0, 3  # a ragged outline
+    s.carry_solute = True  # the flow carries the wine's solids to the drying rim
+    s.substeps = 4  # 11 s steps
+    s.detail = 1  # the stain on the cloth's triangles split 4 ways (84k vertices)
+    s.output_images = True
+    s.output_vertex_colors = False
+    s.image_size = image_size
+    return cloth
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--zip", default=os.environ.get("MADDER_ZIP"), help="extension zip (make addon)")
@@ -131,23 +157,8 @@ def main():
     harness.install_extension(os.path.abspath(args.zip))
     bpy.ops.wm.open_mainfile(filepath=blend)
     scene = bpy.context.scene
-    cloth = bpy.data.objects["Tablecloth"]
-    fab = bpy.data.materials["Linen"].madder_fabric  # the fabric: plain weave, 5 threads/cm
-    fab.enabled, fab.weave, fab.thread_count = True, "PLAIN", 5.0
-    bpy.context.view_layer.objects.active = cloth
+    cloth = configure(args.image_size)
     s = cloth.madder
-    s.enabled = True
-    s.source_group = "stain_source"
-    s.liquid = "RED_WINE"
-    s.amount = 1.2  # kg/m² where the group's weight is 1: a glass knocked over, 12× what linen holds
-    s.wicking = 2.0  # a sharp front that slows as the spill thins
-    s.irregularity, s.irregularity_length, s.irregularity_seed = 0.5, 6.0, 3  # a ragged outline
-    s.carry_solute = True  # the flow carries the wine's solids to the drying rim
-    s.substeps = 4  # 11 s steps
-    s.detail = 1  # the stain on the cloth's triangles split 4 ways (84k vertices)
-    s.output_images = True
-    s.output_vertex_colors = False
-    s.image_size = args.image_size
 
     t0 = time.perf_counter()
     if bpy.ops.madder.bake() != {"FINISHED"}:
