@@ -30,7 +30,7 @@ use crate::error::MeshError;
 pub(crate) const SPOKE_MIN_SINE: f64 = 1e-6;
 
 /// Per-vertex orthonormal tangent frames (columns `x, y, z`; `z` the vertex normal).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct VertexFrames {
     /// `F_i` of every vertex, columns `x_i, y_i, z_i`.
     pub frame: Vec<DMat3>,
@@ -81,15 +81,17 @@ impl VertexFrames {
     /// Frames `F_i = U_i F̄_i` turned by one rotation per vertex (the comoving–corotating
     /// frames of §4.4, with `U_i` from [`super::kabsch::one_ring_rotations`]).
     pub fn rotated(&self, rotation: &[DMat3]) -> Self {
+        let mut out = Self::default();
+        self.rotated_into(rotation, &mut out);
+        out
+    }
+
+    /// [`VertexFrames::rotated`] into `out`'s array (its allocation kept).
+    pub(crate) fn rotated_into(&self, rotation: &[DMat3], out: &mut Self) {
         assert_eq!(rotation.len(), self.frame.len(), "one rotation per vertex");
-        Self {
-            frame: self
-                .frame
-                .iter()
-                .zip(rotation)
-                .map(|(f, u)| *u * *f)
-                .collect(),
-        }
+        out.frame.clear();
+        out.frame
+            .extend(self.frame.iter().zip(rotation).map(|(f, u)| *u * *f));
     }
 
     pub(crate) fn len(&self) -> usize {

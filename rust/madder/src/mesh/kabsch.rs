@@ -207,18 +207,32 @@ impl RingAdjacency {
     /// `share[i] = r ≠ i` takes `U_r` (a vertex whose one-ring is congruent to `r`'s and
     /// moves with the same affine maps, module doc); `share[r] = r` for every such `r`.
     /// Parallel over vertices, deterministic.
+    #[cfg(test)]
     pub(crate) fn shared_rotations(
         &self,
         rest: &[DVec3],
         current: &[DVec3],
         share: &[u32],
     ) -> Vec<DMat3> {
+        let mut rotation = Vec::new();
+        self.shared_rotations_into(rest, current, share, &mut rotation);
+        rotation
+    }
+
+    /// [`RingAdjacency::shared_rotations`] into `rotation` (its allocation kept).
+    pub(crate) fn shared_rotations_into(
+        &self,
+        rest: &[DVec3],
+        current: &[DVec3],
+        share: &[u32],
+        rotation: &mut Vec<DMat3>,
+    ) {
         let n = self.n_vertices();
         assert!(
             rest.len() == n && current.len() == n && share.len() == n,
             "one position and one share per vertex"
         );
-        let mut rotation: Vec<DMat3> = (0..n)
+        (0..n)
             .into_par_iter()
             .map(|i| {
                 if share[i] as usize == i {
@@ -227,7 +241,7 @@ impl RingAdjacency {
                     DMat3::ZERO
                 }
             })
-            .collect();
+            .collect_into_vec(rotation);
         for i in 0..n {
             let r = share[i] as usize;
             if r != i {
@@ -235,7 +249,6 @@ impl RingAdjacency {
                 rotation[i] = rotation[r];
             }
         }
-        rotation
     }
 }
 

@@ -308,15 +308,20 @@ pub fn advect_velocity(
     velocity: &[DVec2],
     h: f64,
 ) -> Vec<DVec2> {
-    advect_velocity_where(topology, rings, geometry, transport, velocity, h, None)
+    let mut out = Vec::new();
+    advect_velocity_where(
+        topology, rings, geometry, transport, velocity, h, None, &mut out,
+    );
+    out
 }
 
 /// [`advect_velocity`] on the vertices where `active` is `true` only (the simulator's
-/// active region); the others keep their velocity. Each traced vertex gets exactly the
-/// value [`advect_velocity`] gives it.
+/// active region), into `out` (its allocation kept); the others keep their velocity.
+/// Each traced vertex gets exactly the value [`advect_velocity`] gives it.
 ///
 /// # Panics
 /// As [`advect_velocity`], and if `active` does not have one entry per vertex.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn advect_velocity_in(
     topology: &Topology,
     rings: &OneRings,
@@ -325,7 +330,8 @@ pub(crate) fn advect_velocity_in(
     velocity: &[DVec2],
     h: f64,
     active: &[bool],
-) -> Vec<DVec2> {
+    out: &mut Vec<DVec2>,
+) {
     assert_eq!(active.len(), topology.n_vertices(), "one flag per vertex");
     advect_velocity_where(
         topology,
@@ -335,9 +341,11 @@ pub(crate) fn advect_velocity_in(
         velocity,
         h,
         Some(active),
-    )
+        out,
+    );
 }
 
+#[allow(clippy::too_many_arguments)]
 fn advect_velocity_where(
     topology: &Topology,
     rings: &OneRings,
@@ -346,7 +354,8 @@ fn advect_velocity_where(
     velocity: &[DVec2],
     h: f64,
     active: Option<&[bool]>,
-) -> Vec<DVec2> {
+    out: &mut Vec<DVec2>,
+) {
     let n = topology.n_vertices();
     assert_eq!(rings.n_vertices(), n, "rings of another topology");
     assert_eq!(velocity.len(), n, "one velocity per vertex");
@@ -374,7 +383,7 @@ fn advect_velocity_where(
                 velocity[i]
             }
         })
-        .collect()
+        .collect_into_vec(out);
 }
 
 /// The first two faces of every edge, in face order (`u32::MAX` where there are fewer):
@@ -791,6 +800,9 @@ pub fn dual_fluxes(
 /// With `share` (a refined cloth's congruent faces, as
 /// [`crate::mesh::Transport::with_shared_tips`] takes them), the median-dual area vectors
 /// of each run of congruent faces are computed once (module doc, "Congruent faces").
+///
+/// Into `flux` (its allocation kept), the intermediate arrays in `scratch`'s.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn dual_fluxes_in(
     topology: &Topology,
     positions: &[DVec3],
@@ -798,9 +810,20 @@ pub(crate) fn dual_fluxes_in(
     velocity: &[DVec2],
     active: &[bool],
     share: Option<&[(u32, u8)]>,
-) -> Vec<f64> {
+    scratch: &mut AdvectScratch,
+    flux: &mut Vec<f64>,
+) {
     assert_eq!(active.len(), topology.n_vertices(), "one flag per vertex");
-    dual_fluxes_where(topology, positions, frames, velocity, Some(active), share)
+    dual_fluxes_into(
+        topology,
+        positions,
+        frames,
+        velocity,
+        Some(active),
+        share,
+        scratch,
+        flux,
+    );
 }
 
 fn dual_fluxes_where(
@@ -811,12 +834,43 @@ fn dual_fluxes_where(
     active: Option<&[bool]>,
     share: Option<&[(u32, u8)]>,
 ) -> Vec<f64> {
+    let mut flux = Vec::new();
+    dual_fluxes_into(
+        topology,
+        positions,
+        frames,
+        velocity,
+        active,
+        share,
+        &mut AdvectScratch::default(),
+        &mut flux,
+    );
+    flux
+}
+
+#[allow(clippy::too_many_arguments)]
+fn dual_fluxes_into(
+    topology: &Topology,
+    positions: &[DVec3],
+    frames: &VertexFrames,
+    velocity: &[DVec2],
+    active: Option<&[bool]>,
+    share: Option<&[(u32, u8)]>,
+    scratch: &mut AdvectScratch,
+    flux: &mut Vec<f64>,
+) {
     let n = topology.n_vertices();
     assert_eq!(positions.len(), n, "one position per vertex");
     assert_eq!(frames.len(), n, "one frame per vertex");
     assert_eq!(velocity.len(), n, "one velocity per vertex");
     let on = |v: u32| active.is_none_or(|a| a[v as usize]);
-    let world: Vec<DVec3> = (0..n)
+    let AdvectScratch {
+        world,
+        per_face,
+        starts,
+        ..
+    } = scratch;
+    (0..n)
         .into_par_iter()
         .with_min_len(VERTICES_PER_TASK)
         .map(|i| {
@@ -826,71 +880,75 @@ fn dual_fluxes_where(
                 DVec3::ZERO
             }
         })
-        .collect();
+        .collect_into_vec(world);
+    let world = &*world;
     // a face with fewer than two active corners has no active edge
     let needed = |tri: &[u32; 3]| tri.iter().filter(|&&v| on(v)).count() >= 2;
-    let per_face: Vec<[f64; 3]> = match share {
+    match share {
         None => topology
             .faces()
             .par_iter()
             .with_min_len(VERTICES_PER_TASK)
             .map(|tri| {
                 if needed(tri) {
-                    face_fluxes(tri.map(|v| v as usize), positions, &world)
+                    face_fluxes(tri.map(|v| v as usize), positions, world)
                 } else {
                     [0.0; 3]
                 }
             })
-            .collect(),
+            .collect_into_vec(per_face),
         Some(share) => {
             // runs of congruent faces (consecutive, each led by the face they share),
             // one set of area vectors per run (module doc, "Congruent faces")
             let faces = topology.faces();
             assert_eq!(share.len(), faces.len(), "one share per face");
-            let starts: Vec<usize> = (0..faces.len())
-                .filter(|&t| share[t].0 as usize == t)
-                .collect();
-            starts
-                .par_iter()
-                .enumerate()
-                .with_min_len(VERTICES_PER_TASK / 16)
-                .flat_map_iter(|(i, &lead)| {
-                    let end = starts.get(i + 1).copied().unwrap_or(faces.len());
-                    let (world, needed) = (&world, &needed);
-                    let lead_tri = faces[lead].map(|v| v as usize);
-                    // the lead's vectors only if a face of the run needs them
-                    let area = faces[lead..end]
-                        .iter()
-                        .any(needed)
-                        .then(|| face_area_vectors(lead_tri, positions));
-                    (lead..end).map(move |t| {
-                        let tri = faces[t];
-                        match area {
-                            Some(area) if needed(&tri) => {
-                                debug_assert_eq!(
-                                    share[t].0 as usize, lead,
-                                    "a run shares its lead"
-                                );
-                                let c = share[t].1 as usize;
-                                // a face of the other orientation is the lead turned by π
-                                let sign = if c == 0 { 1.0 } else { -1.0 };
-                                std::array::from_fn(|k| {
-                                    let s = area[(k + c) % 3] * sign;
-                                    let (a, b) = (tri[(k + 1) % 3], tri[(k + 2) % 3]);
-                                    let s = if a > b { -s } else { s };
-                                    0.5 * (world[a as usize] + world[b as usize]).dot(s)
-                                })
+            starts.clear();
+            starts.extend((0..faces.len()).filter(|&t| share[t].0 as usize == t));
+            let starts = &*starts;
+            per_face.clear();
+            per_face.par_extend(
+                starts
+                    .par_iter()
+                    .enumerate()
+                    .with_min_len(VERTICES_PER_TASK / 16)
+                    .flat_map_iter(|(i, &lead)| {
+                        let end = starts.get(i + 1).copied().unwrap_or(faces.len());
+                        let needed = &needed;
+                        let lead_tri = faces[lead].map(|v| v as usize);
+                        // the lead's vectors only if a face of the run needs them
+                        let area = faces[lead..end]
+                            .iter()
+                            .any(needed)
+                            .then(|| face_area_vectors(lead_tri, positions));
+                        (lead..end).map(move |t| {
+                            let tri = faces[t];
+                            match area {
+                                Some(area) if needed(&tri) => {
+                                    debug_assert_eq!(
+                                        share[t].0 as usize, lead,
+                                        "a run shares its lead"
+                                    );
+                                    let c = share[t].1 as usize;
+                                    // a face of the other orientation is the lead turned by π
+                                    let sign = if c == 0 { 1.0 } else { -1.0 };
+                                    std::array::from_fn(|k| {
+                                        let s = area[(k + c) % 3] * sign;
+                                        let (a, b) = (tri[(k + 1) % 3], tri[(k + 2) % 3]);
+                                        let s = if a > b { -s } else { s };
+                                        0.5 * (world[a as usize] + world[b as usize]).dot(s)
+                                    })
+                                }
+                                _ => [0.0; 3],
                             }
-                            _ => [0.0; 3],
-                        }
-                    })
-                })
-                .collect()
+                        })
+                    }),
+            );
         }
-    };
+    }
     // gather per edge in face order (deterministic)
-    let mut flux = vec![0.0; topology.n_edges()];
-    for (fe, contrib) in topology.face_edges().iter().zip(&per_face) {
+    flux.clear();
+    flux.resize(topology.n_edges(), 0.0);
+    for (fe, contrib) in topology.face_edges().iter().zip(&*per_face) {
         for k in 0..3 {
             flux[fe[k] as usize] += contrib[k];
         }
@@ -902,7 +960,6 @@ fn dual_fluxes_where(
             }
         }
     }
-    flux
 }
 
 /// The median-dual area vectors `S^T` of the edges opposite the corners `k` of a face,
@@ -966,6 +1023,39 @@ impl UpwindPlan {
         flux: &[f64],
         h: f64,
     ) -> Result<Self, ParamError> {
+        let mut plan = Self::empty();
+        plan.renew(
+            topology,
+            vertex_area,
+            flux,
+            h,
+            &mut AdvectScratch::default(),
+        )?;
+        Ok(plan)
+    }
+
+    /// A plan of no edges, to be [`UpwindPlan::renew`]ed.
+    pub(crate) fn empty() -> Self {
+        Self {
+            n_edges: 0,
+            substeps: 1,
+            max_courant: 0.0,
+            n_limited: 0,
+            flows: Flows::default(),
+        }
+    }
+
+    /// [`UpwindPlan::new`] in this plan's arrays, its intermediate arrays in `scratch`'s
+    /// (the allocations of both kept: the simulator renews one plan every sub-step). The
+    /// same plan, bit for bit; on error `self` is left unchanged.
+    pub(crate) fn renew(
+        &mut self,
+        topology: &Topology,
+        vertex_area: &[f64],
+        flux: &[f64],
+        h: f64,
+        scratch: &mut AdvectScratch,
+    ) -> Result<(), ParamError> {
         let (n, n_edges) = (topology.n_vertices(), topology.n_edges());
         if vertex_area.len() != n {
             return Err(ParamError::Length {
@@ -1011,69 +1101,66 @@ impl UpwindPlan {
         // edge order: the numerator of its Courant number) and the |Φ| it gives and
         // receives, the donor chosen by the sign of the flux
         let edges = topology.edges();
-        let runs: Vec<Run> = (0..n.div_ceil(VERTICES_PER_TASK))
-            .into_par_iter()
-            .map(|c| {
-                let vertices = c * VERTICES_PER_TASK..((c + 1) * VERTICES_PER_TASK).min(n);
-                // each edge end gives at most one transfer, given or received
-                let ends: usize = vertices
-                    .clone()
-                    .map(|v| topology.vertex_edges(v).len())
-                    .sum();
-                let mut run = Run {
-                    outflow: Vec::with_capacity(vertices.len()),
-                    flows: Flows {
-                        out_ptr: Vec::with_capacity(vertices.len()),
-                        out_fraction: Vec::with_capacity(ends),
-                        in_ptr: Vec::with_capacity(vertices.len()),
-                        in_from: Vec::with_capacity(ends),
-                    },
-                };
-                for v in vertices {
-                    let o: f64 = topology
-                        .vertex_edges(v)
-                        .iter()
-                        .filter_map(|&e| {
-                            let phi = flux[e as usize];
-                            let [a, b] = edges[e as usize];
-                            let d = if phi > 0.0 { a } else { b };
-                            if d as usize == v {
-                                if phi != 0.0 {
-                                    run.flows.out_fraction.push(phi.abs());
-                                }
-                                Some(phi.abs())
-                            } else {
-                                if phi != 0.0 {
-                                    run.flows.in_from.push((phi.abs(), d, e));
-                                }
-                                None
+        let AdvectScratch {
+            runs,
+            outflow,
+            courant,
+            limited,
+            ..
+        } = scratch;
+        runs.resize_with(n.div_ceil(VERTICES_PER_TASK), Run::default);
+        runs.par_iter_mut().enumerate().for_each(|(c, run)| {
+            let vertices = c * VERTICES_PER_TASK..((c + 1) * VERTICES_PER_TASK).min(n);
+            // each edge end gives at most one transfer, given or received
+            let ends: usize = vertices
+                .clone()
+                .map(|v| topology.vertex_edges(v).len())
+                .sum();
+            run.clear();
+            run.outflow.reserve(vertices.len());
+            run.flows.out_ptr.reserve(vertices.len());
+            run.flows.out_fraction.reserve(ends);
+            run.flows.in_ptr.reserve(vertices.len());
+            run.flows.in_from.reserve(ends);
+            for v in vertices {
+                let o: f64 = topology
+                    .vertex_edges(v)
+                    .iter()
+                    .filter_map(|&e| {
+                        let phi = flux[e as usize];
+                        let [a, b] = edges[e as usize];
+                        let d = if phi > 0.0 { a } else { b };
+                        if d as usize == v {
+                            if phi != 0.0 {
+                                run.flows.out_fraction.push(phi.abs());
                             }
-                        })
-                        .sum();
-                    run.outflow.push(o);
-                    run.flows.out_ptr.push(run.flows.out_fraction.len() as u32);
-                    run.flows.in_ptr.push(run.flows.in_from.len() as u32);
-                }
-                run
-            })
-            .collect();
-        let outflow: Vec<f64> = runs
-            .iter()
-            .flat_map(|r| r.outflow.iter().copied())
-            .collect();
-        let courant: Vec<f64> = outflow
-            .iter()
-            .zip(vertex_area)
-            .map(|(&o, &a)| {
-                if o == 0.0 || h == 0.0 {
-                    0.0
-                } else if a > 0.0 {
-                    h * o / a
-                } else {
-                    f64::INFINITY
-                }
-            })
-            .collect();
+                            Some(phi.abs())
+                        } else {
+                            if phi != 0.0 {
+                                run.flows.in_from.push((phi.abs(), d, e));
+                            }
+                            None
+                        }
+                    })
+                    .sum();
+                run.outflow.push(o);
+                run.flows.out_ptr.push(run.flows.out_fraction.len() as u32);
+                run.flows.in_ptr.push(run.flows.in_from.len() as u32);
+            }
+        });
+        outflow.clear();
+        outflow.extend(runs.iter().flat_map(|r| r.outflow.iter().copied()));
+        let outflow = &*outflow;
+        courant.clear();
+        courant.extend(outflow.iter().zip(vertex_area).map(|(&o, &a)| {
+            if o == 0.0 || h == 0.0 {
+                0.0
+            } else if a > 0.0 {
+                h * o / a
+            } else {
+                f64::INFINITY
+            }
+        }));
         // vertices without area are left to the limiter, not to the sub-step count
         let max_courant = courant
             .iter()
@@ -1081,7 +1168,9 @@ impl UpwindPlan {
             .filter(|c| c.is_finite())
             .fold(0.0, f64::max);
         let substeps = ((max_courant / SUBSTEP_COURANT).ceil() as usize).clamp(1, MAX_SUBSTEPS);
-        let limited: Vec<bool> = courant.iter().map(|&c| c / substeps as f64 > 1.0).collect();
+        limited.clear();
+        limited.extend(courant.iter().map(|&c| c / substeps as f64 > 1.0));
+        let limited = &*limited;
         let n_limited = limited.iter().filter(|&&l| l).count();
         // |Φ| → the fraction of the donor's mass per sub-step; a transfer that rounds to
         // nothing is dropped
@@ -1094,49 +1183,42 @@ impl UpwindPlan {
                 h * phi / (substeps as f64 * vertex_area[d])
             }
         };
-        let runs: Vec<Flows> = runs
-            .into_par_iter()
-            .enumerate()
-            .map(|(c, run)| {
-                // in place: the fractions overwrite the |Φ| they come from, the ones that
-                // round to nothing are squeezed out
-                let mut f = run.flows;
-                let (mut o, mut i, mut o_to, mut i_to) = (0, 0, 0, 0);
-                for (k, v) in (c * VERTICES_PER_TASK..).take(f.out_ptr.len()).enumerate() {
-                    let o_end = f.out_ptr[k] as usize;
-                    for t in o..o_end {
-                        let x = fraction(v, f.out_fraction[t]);
-                        if x != 0.0 {
-                            f.out_fraction[o_to] = x;
-                            o_to += 1;
-                        }
+        runs.par_iter_mut().enumerate().for_each(|(c, run)| {
+            // in place: the fractions overwrite the |Φ| they come from, the ones that
+            // round to nothing are squeezed out
+            let f = &mut run.flows;
+            let (mut o, mut i, mut o_to, mut i_to) = (0, 0, 0, 0);
+            for (k, v) in (c * VERTICES_PER_TASK..).take(f.out_ptr.len()).enumerate() {
+                let o_end = f.out_ptr[k] as usize;
+                for t in o..o_end {
+                    let x = fraction(v, f.out_fraction[t]);
+                    if x != 0.0 {
+                        f.out_fraction[o_to] = x;
+                        o_to += 1;
                     }
-                    let i_end = f.in_ptr[k] as usize;
-                    for t in i..i_end {
-                        let (phi, d, e) = f.in_from[t];
-                        let x = fraction(d as usize, phi);
-                        if x != 0.0 {
-                            f.in_from[i_to] = (x, d, e);
-                            i_to += 1;
-                        }
-                    }
-                    (o, i) = (o_end, i_end);
-                    f.out_ptr[k] = o_to as u32;
-                    f.in_ptr[k] = i_to as u32;
                 }
-                f.out_fraction.truncate(o_to);
-                f.in_from.truncate(i_to);
-                f
-            })
-            .collect();
-        let flows = Flows::concat(n, runs);
-        Ok(Self {
-            n_edges,
-            substeps,
-            max_courant: courant.iter().copied().fold(0.0, f64::max),
-            n_limited,
-            flows,
-        })
+                let i_end = f.in_ptr[k] as usize;
+                for t in i..i_end {
+                    let (phi, d, e) = f.in_from[t];
+                    let x = fraction(d as usize, phi);
+                    if x != 0.0 {
+                        f.in_from[i_to] = (x, d, e);
+                        i_to += 1;
+                    }
+                }
+                (o, i) = (o_end, i_end);
+                f.out_ptr[k] = o_to as u32;
+                f.in_ptr[k] = i_to as u32;
+            }
+            f.out_fraction.truncate(o_to);
+            f.in_from.truncate(i_to);
+        });
+        self.flows.concat(n, runs);
+        self.n_edges = n_edges;
+        self.substeps = substeps;
+        self.max_courant = courant.iter().copied().fold(0.0, f64::max);
+        self.n_limited = n_limited;
+        Ok(())
     }
 
     /// Number of equal sub-steps the step is cut into.
@@ -1181,11 +1263,22 @@ impl UpwindPlan {
     /// # Panics
     /// If a field does not have one value per vertex of `topology`, the plan's topology.
     pub fn transport_all(&self, topology: &Topology, fields: &mut [&mut [f64]]) {
+        self.transport_all_in(topology, fields, &mut AdvectScratch::default());
+    }
+
+    /// [`UpwindPlan::transport_all`], its sub-cycles' arrays in `scratch`'s (their
+    /// allocations kept).
+    pub(crate) fn transport_all_in(
+        &self,
+        topology: &Topology,
+        fields: &mut [&mut [f64]],
+        scratch: &mut AdvectScratch,
+    ) {
         for field in fields.iter() {
             self.check(topology, field.len());
         }
         if !fields.is_empty() {
-            self.cycles(fields, None);
+            self.cycles(fields, None, scratch);
         }
     }
 
@@ -1228,6 +1321,32 @@ impl UpwindPlan {
         velocity: &[DVec2],
         fallback: &[DVec2],
     ) -> Vec<DVec2> {
+        let mut out = Vec::new();
+        self.transport_with_momentum_into(
+            topology,
+            transport,
+            fields,
+            velocity,
+            fallback,
+            &mut AdvectScratch::default(),
+            &mut out,
+        );
+        out
+    }
+
+    /// [`UpwindPlan::transport_with_momentum`] into `out`, its sub-cycles' arrays in
+    /// `scratch`'s (the allocations of both kept).
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn transport_with_momentum_into(
+        &self,
+        topology: &Topology,
+        transport: &Transport,
+        fields: &mut [&mut [f64]],
+        velocity: &[DVec2],
+        fallback: &[DVec2],
+        scratch: &mut AdvectScratch,
+        out: &mut Vec<DVec2>,
+    ) {
         assert!(!fields.is_empty(), "the solvent is the first field");
         for field in fields.iter() {
             self.check(topology, field.len());
@@ -1235,12 +1354,12 @@ impl UpwindPlan {
         self.check(topology, velocity.len());
         self.check(topology, fallback.len());
         let scale = fields[0].iter().copied().fold(0.0, f64::max);
-        let momentum: Vec<DVec2> = fields[0]
-            .iter()
-            .zip(velocity)
-            .map(|(&m, &u)| m * u)
-            .collect();
-        let momentum = self.cycles(fields, Some((transport, momentum)));
+        scratch.p.clear();
+        scratch
+            .p
+            .extend(fields[0].iter().zip(velocity).map(|(&m, &u)| m * u));
+        self.cycles(fields, Some(transport), scratch);
+        let momentum = &scratch.p;
         let mass = &*fields[0];
         let floor = MOMENTUM_MIN_MASS_REL * scale;
         (0..mass.len())
@@ -1253,53 +1372,66 @@ impl UpwindPlan {
                     fallback[v]
                 }
             })
-            .collect()
+            .collect_into_vec(out);
     }
 
-    /// The sub-cycles on the fields, interleaved per vertex, and, given the transport and
-    /// the solvent's momentum, on the momentum too (returned; empty without).
+    /// The sub-cycles on the fields, interleaved per vertex, and, given the transport, on
+    /// the solvent's momentum in `scratch.p` too (left there), in `scratch`'s arrays.
     fn cycles(
         &self,
         fields: &mut [&mut [f64]],
-        momentum: Option<(&Transport, Vec<DVec2>)>,
-    ) -> Vec<DVec2> {
+        transport: Option<&Transport>,
+        scratch: &mut AdvectScratch,
+    ) {
         let (k, n) = (fields.len(), fields[0].len());
-        let mut m = vec![0.0; n * k];
+        let AdvectScratch {
+            m,
+            next,
+            p,
+            p_next,
+            turns,
+            ..
+        } = scratch;
+        m.clear();
+        m.resize(n * k, 0.0);
         for (c, field) in fields.iter().enumerate() {
             for (v, x) in field.iter().enumerate() {
                 m[v * k + c] = *x;
             }
         }
-        let mut next = vec![0.0; n * k];
-        let (transport, mut p) = match momentum {
-            Some((t, p)) => (Some(t), p),
-            None => (None, Vec::new()),
-        };
-        let mut p_next = vec![DVec2::ZERO; p.len()];
+        next.clear();
+        next.resize(n * k, 0.0);
+        if transport.is_none() {
+            p.clear();
+        }
+        p_next.clear();
+        p_next.resize(p.len(), DVec2::ZERO);
         // the rotation of every received transfer, gathered once when several sub-cycles
         // read it
         let turns = match transport {
-            Some(t) if self.substeps > 1 => Turns::Table(self.flows.turns(t)),
+            Some(t) if self.substeps > 1 => {
+                self.flows.turns(t, turns);
+                Turns::Table(&turns[..])
+            }
             Some(t) => Turns::Edges(t.edge_cos_sin()),
             None => Turns::Edges(&[]),
         };
         for _ in 0..self.substeps {
             match transport {
-                None => self.flows.cycle(&m, k, &mut next),
+                None => self.flows.cycle(m, k, next),
                 Some(_) => {
                     self.flows
-                        .cycle_with_momentum(&m, k, &mut next, &turns, &p, &mut p_next);
+                        .cycle_with_momentum(m, k, next, &turns, p, p_next);
                 }
             }
-            std::mem::swap(&mut m, &mut next);
-            std::mem::swap(&mut p, &mut p_next);
+            std::mem::swap(m, next);
+            std::mem::swap(p, p_next);
         }
         for (c, field) in fields.iter_mut().enumerate() {
             for (v, x) in field.iter_mut().enumerate() {
                 *x = m[v * k + c];
             }
         }
-        p
     }
 }
 
@@ -1317,17 +1449,55 @@ struct Flows {
 
 /// One run of vertices in [`UpwindPlan::new`]: their outflows, and their transfers
 /// (`|Φ|` where [`Flows`] will hold the fractions; ends relative to the run's start).
-#[derive(Default)]
+#[derive(Debug, Default)]
 struct Run {
     outflow: Vec<f64>,
     flows: Flows,
+}
+
+impl Run {
+    fn clear(&mut self) {
+        self.outflow.clear();
+        self.flows.out_ptr.clear();
+        self.flows.out_fraction.clear();
+        self.flows.in_ptr.clear();
+        self.flows.in_from.clear();
+    }
+}
+
+/// The advection's intermediate arrays, kept from one sub-step to the next by the
+/// simulator (its step scratch, issue 16: allocated afresh each sub-step, arrays of a
+/// 35k-vertex window are fresh pages the kernel must fault in and glibc hands back) —
+/// what [`dual_fluxes`] and [`UpwindPlan::new`] build on the way, and the interleaved
+/// fields and momenta of the transport's sub-cycles. Contents are overwritten by each
+/// use; only the allocations carry over.
+#[derive(Debug, Default)]
+pub(crate) struct AdvectScratch {
+    /// [`dual_fluxes`]: the velocities in world coordinates, the faces' contributions,
+    /// the first face of each run of congruent faces.
+    world: Vec<DVec3>,
+    per_face: Vec<[f64; 3]>,
+    starts: Vec<usize>,
+    /// [`UpwindPlan::new`]: the runs of vertices, the outflows, Courant numbers, and the
+    /// limited vertices.
+    runs: Vec<Run>,
+    outflow: Vec<f64>,
+    courant: Vec<f64>,
+    limited: Vec<bool>,
+    /// [`UpwindPlan::transport_with_momentum`]: the interleaved fields before and after
+    /// a sub-cycle, the momenta likewise, the table of the received transfers' turns.
+    m: Vec<f64>,
+    next: Vec<f64>,
+    p: Vec<DVec2>,
+    p_next: Vec<DVec2>,
+    turns: Vec<[f64; 2]>,
 }
 
 /// The rotations `R_vd` of the received transfers, as `(cos, sin)` of `[cos −sin; sin cos]`:
 /// a table in [`Flows::received`] order ([`Flows::turns`]), or read off the edges'
 /// rotations (transposed where `v > d`) each time.
 enum Turns<'a> {
-    Table(Vec<[f64; 2]>),
+    Table(&'a [[f64; 2]]),
     Edges(&'a [[f64; 2]]),
 }
 
@@ -1337,26 +1507,28 @@ const VERTICES_PER_TASK: usize = 1024;
 
 impl Flows {
     /// Runs of consecutive vertices' transfers (each with ends relative to its own
-    /// start) laid end to end.
-    fn concat(n: usize, runs: Vec<Flows>) -> Self {
-        let given: usize = runs.iter().map(|r| r.out_fraction.len()).sum();
-        let received: usize = runs.iter().map(|r| r.in_from.len()).sum();
-        let mut f = Flows {
-            out_ptr: Vec::with_capacity(n + 1),
-            out_fraction: Vec::with_capacity(given),
-            in_ptr: Vec::with_capacity(n + 1),
-            in_from: Vec::with_capacity(received),
-        };
+    /// start) laid end to end, in place of these flows (their allocations kept).
+    fn concat(&mut self, n: usize, runs: &[Run]) {
+        let given: usize = runs.iter().map(|r| r.flows.out_fraction.len()).sum();
+        let received: usize = runs.iter().map(|r| r.flows.in_from.len()).sum();
+        let f = self;
+        f.out_ptr.clear();
+        f.out_fraction.clear();
+        f.in_ptr.clear();
+        f.in_from.clear();
+        f.out_ptr.reserve(n + 1);
+        f.out_fraction.reserve(given);
+        f.in_ptr.reserve(n + 1);
+        f.in_from.reserve(received);
         f.out_ptr.push(0);
         f.in_ptr.push(0);
-        for run in runs {
+        for run in runs.iter().map(|r| &r.flows) {
             let (o, i) = (f.out_fraction.len() as u32, f.in_from.len() as u32);
             f.out_ptr.extend(run.out_ptr.iter().map(|x| o + x));
             f.in_ptr.extend(run.in_ptr.iter().map(|x| i + x));
-            f.out_fraction.extend(run.out_fraction);
-            f.in_from.extend(run.in_from);
+            f.out_fraction.extend_from_slice(&run.out_fraction);
+            f.in_from.extend_from_slice(&run.in_from);
         }
-        f
     }
 
     fn given(&self, v: usize) -> &[f64] {
@@ -1378,11 +1550,12 @@ impl Flows {
     /// The rotation `R_vd` of each received transfer, in [`Flows::received`] order, as
     /// `(cos, sin)` of the matrix `[cos −sin; sin cos]`: the stored rotation of the edge or
     /// its transpose (the sine negated: exact), read once per plan instead of once per
-    /// sub-cycle.
-    fn turns(&self, transport: &Transport) -> Vec<[f64; 2]> {
+    /// sub-cycle; into `turns` (its allocation kept).
+    fn turns(&self, transport: &Transport, turns: &mut Vec<[f64; 2]>) {
         let cos_sin = transport.edge_cos_sin();
         let n = self.in_ptr.len() - 1;
-        let mut turns = vec![[0.0; 2]; self.in_from.len()];
+        turns.clear();
+        turns.resize(self.in_from.len(), [0.0; 2]);
         // runs of vertices, each filling its own stretch of the table
         let mut runs = Vec::with_capacity(n.div_ceil(VERTICES_PER_TASK));
         let mut rest = turns.as_mut_slice();
@@ -1403,7 +1576,6 @@ impl Flows {
                 }
             }
         });
-        turns
     }
 
     /// [`Flows::cycle`], and the momentum `p` into `p_next` in the same pass (`turns` from

@@ -82,7 +82,7 @@ use faer::Par;
 use glam::{DMat3, DVec2, DVec3};
 use rayon::prelude::*;
 
-use super::advect::{UpwindPlan, advect_velocity_in, dual_fluxes_in};
+use super::advect::{AdvectScratch, UpwindPlan, advect_velocity_in, dual_fluxes_in};
 use super::diffuse::{
     Conductivity, DENSITY_TOLERANCE, DensityWork, Ops, SoluteMotion, VELOCITY_TOLERANCE, Wicking,
     check_range, diffuse_densities, diffuse_velocity,
@@ -95,7 +95,7 @@ use super::forces::{
 use super::interact::{InteractionRates, exposure, interact_varied, vapour_exposure};
 use super::irregular::{Irregularity, face_means};
 use super::state::{Fields, Local, State, merge_rgb, split_rgb};
-use super::window::{Cloth, Window, pick};
+use super::window::{Cloth, Window, pick, pick_into};
 use crate::error::{Error, ParamError};
 use crate::mesh::geometry::check_positions;
 use crate::mesh::{Geometry, OneRings, RingAdjacency, Topology, Transport, VertexFrames};
@@ -247,6 +247,86 @@ pub struct Simulator {
     /// Relative residual tolerances of the density and the velocity solves
     /// ([`DENSITY_TOLERANCE`], [`VELOCITY_TOLERANCE`]).
     pub(super) tolerances: [f64; 2],
+    /// The step's arrays, kept from frame to frame.
+    pub(super) scratch: StepScratch,
+}
+
+/// The step's per-frame and per-sub-step arrays, kept from one frame to the next and
+/// cleared and refilled instead of allocated afresh (issue 16).
+///
+/// A window of 35k vertices (Detail 2, 10 % of the flag wet) makes a frame array of
+/// `DMat3` 2.5 MB and one of `DVec2` 0.56 MB, above glibc's mmap threshold or, once that
+/// has risen, in its per-thread arenas, which glibc trims when they are freed: every
+/// frame touched new pages and the kernel faulted them in (`clear_page`), 17 % of the
+/// step's samples on 2 cores, 0.24 s of system time in a 0.66 s run of 12 frames. The
+/// buffers here are every array a frame or a sub-step fills for the whole window;
+/// the values written are the same operations on the same numbers as before, so the
+/// results are the same bits.
+///
+/// Sized by the window: when the window shrinks below half the size they were last
+/// grown to, they are dropped (and grown again to the new window's size).
+#[derive(Debug, Default)]
+pub(super) struct StepScratch {
+    /// Window vertices the buffers were grown for.
+    vertices: usize,
+    /// The window's positions at the frame's start and end, and between them (sub-steps
+    /// before the last).
+    cur: Vec<DVec3>,
+    next: Vec<DVec3>,
+    between: Vec<DVec3>,
+    /// `p̈` of the window's vertices over the frame interval.
+    acceleration: Vec<DVec3>,
+    /// The frames' turns `ω_z` over the whole frame.
+    omega: Vec<f64>,
+    /// The frames at the frame's end.
+    end_frames: VertexFrames,
+    /// The last committed frame's work: its arrays are the next frame's.
+    local: Option<Local>,
+    /// The sub-step's arrays.
+    sub: SubstepScratch,
+}
+
+/// The arrays of one sub-step ([`StepScratch`]).
+#[derive(Debug, Default)]
+pub(super) struct SubstepScratch {
+    /// The geometry (its vertex areas then swapped with the frame's).
+    geometry: Geometry,
+    /// The vertex frames at the sub-step's end (then swapped with the frame's), and the
+    /// shared rotations of a refined window.
+    frames: VertexFrames,
+    rotation: Vec<DMat3>,
+    /// Per vertex: the acceleration, turn and half-kick propagator; the velocity after
+    /// the first half kick, and its mean over the sub-step.
+    force: Vec<(DVec2, f64, VelocityStep)>,
+    forced: Vec<DVec2>,
+    mean: Vec<DVec2>,
+    /// The semi-Lagrangian velocity, the densities' velocity, the velocity the momentum
+    /// arrived with, and the velocity after the second half kick.
+    advected: Vec<DVec2>,
+    centred: Vec<DVec2>,
+    arrived: Vec<DVec2>,
+    velocity: Vec<DVec2>,
+    /// The dual fluxes and the upwind plan, and the advection's own arrays.
+    flux: Vec<f64>,
+    plan: Option<UpwindPlan>,
+    advect: AdvectScratch,
+    /// The interactions': liquid densities, the part of the fields they change, its
+    /// areas and exposures.
+    wet: Vec<f64>,
+    part: Fields,
+    area: Vec<f64>,
+    exposed: Vec<f64>,
+}
+
+impl StepScratch {
+    /// Drops the buffers when the window of `n` vertices is less than half the size they
+    /// were grown to (the memory follows the window).
+    fn fit(&mut self, n: usize) {
+        if 2 * n < self.vertices {
+            *self = Self::default();
+        }
+        self.vertices = self.vertices.max(n);
+    }
 }
 
 /// Wall-clock seconds spent in each phase since the simulator was built (for benchmarks).
@@ -373,6 +453,7 @@ impl Simulator {
             prepared: false,
             spare: None,
             tolerances: [DENSITY_TOLERANCE, VELOCITY_TOLERANCE],
+            scratch: StepScratch::default(),
         })
     }
 
@@ -443,13 +524,18 @@ impl Simulator {
         prof.window += clock.elapsed().as_secs_f64();
         let t_end = self.state.time + dt;
         let mut window = self.window.take();
+        let mut scratch = std::mem::take(&mut self.scratch);
         let result = match window.as_mut() {
             Some(w) => self
-                .run_frame(w, positions, dt, after, &mut prof)
-                .map(|local| self.commit(w, local, t_end)),
+                .run_frame(w, positions, dt, after, &mut prof, &mut scratch)
+                .map(|local| {
+                    self.commit(w, &local, t_end);
+                    scratch.local = Some(local);
+                }),
             None => Ok(()),
         };
         self.window = window;
+        self.scratch = scratch;
         self.profile = prof;
         // nothing is written before the whole frame succeeded (module doc, "Failure")
         result?;
@@ -463,7 +549,8 @@ impl Simulator {
         Ok(())
     }
 
-    /// One frame on the window `w`, on copies of its state: nothing in `self` changes.
+    /// One frame on the window `w`, on copies of its state: nothing in `self` changes
+    /// (but the kept arrays of `scratch`).
     fn run_frame(
         &self,
         w: &mut Window,
@@ -471,14 +558,27 @@ impl Simulator {
         dt: f64,
         after: Option<&[DVec3]>,
         prof: &mut Profile,
+        scratch: &mut StepScratch,
     ) -> Result<Local, Error> {
         let clock = Instant::now();
         let (p, st) = (&self.params, &self.state);
-        let cur = w.gather(&st.positions);
-        let next = w.gather(positions);
+        scratch.fit(w.vertices.len());
+        let StepScratch {
+            cur,
+            next,
+            between,
+            acceleration,
+            omega,
+            end_frames,
+            local,
+            sub,
+            ..
+        } = scratch;
+        pick_into(&w.vertices, &st.positions, cur);
+        pick_into(&w.vertices, positions, next);
         // p̈ over the frame interval: the mean of the centred differences at its two ends
         // when the frame after is known (module doc of `forces`)
-        let acceleration: Vec<DVec3> = if p.forces.rectilinear {
+        if p.forces.rectilinear {
             w.vertices
                 .par_iter()
                 .map(|&v| {
@@ -494,46 +594,43 @@ impl Simulator {
                         None => start,
                     }
                 })
-                .collect()
+                .collect_into_vec(acceleration);
         } else {
-            vec![DVec3::ZERO; w.vertices.len()]
-        };
-        let (velocity, frame): (Vec<DVec2>, Vec<DMat3>) = w
-            .vertices
+            acceleration.clear();
+            acceleration.resize(w.vertices.len(), DVec3::ZERO);
+        }
+        let mut local = local.take().unwrap_or_default();
+        w.vertices
             .par_iter()
-            .zip(&acceleration)
+            .zip(&*acceleration)
             .map(|(&v, &a)| self.caught_up(v as usize, a))
-            .unzip();
-        let mut local = Local {
-            velocity,
-            frames: VertexFrames { frame },
-            fields: st.fields.gather(&w.vertices),
-            area: w.gather(&st.vertex_area),
-            evaporated: 0.0,
-            cycles: 0,
-        };
+            .unzip_into_vecs(&mut local.velocity, &mut local.frames.frame);
+        st.fields.gather_into(&w.vertices, &mut local.fields);
+        pick_into(&w.vertices, &st.vertex_area, &mut local.area);
+        local.evaporated = 0.0;
+        local.cycles = 0;
         prof.forces += clock.elapsed().as_secs_f64();
         let clock = Instant::now();
         // the frames at the frame's end: the sub-step count reads them, and the last
         // sub-step's frames are these (the same formula at the same positions)
-        let end_frames = w.corotating_frames(&next);
-        let (s_count, omega) = self.substeps(w, &end_frames, &local.frames, dt);
+        w.corotating_frames_into(next, end_frames, &mut sub.rotation);
+        let (s_count, omega) = self.substeps(w, end_frames, &local.frames, dt, omega);
         // one sub-step: its turn is the frame's, just computed
         let omega = omega.filter(|_| s_count == 1);
-        let mut end_frames = Some(end_frames);
         prof.geometry += clock.elapsed().as_secs_f64();
         let h = dt / s_count as f64;
         for s in 1..=s_count {
-            let between: Vec<DVec3>;
-            let (q, frames) = if s == s_count {
-                (&next[..], end_frames.take())
+            let last = s == s_count;
+            if last {
+                std::mem::swap(&mut sub.frames, end_frames);
             } else {
                 let t = s as f64 / s_count as f64;
-                between = cur.iter().zip(&next).map(|(a, b)| a.lerp(*b, t)).collect();
-                (&between[..], None)
-            };
-            let turns = if s == s_count { omega.as_deref() } else { None };
-            self.substep(w, &mut local, q, frames, turns, h, &acceleration, prof)?;
+                between.clear();
+                between.extend(cur.iter().zip(&*next).map(|(a, b)| a.lerp(*b, t)));
+            }
+            let q = if last { &next[..] } else { &between[..] };
+            let turns = if last { omega } else { None };
+            self.substep(w, &mut local, q, last, turns, h, acceleration, prof, sub)?;
         }
         Ok(local)
     }
@@ -547,21 +644,23 @@ impl Simulator {
     /// Also returns, with the Coriolis force on, every window vertex's `ω_z` over the
     /// whole frame: with one sub-step it is the sub-step's own, which the forces then
     /// take instead of computing it again (the same call on the same frames and `h = dt`).
-    fn substeps(
+    /// `omega` is filled (its allocation kept) and returned.
+    fn substeps<'a>(
         &self,
         w: &Window,
         end: &VertexFrames,
         start: &VertexFrames,
         dt: f64,
-    ) -> (usize, Option<Vec<f64>>) {
+        omega: &'a mut Vec<f64>,
+    ) -> (usize, Option<&'a [f64]>) {
         let asked = self.params.substeps as usize;
         if !self.params.forces.coriolis {
             return (asked, None);
         }
-        let omega: Vec<f64> = (0..w.vertices.len())
+        (0..w.vertices.len())
             .into_par_iter()
             .map(|j| frame_angular_velocity(&start.frame[j], &end.frame[j], dt).z)
-            .collect();
+            .collect_into_vec(omega);
         let turn = w
             .region
             .vertices
@@ -579,19 +678,20 @@ impl Simulator {
     }
 
     /// One sub-step `h` of the window to positions `q` (window order), whose vertex frames
-    /// are `frames` and whose frames' turns `ω_z` over the sub-step are `turns` if the
-    /// caller has them.
+    /// are in `sub.frames` if `frames_ready` and whose frames' turns `ω_z` over the
+    /// sub-step are `turns` if the caller has them; in `sub`'s arrays.
     #[allow(clippy::too_many_arguments)]
     fn substep(
         &self,
         w: &mut Window,
         loc: &mut Local,
         q: &[DVec3],
-        frames: Option<VertexFrames>,
+        frames_ready: bool,
         turns: Option<&[f64]>,
         h: f64,
         acceleration: &[DVec3],
         prof: &mut Profile,
+        sub: &mut SubstepScratch,
     ) -> Result<(), Error> {
         let mut clock = Instant::now();
         let mut lap = |slot: &mut f64| {
@@ -602,13 +702,16 @@ impl Simulator {
         let p = &self.params;
         let n = w.vertices.len();
         let topo = &w.cloth.topology;
-        let geometry = Geometry::new(topo, q)?;
-        let frames = frames.unwrap_or_else(|| w.corotating_frames(q));
+        sub.geometry.renew(topo, q)?;
+        if !frames_ready {
+            w.corotating_frames_into(q, &mut sub.frames, &mut sub.rotation);
+        }
+        let (geometry, frames) = (&sub.geometry, &sub.frames);
         let transport = Transport::with_shared_tips(
             topo,
             &w.cloth.rings,
-            &geometry,
-            &frames,
+            geometry,
+            frames,
             q,
             w.tip_share.as_deref(),
         );
@@ -628,7 +731,7 @@ impl Simulator {
             VelocityStep::decay(p.friction, 0.5 * h),
             VelocityStep::decay(p.friction, h),
         );
-        let force: Vec<(DVec2, f64, VelocityStep)> = (0..n)
+        (0..n)
             .into_par_iter()
             .map(|j| {
                 let f = &frames.frame[j];
@@ -643,41 +746,46 @@ impl Simulator {
                 let half = VelocityStep::with_decay(decay_half, turn, p.friction, 0.5 * h);
                 (a, turn, half)
             })
-            .collect();
-        let (mut forced, mut mean): (Vec<DVec2>, Vec<DVec2>) = force
+            .collect_into_vec(&mut sub.force);
+        let force = &sub.force;
+        let (forced, mean) = (&mut sub.forced, &mut sub.mean);
+        force
             .par_iter()
             .zip(&loc.velocity)
             .map(|(&(a, turn, half), &u)| {
                 let full = VelocityStep::with_decay(decay_full, turn, p.friction, h);
                 (half.end(u, a), full.mean(u, a))
             })
-            .unzip();
+            .unzip_into_vecs(forced, mean);
         // the velocity is the liquid's: on the dry cloth it is the wet region's, extended
         let wet = wet_vertices(
             &loc.fields.free_solvent,
             &geometry.vertex_area,
             &w.region.mask,
         );
-        extend_velocity(topo, &transport, &wet, &mut [&mut forced, &mut mean]);
+        extend_velocity(topo, &transport, &wet, &mut [forced, mean]);
+        let (forced, mean) = (&sub.forced, &sub.mean);
         lap(&mut prof.forces);
 
         // 2. advection (§4.3.1–4.3.2), closed inside the active region
         let active = &w.region.mask;
         let part = Instant::now();
-        let advected = advect_velocity_in(
+        advect_velocity_in(
             topo,
             &w.cloth.rings,
-            &geometry,
+            geometry,
             &transport,
-            &forced,
+            forced,
             h,
             active,
+            &mut sub.advected,
         );
+        let advected = &sub.advected;
         prof.advection_trace += part.elapsed().as_secs_f64();
         let part = Instant::now();
         // the densities move with the sub-step's mean velocity: the exact mean under the
         // forces, plus half the change the advection made at its end (module doc)
-        let centred: Vec<DVec2> = (0..n)
+        (0..n)
             .into_par_iter()
             .map(|j| {
                 if active[j] {
@@ -686,9 +794,20 @@ impl Simulator {
                     DVec2::ZERO
                 }
             })
-            .collect();
-        let flux = dual_fluxes_in(topo, q, &frames, &centred, active, w.tip_share.as_deref());
-        let plan = UpwindPlan::new(topo, &geometry.vertex_area, &flux, h)?;
+            .collect_into_vec(&mut sub.centred);
+        dual_fluxes_in(
+            topo,
+            q,
+            frames,
+            &sub.centred,
+            active,
+            w.tip_share.as_deref(),
+            &mut sub.advect,
+            &mut sub.flux,
+        );
+        let plan = sub.plan.get_or_insert_with(UpwindPlan::empty);
+        plan.renew(topo, &geometry.vertex_area, &sub.flux, h, &mut sub.advect)?;
+        let plan = &*plan;
         prof.transport_cycles += plan.substeps();
         loc.cycles += plan.substeps();
         prof.advection_plan += part.elapsed().as_secs_f64();
@@ -703,9 +822,18 @@ impl Simulator {
             }
             prof.transport_passes += plan.substeps() * fields.len();
             let arrived = if p.momentum_advection {
-                plan.transport_with_momentum(topo, &transport, &mut fields, &forced, &advected)
+                plan.transport_with_momentum_into(
+                    topo,
+                    &transport,
+                    &mut fields,
+                    forced,
+                    advected,
+                    &mut sub.advect,
+                    &mut sub.arrived,
+                );
+                &sub.arrived
             } else {
-                plan.transport_all(topo, &mut fields);
+                plan.transport_all_in(topo, &mut fields, &mut sub.advect);
                 advected
             };
             if let (Some(c), Some(cf)) = (color, f.color_free.as_mut()) {
@@ -716,11 +844,12 @@ impl Simulator {
         prof.advection_apply += part.elapsed().as_secs_f64();
         lap(&mut prof.advection);
         // the second half of the forces, at the vertex the liquid arrived at
-        loc.velocity = arrived
-            .into_par_iter()
-            .zip(&force)
-            .map(|(u, (a, _, half))| half.end(u, *a))
-            .collect();
+        arrived
+            .par_iter()
+            .zip(force)
+            .map(|(&u, (a, _, half))| half.end(u, *a))
+            .collect_into_vec(&mut sub.velocity);
+        std::mem::swap(&mut loc.velocity, &mut sub.velocity);
         lap(&mut prof.forces);
 
         // 3. diffusion (§4.3.3–4.3.4, eq. 4.6): the densities and the velocity are
@@ -792,7 +921,7 @@ impl Simulator {
                             &ops,
                             scalar_cg,
                             fields,
-                            &geometry,
+                            geometry,
                             h,
                             face_scale.as_deref(),
                             if p.carry_solute {
@@ -807,9 +936,7 @@ impl Simulator {
                     || {
                         if p.viscosity > 0.0 {
                             let scale = h * p.viscosity;
-                            diffuse_velocity(
-                                &ops, vector_cg, velocity, &geometry, &transport, scale,
-                            )
+                            diffuse_velocity(&ops, vector_cg, velocity, geometry, &transport, scale)
                         } else {
                             Ok(0)
                         }
@@ -826,44 +953,46 @@ impl Simulator {
 
         // 4. interactions (§4.5) on the active and held vertices (the halo's areas are
         // partial; it holds nothing that can change)
-        let wet: Vec<f64> = (0..n)
-            .map(|j| {
-                let a = geometry.vertex_area[j];
-                let m = loc.fields.free_solvent[j] + loc.fields.absorbed_solvent[j];
-                if a > 0.0 { m / a } else { 0.0 }
-            })
-            .collect();
+        sub.wet.clear();
+        sub.wet.extend((0..n).map(|j| {
+            let a = geometry.vertex_area[j];
+            let m = loc.fields.free_solvent[j] + loc.fields.absorbed_solvent[j];
+            if a > 0.0 { m / a } else { 0.0 }
+        }));
+        let wet = &sub.wet;
         let exposed = if p.vapour_limited {
             vapour_exposure(
                 topo,
                 &geometry.edge_length,
                 &geometry.vertex_area,
                 &w.cloth.boundary,
-                &wet,
+                wet,
                 DRY_DENSITY,
             )
         } else {
             exposure(
                 topo,
                 &w.cloth.boundary,
-                &wet,
+                wet,
                 DRY_DENSITY,
                 p.interaction.evaporation_boundary,
             )
         };
-        let mut part = loc.fields.gather(&w.whole);
+        loc.fields.gather_into(&w.whole, &mut sub.part);
         let absorption_scale = irregular.map(|m| pick(&w.whole, m));
+        pick_into(&w.whole, &geometry.vertex_area, &mut sub.area);
+        pick_into(&w.whole, &exposed, &mut sub.exposed);
         loc.evaporated += interact_varied(
             &p.interaction,
-            &pick(&w.whole, &geometry.vertex_area),
-            &pick(&w.whole, &exposed),
+            &sub.area,
+            &sub.exposed,
             absorption_scale.as_deref(),
             h,
-            &mut part,
+            &mut sub.part,
         )?;
-        loc.fields.scatter(&w.whole, &part);
-        loc.frames = frames;
-        loc.area = geometry.vertex_area;
+        loc.fields.scatter(&w.whole, &sub.part);
+        std::mem::swap(&mut loc.frames, &mut sub.frames);
+        std::mem::swap(&mut loc.area, &mut sub.geometry.vertex_area);
         lap(&mut prof.interaction);
         prof.substeps += 1;
         Ok(())
