@@ -81,17 +81,15 @@ impl VertexFrames {
     /// Frames `F_i = U_i F̄_i` turned by one rotation per vertex (the comoving–corotating
     /// frames of §4.4, with `U_i` from [`super::kabsch::one_ring_rotations`]).
     pub fn rotated(&self, rotation: &[DMat3]) -> Self {
-        let mut out = Self::default();
-        self.rotated_into(rotation, &mut out);
-        out
-    }
-
-    /// [`VertexFrames::rotated`] into `out`'s array (its allocation kept).
-    pub(crate) fn rotated_into(&self, rotation: &[DMat3], out: &mut Self) {
         assert_eq!(rotation.len(), self.frame.len(), "one rotation per vertex");
-        out.frame.clear();
-        out.frame
-            .extend(self.frame.iter().zip(rotation).map(|(f, u)| *u * *f));
+        Self {
+            frame: self
+                .frame
+                .iter()
+                .zip(rotation)
+                .map(|(f, u)| *u * *f)
+                .collect(),
+        }
     }
 
     pub(crate) fn len(&self) -> usize {

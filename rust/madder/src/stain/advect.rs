@@ -1102,52 +1102,59 @@ impl UpwindPlan {
         // receives, the donor chosen by the sign of the flux
         let edges = topology.edges();
         let AdvectScratch {
-            runs,
             outflow,
             courant,
             limited,
             ..
         } = scratch;
-        runs.resize_with(n.div_ceil(VERTICES_PER_TASK), Run::default);
-        runs.par_iter_mut().enumerate().for_each(|(c, run)| {
-            let vertices = c * VERTICES_PER_TASK..((c + 1) * VERTICES_PER_TASK).min(n);
-            // each edge end gives at most one transfer, given or received
-            let ends: usize = vertices
-                .clone()
-                .map(|v| topology.vertex_edges(v).len())
-                .sum();
-            run.clear();
-            run.outflow.reserve(vertices.len());
-            run.flows.out_ptr.reserve(vertices.len());
-            run.flows.out_fraction.reserve(ends);
-            run.flows.in_ptr.reserve(vertices.len());
-            run.flows.in_from.reserve(ends);
-            for v in vertices {
-                let o: f64 = topology
-                    .vertex_edges(v)
-                    .iter()
-                    .filter_map(|&e| {
-                        let phi = flux[e as usize];
-                        let [a, b] = edges[e as usize];
-                        let d = if phi > 0.0 { a } else { b };
-                        if d as usize == v {
-                            if phi != 0.0 {
-                                run.flows.out_fraction.push(phi.abs());
-                            }
-                            Some(phi.abs())
-                        } else {
-                            if phi != 0.0 {
-                                run.flows.in_from.push((phi.abs(), d, e));
-                            }
-                            None
-                        }
-                    })
+        // the runs are not kept (each is a few tens of kB, reused from the allocator's
+        // free lists; kept, they would add the plan's size to the step's peak memory)
+        let runs: Vec<Run> = (0..n.div_ceil(VERTICES_PER_TASK))
+            .into_par_iter()
+            .map(|c| {
+                let vertices = c * VERTICES_PER_TASK..((c + 1) * VERTICES_PER_TASK).min(n);
+                // each edge end gives at most one transfer, given or received
+                let ends: usize = vertices
+                    .clone()
+                    .map(|v| topology.vertex_edges(v).len())
                     .sum();
-                run.outflow.push(o);
-                run.flows.out_ptr.push(run.flows.out_fraction.len() as u32);
-                run.flows.in_ptr.push(run.flows.in_from.len() as u32);
-            }
-        });
+                let mut run = Run {
+                    outflow: Vec::with_capacity(vertices.len()),
+                    flows: Flows {
+                        out_ptr: Vec::with_capacity(vertices.len()),
+                        out_fraction: Vec::with_capacity(ends),
+                        in_ptr: Vec::with_capacity(vertices.len()),
+                        in_from: Vec::with_capacity(ends),
+                    },
+                };
+                for v in vertices {
+                    let o: f64 = topology
+                        .vertex_edges(v)
+                        .iter()
+                        .filter_map(|&e| {
+                            let phi = flux[e as usize];
+                            let [a, b] = edges[e as usize];
+                            let d = if phi > 0.0 { a } else { b };
+                            if d as usize == v {
+                                if phi != 0.0 {
+                                    run.flows.out_fraction.push(phi.abs());
+                                }
+                                Some(phi.abs())
+                            } else {
+                                if phi != 0.0 {
+                                    run.flows.in_from.push((phi.abs(), d, e));
+                                }
+                                None
+                            }
+                        })
+                        .sum();
+                    run.outflow.push(o);
+                    run.flows.out_ptr.push(run.flows.out_fraction.len() as u32);
+                    run.flows.in_ptr.push(run.flows.in_from.len() as u32);
+                }
+                run
+            })
+            .collect();
         outflow.clear();
         outflow.extend(runs.iter().flat_map(|r| r.outflow.iter().copied()));
         let outflow = &*outflow;
@@ -1183,36 +1190,41 @@ impl UpwindPlan {
                 h * phi / (substeps as f64 * vertex_area[d])
             }
         };
-        runs.par_iter_mut().enumerate().for_each(|(c, run)| {
-            // in place: the fractions overwrite the |Φ| they come from, the ones that
-            // round to nothing are squeezed out
-            let f = &mut run.flows;
-            let (mut o, mut i, mut o_to, mut i_to) = (0, 0, 0, 0);
-            for (k, v) in (c * VERTICES_PER_TASK..).take(f.out_ptr.len()).enumerate() {
-                let o_end = f.out_ptr[k] as usize;
-                for t in o..o_end {
-                    let x = fraction(v, f.out_fraction[t]);
-                    if x != 0.0 {
-                        f.out_fraction[o_to] = x;
-                        o_to += 1;
+        let runs: Vec<Flows> = runs
+            .into_par_iter()
+            .enumerate()
+            .map(|(c, run)| {
+                // in place: the fractions overwrite the |Φ| they come from, the ones that
+                // round to nothing are squeezed out
+                let mut f = run.flows;
+                let (mut o, mut i, mut o_to, mut i_to) = (0, 0, 0, 0);
+                for (k, v) in (c * VERTICES_PER_TASK..).take(f.out_ptr.len()).enumerate() {
+                    let o_end = f.out_ptr[k] as usize;
+                    for t in o..o_end {
+                        let x = fraction(v, f.out_fraction[t]);
+                        if x != 0.0 {
+                            f.out_fraction[o_to] = x;
+                            o_to += 1;
+                        }
                     }
-                }
-                let i_end = f.in_ptr[k] as usize;
-                for t in i..i_end {
-                    let (phi, d, e) = f.in_from[t];
-                    let x = fraction(d as usize, phi);
-                    if x != 0.0 {
-                        f.in_from[i_to] = (x, d, e);
-                        i_to += 1;
+                    let i_end = f.in_ptr[k] as usize;
+                    for t in i..i_end {
+                        let (phi, d, e) = f.in_from[t];
+                        let x = fraction(d as usize, phi);
+                        if x != 0.0 {
+                            f.in_from[i_to] = (x, d, e);
+                            i_to += 1;
+                        }
                     }
+                    (o, i) = (o_end, i_end);
+                    f.out_ptr[k] = o_to as u32;
+                    f.in_ptr[k] = i_to as u32;
                 }
-                (o, i) = (o_end, i_end);
-                f.out_ptr[k] = o_to as u32;
-                f.in_ptr[k] = i_to as u32;
-            }
-            f.out_fraction.truncate(o_to);
-            f.in_from.truncate(i_to);
-        });
+                f.out_fraction.truncate(o_to);
+                f.in_from.truncate(i_to);
+                f
+            })
+            .collect();
         self.flows.concat(n, runs);
         self.n_edges = n_edges;
         self.substeps = substeps;
@@ -1455,16 +1467,6 @@ struct Run {
     flows: Flows,
 }
 
-impl Run {
-    fn clear(&mut self) {
-        self.outflow.clear();
-        self.flows.out_ptr.clear();
-        self.flows.out_fraction.clear();
-        self.flows.in_ptr.clear();
-        self.flows.in_from.clear();
-    }
-}
-
 /// The advection's intermediate arrays, kept from one sub-step to the next by the
 /// simulator (its step scratch, issue 16: allocated afresh each sub-step, arrays of a
 /// 35k-vertex window are fresh pages the kernel must fault in and glibc hands back) —
@@ -1478,9 +1480,7 @@ pub(crate) struct AdvectScratch {
     world: Vec<DVec3>,
     per_face: Vec<[f64; 3]>,
     starts: Vec<usize>,
-    /// [`UpwindPlan::new`]: the runs of vertices, the outflows, Courant numbers, and the
-    /// limited vertices.
-    runs: Vec<Run>,
+    /// [`UpwindPlan::new`]: the outflows, Courant numbers, and the limited vertices.
     outflow: Vec<f64>,
     courant: Vec<f64>,
     limited: Vec<bool>,
@@ -1508,9 +1508,9 @@ const VERTICES_PER_TASK: usize = 1024;
 impl Flows {
     /// Runs of consecutive vertices' transfers (each with ends relative to its own
     /// start) laid end to end, in place of these flows (their allocations kept).
-    fn concat(&mut self, n: usize, runs: &[Run]) {
-        let given: usize = runs.iter().map(|r| r.flows.out_fraction.len()).sum();
-        let received: usize = runs.iter().map(|r| r.flows.in_from.len()).sum();
+    fn concat(&mut self, n: usize, runs: Vec<Flows>) {
+        let given: usize = runs.iter().map(|r| r.out_fraction.len()).sum();
+        let received: usize = runs.iter().map(|r| r.in_from.len()).sum();
         let f = self;
         f.out_ptr.clear();
         f.out_fraction.clear();
@@ -1522,12 +1522,12 @@ impl Flows {
         f.in_from.reserve(received);
         f.out_ptr.push(0);
         f.in_ptr.push(0);
-        for run in runs.iter().map(|r| &r.flows) {
+        for run in runs {
             let (o, i) = (f.out_fraction.len() as u32, f.in_from.len() as u32);
             f.out_ptr.extend(run.out_ptr.iter().map(|x| o + x));
             f.in_ptr.extend(run.in_ptr.iter().map(|x| i + x));
-            f.out_fraction.extend_from_slice(&run.out_fraction);
-            f.in_from.extend_from_slice(&run.in_from);
+            f.out_fraction.extend(run.out_fraction);
+            f.in_from.extend(run.in_from);
         }
     }
 

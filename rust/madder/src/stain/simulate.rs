@@ -79,13 +79,13 @@
 use std::time::Instant;
 
 use faer::Par;
-use glam::{DMat3, DVec2, DVec3};
+use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
 use super::advect::{AdvectScratch, UpwindPlan, advect_velocity_in, dual_fluxes_in};
 use super::diffuse::{
-    Conductivity, DENSITY_TOLERANCE, DensityWork, Ops, SoluteMotion, VELOCITY_TOLERANCE, Wicking,
-    check_range, diffuse_densities, diffuse_velocity,
+    Conductivity, DENSITY_TOLERANCE, DensityWork, Ops, SoluteMotion, SolveScratch,
+    VELOCITY_TOLERANCE, Wicking, check_range, diffuse_densities, diffuse_velocity,
 };
 use super::extend::{extend_velocity, wet_vertices};
 use super::forces::{
@@ -278,7 +278,7 @@ pub(super) struct StepScratch {
     acceleration: Vec<DVec3>,
     /// The frames' turns `ω_z` over the whole frame.
     omega: Vec<f64>,
-    /// The frames at the frame's end.
+    /// The frames at the frame's end, while the sub-steps before the last run.
     end_frames: VertexFrames,
     /// The last committed frame's work: its arrays are the next frame's.
     local: Option<Local>,
@@ -292,9 +292,9 @@ pub(super) struct SubstepScratch {
     /// The geometry (its vertex areas then swapped with the frame's).
     geometry: Geometry,
     /// The vertex frames at the sub-step's end (then swapped with the frame's), and the
-    /// shared rotations of a refined window.
+    /// transport between them.
     frames: VertexFrames,
-    rotation: Vec<DMat3>,
+    transport: Transport,
     /// Per vertex: the acceleration, turn and half-kick propagator; the velocity after
     /// the first half kick, and its mean over the sub-step.
     force: Vec<(DVec2, f64, VelocityStep)>,
@@ -310,6 +310,8 @@ pub(super) struct SubstepScratch {
     flux: Vec<f64>,
     plan: Option<UpwindPlan>,
     advect: AdvectScratch,
+    /// The density and the velocity solves' arrays.
+    solves: [SolveScratch; 2],
     /// The interactions': liquid densities, the part of the fields they change, its
     /// areas and exposures.
     wet: Vec<f64>,
@@ -613,17 +615,21 @@ impl Simulator {
         let clock = Instant::now();
         // the frames at the frame's end: the sub-step count reads them, and the last
         // sub-step's frames are these (the same formula at the same positions)
-        w.corotating_frames_into(next, end_frames, &mut sub.rotation);
-        let (s_count, omega) = self.substeps(w, end_frames, &local.frames, dt, omega);
+        w.corotating_frames_into(next, &mut sub.frames);
+        let (s_count, omega) = self.substeps(w, &sub.frames, &local.frames, dt, omega);
+        // several sub-steps: the end's frames wait for the last one
+        if s_count > 1 {
+            std::mem::swap(&mut sub.frames, end_frames);
+        }
         // one sub-step: its turn is the frame's, just computed
         let omega = omega.filter(|_| s_count == 1);
         prof.geometry += clock.elapsed().as_secs_f64();
         let h = dt / s_count as f64;
         for s in 1..=s_count {
             let last = s == s_count;
-            if last {
+            if last && s_count > 1 {
                 std::mem::swap(&mut sub.frames, end_frames);
-            } else {
+            } else if !last {
                 let t = s as f64 / s_count as f64;
                 between.clear();
                 between.extend(cur.iter().zip(&*next).map(|(a, b)| a.lerp(*b, t)));
@@ -704,17 +710,18 @@ impl Simulator {
         let topo = &w.cloth.topology;
         sub.geometry.renew(topo, q)?;
         if !frames_ready {
-            w.corotating_frames_into(q, &mut sub.frames, &mut sub.rotation);
+            w.corotating_frames_into(q, &mut sub.frames);
         }
         let (geometry, frames) = (&sub.geometry, &sub.frames);
-        let transport = Transport::with_shared_tips(
+        sub.transport.renew(
             topo,
             &w.cloth.rings,
-            geometry,
-            frames,
+            &sub.geometry,
+            &sub.frames,
             q,
             w.tip_share.as_deref(),
         );
+        let transport = &sub.transport;
         prof.active_vertices += w.region.vertices.len();
         prof.window_vertices += n;
         prof.window_edges += topo.n_edges();
@@ -763,7 +770,7 @@ impl Simulator {
             &geometry.vertex_area,
             &w.region.mask,
         );
-        extend_velocity(topo, &transport, &wet, &mut [forced, mean]);
+        extend_velocity(topo, transport, &wet, &mut [forced, mean]);
         let (forced, mean) = (&sub.forced, &sub.mean);
         lap(&mut prof.forces);
 
@@ -774,7 +781,7 @@ impl Simulator {
             topo,
             &w.cloth.rings,
             geometry,
-            &transport,
+            transport,
             forced,
             h,
             active,
@@ -824,7 +831,7 @@ impl Simulator {
             let arrived = if p.momentum_advection {
                 plan.transport_with_momentum_into(
                     topo,
-                    &transport,
+                    transport,
                     &mut fields,
                     forced,
                     advected,
@@ -903,6 +910,7 @@ impl Simulator {
                 .collect::<Vec<f64>>()
         });
         let (fields, velocity) = (&mut loc.fields, &mut loc.velocity);
+        let [density_solve, velocity_solve] = &mut sub.solves;
         let (densities, viscous) = match w.cg.as_mut() {
             None => (
                 Ok(DensityWork {
@@ -931,12 +939,21 @@ impl Simulator {
                             } else {
                                 SoluteMotion::Diffused
                             },
+                            density_solve,
                         )
                     },
                     || {
                         if p.viscosity > 0.0 {
                             let scale = h * p.viscosity;
-                            diffuse_velocity(&ops, vector_cg, velocity, geometry, &transport, scale)
+                            diffuse_velocity(
+                                &ops,
+                                vector_cg,
+                                velocity,
+                                geometry,
+                                transport,
+                                scale,
+                                velocity_solve,
+                            )
                         } else {
                             Ok(0)
                         }

@@ -306,21 +306,18 @@ impl Window {
     /// ([`corotating_frames_into`]), or on a refined cloth one per coarse face and edge
     /// for the fine vertices with whole one-rings there (congruent rings moving
     /// affinely: the same rotation up to rounding, [`crate::mesh::kabsch`]). Into `out`
-    /// (its array kept), the shared rotations of a refined window in `rotation` (kept
-    /// too).
-    pub(super) fn corotating_frames_into(
-        &self,
-        positions: &[DVec3],
-        out: &mut VertexFrames,
-        rotation: &mut Vec<DMat3>,
-    ) {
+    /// (its array kept).
+    pub(super) fn corotating_frames_into(&self, positions: &[DVec3], out: &mut VertexFrames) {
         let c = &self.cloth;
         match &self.share {
             None => corotating_frames_into(&c.adjacency, &c.rest_frames, &c.rest, positions, out),
             Some(share) => {
+                // the rotations `U_j`, then `U_j F̄_j` over them in place
                 c.adjacency
-                    .shared_rotations_into(&c.rest, positions, share, rotation);
-                c.rest_frames.rotated_into(rotation, out);
+                    .shared_rotations_into(&c.rest, positions, share, &mut out.frame);
+                for (u, f) in out.frame.iter_mut().zip(&c.rest_frames.frame) {
+                    *u = *u * *f;
+                }
             }
         }
     }
