@@ -91,12 +91,13 @@ use super::{Geometry, Topology};
 /// parallel; each corner's angle is computed once and read by the fan of its vertex). With
 /// `share`, a face `t` with `share[t] = (r, c)`, `r ≠ t`, takes the angles of face `r`
 /// turned by `c` (its corner `k` gets `r`'s corner `(k + c) % 3`): similar faces, module
-/// doc, "Similar faces".
+/// doc, "Similar faces". Into `tip` (its allocation kept).
 fn tip_angles(
     topology: &Topology,
     geometry: &Geometry,
     share: Option<&[(u32, u8)]>,
-) -> Vec<[f64; 3]> {
+    tip: &mut Vec<[f64; 3]>,
+) {
     let own = |f: usize| -> [f64; 3] {
         let fe = topology.face_edges()[f];
         let area = geometry.face_area[f];
@@ -109,10 +110,16 @@ fn tip_angles(
     // the mollification adds the same length to every edge, which does not scale with
     // the faces: similar faces stay similar only without it
     let Some(share) = share.filter(|_| geometry.mollify_delta == 0.0) else {
-        return (0..topology.n_faces()).into_par_iter().map(own).collect();
+        (0..topology.n_faces())
+            .into_par_iter()
+            .map(own)
+            .collect_into_vec(tip);
+        return;
     };
     assert_eq!(share.len(), topology.n_faces(), "one share per face");
-    let first: Vec<[f64; 3]> = share
+    // the faces that lead their run first, then the others from their lead (which is
+    // never overwritten)
+    share
         .par_iter()
         .enumerate()
         .map(|(t, &(r, _))| {
@@ -122,20 +129,14 @@ fn tip_angles(
                 [f64::NAN; 3]
             }
         })
-        .collect();
-    share
-        .par_iter()
-        .zip(&first)
-        .map(|(&(r, c), &mine)| {
-            let theirs = first[r as usize];
+        .collect_into_vec(tip);
+    for (t, &(r, c)) in share.iter().enumerate() {
+        if r as usize != t {
+            let theirs = tip[r as usize];
             debug_assert!(theirs[0].is_finite(), "a shared face's angles are its own");
-            if mine[0].is_nan() {
-                std::array::from_fn(|k| theirs[(k + c as usize) % 3])
-            } else {
-                mine
-            }
-        })
-        .collect()
+            tip[t] = std::array::from_fn(|k| theirs[(k + c as usize) % 3]);
+        }
+    }
 }
 
 /// Parallel transport `R_ij` of eq. 4.4 (the discrete connection of §4.3.1): polar angles
@@ -156,6 +157,9 @@ pub struct Transport {
     edge_polar: Vec<[f64; 2]>,
     edge_ptr: Vec<u32>,
     edge_end: Vec<u32>,
+    /// The tip angles of every face's corners: [`Transport::renew`]'s intermediate array,
+    /// kept with its allocation (issue 16).
+    tip: Vec<[f64; 3]>,
 }
 
 impl Transport {
@@ -211,7 +215,8 @@ impl Transport {
         assert_eq!(rings.n_vertices(), n, "rings of another topology");
         assert_eq!(frames.len(), n, "one frame per vertex");
         assert_eq!(positions.len(), n, "one position per vertex");
-        let tip = tip_angles(topology, geometry, share);
+        tip_angles(topology, geometry, share, &mut self.tip);
+        let tip = &self.tip;
         // polar angles written in place: one slice of the flat array per vertex
         let alpha = &mut self.alpha;
         alpha.clear();
@@ -227,7 +232,7 @@ impl Transport {
             .into_par_iter()
             .enumerate()
             .map(|(v, alpha)| {
-                let gamma = polar_map(rings, &tip, v, alpha);
+                let gamma = polar_map(rings, tip, v, alpha);
                 let offset = frame_offset(rings, v, alpha, &frames.frame[v], positions);
                 (gamma, offset)
             })

@@ -300,12 +300,11 @@ pub(super) struct SubstepScratch {
     force: Vec<(DVec2, f64, VelocityStep)>,
     forced: Vec<DVec2>,
     mean: Vec<DVec2>,
-    /// The semi-Lagrangian velocity, the densities' velocity, the velocity the momentum
-    /// arrived with, and the velocity after the second half kick.
+    /// The semi-Lagrangian velocity, the densities' velocity, and the velocity the
+    /// momentum arrived with (then the second half kick's, swapped with the frame's).
     advected: Vec<DVec2>,
     centred: Vec<DVec2>,
     arrived: Vec<DVec2>,
-    velocity: Vec<DVec2>,
     /// The dual fluxes and the upwind plan, and the advection's own arrays.
     flux: Vec<f64>,
     plan: Option<UpwindPlan>,
@@ -838,10 +837,10 @@ impl Simulator {
                     &mut sub.advect,
                     &mut sub.arrived,
                 );
-                &sub.arrived
+                &mut sub.arrived
             } else {
                 plan.transport_all_in(topo, &mut fields, &mut sub.advect);
-                advected
+                &mut sub.advected
             };
             if let (Some(c), Some(cf)) = (color, f.color_free.as_mut()) {
                 merge_rgb(&c, cf);
@@ -852,11 +851,10 @@ impl Simulator {
         lap(&mut prof.advection);
         // the second half of the forces, at the vertex the liquid arrived at
         arrived
-            .par_iter()
+            .par_iter_mut()
             .zip(force)
-            .map(|(&u, (a, _, half))| half.end(u, *a))
-            .collect_into_vec(&mut sub.velocity);
-        std::mem::swap(&mut loc.velocity, &mut sub.velocity);
+            .for_each(|(u, (a, _, half))| *u = half.end(*u, *a));
+        std::mem::swap(&mut loc.velocity, arrived);
         lap(&mut prof.forces);
 
         // 3. diffusion (§4.3.3–4.3.4, eq. 4.6): the densities and the velocity are
@@ -1008,6 +1006,7 @@ impl Simulator {
             &mut sub.part,
         )?;
         loc.fields.scatter(&w.whole, &sub.part);
+
         std::mem::swap(&mut loc.frames, &mut sub.frames);
         std::mem::swap(&mut loc.area, &mut sub.geometry.vertex_area);
         lap(&mut prof.interaction);
