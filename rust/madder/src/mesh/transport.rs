@@ -157,9 +157,6 @@ pub struct Transport {
     edge_polar: Vec<[f64; 2]>,
     edge_ptr: Vec<u32>,
     edge_end: Vec<u32>,
-    /// The tip angles of every face's corners: [`Transport::renew`]'s intermediate array,
-    /// kept with its allocation (issue 16).
-    tip: Vec<[f64; 3]>,
 }
 
 impl Transport {
@@ -215,8 +212,11 @@ impl Transport {
         assert_eq!(rings.n_vertices(), n, "rings of another topology");
         assert_eq!(frames.len(), n, "one frame per vertex");
         assert_eq!(positions.len(), n, "one position per vertex");
-        tip_angles(topology, geometry, share, &mut self.tip);
-        let tip = &self.tip;
+        // the tip angles are not kept: they are needed only here, and the memory they
+        // take is the advection's a moment later
+        let mut tip = Vec::new();
+        tip_angles(topology, geometry, share, &mut tip);
+        let tip = &tip;
         // polar angles written in place: one slice of the flat array per vertex
         let alpha = &mut self.alpha;
         alpha.clear();

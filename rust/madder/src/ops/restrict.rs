@@ -288,7 +288,6 @@ impl Restriction {
     /// assembling it: only the faces with an edge inside add, in the same face order,
     /// so every value is the same to the last bit (the whole mesh's diagonal, which the
     /// restriction recomputes, is not formed).
-    #[cfg(test)]
     pub(crate) fn values_from_faces(
         &self,
         topology: &Topology,
@@ -296,22 +295,7 @@ impl Restriction {
         clamp: bool,
         weights: impl Fn(usize) -> [f64; 3],
     ) -> Vec<f64> {
-        let mut values = Vec::new();
-        self.values_from_faces_into(topology, area, clamp, weights, &mut values);
-        values
-    }
-
-    /// [`Restriction::values_from_faces`] into `values` (its allocation kept).
-    pub(crate) fn values_from_faces_into(
-        &self,
-        topology: &Topology,
-        area: &[f64],
-        clamp: bool,
-        weights: impl Fn(usize) -> [f64; 3],
-        values: &mut Vec<f64>,
-    ) {
-        values.clear();
-        values.resize(self.scalar.row_idx.len(), 0.0);
+        let mut values = vec![0.0; self.scalar.row_idx.len()];
         for (f, fe) in topology.face_edges().iter().enumerate() {
             let entry = fe.map(|e| self.edge_entry[e as usize]);
             if entry.iter().all(|&s| s == u32::MAX) {
@@ -324,7 +308,8 @@ impl Restriction {
                 }
             }
         }
-        self.close_rows(values, area, clamp);
+        self.close_rows(&mut values, area, clamp);
+        values
     }
 
     /// Per entry of [`Restriction::scalar`]: its mesh edge (`u32::MAX` on the diagonal).

@@ -324,9 +324,6 @@ impl Conductivity {
     /// `M + scale · K_S` restricted to `region` ([`Restriction::scalar_values`] of
     /// [`Self::stiffness`]), bit for bit; for an isotropic cloth assembled on the region's
     /// faces only ([`Restriction::values_from_faces`]), without the whole window's matrix.
-    ///
-    /// Into `values` (its allocation kept where the values are assembled in place).
-    #[allow(clippy::too_many_arguments)]
     pub(crate) fn restricted_values(
         &self,
         topology: &Topology,
@@ -335,33 +332,24 @@ impl Conductivity {
         region: &Restriction,
         scale: f64,
         face_scale: Option<&[f64]>,
-        values: &mut Vec<f64>,
-    ) {
+    ) -> Vec<f64> {
         let area = &geometry.vertex_area;
         match (self, face_scale) {
             (Conductivity::Isotropic(d), None) => {
                 // `cotan_stiffness(scale · d)`'s weights
                 let s = scale * d;
-                region.values_from_faces_into(
-                    topology,
-                    area,
-                    false,
-                    |f| geometry.face_cot[f].map(|c| -0.5 * s * c),
-                    values,
-                );
+                region.values_from_faces(topology, area, false, |f| {
+                    geometry.face_cot[f].map(|c| -0.5 * s * c)
+                })
             }
             (Conductivity::Isotropic(d), Some(g)) => {
-                region.values_from_faces_into(
-                    topology,
-                    area,
-                    false,
-                    |f| geometry.face_cot[f].map(|c| -0.5 * scale * d * g[f] * c),
-                    values,
-                );
+                region.values_from_faces(topology, area, false, |f| {
+                    geometry.face_cot[f].map(|c| -0.5 * scale * d * g[f] * c)
+                })
             }
             (Conductivity::Woven(_), g) => {
                 let full = self.stiffness(topology, geometry, pattern, scale, g);
-                *values = region.scalar_values(pattern, &full, area, false);
+                region.scalar_values(pattern, &full, area, false)
             }
         }
     }
@@ -701,17 +689,6 @@ pub(super) fn solvers(
     })
 }
 
-/// The arrays of one CG solve — the matrix's values, the right-hand sides, the solutions —
-/// kept by the simulator from one sub-step to the next (its step scratch, issue 16:
-/// allocated afresh, they were fresh pages to fault in every sub-step). Contents are
-/// overwritten by each use.
-#[derive(Debug, Default)]
-pub(super) struct SolveScratch {
-    values: Vec<f64>,
-    rhs: Vec<f64>,
-    x: Vec<f64>,
-}
-
 /// The operators of a window the diffusion steps read.
 pub(super) struct Ops<'a> {
     pub(super) topology: &'a Topology,
@@ -734,9 +711,6 @@ pub(super) enum SoluteMotion<'a> {
 /// `(M + h K_A) σ' = m` for every flowing field on the active vertices, Neumann at the
 /// region's edge ([`crate::ops::restrict`]), then the exact mass restoration and the non-negativity
 /// repair; the masses outside are not touched. Returns the work done.
-///
-/// The matrix, right-hand sides and solutions in `scratch`'s arrays.
-#[allow(clippy::too_many_arguments)]
 pub(super) fn diffuse_densities(
     ops: &Ops<'_>,
     cg: &mut WarmCg,
@@ -745,7 +719,6 @@ pub(super) fn diffuse_densities(
     h: f64,
     wicking: Option<&[f64]>,
     solute: SoluteMotion<'_>,
-    scratch: &mut SolveScratch,
 ) -> Result<DensityWork, Error> {
     let (carry, held_scale) = match solute {
         SoluteMotion::Diffused => (false, None),
@@ -760,13 +733,8 @@ pub(super) fn diffuse_densities(
         ops.conductivity
             .stiffness(ops.topology, geometry, ops.pattern, h, wicking)
     });
-    let SolveScratch {
-        values,
-        rhs,
-        x: sigma,
-    } = scratch;
-    match &full {
-        Some(full) => *values = region.scalar_values(ops.pattern, full, area, false),
+    let values = match &full {
+        Some(full) => region.scalar_values(ops.pattern, full, area, false),
         None => ops.conductivity.restricted_values(
             ops.topology,
             geometry,
@@ -774,10 +742,8 @@ pub(super) fn diffuse_densities(
             region,
             h,
             wicking,
-            values,
         ),
-    }
-    let values = &*values;
+    };
     // the fibres' liquid on its own, pinned operator (its faces' scales), when carried
     let held_full = held_scale.map(|g| {
         ops.conductivity
@@ -797,21 +763,21 @@ pub(super) fn diffuse_densities(
             fields.extend(c.iter_mut());
         }
     }
-    rhs.clear();
-    rhs.extend(
-        fields
-            .iter()
-            .flat_map(|m| vertices.iter().map(|&v| m[v as usize])),
-    );
-    let rhs = &*rhs;
+    let rhs: Vec<f64> = fields
+        .iter()
+        .flat_map(|m| vertices.iter().map(|&v| m[v as usize]))
+        .collect();
     // warm start: the densities the masses have now (after advection) on the new areas —
     // the solution for h → 0, closer than the last step's solution because the liquid has
     // moved since
-    sigma.clear();
-    sigma.extend(rhs.iter().enumerate().map(|(k, m)| {
-        let a = area[vertices[k % nv] as usize];
-        if a > 0.0 { m / a } else { 0.0 }
-    }));
+    let mut sigma: Vec<f64> = rhs
+        .iter()
+        .enumerate()
+        .map(|(k, m)| {
+            let a = area[vertices[k % nv] as usize];
+            if a > 0.0 { m / a } else { 0.0 }
+        })
+        .collect();
     let mut work = DensityWork {
         iterations: 0,
         solves: fields.len(),
@@ -819,12 +785,12 @@ pub(super) fn diffuse_densities(
     };
     work.iterations = match &held_full {
         None => {
-            cg.solve_chained(values, rhs, sigma)?;
+            cg.solve_chained(&values, &rhs, &mut sigma)?;
             cg.last_iterations
         }
         Some(held) => {
             let held_values = region.scalar_values(ops.pattern, held, area, false);
-            cg.solve(values, &rhs[..nv], &mut sigma[..nv])?;
+            cg.solve(&values, &rhs[..nv], &mut sigma[..nv])?;
             let free = cg.last_iterations;
             cg.solve(&held_values, &rhs[nv..], &mut sigma[nv..])?;
             free + cg.last_iterations
@@ -1057,8 +1023,7 @@ fn carry_with_solvent(
 /// Eq. 4.6 on the active vertices with clamped (non-negative) edge weights,
 /// `(M ⊗ I + h ν K_∇) u' = (M ⊗ I) u` with `scale = h ν`: the block rows and columns of
 /// the active vertices, diagonal blocks `K_ii = Σ_{j active} L_ij`; the velocities
-/// outside are not touched. Returns the CG iterations. The matrix, right-hand side and
-/// solution in `scratch`'s arrays.
+/// outside are not touched. Returns the CG iterations.
 pub(super) fn diffuse_velocity(
     ops: &Ops<'_>,
     cg: &mut WarmCg,
@@ -1066,39 +1031,27 @@ pub(super) fn diffuse_velocity(
     geometry: &Geometry,
     transport: &Transport,
     scale: f64,
-    scratch: &mut SolveScratch,
 ) -> Result<usize, Error> {
     let region = ops.region;
     let area = &geometry.vertex_area;
-    let SolveScratch {
-        values: scalar,
-        rhs,
-        x,
-    } = scratch;
     // `cotan_stiffness(scale)` on the region's faces, clamped
-    region.values_from_faces_into(
-        ops.topology,
-        area,
-        true,
-        |f| geometry.face_cot[f].map(|c| -0.5 * scale * c),
-        scalar,
-    );
+    let scalar = region.values_from_faces(ops.topology, area, true, |f| {
+        geometry.face_cot[f].map(|c| -0.5 * scale * c)
+    });
     let nv = region.vertices.len();
-    rhs.clear();
-    x.clear();
-    rhs.reserve(2 * nv);
-    x.reserve(2 * nv);
+    let mut rhs = Vec::with_capacity(2 * nv);
+    let mut x = Vec::with_capacity(2 * nv);
     for &v in &region.vertices {
         let (a, u) = (area[v as usize], velocity[v as usize]);
         rhs.extend([a * u.x, a * u.y]);
         x.extend([u.x, u.y]);
     }
     cg.solve_rotated(
-        scalar,
+        &scalar,
         region.entry_edges(),
         transport.edge_cos_sin(),
-        rhs,
-        x,
+        &rhs,
+        &mut x,
     )?;
     for (j, &v) in region.vertices.iter().enumerate() {
         velocity[v as usize] = DVec2::new(x[2 * j], x[2 * j + 1]);

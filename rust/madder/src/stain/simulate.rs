@@ -84,8 +84,8 @@ use rayon::prelude::*;
 
 use super::advect::{AdvectScratch, UpwindPlan, advect_velocity_in, dual_fluxes_in};
 use super::diffuse::{
-    Conductivity, DENSITY_TOLERANCE, DensityWork, Ops, SoluteMotion, SolveScratch,
-    VELOCITY_TOLERANCE, Wicking, check_range, diffuse_densities, diffuse_velocity,
+    Conductivity, DENSITY_TOLERANCE, DensityWork, Ops, SoluteMotion, VELOCITY_TOLERANCE, Wicking,
+    check_range, diffuse_densities, diffuse_velocity,
 };
 use super::extend::{extend_velocity, wet_vertices};
 use super::forces::{
@@ -309,14 +309,6 @@ pub(super) struct SubstepScratch {
     flux: Vec<f64>,
     plan: Option<UpwindPlan>,
     advect: AdvectScratch,
-    /// The density and the velocity solves' arrays.
-    solves: [SolveScratch; 2],
-    /// The interactions': liquid densities, the part of the fields they change, its
-    /// areas and exposures.
-    wet: Vec<f64>,
-    part: Fields,
-    area: Vec<f64>,
-    exposed: Vec<f64>,
 }
 
 impl StepScratch {
@@ -908,7 +900,6 @@ impl Simulator {
                 .collect::<Vec<f64>>()
         });
         let (fields, velocity) = (&mut loc.fields, &mut loc.velocity);
-        let [density_solve, velocity_solve] = &mut sub.solves;
         let (densities, viscous) = match w.cg.as_mut() {
             None => (
                 Ok(DensityWork {
@@ -937,21 +928,12 @@ impl Simulator {
                             } else {
                                 SoluteMotion::Diffused
                             },
-                            density_solve,
                         )
                     },
                     || {
                         if p.viscosity > 0.0 {
                             let scale = h * p.viscosity;
-                            diffuse_velocity(
-                                &ops,
-                                vector_cg,
-                                velocity,
-                                geometry,
-                                transport,
-                                scale,
-                                velocity_solve,
-                            )
+                            diffuse_velocity(&ops, vector_cg, velocity, geometry, transport, scale)
                         } else {
                             Ok(0)
                         }
@@ -968,44 +950,42 @@ impl Simulator {
 
         // 4. interactions (§4.5) on the active and held vertices (the halo's areas are
         // partial; it holds nothing that can change)
-        sub.wet.clear();
-        sub.wet.extend((0..n).map(|j| {
-            let a = geometry.vertex_area[j];
-            let m = loc.fields.free_solvent[j] + loc.fields.absorbed_solvent[j];
-            if a > 0.0 { m / a } else { 0.0 }
-        }));
-        let wet = &sub.wet;
+        let wet: Vec<f64> = (0..n)
+            .map(|j| {
+                let a = geometry.vertex_area[j];
+                let m = loc.fields.free_solvent[j] + loc.fields.absorbed_solvent[j];
+                if a > 0.0 { m / a } else { 0.0 }
+            })
+            .collect();
         let exposed = if p.vapour_limited {
             vapour_exposure(
                 topo,
                 &geometry.edge_length,
                 &geometry.vertex_area,
                 &w.cloth.boundary,
-                wet,
+                &wet,
                 DRY_DENSITY,
             )
         } else {
             exposure(
                 topo,
                 &w.cloth.boundary,
-                wet,
+                &wet,
                 DRY_DENSITY,
                 p.interaction.evaporation_boundary,
             )
         };
-        loc.fields.gather_into(&w.whole, &mut sub.part);
+        let mut part = loc.fields.gather(&w.whole);
         let absorption_scale = irregular.map(|m| pick(&w.whole, m));
-        pick_into(&w.whole, &geometry.vertex_area, &mut sub.area);
-        pick_into(&w.whole, &exposed, &mut sub.exposed);
         loc.evaporated += interact_varied(
             &p.interaction,
-            &sub.area,
-            &sub.exposed,
+            &pick(&w.whole, &geometry.vertex_area),
+            &pick(&w.whole, &exposed),
             absorption_scale.as_deref(),
             h,
-            &mut sub.part,
+            &mut part,
         )?;
-        loc.fields.scatter(&w.whole, &sub.part);
+        loc.fields.scatter(&w.whole, &part);
 
         std::mem::swap(&mut loc.frames, &mut sub.frames);
         std::mem::swap(&mut loc.area, &mut sub.geometry.vertex_area);

@@ -59,8 +59,14 @@ impl Fields {
         }
     }
 
-    /// The fields of the vertices `index` (in that order), into `out` (its arrays'
-    /// allocations kept).
+    /// The fields of the vertices `index` (in that order).
+    pub(crate) fn gather(&self, index: &[u32]) -> Self {
+        let mut out = Self::default();
+        self.gather_into(index, &mut out);
+        out
+    }
+
+    /// [`Fields::gather`] into `out` (its arrays' allocations kept).
     pub(crate) fn gather_into(&self, index: &[u32], out: &mut Self) {
         fn pick<T: Copy>(from: &[T], index: &[u32], to: &mut Vec<T>) {
             to.clear();
