@@ -1516,10 +1516,12 @@ impl Flows {
         f.out_fraction.clear();
         f.in_ptr.clear();
         f.in_from.clear();
-        f.out_ptr.reserve(n + 1);
-        f.out_fraction.reserve(given);
-        f.in_ptr.reserve(n + 1);
-        f.in_from.reserve(received);
+        // exact: the transfers grow a little every sub-step while the liquid spreads, and
+        // the doubling of an amortized reserve would keep up to twice their memory
+        f.out_ptr.reserve_exact(n + 1);
+        f.out_fraction.reserve_exact(given);
+        f.in_ptr.reserve_exact(n + 1);
+        f.in_from.reserve_exact(received);
         f.out_ptr.push(0);
         f.in_ptr.push(0);
         for run in runs {
@@ -1555,6 +1557,7 @@ impl Flows {
         let cos_sin = transport.edge_cos_sin();
         let n = self.in_ptr.len() - 1;
         turns.clear();
+        turns.reserve_exact(self.in_from.len());
         turns.resize(self.in_from.len(), [0.0; 2]);
         // runs of vertices, each filling its own stretch of the table
         let mut runs = Vec::with_capacity(n.div_ceil(VERTICES_PER_TASK));
