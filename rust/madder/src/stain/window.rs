@@ -316,7 +316,7 @@ impl Window {
                 c.adjacency
                     .shared_rotations_into(&c.rest, positions, share, &mut out.frame);
                 for (u, f) in out.frame.iter_mut().zip(&c.rest_frames.frame) {
-                    *u = *u * *f;
+                    *u *= *f;
                 }
             }
         }
