@@ -257,11 +257,18 @@ pub struct Simulator {
 /// A window of 35k vertices (Detail 2, 10 % of the flag wet) makes a frame array of
 /// `DMat3` 2.5 MB and one of `DVec2` 0.56 MB, above glibc's mmap threshold or, once that
 /// has risen, in its per-thread arenas, which glibc trims when they are freed: every
-/// frame touched new pages and the kernel faulted them in (`clear_page`), 17 % of the
-/// step's samples on 2 cores, 0.24 s of system time in a 0.66 s run of 12 frames. The
-/// buffers here are every array a frame or a sub-step fills for the whole window;
-/// the values written are the same operations on the same numbers as before, so the
-/// results are the same bits.
+/// frame touched new pages and the kernel faulted them in (`clear_page`; 17 % of the
+/// Detail 2 bench's samples were in the kernel on 2 cores). Kept here, the Detail 0
+/// bench (20k vertices, all wet) takes 18.9k page faults instead of 29.3k, the Detail 2
+/// one 53k instead of 57k (12 frames; ARCHITECTURE.md, "Close to the limit"). The values
+/// written are the same operations on the same numbers as before: the same bits.
+///
+/// Kept are the arrays that live through the whole sub-step anyway (positions, frames,
+/// geometry, transport, velocities, fluxes, the plan) and the advection's intermediate
+/// ones ([`AdvectScratch`]: freed at the top of the heap, they were the ones trimmed and
+/// faulted in again every frame). The diffusion's and the interactions' arrays are not:
+/// allocated after the advection's are freed, they reused that memory, and kept beside
+/// them they added 3–6 MB to the peak for no fewer faults.
 ///
 /// Sized by the window: when the window shrinks below half the size they were last
 /// grown to, they are dropped (and grown again to the new window's size).
