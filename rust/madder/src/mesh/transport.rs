@@ -91,13 +91,12 @@ use super::{Geometry, Topology};
 /// parallel; each corner's angle is computed once and read by the fan of its vertex). With
 /// `share`, a face `t` with `share[t] = (r, c)`, `r ≠ t`, takes the angles of face `r`
 /// turned by `c` (its corner `k` gets `r`'s corner `(k + c) % 3`): similar faces, module
-/// doc, "Similar faces". Into `tip` (its allocation kept).
+/// doc, "Similar faces".
 fn tip_angles(
     topology: &Topology,
     geometry: &Geometry,
     share: Option<&[(u32, u8)]>,
-    tip: &mut Vec<[f64; 3]>,
-) {
+) -> Vec<[f64; 3]> {
     let own = |f: usize| -> [f64; 3] {
         let fe = topology.face_edges()[f];
         let area = geometry.face_area[f];
@@ -110,16 +109,10 @@ fn tip_angles(
     // the mollification adds the same length to every edge, which does not scale with
     // the faces: similar faces stay similar only without it
     let Some(share) = share.filter(|_| geometry.mollify_delta == 0.0) else {
-        (0..topology.n_faces())
-            .into_par_iter()
-            .map(own)
-            .collect_into_vec(tip);
-        return;
+        return (0..topology.n_faces()).into_par_iter().map(own).collect();
     };
     assert_eq!(share.len(), topology.n_faces(), "one share per face");
-    // the faces that lead their run first, then the others from their lead (which is
-    // never overwritten)
-    share
+    let first: Vec<[f64; 3]> = share
         .par_iter()
         .enumerate()
         .map(|(t, &(r, _))| {
@@ -129,14 +122,20 @@ fn tip_angles(
                 [f64::NAN; 3]
             }
         })
-        .collect_into_vec(tip);
-    for (t, &(r, c)) in share.iter().enumerate() {
-        if r as usize != t {
-            let theirs = tip[r as usize];
+        .collect();
+    share
+        .par_iter()
+        .zip(&first)
+        .map(|(&(r, c), &mine)| {
+            let theirs = first[r as usize];
             debug_assert!(theirs[0].is_finite(), "a shared face's angles are its own");
-            tip[t] = std::array::from_fn(|k| theirs[(k + c as usize) % 3]);
-        }
-    }
+            if mine[0].is_nan() {
+                std::array::from_fn(|k| theirs[(k + c as usize) % 3])
+            } else {
+                mine
+            }
+        })
+        .collect()
 }
 
 /// Parallel transport `R_ij` of eq. 4.4 (the discrete connection of §4.3.1): polar angles
@@ -214,9 +213,7 @@ impl Transport {
         assert_eq!(positions.len(), n, "one position per vertex");
         // the tip angles are not kept: they are needed only here, and the memory they
         // take is the advection's a moment later
-        let mut tip = Vec::new();
-        tip_angles(topology, geometry, share, &mut tip);
-        let tip = &tip;
+        let tip = tip_angles(topology, geometry, share);
         // polar angles written in place: one slice of the flat array per vertex
         let alpha = &mut self.alpha;
         alpha.clear();
@@ -232,7 +229,7 @@ impl Transport {
             .into_par_iter()
             .enumerate()
             .map(|(v, alpha)| {
-                let gamma = polar_map(rings, tip, v, alpha);
+                let gamma = polar_map(rings, &tip, v, alpha);
                 let offset = frame_offset(rings, v, alpha, &frames.frame[v], positions);
                 (gamma, offset)
             })

@@ -801,8 +801,7 @@ pub fn dual_fluxes(
 /// [`crate::mesh::Transport::with_shared_tips`] takes them), the median-dual area vectors
 /// of each run of congruent faces are computed once (module doc, "Congruent faces").
 ///
-/// Into `flux` (its allocation kept), the intermediate arrays in `scratch`'s.
-#[allow(clippy::too_many_arguments)]
+/// Into `flux` (its allocation kept).
 pub(crate) fn dual_fluxes_in(
     topology: &Topology,
     positions: &[DVec3],
@@ -810,7 +809,6 @@ pub(crate) fn dual_fluxes_in(
     velocity: &[DVec2],
     active: &[bool],
     share: Option<&[(u32, u8)]>,
-    scratch: &mut AdvectScratch,
     flux: &mut Vec<f64>,
 ) {
     assert_eq!(active.len(), topology.n_vertices(), "one flag per vertex");
@@ -821,7 +819,6 @@ pub(crate) fn dual_fluxes_in(
         velocity,
         Some(active),
         share,
-        scratch,
         flux,
     );
 }
@@ -836,19 +833,11 @@ fn dual_fluxes_where(
 ) -> Vec<f64> {
     let mut flux = Vec::new();
     dual_fluxes_into(
-        topology,
-        positions,
-        frames,
-        velocity,
-        active,
-        share,
-        &mut AdvectScratch::default(),
-        &mut flux,
+        topology, positions, frames, velocity, active, share, &mut flux,
     );
     flux
 }
 
-#[allow(clippy::too_many_arguments)]
 fn dual_fluxes_into(
     topology: &Topology,
     positions: &[DVec3],
@@ -856,7 +845,6 @@ fn dual_fluxes_into(
     velocity: &[DVec2],
     active: Option<&[bool]>,
     share: Option<&[(u32, u8)]>,
-    scratch: &mut AdvectScratch,
     flux: &mut Vec<f64>,
 ) {
     let n = topology.n_vertices();
@@ -864,13 +852,7 @@ fn dual_fluxes_into(
     assert_eq!(frames.len(), n, "one frame per vertex");
     assert_eq!(velocity.len(), n, "one velocity per vertex");
     let on = |v: u32| active.is_none_or(|a| a[v as usize]);
-    let AdvectScratch {
-        world,
-        per_face,
-        starts,
-        ..
-    } = scratch;
-    (0..n)
+    let world: Vec<DVec3> = (0..n)
         .into_par_iter()
         .with_min_len(VERTICES_PER_TASK)
         .map(|i| {
@@ -880,75 +862,72 @@ fn dual_fluxes_into(
                 DVec3::ZERO
             }
         })
-        .collect_into_vec(world);
-    let world = &*world;
+        .collect();
     // a face with fewer than two active corners has no active edge
     let needed = |tri: &[u32; 3]| tri.iter().filter(|&&v| on(v)).count() >= 2;
-    match share {
+    let per_face: Vec<[f64; 3]> = match share {
         None => topology
             .faces()
             .par_iter()
             .with_min_len(VERTICES_PER_TASK)
             .map(|tri| {
                 if needed(tri) {
-                    face_fluxes(tri.map(|v| v as usize), positions, world)
+                    face_fluxes(tri.map(|v| v as usize), positions, &world)
                 } else {
                     [0.0; 3]
                 }
             })
-            .collect_into_vec(per_face),
+            .collect(),
         Some(share) => {
             // runs of congruent faces (consecutive, each led by the face they share),
             // one set of area vectors per run (module doc, "Congruent faces")
             let faces = topology.faces();
             assert_eq!(share.len(), faces.len(), "one share per face");
-            starts.clear();
-            starts.extend((0..faces.len()).filter(|&t| share[t].0 as usize == t));
-            let starts = &*starts;
-            per_face.clear();
-            per_face.par_extend(
-                starts
-                    .par_iter()
-                    .enumerate()
-                    .with_min_len(VERTICES_PER_TASK / 16)
-                    .flat_map_iter(|(i, &lead)| {
-                        let end = starts.get(i + 1).copied().unwrap_or(faces.len());
-                        let needed = &needed;
-                        let lead_tri = faces[lead].map(|v| v as usize);
-                        // the lead's vectors only if a face of the run needs them
-                        let area = faces[lead..end]
-                            .iter()
-                            .any(needed)
-                            .then(|| face_area_vectors(lead_tri, positions));
-                        (lead..end).map(move |t| {
-                            let tri = faces[t];
-                            match area {
-                                Some(area) if needed(&tri) => {
-                                    debug_assert_eq!(
-                                        share[t].0 as usize, lead,
-                                        "a run shares its lead"
-                                    );
-                                    let c = share[t].1 as usize;
-                                    // a face of the other orientation is the lead turned by π
-                                    let sign = if c == 0 { 1.0 } else { -1.0 };
-                                    std::array::from_fn(|k| {
-                                        let s = area[(k + c) % 3] * sign;
-                                        let (a, b) = (tri[(k + 1) % 3], tri[(k + 2) % 3]);
-                                        let s = if a > b { -s } else { s };
-                                        0.5 * (world[a as usize] + world[b as usize]).dot(s)
-                                    })
-                                }
-                                _ => [0.0; 3],
+            let starts: Vec<usize> = (0..faces.len())
+                .filter(|&t| share[t].0 as usize == t)
+                .collect();
+            starts
+                .par_iter()
+                .enumerate()
+                .with_min_len(VERTICES_PER_TASK / 16)
+                .flat_map_iter(|(i, &lead)| {
+                    let end = starts.get(i + 1).copied().unwrap_or(faces.len());
+                    let (world, needed) = (&world, &needed);
+                    let lead_tri = faces[lead].map(|v| v as usize);
+                    // the lead's vectors only if a face of the run needs them
+                    let area = faces[lead..end]
+                        .iter()
+                        .any(needed)
+                        .then(|| face_area_vectors(lead_tri, positions));
+                    (lead..end).map(move |t| {
+                        let tri = faces[t];
+                        match area {
+                            Some(area) if needed(&tri) => {
+                                debug_assert_eq!(
+                                    share[t].0 as usize, lead,
+                                    "a run shares its lead"
+                                );
+                                let c = share[t].1 as usize;
+                                // a face of the other orientation is the lead turned by π
+                                let sign = if c == 0 { 1.0 } else { -1.0 };
+                                std::array::from_fn(|k| {
+                                    let s = area[(k + c) % 3] * sign;
+                                    let (a, b) = (tri[(k + 1) % 3], tri[(k + 2) % 3]);
+                                    let s = if a > b { -s } else { s };
+                                    0.5 * (world[a as usize] + world[b as usize]).dot(s)
+                                })
                             }
-                        })
-                    }),
-            );
+                            _ => [0.0; 3],
+                        }
+                    })
+                })
+                .collect()
         }
-    }
+    };
     // gather per edge in face order (deterministic)
     flux.clear();
     flux.resize(topology.n_edges(), 0.0);
-    for (fe, contrib) in topology.face_edges().iter().zip(&*per_face) {
+    for (fe, contrib) in topology.face_edges().iter().zip(&per_face) {
         for k in 0..3 {
             flux[fe[k] as usize] += contrib[k];
         }
@@ -1024,13 +1003,7 @@ impl UpwindPlan {
         h: f64,
     ) -> Result<Self, ParamError> {
         let mut plan = Self::empty();
-        plan.renew(
-            topology,
-            vertex_area,
-            flux,
-            h,
-            &mut AdvectScratch::default(),
-        )?;
+        plan.renew(topology, vertex_area, flux, h)?;
         Ok(plan)
     }
 
@@ -1045,16 +1018,15 @@ impl UpwindPlan {
         }
     }
 
-    /// [`UpwindPlan::new`] in this plan's arrays, its intermediate arrays in `scratch`'s
-    /// (the allocations of both kept: the simulator renews one plan every sub-step). The
-    /// same plan, bit for bit; on error `self` is left unchanged.
+    /// [`UpwindPlan::new`] in this plan's arrays (their allocations kept: the simulator
+    /// renews one plan every sub-step, issue 16). The same plan, bit for bit; on error
+    /// `self` is left unchanged.
     pub(crate) fn renew(
         &mut self,
         topology: &Topology,
         vertex_area: &[f64],
         flux: &[f64],
         h: f64,
-        scratch: &mut AdvectScratch,
     ) -> Result<(), ParamError> {
         let (n, n_edges) = (topology.n_vertices(), topology.n_edges());
         if vertex_area.len() != n {
@@ -1101,14 +1073,6 @@ impl UpwindPlan {
         // edge order: the numerator of its Courant number) and the |Φ| it gives and
         // receives, the donor chosen by the sign of the flux
         let edges = topology.edges();
-        let AdvectScratch {
-            outflow,
-            courant,
-            limited,
-            ..
-        } = scratch;
-        // the runs are not kept (each is a few tens of kB, reused from the allocator's
-        // free lists; kept, they would add the plan's size to the step's peak memory)
         let runs: Vec<Run> = (0..n.div_ceil(VERTICES_PER_TASK))
             .into_par_iter()
             .map(|c| {
@@ -1155,19 +1119,23 @@ impl UpwindPlan {
                 run
             })
             .collect();
-        outflow.clear();
-        outflow.extend(runs.iter().flat_map(|r| r.outflow.iter().copied()));
-        let outflow = &*outflow;
-        courant.clear();
-        courant.extend(outflow.iter().zip(vertex_area).map(|(&o, &a)| {
-            if o == 0.0 || h == 0.0 {
-                0.0
-            } else if a > 0.0 {
-                h * o / a
-            } else {
-                f64::INFINITY
-            }
-        }));
+        let outflow: Vec<f64> = runs
+            .iter()
+            .flat_map(|r| r.outflow.iter().copied())
+            .collect();
+        let courant: Vec<f64> = outflow
+            .iter()
+            .zip(vertex_area)
+            .map(|(&o, &a)| {
+                if o == 0.0 || h == 0.0 {
+                    0.0
+                } else if a > 0.0 {
+                    h * o / a
+                } else {
+                    f64::INFINITY
+                }
+            })
+            .collect();
         // vertices without area are left to the limiter, not to the sub-step count
         let max_courant = courant
             .iter()
@@ -1175,9 +1143,7 @@ impl UpwindPlan {
             .filter(|c| c.is_finite())
             .fold(0.0, f64::max);
         let substeps = ((max_courant / SUBSTEP_COURANT).ceil() as usize).clamp(1, MAX_SUBSTEPS);
-        limited.clear();
-        limited.extend(courant.iter().map(|&c| c / substeps as f64 > 1.0));
-        let limited = &*limited;
+        let limited: Vec<bool> = courant.iter().map(|&c| c / substeps as f64 > 1.0).collect();
         let n_limited = limited.iter().filter(|&&l| l).count();
         // |Φ| → the fraction of the donor's mass per sub-step; a transfer that rounds to
         // nothing is dropped
@@ -1275,22 +1241,11 @@ impl UpwindPlan {
     /// # Panics
     /// If a field does not have one value per vertex of `topology`, the plan's topology.
     pub fn transport_all(&self, topology: &Topology, fields: &mut [&mut [f64]]) {
-        self.transport_all_in(topology, fields, &mut AdvectScratch::default());
-    }
-
-    /// [`UpwindPlan::transport_all`], its sub-cycles' arrays in `scratch`'s (their
-    /// allocations kept).
-    pub(crate) fn transport_all_in(
-        &self,
-        topology: &Topology,
-        fields: &mut [&mut [f64]],
-        scratch: &mut AdvectScratch,
-    ) {
         for field in fields.iter() {
             self.check(topology, field.len());
         }
         if !fields.is_empty() {
-            self.cycles(fields, None, scratch);
+            self.cycles(fields, None);
         }
     }
 
@@ -1335,20 +1290,12 @@ impl UpwindPlan {
     ) -> Vec<DVec2> {
         let mut out = Vec::new();
         self.transport_with_momentum_into(
-            topology,
-            transport,
-            fields,
-            velocity,
-            fallback,
-            &mut AdvectScratch::default(),
-            &mut out,
+            topology, transport, fields, velocity, fallback, &mut out,
         );
         out
     }
 
-    /// [`UpwindPlan::transport_with_momentum`] into `out`, its sub-cycles' arrays in
-    /// `scratch`'s (the allocations of both kept).
-    #[allow(clippy::too_many_arguments)]
+    /// [`UpwindPlan::transport_with_momentum`] into `out` (its allocation kept).
     pub(crate) fn transport_with_momentum_into(
         &self,
         topology: &Topology,
@@ -1356,7 +1303,6 @@ impl UpwindPlan {
         fields: &mut [&mut [f64]],
         velocity: &[DVec2],
         fallback: &[DVec2],
-        scratch: &mut AdvectScratch,
         out: &mut Vec<DVec2>,
     ) {
         assert!(!fields.is_empty(), "the solvent is the first field");
@@ -1366,12 +1312,12 @@ impl UpwindPlan {
         self.check(topology, velocity.len());
         self.check(topology, fallback.len());
         let scale = fields[0].iter().copied().fold(0.0, f64::max);
-        scratch.p.clear();
-        scratch
-            .p
-            .extend(fields[0].iter().zip(velocity).map(|(&m, &u)| m * u));
-        self.cycles(fields, Some(transport), scratch);
-        let momentum = &scratch.p;
+        let momentum: Vec<DVec2> = fields[0]
+            .iter()
+            .zip(velocity)
+            .map(|(&m, &u)| m * u)
+            .collect();
+        let momentum = self.cycles(fields, Some((transport, momentum)));
         let mass = &*fields[0];
         let floor = MOMENTUM_MIN_MASS_REL * scale;
         (0..mass.len())
@@ -1387,63 +1333,50 @@ impl UpwindPlan {
             .collect_into_vec(out);
     }
 
-    /// The sub-cycles on the fields, interleaved per vertex, and, given the transport, on
-    /// the solvent's momentum in `scratch.p` too (left there), in `scratch`'s arrays.
+    /// The sub-cycles on the fields, interleaved per vertex, and, given the transport and
+    /// the solvent's momentum, on the momentum too (returned; empty without).
     fn cycles(
         &self,
         fields: &mut [&mut [f64]],
-        transport: Option<&Transport>,
-        scratch: &mut AdvectScratch,
-    ) {
+        momentum: Option<(&Transport, Vec<DVec2>)>,
+    ) -> Vec<DVec2> {
         let (k, n) = (fields.len(), fields[0].len());
-        let AdvectScratch {
-            m,
-            next,
-            p,
-            p_next,
-            turns,
-            ..
-        } = scratch;
-        m.clear();
-        m.resize(n * k, 0.0);
+        let mut m = vec![0.0; n * k];
         for (c, field) in fields.iter().enumerate() {
             for (v, x) in field.iter().enumerate() {
                 m[v * k + c] = *x;
             }
         }
-        next.clear();
-        next.resize(n * k, 0.0);
-        if transport.is_none() {
-            p.clear();
-        }
-        p_next.clear();
-        p_next.resize(p.len(), DVec2::ZERO);
+        let mut next = vec![0.0; n * k];
+        let (transport, mut p) = match momentum {
+            Some((t, p)) => (Some(t), p),
+            None => (None, Vec::new()),
+        };
+        let mut p_next = vec![DVec2::ZERO; p.len()];
         // the rotation of every received transfer, gathered once when several sub-cycles
         // read it
         let turns = match transport {
-            Some(t) if self.substeps > 1 => {
-                self.flows.turns(t, turns);
-                Turns::Table(&turns[..])
-            }
+            Some(t) if self.substeps > 1 => Turns::Table(self.flows.turns(t)),
             Some(t) => Turns::Edges(t.edge_cos_sin()),
             None => Turns::Edges(&[]),
         };
         for _ in 0..self.substeps {
             match transport {
-                None => self.flows.cycle(m, k, next),
+                None => self.flows.cycle(&m, k, &mut next),
                 Some(_) => {
                     self.flows
-                        .cycle_with_momentum(m, k, next, &turns, p, p_next);
+                        .cycle_with_momentum(&m, k, &mut next, &turns, &p, &mut p_next);
                 }
             }
-            std::mem::swap(m, next);
-            std::mem::swap(p, p_next);
+            std::mem::swap(&mut m, &mut next);
+            std::mem::swap(&mut p, &mut p_next);
         }
         for (c, field) in fields.iter_mut().enumerate() {
             for (v, x) in field.iter_mut().enumerate() {
                 *x = m[v * k + c];
             }
         }
+        p
     }
 }
 
@@ -1461,43 +1394,17 @@ struct Flows {
 
 /// One run of vertices in [`UpwindPlan::new`]: their outflows, and their transfers
 /// (`|Φ|` where [`Flows`] will hold the fractions; ends relative to the run's start).
-#[derive(Debug, Default)]
+#[derive(Default)]
 struct Run {
     outflow: Vec<f64>,
     flows: Flows,
-}
-
-/// The advection's intermediate arrays, kept from one sub-step to the next by the
-/// simulator (its step scratch, issue 16: allocated afresh each sub-step, arrays of a
-/// 35k-vertex window are fresh pages the kernel must fault in and glibc hands back) —
-/// what [`dual_fluxes`] and [`UpwindPlan::new`] build on the way, and the interleaved
-/// fields and momenta of the transport's sub-cycles. Contents are overwritten by each
-/// use; only the allocations carry over.
-#[derive(Debug, Default)]
-pub(crate) struct AdvectScratch {
-    /// [`dual_fluxes`]: the velocities in world coordinates, the faces' contributions,
-    /// the first face of each run of congruent faces.
-    world: Vec<DVec3>,
-    per_face: Vec<[f64; 3]>,
-    starts: Vec<usize>,
-    /// [`UpwindPlan::new`]: the outflows, Courant numbers, and the limited vertices.
-    outflow: Vec<f64>,
-    courant: Vec<f64>,
-    limited: Vec<bool>,
-    /// [`UpwindPlan::transport_with_momentum`]: the interleaved fields before and after
-    /// a sub-cycle, the momenta likewise, the table of the received transfers' turns.
-    m: Vec<f64>,
-    next: Vec<f64>,
-    p: Vec<DVec2>,
-    p_next: Vec<DVec2>,
-    turns: Vec<[f64; 2]>,
 }
 
 /// The rotations `R_vd` of the received transfers, as `(cos, sin)` of `[cos −sin; sin cos]`:
 /// a table in [`Flows::received`] order ([`Flows::turns`]), or read off the edges'
 /// rotations (transposed where `v > d`) each time.
 enum Turns<'a> {
-    Table(&'a [[f64; 2]]),
+    Table(Vec<[f64; 2]>),
     Edges(&'a [[f64; 2]]),
 }
 
@@ -1552,13 +1459,11 @@ impl Flows {
     /// The rotation `R_vd` of each received transfer, in [`Flows::received`] order, as
     /// `(cos, sin)` of the matrix `[cos −sin; sin cos]`: the stored rotation of the edge or
     /// its transpose (the sine negated: exact), read once per plan instead of once per
-    /// sub-cycle; into `turns` (its allocation kept).
-    fn turns(&self, transport: &Transport, turns: &mut Vec<[f64; 2]>) {
+    /// sub-cycle.
+    fn turns(&self, transport: &Transport) -> Vec<[f64; 2]> {
         let cos_sin = transport.edge_cos_sin();
         let n = self.in_ptr.len() - 1;
-        turns.clear();
-        turns.reserve_exact(self.in_from.len());
-        turns.resize(self.in_from.len(), [0.0; 2]);
+        let mut turns = vec![[0.0; 2]; self.in_from.len()];
         // runs of vertices, each filling its own stretch of the table
         let mut runs = Vec::with_capacity(n.div_ceil(VERTICES_PER_TASK));
         let mut rest = turns.as_mut_slice();
@@ -1579,6 +1484,7 @@ impl Flows {
                 }
             }
         });
+        turns
     }
 
     /// [`Flows::cycle`], and the momentum `p` into `p_next` in the same pass (`turns` from

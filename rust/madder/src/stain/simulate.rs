@@ -82,7 +82,7 @@ use faer::Par;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
-use super::advect::{AdvectScratch, UpwindPlan, advect_velocity_in, dual_fluxes_in};
+use super::advect::{UpwindPlan, advect_velocity_in, dual_fluxes_in};
 use super::diffuse::{
     Conductivity, DENSITY_TOLERANCE, DensityWork, Ops, SoluteMotion, VELOCITY_TOLERANCE, Wicking,
     check_range, diffuse_densities, diffuse_velocity,
@@ -259,16 +259,18 @@ pub struct Simulator {
 /// has risen, in its per-thread arenas, which glibc trims when they are freed: every
 /// frame touched new pages and the kernel faulted them in (`clear_page`; 17 % of the
 /// Detail 2 bench's samples were in the kernel on 2 cores). Kept here, the Detail 0
-/// bench (20k vertices, all wet) takes 18.9k page faults instead of 29.3k, the Detail 2
-/// one 53k instead of 57k (12 frames; ARCHITECTURE.md, "Close to the limit"). The values
-/// written are the same operations on the same numbers as before: the same bits.
+/// bench (20k vertices, all wet) takes 17k page faults instead of 29k (12 frames;
+/// ARCHITECTURE.md, "Close to the limit"). The values written are the same operations on
+/// the same numbers as before: the same bits.
 ///
-/// Kept are the arrays that live through the whole sub-step anyway (positions, frames,
-/// geometry, transport, velocities, fluxes, the plan) and the advection's intermediate
-/// ones ([`AdvectScratch`]: freed at the top of the heap, they were the ones trimmed and
-/// faulted in again every frame). The diffusion's and the interactions' arrays are not:
-/// allocated after the advection's are freed, they reused that memory, and kept beside
-/// them they added 3–6 MB to the peak for no fewer faults.
+/// Kept are the arrays that live through the whole sub-step (positions, frames, geometry,
+/// transport, forces and velocities, fluxes, the plan) or the whole frame (the frame's
+/// working copy of the state, recycled after its commit). The short-lived arrays inside
+/// a phase (the flux's and the plan's intermediates, the sub-cycles' fields, the
+/// diffusion's and the interactions' arrays) are not: each is freed before the next
+/// phase allocates, which then reuses that memory, so they cost no page faults; kept as
+/// well, they only added to the peak (3–15 MB measured, as much as they weigh together
+/// against the largest of them).
 ///
 /// Sized by the window: when the window shrinks below half the size they were last
 /// grown to, they are dropped (and grown again to the new window's size).
@@ -312,10 +314,9 @@ pub(super) struct SubstepScratch {
     advected: Vec<DVec2>,
     centred: Vec<DVec2>,
     arrived: Vec<DVec2>,
-    /// The dual fluxes and the upwind plan, and the advection's own arrays.
+    /// The dual fluxes and the upwind plan.
     flux: Vec<f64>,
     plan: Option<UpwindPlan>,
-    advect: AdvectScratch,
 }
 
 impl StepScratch {
@@ -807,11 +808,10 @@ impl Simulator {
             &sub.centred,
             active,
             w.tip_share.as_deref(),
-            &mut sub.advect,
             &mut sub.flux,
         );
         let plan = sub.plan.get_or_insert_with(UpwindPlan::empty);
-        plan.renew(topo, &geometry.vertex_area, &sub.flux, h, &mut sub.advect)?;
+        plan.renew(topo, &geometry.vertex_area, &sub.flux, h)?;
         let plan = &*plan;
         prof.transport_cycles += plan.substeps();
         loc.cycles += plan.substeps();
@@ -833,12 +833,11 @@ impl Simulator {
                     &mut fields,
                     forced,
                     advected,
-                    &mut sub.advect,
                     &mut sub.arrived,
                 );
                 &mut sub.arrived
             } else {
-                plan.transport_all_in(topo, &mut fields, &mut sub.advect);
+                plan.transport_all(topo, &mut fields);
                 &mut sub.advected
             };
             if let (Some(c), Some(cf)) = (color, f.color_free.as_mut()) {
