@@ -259,7 +259,7 @@ pub struct Simulator {
 /// has risen, in its per-thread arenas, which glibc trims when they are freed: every
 /// frame touched new pages and the kernel faulted them in (`clear_page`; 17 % of the
 /// Detail 2 bench's samples were in the kernel on 2 cores). Kept here, the Detail 0
-/// bench (20k vertices, all wet) takes 17k page faults instead of 29k (12 frames;
+/// bench (20k vertices, all wet) takes 18k page faults instead of 29k (12 frames;
 /// ARCHITECTURE.md, "Close to the limit"). The values written are the same operations on
 /// the same numbers as before: the same bits.
 ///
