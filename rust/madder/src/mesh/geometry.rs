@@ -70,7 +70,7 @@ impl Geometry {
 
     /// [`Geometry::new`] in this geometry's arrays (their allocations kept: the simulator
     /// renews one geometry every sub-step instead of allocating its arrays afresh, see
-    /// [`crate::stain::simulate`]'s scratch). The same values, bit for bit; on error
+    /// the step scratch of `stain::simulate`). The same values, bit for bit; on error
     /// `self` is left unchanged.
     pub(crate) fn renew<P: Copy + Into<DVec3> + Sync>(
         &mut self,
