@@ -50,9 +50,10 @@
 //! (`q_j = A_f p_j` on the ring's part in face `f`, `A_f` the coarse face's current
 //! map). So `H = Σ_f A_f Σ_{j ∈ f} p_j p_jᵀ` is the same matrix for all of them, and so is
 //! `U_i`: [`RingAdjacency::shared_rotations_into`] computes it once, at the first such
-//! vertex of a face or edge, and gives it to the others. It equals their own Kabsch rotation up
-//! to the rounding of their positions (each placed by its own barycentric sum), not bit
-//! for bit; ARCHITECTURE.md (Stain detail) gives the measured effect on the stain.
+//! vertex of a face or edge, and gives it to the others. It equals their own Kabsch
+//! rotation up to the rounding of their positions (each placed by its own barycentric
+//! sum), not bit for bit; ARCHITECTURE.md (Stain detail) gives the measured effect on
+//! the stain.
 
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
