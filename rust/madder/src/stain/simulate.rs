@@ -1000,3 +1000,118 @@ impl Simulator {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A `w × h` grid of unit spacing `d` on the plane `z = 0`, two triangles a cell.
+    fn grid(w: usize, h: usize, d: f64) -> (Topology, Vec<DVec3>) {
+        let id = |i: usize, j: usize| (j * w + i) as u32;
+        let mut faces = Vec::new();
+        for j in 0..h - 1 {
+            for i in 0..w - 1 {
+                faces.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                faces.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+        let rest = (0..w * h)
+            .map(|k| DVec3::new((k % w) as f64 * d, (k / w) as f64 * d, 0.0))
+            .collect();
+        (Topology::from_triangles(w * h, faces).unwrap(), rest)
+    }
+
+    /// The kept step arrays ([`StepScratch`]) carry no value from one frame to the next:
+    /// a simulator whose scratch is replaced before every frame — by an empty one, or by
+    /// the leftovers of another simulation on a larger window — steps to the same bits
+    /// as one that keeps its own, while the liquid spreads (the window is rebuilt and
+    /// grows) on a waving, tilting cloth, with one and with three sub-steps a frame.
+    #[test]
+    fn kept_arrays_carry_nothing_between_frames() {
+        let (topo, rest) = grid(60, 40, 0.02);
+        let wave = |t: f64| -> Vec<DVec3> {
+            rest.iter()
+                .map(|p| {
+                    // tilted: the liquid runs down towards y = 0
+                    let z = 0.01 * (8.0 * p.x + 5.0 * t).sin() + (0.8 + 0.3 * t) * p.y;
+                    DVec3::new(p.x, p.y + 0.05 * t * p.x, z)
+                })
+                .collect()
+        };
+        let centre = DVec3::new(0.6, 0.6, 0.0);
+        let pour: Vec<f64> = rest
+            .iter()
+            .map(|p| if p.distance(centre) < 0.06 { 0.5 } else { 0.0 })
+            .collect();
+        let dt = 1.0 / 24.0;
+        for substeps in [1, 3] {
+            let make = || {
+                let params = StainParams {
+                    substeps,
+                    friction: 5.0,
+                    ..StainParams::default()
+                };
+                let mut sim = Simulator::new(
+                    topo.clone(),
+                    &rest,
+                    &wave(0.0),
+                    Conductivity::Isotropic(2e-4),
+                    params,
+                    DEFAULT_SOLUTE_COLOR,
+                    Par::Seq,
+                )
+                .unwrap();
+                sim.add_liquid(&pour, 0.05, None).unwrap();
+                sim
+            };
+            // leftovers of a larger window: the whole cloth wet
+            let mut other = make();
+            other.add_liquid(&vec![0.2; rest.len()], 0.1, None).unwrap();
+            for f in 1..=4 {
+                other.step(&wave(f as f64 * dt), dt, None).unwrap();
+            }
+            let leftovers = std::mem::take(&mut other.scratch);
+            assert!(
+                leftovers.vertices > 0,
+                "the other simulation kept its arrays"
+            );
+            let (mut kept, mut fresh, mut stale) = (make(), make(), make());
+            stale.scratch = leftovers;
+            let mut rebuilds = 0;
+            for f in 1..=16 {
+                let q = wave(f as f64 * dt);
+                let after = wave((f + 1) as f64 * dt);
+                fresh.scratch = StepScratch::default();
+                if f > 1 {
+                    // another frame's leftovers each time, of another size
+                    std::mem::swap(&mut stale.scratch, &mut other.scratch);
+                    other.step(&q, dt, None).unwrap();
+                }
+                for sim in [&mut kept, &mut fresh, &mut stale] {
+                    sim.step(&q, dt, Some(&after)).unwrap();
+                }
+                rebuilds = kept.profile().window_rebuilds;
+                let bits = |sim: &Simulator| -> Vec<u64> {
+                    let st = &sim.state;
+                    st.fields
+                        .free_solvent
+                        .iter()
+                        .chain(&st.fields.solute)
+                        .chain(&st.fields.absorbed_solvent)
+                        .chain(&st.vertex_area)
+                        .chain(st.velocity.iter().flat_map(|u| [&u.x, &u.y]))
+                        .map(|x| x.to_bits())
+                        .collect()
+                };
+                let want = bits(&kept);
+                assert!(bits(&fresh) == want, "fresh arrays differ at frame {f}");
+                assert!(bits(&stale) == want, "stale arrays differ at frame {f}");
+            }
+            assert!(rebuilds >= 4, "the window was rebuilt as the liquid ran");
+            assert!(
+                kept.state.fields.free_solvent.iter().any(|&m| m > 0.0),
+                "liquid left to compare"
+            );
+        }
+    }
+}
