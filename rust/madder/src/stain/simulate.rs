@@ -1077,6 +1077,8 @@ mod tests {
             );
             let (mut kept, mut fresh, mut stale) = (make(), make(), make());
             stale.scratch = leftovers;
+            // (`vertices` reset: the larger leftovers are used, not dropped by `fit`)
+            stale.scratch.vertices = 0;
             let mut rebuilds = 0;
             for f in 1..=16 {
                 let q = wave(f as f64 * dt);
@@ -1085,6 +1087,7 @@ mod tests {
                 if f > 1 {
                     // another frame's leftovers each time, of another size
                     std::mem::swap(&mut stale.scratch, &mut other.scratch);
+                    stale.scratch.vertices = 0;
                     other.step(&q, dt, None).unwrap();
                 }
                 for sim in [&mut kept, &mut fresh, &mut stale] {
