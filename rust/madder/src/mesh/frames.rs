@@ -30,7 +30,7 @@ use crate::error::MeshError;
 pub(crate) const SPOKE_MIN_SINE: f64 = 1e-6;
 
 /// Per-vertex orthonormal tangent frames (columns `x, y, z`; `z` the vertex normal).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct VertexFrames {
     /// `F_i` of every vertex, columns `x_i, y_i, z_i`.
     pub frame: Vec<DMat3>,

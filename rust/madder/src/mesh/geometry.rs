@@ -38,7 +38,7 @@ use crate::error::MeshError;
 pub(crate) const MOLLIFY_EPS_REL: f64 = 1e-6;
 
 /// Geometry of one frame of a mesh with fixed [`Topology`].
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct Geometry {
     /// Mollified intrinsic length of every edge (indexed like [`Topology::edges`]).
     pub edge_length: Vec<f64>,
@@ -63,8 +63,22 @@ impl Geometry {
         topology: &Topology,
         positions: &[P],
     ) -> Result<Self, MeshError> {
+        let mut geometry = Self::default();
+        geometry.renew(topology, positions)?;
+        Ok(geometry)
+    }
+
+    /// [`Geometry::new`] in this geometry's arrays (their allocations kept: the simulator
+    /// renews one geometry every sub-step instead of allocating its arrays afresh, see
+    /// the step scratch of `stain::simulate`). The same values, bit for bit; on error
+    /// `self` is left unchanged.
+    pub(crate) fn renew<P: Copy + Into<DVec3> + Sync>(
+        &mut self,
+        topology: &Topology,
+        positions: &[P],
+    ) -> Result<(), MeshError> {
         check_positions(topology, positions)?;
-        let raw: Vec<f64> = topology
+        topology
             .edges()
             .par_iter()
             .map(|&[a, b]| {
@@ -72,12 +86,15 @@ impl Geometry {
                     .into()
                     .distance(positions[b as usize].into())
             })
-            .collect();
-        Ok(Self::from_edge_lengths(topology, raw))
+            .collect_into_vec(&mut self.edge_length);
+        self.complete(topology);
+        Ok(())
     }
 
-    /// Geometry from (unmollified) intrinsic edge lengths, indexed like [`Topology::edges`].
-    pub(crate) fn from_edge_lengths(topology: &Topology, mut edge_length: Vec<f64>) -> Self {
+    /// The rest of the geometry from the raw edge lengths in `self.edge_length` (mollified
+    /// in place), into the arrays already there.
+    fn complete(&mut self, topology: &Topology) {
+        let edge_length = &mut self.edge_length;
         let mean = edge_length.iter().sum::<f64>() / edge_length.len().max(1) as f64;
         let eps = MOLLIFY_EPS_REL * mean;
         let margin = |f: &[u32; 3]| {
@@ -93,28 +110,24 @@ impl Geometry {
         if delta > 0.0 {
             edge_length.iter_mut().for_each(|l| *l += delta);
         }
-        let (face_area, face_cot): (Vec<f64>, Vec<[f64; 3]>) = topology
+        let edge_length = &*edge_length;
+        topology
             .face_edges()
             .par_iter()
             .map(|fe| triangle_area_cot(fe.map(|e| edge_length[e as usize])))
-            .unzip();
-        let mut vertex_area = vec![0.0; topology.n_vertices()];
-        for (tri, &area) in topology.faces().iter().zip(&face_area) {
+            .unzip_into_vecs(&mut self.face_area, &mut self.face_cot);
+        let vertex_area = &mut self.vertex_area;
+        vertex_area.clear();
+        vertex_area.resize(topology.n_vertices(), 0.0);
+        for (tri, &area) in topology.faces().iter().zip(&self.face_area) {
             for &v in tri {
                 vertex_area[v as usize] += area / 3.0;
             }
         }
-        Self {
-            edge_length,
-            face_area,
-            face_cot,
-            vertex_area,
-            mollify_delta: delta,
-            n_degenerate_faces,
-        }
+        self.mollify_delta = delta;
+        self.n_degenerate_faces = n_degenerate_faces;
     }
 
-    /// Total area of the mesh.
     #[cfg(test)]
     pub(crate) fn total_area(&self) -> f64 {
         self.face_area.iter().sum()

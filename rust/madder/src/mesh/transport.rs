@@ -140,7 +140,7 @@ fn tip_angles(
 
 /// Parallel transport `R_ij` of eq. 4.4 (the discrete connection of §4.3.1): polar angles
 /// `α_ij` per spoke and transport angles `θ_ij` per edge, in given vertex frames.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct Transport {
     /// Polar angle of every spoke (laid out like [`OneRings::spokes`]), measured from the
     /// reference spoke, counter-clockwise, rescaled.
@@ -190,13 +190,34 @@ impl Transport {
         positions: &[DVec3],
         share: Option<&[(u32, u8)]>,
     ) -> Self {
+        let mut transport = Self::default();
+        transport.renew(topology, rings, geometry, frames, positions, share);
+        transport
+    }
+
+    /// [`Self::with_shared_tips`] in this transport's arrays (their allocations kept: the
+    /// simulator renews one transport every sub-step instead of allocating it afresh,
+    /// issue 16). The same values, bit for bit.
+    pub(crate) fn renew(
+        &mut self,
+        topology: &Topology,
+        rings: &OneRings,
+        geometry: &Geometry,
+        frames: &VertexFrames,
+        positions: &[DVec3],
+        share: Option<&[(u32, u8)]>,
+    ) {
         let n = topology.n_vertices();
         assert_eq!(rings.n_vertices(), n, "rings of another topology");
         assert_eq!(frames.len(), n, "one frame per vertex");
         assert_eq!(positions.len(), n, "one position per vertex");
+        // the tip angles are not kept: they are needed only here, and the memory they
+        // take is the advection's a moment later
         let tip = tip_angles(topology, geometry, share);
         // polar angles written in place: one slice of the flat array per vertex
-        let mut alpha = vec![f64::NAN; rings.spoke_vertex.len()];
+        let alpha = &mut self.alpha;
+        alpha.clear();
+        alpha.resize(rings.spoke_vertex.len(), f64::NAN);
         let mut slices: Vec<&mut [f64]> = Vec::with_capacity(n);
         let mut rest = alpha.as_mut_slice();
         for v in 0..n {
@@ -204,7 +225,7 @@ impl Transport {
             slices.push(head);
             rest = tail;
         }
-        let (angle_sum, offset): (Vec<f64>, Vec<f64>) = slices
+        slices
             .into_par_iter()
             .enumerate()
             .map(|(v, alpha)| {
@@ -212,18 +233,25 @@ impl Transport {
                 let offset = frame_offset(rings, v, alpha, &frames.frame[v], positions);
                 (gamma, offset)
             })
-            .unzip();
+            .unzip_into_vecs(&mut self.angle_sum, &mut self.offset);
+        let (alpha, offset) = (&self.alpha, &self.offset);
         // θ_ab from the angle of each edge in the frame of each endpoint, and its rotation
         let edges = topology.edges();
         // written in place, in one parallel pass (a nested unzip collects into lists
         // of chunks and copies them)
         let m = edges.len();
-        let (mut theta, mut cos_sin, mut edge_polar) =
-            (vec![0.0; m], vec![[0.0; 2]; m], vec![[0.0; 2]; m]);
+        let (theta, cos_sin, edge_polar) =
+            (&mut self.theta, &mut self.cos_sin, &mut self.edge_polar);
+        theta.clear();
+        theta.resize(m, 0.0);
+        cos_sin.clear();
+        cos_sin.resize(m, [0.0; 2]);
+        edge_polar.clear();
+        edge_polar.resize(m, [0.0; 2]);
         theta
             .par_iter_mut()
-            .zip(&mut cos_sin)
-            .zip(&mut edge_polar)
+            .zip(cos_sin)
+            .zip(edge_polar)
             .zip(edges.par_iter().zip(&rings.edge_spoke))
             .with_min_len(1024)
             .for_each(|(((theta, cos_sin), polar), (&[a, b], &[sa, sb]))| {
@@ -238,17 +266,9 @@ impl Transport {
                 *cos_sin = [cos, sin];
                 *polar = [ta, tb];
             });
-        Self {
-            alpha,
-            spoke_ptr: rings.spoke_ptr.clone(),
-            angle_sum,
-            offset,
-            theta,
-            cos_sin,
-            edge_polar,
-            edge_ptr: rings.edge_ptr.clone(),
-            edge_end: rings.edge_end.clone(),
-        }
+        self.spoke_ptr.clone_from(&rings.spoke_ptr);
+        self.edge_ptr.clone_from(&rings.edge_ptr);
+        self.edge_end.clone_from(&rings.edge_end);
     }
 
     /// Polar angles `α_ij` of the spokes of `v` (in [`OneRings::spokes`] order) in the

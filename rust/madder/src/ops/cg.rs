@@ -195,6 +195,8 @@ pub struct WarmCg {
     rotated_lower: Vec<[f64; 2]>,
     /// One workspace per right-hand side column.
     scratch: Vec<MemBuffer>,
+    /// The system size and kind (rotated or not) `scratch` was made for.
+    scratch_for: (usize, bool),
     tolerance: f64,
     /// Iterations of the last solve, summed over its columns.
     pub last_iterations: usize,
@@ -241,6 +243,7 @@ impl WarmCg {
             rotated: Vec::new(),
             rotated_lower: Vec::new(),
             scratch: Vec::new(),
+            scratch_for: (0, false),
             tolerance: RELATIVE_TOLERANCE,
             last_iterations: 0,
         };
@@ -324,7 +327,6 @@ impl WarmCg {
         };
         let full = refill(std::mem::take(&mut self.full), slot.len(), 0.0);
         let inv_diag = refill(std::mem::take(&mut self.inv_diag), n, 0.0);
-        self.scratch.clear();
         (
             self.n,
             self.col_ptr,
@@ -534,6 +536,7 @@ impl WarmCg {
                 *u = self.l_val[p as usize];
             }
         }
+        self.fit_scratch(n, false);
         let a = SymOp {
             ptr: &self.col_ptr,
             idx: &self.row_idx,
@@ -690,6 +693,7 @@ impl WarmCg {
                 }
             }));
         self.rotated.resize(self.slot.len(), [0.0; 2]);
+        self.fit_scratch(2 * n, true);
         for i in 0..n {
             for k in self.col_ptr[i] as usize..self.col_ptr[i + 1] as usize {
                 let [p, q] = self.rotated_lower[self.slot[k] as usize];
@@ -762,6 +766,17 @@ impl WarmCg {
         .map_err(cg_error(2 * n))?;
         self.last_iterations = info.iter_count;
         Ok(())
+    }
+
+    /// Keeps the CG work space if it was made for systems of at least `size` unknowns of
+    /// the same kind (`rotated`: [`Self::solve_rotated`]'s), else drops it to be made
+    /// anew. Kept across [`Self::rebuild`]: fresh work space is fresh pages, faulted in
+    /// at every window (issue 16); its contents are never read before written.
+    fn fit_scratch(&mut self, size: usize, rotated: bool) {
+        if self.scratch_for.0 < size || self.scratch_for.1 != rotated {
+            self.scratch.clear();
+            self.scratch_for = (size, rotated);
+        }
     }
 
     /// `L̃ = L D⁻¹`, `D̃ = D` (module doc): symmetric Gauss–Seidel.

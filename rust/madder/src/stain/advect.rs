@@ -308,15 +308,20 @@ pub fn advect_velocity(
     velocity: &[DVec2],
     h: f64,
 ) -> Vec<DVec2> {
-    advect_velocity_where(topology, rings, geometry, transport, velocity, h, None)
+    let mut out = Vec::new();
+    advect_velocity_where(
+        topology, rings, geometry, transport, velocity, h, None, &mut out,
+    );
+    out
 }
 
 /// [`advect_velocity`] on the vertices where `active` is `true` only (the simulator's
-/// active region); the others keep their velocity. Each traced vertex gets exactly the
-/// value [`advect_velocity`] gives it.
+/// active region), into `out` (its allocation kept); the others keep their velocity.
+/// Each traced vertex gets exactly the value [`advect_velocity`] gives it.
 ///
 /// # Panics
 /// As [`advect_velocity`], and if `active` does not have one entry per vertex.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn advect_velocity_in(
     topology: &Topology,
     rings: &OneRings,
@@ -325,7 +330,8 @@ pub(crate) fn advect_velocity_in(
     velocity: &[DVec2],
     h: f64,
     active: &[bool],
-) -> Vec<DVec2> {
+    out: &mut Vec<DVec2>,
+) {
     assert_eq!(active.len(), topology.n_vertices(), "one flag per vertex");
     advect_velocity_where(
         topology,
@@ -335,9 +341,11 @@ pub(crate) fn advect_velocity_in(
         velocity,
         h,
         Some(active),
-    )
+        out,
+    );
 }
 
+#[allow(clippy::too_many_arguments)]
 fn advect_velocity_where(
     topology: &Topology,
     rings: &OneRings,
@@ -346,7 +354,8 @@ fn advect_velocity_where(
     velocity: &[DVec2],
     h: f64,
     active: Option<&[bool]>,
-) -> Vec<DVec2> {
+    out: &mut Vec<DVec2>,
+) {
     let n = topology.n_vertices();
     assert_eq!(rings.n_vertices(), n, "rings of another topology");
     assert_eq!(velocity.len(), n, "one velocity per vertex");
@@ -374,7 +383,7 @@ fn advect_velocity_where(
                 velocity[i]
             }
         })
-        .collect()
+        .collect_into_vec(out);
 }
 
 /// The first two faces of every edge, in face order (`u32::MAX` where there are fewer):
@@ -791,6 +800,8 @@ pub fn dual_fluxes(
 /// With `share` (a refined cloth's congruent faces, as
 /// [`crate::mesh::Transport::with_shared_tips`] takes them), the median-dual area vectors
 /// of each run of congruent faces are computed once (module doc, "Congruent faces").
+///
+/// Into `flux` (its allocation kept).
 pub(crate) fn dual_fluxes_in(
     topology: &Topology,
     positions: &[DVec3],
@@ -798,9 +809,18 @@ pub(crate) fn dual_fluxes_in(
     velocity: &[DVec2],
     active: &[bool],
     share: Option<&[(u32, u8)]>,
-) -> Vec<f64> {
+    flux: &mut Vec<f64>,
+) {
     assert_eq!(active.len(), topology.n_vertices(), "one flag per vertex");
-    dual_fluxes_where(topology, positions, frames, velocity, Some(active), share)
+    dual_fluxes_into(
+        topology,
+        positions,
+        frames,
+        velocity,
+        Some(active),
+        share,
+        flux,
+    );
 }
 
 fn dual_fluxes_where(
@@ -811,6 +831,22 @@ fn dual_fluxes_where(
     active: Option<&[bool]>,
     share: Option<&[(u32, u8)]>,
 ) -> Vec<f64> {
+    let mut flux = Vec::new();
+    dual_fluxes_into(
+        topology, positions, frames, velocity, active, share, &mut flux,
+    );
+    flux
+}
+
+fn dual_fluxes_into(
+    topology: &Topology,
+    positions: &[DVec3],
+    frames: &VertexFrames,
+    velocity: &[DVec2],
+    active: Option<&[bool]>,
+    share: Option<&[(u32, u8)]>,
+    flux: &mut Vec<f64>,
+) {
     let n = topology.n_vertices();
     assert_eq!(positions.len(), n, "one position per vertex");
     assert_eq!(frames.len(), n, "one frame per vertex");
@@ -889,7 +925,8 @@ fn dual_fluxes_where(
         }
     };
     // gather per edge in face order (deterministic)
-    let mut flux = vec![0.0; topology.n_edges()];
+    flux.clear();
+    flux.resize(topology.n_edges(), 0.0);
     for (fe, contrib) in topology.face_edges().iter().zip(&per_face) {
         for k in 0..3 {
             flux[fe[k] as usize] += contrib[k];
@@ -902,7 +939,6 @@ fn dual_fluxes_where(
             }
         }
     }
-    flux
 }
 
 /// The median-dual area vectors `S^T` of the edges opposite the corners `k` of a face,
@@ -966,6 +1002,32 @@ impl UpwindPlan {
         flux: &[f64],
         h: f64,
     ) -> Result<Self, ParamError> {
+        let mut plan = Self::empty();
+        plan.renew(topology, vertex_area, flux, h)?;
+        Ok(plan)
+    }
+
+    /// A plan of no edges, to be [`UpwindPlan::renew`]ed.
+    pub(crate) fn empty() -> Self {
+        Self {
+            n_edges: 0,
+            substeps: 1,
+            max_courant: 0.0,
+            n_limited: 0,
+            flows: Flows::default(),
+        }
+    }
+
+    /// [`UpwindPlan::new`] in this plan's arrays (their allocations kept: the simulator
+    /// renews one plan every sub-step, issue 16). The same plan, bit for bit; on error
+    /// `self` is left unchanged.
+    pub(crate) fn renew(
+        &mut self,
+        topology: &Topology,
+        vertex_area: &[f64],
+        flux: &[f64],
+        h: f64,
+    ) -> Result<(), ParamError> {
         let (n, n_edges) = (topology.n_vertices(), topology.n_edges());
         if vertex_area.len() != n {
             return Err(ParamError::Length {
@@ -1129,14 +1191,12 @@ impl UpwindPlan {
                 f
             })
             .collect();
-        let flows = Flows::concat(n, runs);
-        Ok(Self {
-            n_edges,
-            substeps,
-            max_courant: courant.iter().copied().fold(0.0, f64::max),
-            n_limited,
-            flows,
-        })
+        self.flows.concat(n, runs);
+        self.n_edges = n_edges;
+        self.substeps = substeps;
+        self.max_courant = courant.iter().copied().fold(0.0, f64::max);
+        self.n_limited = n_limited;
+        Ok(())
     }
 
     /// Number of equal sub-steps the step is cut into.
@@ -1228,6 +1288,23 @@ impl UpwindPlan {
         velocity: &[DVec2],
         fallback: &[DVec2],
     ) -> Vec<DVec2> {
+        let mut out = Vec::new();
+        self.transport_with_momentum_into(
+            topology, transport, fields, velocity, fallback, &mut out,
+        );
+        out
+    }
+
+    /// [`UpwindPlan::transport_with_momentum`] into `out` (its allocation kept).
+    pub(crate) fn transport_with_momentum_into(
+        &self,
+        topology: &Topology,
+        transport: &Transport,
+        fields: &mut [&mut [f64]],
+        velocity: &[DVec2],
+        fallback: &[DVec2],
+        out: &mut Vec<DVec2>,
+    ) {
         assert!(!fields.is_empty(), "the solvent is the first field");
         for field in fields.iter() {
             self.check(topology, field.len());
@@ -1253,7 +1330,7 @@ impl UpwindPlan {
                     fallback[v]
                 }
             })
-            .collect()
+            .collect_into_vec(out);
     }
 
     /// The sub-cycles on the fields, interleaved per vertex, and, given the transport and
@@ -1337,16 +1414,21 @@ const VERTICES_PER_TASK: usize = 1024;
 
 impl Flows {
     /// Runs of consecutive vertices' transfers (each with ends relative to its own
-    /// start) laid end to end.
-    fn concat(n: usize, runs: Vec<Flows>) -> Self {
+    /// start) laid end to end, in place of these flows (their allocations kept).
+    fn concat(&mut self, n: usize, runs: Vec<Flows>) {
         let given: usize = runs.iter().map(|r| r.out_fraction.len()).sum();
         let received: usize = runs.iter().map(|r| r.in_from.len()).sum();
-        let mut f = Flows {
-            out_ptr: Vec::with_capacity(n + 1),
-            out_fraction: Vec::with_capacity(given),
-            in_ptr: Vec::with_capacity(n + 1),
-            in_from: Vec::with_capacity(received),
-        };
+        let f = self;
+        f.out_ptr.clear();
+        f.out_fraction.clear();
+        f.in_ptr.clear();
+        f.in_from.clear();
+        // exact: the transfers grow a little every sub-step while the liquid spreads, and
+        // the doubling of an amortized reserve would keep up to twice their memory
+        f.out_ptr.reserve_exact(n + 1);
+        f.out_fraction.reserve_exact(given);
+        f.in_ptr.reserve_exact(n + 1);
+        f.in_from.reserve_exact(received);
         f.out_ptr.push(0);
         f.in_ptr.push(0);
         for run in runs {
@@ -1356,7 +1438,6 @@ impl Flows {
             f.out_fraction.extend(run.out_fraction);
             f.in_from.extend(run.in_from);
         }
-        f
     }
 
     fn given(&self, v: usize) -> &[f64] {

@@ -84,20 +84,31 @@ pub(crate) fn corotating_frames_with(
     rest: &[DVec3],
     current: &[DVec3],
 ) -> VertexFrames {
+    let mut frames = VertexFrames::default();
+    corotating_frames_into(adjacency, rest_frames, rest, current, &mut frames);
+    frames
+}
+
+/// [`corotating_frames_with`] into `out`'s array (its allocation kept).
+pub(crate) fn corotating_frames_into(
+    adjacency: &RingAdjacency,
+    rest_frames: &VertexFrames,
+    rest: &[DVec3],
+    current: &[DVec3],
+    out: &mut VertexFrames,
+) {
     let n = adjacency.n_vertices();
     assert!(
         rest.len() == n && current.len() == n,
         "one position per vertex"
     );
     assert_eq!(rest_frames.len(), n, "one frame per vertex");
-    VertexFrames {
-        frame: rest_frames
-            .frame
-            .par_iter()
-            .enumerate()
-            .map(|(i, f)| adjacency.rotation(rest, current, i) * *f)
-            .collect(),
-    }
+    rest_frames
+        .frame
+        .par_iter()
+        .enumerate()
+        .map(|(i, f)| adjacency.rotation(rest, current, i) * *f)
+        .collect_into_vec(&mut out.frame);
 }
 
 /// The rest frames `F̄_i` (seed §4.3.1 frames of the rest positions).

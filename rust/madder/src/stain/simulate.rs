@@ -79,7 +79,7 @@
 use std::time::Instant;
 
 use faer::Par;
-use glam::{DMat3, DVec2, DVec3};
+use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
 use super::advect::{UpwindPlan, advect_velocity_in, dual_fluxes_in};
@@ -95,7 +95,7 @@ use super::forces::{
 use super::interact::{InteractionRates, exposure, interact_varied, vapour_exposure};
 use super::irregular::{Irregularity, face_means};
 use super::state::{Fields, Local, State, merge_rgb, split_rgb};
-use super::window::{Cloth, Window, pick};
+use super::window::{Cloth, Window, pick, pick_into};
 use crate::error::{Error, ParamError};
 use crate::mesh::geometry::check_positions;
 use crate::mesh::{Geometry, OneRings, RingAdjacency, Topology, Transport, VertexFrames};
@@ -247,6 +247,87 @@ pub struct Simulator {
     /// Relative residual tolerances of the density and the velocity solves
     /// ([`DENSITY_TOLERANCE`], [`VELOCITY_TOLERANCE`]).
     pub(super) tolerances: [f64; 2],
+    /// The step's arrays, kept from frame to frame.
+    pub(super) scratch: StepScratch,
+}
+
+/// The step's per-frame and per-sub-step arrays, kept from one frame to the next and
+/// cleared and refilled instead of allocated afresh (issue 16).
+///
+/// A window of 35k vertices (Detail 2, 10 % of the flag wet) makes a frame array of
+/// `DMat3` 2.5 MB and one of `DVec2` 0.56 MB, above glibc's mmap threshold or, once that
+/// has risen, in its per-thread arenas, which glibc trims when they are freed: every
+/// frame touched new pages and the kernel faulted them in (`clear_page`; 17 % of the
+/// Detail 2 bench's samples were in the kernel on 2 cores). Kept here, the Detail 0
+/// bench (20k vertices, all wet) takes 18k page faults instead of 29k (12 frames;
+/// ARCHITECTURE.md, "Close to the limit"). The values written are the same operations on
+/// the same numbers as before: the same bits.
+///
+/// Kept are the arrays that live through the whole sub-step (positions, frames, geometry,
+/// transport, forces and velocities, fluxes, the plan) or the whole frame (the frame's
+/// working copy of the state, recycled after its commit). The short-lived arrays inside
+/// a phase (the flux's and the plan's intermediates, the sub-cycles' fields, the
+/// diffusion's and the interactions' arrays) are not: each is freed before the next
+/// phase allocates, which then reuses that memory, so they cost no page faults; kept as
+/// well, they only added to the peak (3–15 MB measured, as much as they weigh together
+/// against the largest of them).
+///
+/// Sized by the window: when the window shrinks below half the size they were last
+/// grown to, they are dropped (and grown again to the new window's size).
+#[derive(Debug, Default)]
+pub(super) struct StepScratch {
+    /// Window vertices the buffers were grown for.
+    vertices: usize,
+    /// The window's positions at the frame's start and end, and between them (sub-steps
+    /// before the last).
+    cur: Vec<DVec3>,
+    next: Vec<DVec3>,
+    between: Vec<DVec3>,
+    /// `p̈` of the window's vertices over the frame interval.
+    acceleration: Vec<DVec3>,
+    /// The frames' turns `ω_z` over the whole frame.
+    omega: Vec<f64>,
+    /// The frames at the frame's end, while the sub-steps before the last run.
+    end_frames: VertexFrames,
+    /// The last committed frame's work: its arrays are the next frame's.
+    local: Option<Local>,
+    /// The sub-step's arrays.
+    sub: SubstepScratch,
+}
+
+/// The arrays of one sub-step ([`StepScratch`]).
+#[derive(Debug, Default)]
+pub(super) struct SubstepScratch {
+    /// The geometry (its vertex areas then swapped with the frame's).
+    geometry: Geometry,
+    /// The vertex frames at the sub-step's end (then swapped with the frame's), and the
+    /// transport between them.
+    frames: VertexFrames,
+    transport: Transport,
+    /// Per vertex: the acceleration, turn and half-kick propagator; the velocity after
+    /// the first half kick, and its mean over the sub-step.
+    force: Vec<(DVec2, f64, VelocityStep)>,
+    forced: Vec<DVec2>,
+    mean: Vec<DVec2>,
+    /// The semi-Lagrangian velocity, the densities' velocity, and the velocity the
+    /// momentum arrived with (then the second half kick's, swapped with the frame's).
+    advected: Vec<DVec2>,
+    centred: Vec<DVec2>,
+    arrived: Vec<DVec2>,
+    /// The dual fluxes and the upwind plan.
+    flux: Vec<f64>,
+    plan: Option<UpwindPlan>,
+}
+
+impl StepScratch {
+    /// Drops the buffers when the window of `n` vertices is less than half the size they
+    /// were grown to (the memory follows the window).
+    fn fit(&mut self, n: usize) {
+        if 2 * n < self.vertices {
+            *self = Self::default();
+        }
+        self.vertices = self.vertices.max(n);
+    }
 }
 
 /// Wall-clock seconds spent in each phase since the simulator was built (for benchmarks).
@@ -373,6 +454,7 @@ impl Simulator {
             prepared: false,
             spare: None,
             tolerances: [DENSITY_TOLERANCE, VELOCITY_TOLERANCE],
+            scratch: StepScratch::default(),
         })
     }
 
@@ -443,13 +525,18 @@ impl Simulator {
         prof.window += clock.elapsed().as_secs_f64();
         let t_end = self.state.time + dt;
         let mut window = self.window.take();
+        let mut scratch = std::mem::take(&mut self.scratch);
         let result = match window.as_mut() {
             Some(w) => self
-                .run_frame(w, positions, dt, after, &mut prof)
-                .map(|local| self.commit(w, local, t_end)),
+                .run_frame(w, positions, dt, after, &mut prof, &mut scratch)
+                .map(|local| {
+                    self.commit(w, &local, t_end);
+                    scratch.local = Some(local);
+                }),
             None => Ok(()),
         };
         self.window = window;
+        self.scratch = scratch;
         self.profile = prof;
         // nothing is written before the whole frame succeeded (module doc, "Failure")
         result?;
@@ -463,7 +550,8 @@ impl Simulator {
         Ok(())
     }
 
-    /// One frame on the window `w`, on copies of its state: nothing in `self` changes.
+    /// One frame on the window `w`, on copies of its state: nothing in `self` changes
+    /// (but the kept arrays of `scratch`).
     fn run_frame(
         &self,
         w: &mut Window,
@@ -471,14 +559,27 @@ impl Simulator {
         dt: f64,
         after: Option<&[DVec3]>,
         prof: &mut Profile,
+        scratch: &mut StepScratch,
     ) -> Result<Local, Error> {
         let clock = Instant::now();
         let (p, st) = (&self.params, &self.state);
-        let cur = w.gather(&st.positions);
-        let next = w.gather(positions);
+        scratch.fit(w.vertices.len());
+        let StepScratch {
+            cur,
+            next,
+            between,
+            acceleration,
+            omega,
+            end_frames,
+            local,
+            sub,
+            ..
+        } = scratch;
+        pick_into(&w.vertices, &st.positions, cur);
+        pick_into(&w.vertices, positions, next);
         // p̈ over the frame interval: the mean of the centred differences at its two ends
         // when the frame after is known (module doc of `forces`)
-        let acceleration: Vec<DVec3> = if p.forces.rectilinear {
+        if p.forces.rectilinear {
             w.vertices
                 .par_iter()
                 .map(|&v| {
@@ -494,46 +595,47 @@ impl Simulator {
                         None => start,
                     }
                 })
-                .collect()
+                .collect_into_vec(acceleration);
         } else {
-            vec![DVec3::ZERO; w.vertices.len()]
-        };
-        let (velocity, frame): (Vec<DVec2>, Vec<DMat3>) = w
-            .vertices
+            acceleration.clear();
+            acceleration.resize(w.vertices.len(), DVec3::ZERO);
+        }
+        let mut local = local.take().unwrap_or_default();
+        w.vertices
             .par_iter()
-            .zip(&acceleration)
+            .zip(&*acceleration)
             .map(|(&v, &a)| self.caught_up(v as usize, a))
-            .unzip();
-        let mut local = Local {
-            velocity,
-            frames: VertexFrames { frame },
-            fields: st.fields.gather(&w.vertices),
-            area: w.gather(&st.vertex_area),
-            evaporated: 0.0,
-            cycles: 0,
-        };
+            .unzip_into_vecs(&mut local.velocity, &mut local.frames.frame);
+        st.fields.gather_into(&w.vertices, &mut local.fields);
+        pick_into(&w.vertices, &st.vertex_area, &mut local.area);
+        local.evaporated = 0.0;
+        local.cycles = 0;
         prof.forces += clock.elapsed().as_secs_f64();
         let clock = Instant::now();
         // the frames at the frame's end: the sub-step count reads them, and the last
         // sub-step's frames are these (the same formula at the same positions)
-        let end_frames = w.corotating_frames(&next);
-        let (s_count, omega) = self.substeps(w, &end_frames, &local.frames, dt);
+        w.corotating_frames_into(next, &mut sub.frames);
+        let (s_count, omega) = self.substeps(w, &sub.frames, &local.frames, dt, omega);
+        // several sub-steps: the end's frames wait for the last one
+        if s_count > 1 {
+            std::mem::swap(&mut sub.frames, end_frames);
+        }
         // one sub-step: its turn is the frame's, just computed
         let omega = omega.filter(|_| s_count == 1);
-        let mut end_frames = Some(end_frames);
         prof.geometry += clock.elapsed().as_secs_f64();
         let h = dt / s_count as f64;
         for s in 1..=s_count {
-            let between: Vec<DVec3>;
-            let (q, frames) = if s == s_count {
-                (&next[..], end_frames.take())
-            } else {
+            let last = s == s_count;
+            if last && s_count > 1 {
+                std::mem::swap(&mut sub.frames, end_frames);
+            } else if !last {
                 let t = s as f64 / s_count as f64;
-                between = cur.iter().zip(&next).map(|(a, b)| a.lerp(*b, t)).collect();
-                (&between[..], None)
-            };
-            let turns = if s == s_count { omega.as_deref() } else { None };
-            self.substep(w, &mut local, q, frames, turns, h, &acceleration, prof)?;
+                between.clear();
+                between.extend(cur.iter().zip(&*next).map(|(a, b)| a.lerp(*b, t)));
+            }
+            let q = if last { &next[..] } else { &between[..] };
+            let turns = if last { omega } else { None };
+            self.substep(w, &mut local, q, last, turns, h, acceleration, prof, sub)?;
         }
         Ok(local)
     }
@@ -547,21 +649,23 @@ impl Simulator {
     /// Also returns, with the Coriolis force on, every window vertex's `ω_z` over the
     /// whole frame: with one sub-step it is the sub-step's own, which the forces then
     /// take instead of computing it again (the same call on the same frames and `h = dt`).
-    fn substeps(
+    /// `omega` is filled (its allocation kept) and returned.
+    fn substeps<'a>(
         &self,
         w: &Window,
         end: &VertexFrames,
         start: &VertexFrames,
         dt: f64,
-    ) -> (usize, Option<Vec<f64>>) {
+        omega: &'a mut Vec<f64>,
+    ) -> (usize, Option<&'a [f64]>) {
         let asked = self.params.substeps as usize;
         if !self.params.forces.coriolis {
             return (asked, None);
         }
-        let omega: Vec<f64> = (0..w.vertices.len())
+        (0..w.vertices.len())
             .into_par_iter()
             .map(|j| frame_angular_velocity(&start.frame[j], &end.frame[j], dt).z)
-            .collect();
+            .collect_into_vec(omega);
         let turn = w
             .region
             .vertices
@@ -579,19 +683,20 @@ impl Simulator {
     }
 
     /// One sub-step `h` of the window to positions `q` (window order), whose vertex frames
-    /// are `frames` and whose frames' turns `ω_z` over the sub-step are `turns` if the
-    /// caller has them.
+    /// are in `sub.frames` if `frames_ready` and whose frames' turns `ω_z` over the
+    /// sub-step are `turns` if the caller has them; in `sub`'s arrays.
     #[allow(clippy::too_many_arguments)]
     fn substep(
         &self,
         w: &mut Window,
         loc: &mut Local,
         q: &[DVec3],
-        frames: Option<VertexFrames>,
+        frames_ready: bool,
         turns: Option<&[f64]>,
         h: f64,
         acceleration: &[DVec3],
         prof: &mut Profile,
+        sub: &mut SubstepScratch,
     ) -> Result<(), Error> {
         let mut clock = Instant::now();
         let mut lap = |slot: &mut f64| {
@@ -602,16 +707,20 @@ impl Simulator {
         let p = &self.params;
         let n = w.vertices.len();
         let topo = &w.cloth.topology;
-        let geometry = Geometry::new(topo, q)?;
-        let frames = frames.unwrap_or_else(|| w.corotating_frames(q));
-        let transport = Transport::with_shared_tips(
+        sub.geometry.renew(topo, q)?;
+        if !frames_ready {
+            w.corotating_frames_into(q, &mut sub.frames);
+        }
+        let (geometry, frames) = (&sub.geometry, &sub.frames);
+        sub.transport.renew(
             topo,
             &w.cloth.rings,
-            &geometry,
-            &frames,
+            &sub.geometry,
+            &sub.frames,
             q,
             w.tip_share.as_deref(),
         );
+        let transport = &sub.transport;
         prof.active_vertices += w.region.vertices.len();
         prof.window_vertices += n;
         prof.window_edges += topo.n_edges();
@@ -628,7 +737,7 @@ impl Simulator {
             VelocityStep::decay(p.friction, 0.5 * h),
             VelocityStep::decay(p.friction, h),
         );
-        let force: Vec<(DVec2, f64, VelocityStep)> = (0..n)
+        (0..n)
             .into_par_iter()
             .map(|j| {
                 let f = &frames.frame[j];
@@ -643,41 +752,46 @@ impl Simulator {
                 let half = VelocityStep::with_decay(decay_half, turn, p.friction, 0.5 * h);
                 (a, turn, half)
             })
-            .collect();
-        let (mut forced, mut mean): (Vec<DVec2>, Vec<DVec2>) = force
+            .collect_into_vec(&mut sub.force);
+        let force = &sub.force;
+        let (forced, mean) = (&mut sub.forced, &mut sub.mean);
+        force
             .par_iter()
             .zip(&loc.velocity)
             .map(|(&(a, turn, half), &u)| {
                 let full = VelocityStep::with_decay(decay_full, turn, p.friction, h);
                 (half.end(u, a), full.mean(u, a))
             })
-            .unzip();
+            .unzip_into_vecs(forced, mean);
         // the velocity is the liquid's: on the dry cloth it is the wet region's, extended
         let wet = wet_vertices(
             &loc.fields.free_solvent,
             &geometry.vertex_area,
             &w.region.mask,
         );
-        extend_velocity(topo, &transport, &wet, &mut [&mut forced, &mut mean]);
+        extend_velocity(topo, transport, &wet, &mut [forced, mean]);
+        let (forced, mean) = (&sub.forced, &sub.mean);
         lap(&mut prof.forces);
 
         // 2. advection (§4.3.1–4.3.2), closed inside the active region
         let active = &w.region.mask;
         let part = Instant::now();
-        let advected = advect_velocity_in(
+        advect_velocity_in(
             topo,
             &w.cloth.rings,
-            &geometry,
-            &transport,
-            &forced,
+            geometry,
+            transport,
+            forced,
             h,
             active,
+            &mut sub.advected,
         );
+        let advected = &sub.advected;
         prof.advection_trace += part.elapsed().as_secs_f64();
         let part = Instant::now();
         // the densities move with the sub-step's mean velocity: the exact mean under the
         // forces, plus half the change the advection made at its end (module doc)
-        let centred: Vec<DVec2> = (0..n)
+        (0..n)
             .into_par_iter()
             .map(|j| {
                 if active[j] {
@@ -686,9 +800,19 @@ impl Simulator {
                     DVec2::ZERO
                 }
             })
-            .collect();
-        let flux = dual_fluxes_in(topo, q, &frames, &centred, active, w.tip_share.as_deref());
-        let plan = UpwindPlan::new(topo, &geometry.vertex_area, &flux, h)?;
+            .collect_into_vec(&mut sub.centred);
+        dual_fluxes_in(
+            topo,
+            q,
+            frames,
+            &sub.centred,
+            active,
+            w.tip_share.as_deref(),
+            &mut sub.flux,
+        );
+        let plan = sub.plan.get_or_insert_with(UpwindPlan::empty);
+        plan.renew(topo, &geometry.vertex_area, &sub.flux, h)?;
+        let plan = &*plan;
         prof.transport_cycles += plan.substeps();
         loc.cycles += plan.substeps();
         prof.advection_plan += part.elapsed().as_secs_f64();
@@ -703,10 +827,18 @@ impl Simulator {
             }
             prof.transport_passes += plan.substeps() * fields.len();
             let arrived = if p.momentum_advection {
-                plan.transport_with_momentum(topo, &transport, &mut fields, &forced, &advected)
+                plan.transport_with_momentum_into(
+                    topo,
+                    transport,
+                    &mut fields,
+                    forced,
+                    advected,
+                    &mut sub.arrived,
+                );
+                &mut sub.arrived
             } else {
                 plan.transport_all(topo, &mut fields);
-                advected
+                &mut sub.advected
             };
             if let (Some(c), Some(cf)) = (color, f.color_free.as_mut()) {
                 merge_rgb(&c, cf);
@@ -716,11 +848,11 @@ impl Simulator {
         prof.advection_apply += part.elapsed().as_secs_f64();
         lap(&mut prof.advection);
         // the second half of the forces, at the vertex the liquid arrived at
-        loc.velocity = arrived
-            .into_par_iter()
-            .zip(&force)
-            .map(|(u, (a, _, half))| half.end(u, *a))
-            .collect();
+        arrived
+            .par_iter_mut()
+            .zip(force)
+            .for_each(|(u, (a, _, half))| *u = half.end(*u, *a));
+        std::mem::swap(&mut loc.velocity, arrived);
         lap(&mut prof.forces);
 
         // 3. diffusion (§4.3.3–4.3.4, eq. 4.6): the densities and the velocity are
@@ -792,7 +924,7 @@ impl Simulator {
                             &ops,
                             scalar_cg,
                             fields,
-                            &geometry,
+                            geometry,
                             h,
                             face_scale.as_deref(),
                             if p.carry_solute {
@@ -807,9 +939,7 @@ impl Simulator {
                     || {
                         if p.viscosity > 0.0 {
                             let scale = h * p.viscosity;
-                            diffuse_velocity(
-                                &ops, vector_cg, velocity, &geometry, &transport, scale,
-                            )
+                            diffuse_velocity(&ops, vector_cg, velocity, geometry, transport, scale)
                         } else {
                             Ok(0)
                         }
@@ -862,10 +992,129 @@ impl Simulator {
             &mut part,
         )?;
         loc.fields.scatter(&w.whole, &part);
-        loc.frames = frames;
-        loc.area = geometry.vertex_area;
+
+        std::mem::swap(&mut loc.frames, &mut sub.frames);
+        std::mem::swap(&mut loc.area, &mut sub.geometry.vertex_area);
         lap(&mut prof.interaction);
         prof.substeps += 1;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A `w × h` grid of unit spacing `d` on the plane `z = 0`, two triangles a cell.
+    fn grid(w: usize, h: usize, d: f64) -> (Topology, Vec<DVec3>) {
+        let id = |i: usize, j: usize| (j * w + i) as u32;
+        let mut faces = Vec::new();
+        for j in 0..h - 1 {
+            for i in 0..w - 1 {
+                faces.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+                faces.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+        }
+        let rest = (0..w * h)
+            .map(|k| DVec3::new((k % w) as f64 * d, (k / w) as f64 * d, 0.0))
+            .collect();
+        (Topology::from_triangles(w * h, faces).unwrap(), rest)
+    }
+
+    /// The kept step arrays ([`StepScratch`]) carry no value from one frame to the next:
+    /// a simulator whose scratch is replaced before every frame — by an empty one, or by
+    /// the leftovers of another simulation on a larger window — steps to the same bits
+    /// as one that keeps its own, while the liquid spreads (the window is rebuilt and
+    /// grows) on a waving, tilting cloth, with one and with three sub-steps a frame.
+    #[test]
+    fn kept_arrays_carry_nothing_between_frames() {
+        let (topo, rest) = grid(60, 40, 0.02);
+        let wave = |t: f64| -> Vec<DVec3> {
+            rest.iter()
+                .map(|p| {
+                    // tilted: the liquid runs down towards y = 0
+                    let z = 0.01 * (8.0 * p.x + 5.0 * t).sin() + (0.8 + 0.3 * t) * p.y;
+                    DVec3::new(p.x, p.y + 0.05 * t * p.x, z)
+                })
+                .collect()
+        };
+        let centre = DVec3::new(0.6, 0.6, 0.0);
+        let pour: Vec<f64> = rest
+            .iter()
+            .map(|p| if p.distance(centre) < 0.06 { 0.5 } else { 0.0 })
+            .collect();
+        let dt = 1.0 / 24.0;
+        for substeps in [1, 3] {
+            let make = || {
+                let params = StainParams {
+                    substeps,
+                    friction: 5.0,
+                    ..StainParams::default()
+                };
+                let mut sim = Simulator::new(
+                    topo.clone(),
+                    &rest,
+                    &wave(0.0),
+                    Conductivity::Isotropic(2e-4),
+                    params,
+                    DEFAULT_SOLUTE_COLOR,
+                    Par::Seq,
+                )
+                .unwrap();
+                sim.add_liquid(&pour, 0.05, None).unwrap();
+                sim
+            };
+            // leftovers of a larger window: the whole cloth wet
+            let mut other = make();
+            other.add_liquid(&vec![0.2; rest.len()], 0.1, None).unwrap();
+            for f in 1..=4 {
+                other.step(&wave(f as f64 * dt), dt, None).unwrap();
+            }
+            let leftovers = std::mem::take(&mut other.scratch);
+            assert!(
+                leftovers.vertices > 0,
+                "the other simulation kept its arrays"
+            );
+            let (mut kept, mut fresh, mut stale) = (make(), make(), make());
+            stale.scratch = leftovers;
+            // (`vertices` reset: the larger leftovers are used, not dropped by `fit`)
+            stale.scratch.vertices = 0;
+            let mut rebuilds = 0;
+            for f in 1..=16 {
+                let q = wave(f as f64 * dt);
+                let after = wave((f + 1) as f64 * dt);
+                fresh.scratch = StepScratch::default();
+                if f > 1 {
+                    // another frame's leftovers each time, of another size
+                    std::mem::swap(&mut stale.scratch, &mut other.scratch);
+                    stale.scratch.vertices = 0;
+                    other.step(&q, dt, None).unwrap();
+                }
+                for sim in [&mut kept, &mut fresh, &mut stale] {
+                    sim.step(&q, dt, Some(&after)).unwrap();
+                }
+                rebuilds = kept.profile().window_rebuilds;
+                let bits = |sim: &Simulator| -> Vec<u64> {
+                    let st = &sim.state;
+                    st.fields
+                        .free_solvent
+                        .iter()
+                        .chain(&st.fields.solute)
+                        .chain(&st.fields.absorbed_solvent)
+                        .chain(&st.vertex_area)
+                        .chain(st.velocity.iter().flat_map(|u| [&u.x, &u.y]))
+                        .map(|x| x.to_bits())
+                        .collect()
+                };
+                let want = bits(&kept);
+                assert!(bits(&fresh) == want, "fresh arrays differ at frame {f}");
+                assert!(bits(&stale) == want, "stale arrays differ at frame {f}");
+            }
+            assert!(rebuilds >= 4, "the window was rebuilt as the liquid ran");
+            assert!(
+                kept.state.fields.free_solvent.iter().any(|&m| m > 0.0),
+                "liquid left to compare"
+            );
+        }
     }
 }

@@ -27,7 +27,7 @@ use crate::mesh::VertexFrames;
 ///
 /// Colour masses are solute mass × RGB colour: `color_free` accompanies `solute`,
 /// `color_held` accompanies `absorbed_solute + adsorbed`. Give both or neither.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct Fields {
     /// Free solvent `f` (flows).
     pub free_solvent: Vec<f64>,
@@ -61,19 +61,30 @@ impl Fields {
 
     /// The fields of the vertices `index` (in that order).
     pub(crate) fn gather(&self, index: &[u32]) -> Self {
-        let pick = |v: &[f64]| index.iter().map(|&i| v[i as usize]).collect();
-        let pick3 = |v: &Option<Vec<[f64; 3]>>| {
-            v.as_ref()
-                .map(|v| index.iter().map(|&i| v[i as usize]).collect())
-        };
-        Self {
-            free_solvent: pick(&self.free_solvent),
-            solute: pick(&self.solute),
-            absorbed_solvent: pick(&self.absorbed_solvent),
-            absorbed_solute: pick(&self.absorbed_solute),
-            adsorbed: pick(&self.adsorbed),
-            color_free: pick3(&self.color_free),
-            color_held: pick3(&self.color_held),
+        let mut out = Self::default();
+        self.gather_into(index, &mut out);
+        out
+    }
+
+    /// [`Fields::gather`] into `out` (its arrays' allocations kept).
+    pub(crate) fn gather_into(&self, index: &[u32], out: &mut Self) {
+        fn pick<T: Copy>(from: &[T], index: &[u32], to: &mut Vec<T>) {
+            to.clear();
+            to.extend(index.iter().map(|&i| from[i as usize]));
+        }
+        pick(&self.free_solvent, index, &mut out.free_solvent);
+        pick(&self.solute, index, &mut out.solute);
+        pick(&self.absorbed_solvent, index, &mut out.absorbed_solvent);
+        pick(&self.absorbed_solute, index, &mut out.absorbed_solute);
+        pick(&self.adsorbed, index, &mut out.adsorbed);
+        for (from, to) in [
+            (&self.color_free, &mut out.color_free),
+            (&self.color_held, &mut out.color_held),
+        ] {
+            match from {
+                Some(from) => pick(from, index, to.get_or_insert_with(Vec::new)),
+                None => *to = None,
+            }
         }
     }
 
@@ -178,6 +189,7 @@ pub struct Totals {
 }
 
 /// One frame's work on a window, committed when the whole frame succeeded.
+#[derive(Debug, Default)]
 pub(super) struct Local {
     pub(super) velocity: Vec<DVec2>,
     pub(super) frames: VertexFrames,

@@ -95,7 +95,7 @@ use rayon::prelude::*;
 
 use super::diffuse::{Conductivity, solvers};
 use super::forces::{
-    corotating_frames_with, frame_angular_velocity, frame_body_acceleration, integrate_velocity,
+    corotating_frames_into, frame_angular_velocity, frame_body_acceleration, integrate_velocity,
 };
 use super::simulate::Simulator;
 use super::state::{Fields, Local};
@@ -303,28 +303,37 @@ impl Window {
 
     /// The comoving–corotating frames `F_j = U_j F̄_j` of the window's vertices at
     /// `positions` (window order): one Kabsch rotation per vertex
-    /// ([`corotating_frames_with`]), or on a refined cloth one per coarse face and edge
+    /// ([`corotating_frames_into`]), or on a refined cloth one per coarse face and edge
     /// for the fine vertices with whole one-rings there (congruent rings moving
-    /// affinely: the same rotation up to rounding, [`crate::mesh::kabsch`]).
-    pub(super) fn corotating_frames(&self, positions: &[DVec3]) -> VertexFrames {
+    /// affinely: the same rotation up to rounding, [`crate::mesh::kabsch`]). Into `out`
+    /// (its array kept).
+    pub(super) fn corotating_frames_into(&self, positions: &[DVec3], out: &mut VertexFrames) {
         let c = &self.cloth;
         match &self.share {
-            None => corotating_frames_with(&c.adjacency, &c.rest_frames, &c.rest, positions),
-            Some(share) => c
-                .rest_frames
-                .rotated(&c.adjacency.shared_rotations(&c.rest, positions, share)),
+            None => corotating_frames_into(&c.adjacency, &c.rest_frames, &c.rest, positions, out),
+            Some(share) => {
+                // the rotations `U_j`, then `U_j F̄_j` over them in place
+                c.adjacency
+                    .shared_rotations_into(&c.rest, positions, share, &mut out.frame);
+                for (u, f) in out.frame.iter_mut().zip(&c.rest_frames.frame) {
+                    *u *= *f;
+                }
+            }
         }
-    }
-
-    /// `values` of every mesh vertex, in window order.
-    pub(super) fn gather<T: Copy>(&self, values: &[T]) -> Vec<T> {
-        pick(&self.vertices, values)
     }
 }
 
 /// `values[i]` for every `i` of `index`, in that order.
 pub(super) fn pick<T: Copy>(index: &[u32], values: &[T]) -> Vec<T> {
-    index.iter().map(|&i| values[i as usize]).collect()
+    let mut out = Vec::new();
+    pick_into(index, values, &mut out);
+    out
+}
+
+/// [`pick`] into `out` (its allocation kept).
+pub(super) fn pick_into<T: Copy>(index: &[u32], values: &[T], out: &mut Vec<T>) {
+    out.clear();
+    out.extend(index.iter().map(|&i| values[i as usize]));
 }
 
 /// Where the liquid is (module doc): among the vertices `scan`, those holding
@@ -576,7 +585,7 @@ impl Simulator {
     /// Writes a successful frame on `w` back (module doc): fields of every
     /// window vertex (the halo's are unchanged), velocities, frames and areas of the
     /// active and held vertices, stamped `time`.
-    pub(super) fn commit(&mut self, w: &Window, local: Local, time: f64) {
+    pub(super) fn commit(&mut self, w: &Window, local: &Local, time: f64) {
         let st = &mut self.state;
         st.fields.scatter(&w.vertices, &local.fields);
         st.evaporated += local.evaporated;
