@@ -128,6 +128,7 @@ impl Geometry {
         self.n_degenerate_faces = n_degenerate_faces;
     }
 
+    /// Total area of the mesh.
     #[cfg(test)]
     pub(crate) fn total_area(&self) -> f64 {
         self.face_area.iter().sum()
