@@ -56,7 +56,8 @@ def main():
     print(
         f"image sequence in the bake: the demo's spill ({n} vertices, Detail {args.detail}, {demo.FRAMES} frames), "
         f"{os.cpu_count()} cores: vertex colours {plain:.1f} s, with {args.size} px images too {textured:.1f} s "
-        f"({1e3 * (textured - plain) / demo.FRAMES:.0f} ms a frame for the images): {textured / plain:.2f}x (target <= 2x)"
+        f"({1e3 * (textured - plain) / demo.FRAMES:.0f} ms a frame for the images): "
+        f"{textured / plain:.2f}x (target <= 2x)"
     )
 
 

@@ -231,8 +231,11 @@ fn main() {
             fine / coarse
         );
         let per = |ms: f64, active: f64| 1e3 * ms / active;
-        let (c_coarse, c_fine, c_local) =
-            (per(coarse, a_coarse), per(fine, a_fine), per(local, a_local));
+        let (c_coarse, c_fine, c_local) = (
+            per(coarse, a_coarse),
+            per(fine, a_fine),
+            per(local, a_local),
+        );
         println!(
             "    per active vertex and frame: detail 0 all wet {c_coarse:.2} µs, detail 0 with the same pour {c_local:.2} µs, detail 2 {c_fine:.2} µs; the ratio is {:.2} (active vertices) × {:.2} (a local stain's cost per vertex over the all-wet cloth's, at detail 0) × {:.2} (detail 2's over detail 0's on the same stain)",
             a_fine / a_coarse,
