@@ -49,7 +49,7 @@
 //! same lattice steps, and the fine vertices are placed affinely on the coarse faces
 //! (`q_j = A_f p_j` on the ring's part in face `f`, `A_f` the coarse face's current
 //! map). So `H = Σ_f A_f Σ_{j ∈ f} p_j p_jᵀ` is the same matrix for all of them, and so is
-//! `U_i`: [`RingAdjacency::shared_rotations_into`] computes it once, at the first such
+//! `U_i`: [`RingAdjacency::shared_rotations`] computes it once, at the first such
 //! vertex of a face or edge, and gives it to the others. It equals their own Kabsch
 //! rotation up to the rounding of their positions (each placed by its own barycentric
 //! sum), not bit for bit; ARCHITECTURE.md (Stain detail) gives the measured effect on
@@ -207,21 +207,9 @@ impl RingAdjacency {
     /// `U_i` of every vertex as [`Self::rotations`], except that vertex `i` with
     /// `share[i] = r ≠ i` takes `U_r` (a vertex whose one-ring is congruent to `r`'s and
     /// moves with the same affine maps, module doc); `share[r] = r` for every such `r`.
-    /// Parallel over vertices, deterministic.
-    #[cfg(test)]
+    /// Parallel over vertices, deterministic. Into `rotation` (its allocation kept: the
+    /// simulator fills one array every sub-step).
     pub(crate) fn shared_rotations(
-        &self,
-        rest: &[DVec3],
-        current: &[DVec3],
-        share: &[u32],
-    ) -> Vec<DMat3> {
-        let mut rotation = Vec::new();
-        self.shared_rotations_into(rest, current, share, &mut rotation);
-        rotation
-    }
-
-    /// [`RingAdjacency::shared_rotations`] into `rotation` (its allocation kept).
-    pub(crate) fn shared_rotations_into(
         &self,
         rest: &[DVec3],
         current: &[DVec3],

@@ -643,14 +643,6 @@ pub(crate) fn tip_shares(classes: impl Iterator<Item = u32>) -> Vec<(u32, u8)> {
 #[cfg(test)]
 pub(crate) fn folded_grid(nx: usize, ny: usize) -> (Topology, Vec<glam::DVec3>, Vec<glam::DVec3>) {
     use glam::DVec3;
-    let mut faces = Vec::new();
-    for j in 0..ny - 1 {
-        for i in 0..nx - 1 {
-            let v = (j * nx + i) as u32;
-            faces.push([v, v + 1, v + nx as u32 + 1]);
-            faces.push([v, v + nx as u32 + 1, v + nx as u32]);
-        }
-    }
     let rest: Vec<DVec3> = (0..nx * ny)
         .map(|v| DVec3::new((v % nx) as f64 * 0.3, (v / nx) as f64 * 0.25, 0.0))
         .collect();
@@ -664,7 +656,7 @@ pub(crate) fn folded_grid(nx: usize, ny: usize) -> (Topology, Vec<glam::DVec3>, 
             )
         })
         .collect();
-    (Topology::from_triangles(nx * ny, faces).unwrap(), rest, now)
+    (crate::mesh::topology::grid_topology(nx, ny), rest, now)
 }
 
 /// The lattice points strictly inside a face, in the fine numbering's order.
@@ -826,7 +818,8 @@ mod tests {
             assert!(share.iter().enumerate().all(|(j, &k)| k as usize == j
                 || (k as usize) < j && class[k as usize..=j].iter().all(|&c| c == class[j])));
             let own = adjacency.rotations(&r, &q);
-            let shared = adjacency.shared_rotations(&r, &q, &share);
+            let mut shared = Vec::new();
+            adjacency.shared_rotations(&r, &q, &share, &mut shared);
             let shared_count = share.iter().enumerate().filter(|&(j, &k)| k as usize != j);
             assert!(level == 1 || shared_count.count() > 0);
             let worst = own
@@ -856,7 +849,8 @@ mod tests {
                 .map(|(p, x)| *p + DVec3::Z * 0.05 * (7.0 * x.x).sin() * (9.0 * x.y).cos())
                 .collect();
             let own = adjacency.rotations(&r, &bumped);
-            let shared = adjacency.shared_rotations(&r, &bumped, &share);
+            let mut shared = Vec::new();
+            adjacency.shared_rotations(&r, &bumped, &share, &mut shared);
             let worst = own
                 .iter()
                 .zip(&shared)

@@ -417,6 +417,21 @@ fn incidence(n: usize, edges: &[[u32; 2]]) -> (Vec<u32>, Vec<u32>) {
     (ptr, list)
 }
 
+/// Tests' grid: `w × h` vertices numbered `j w + i`, each cell split along its
+/// `(i, j)–(i+1, j+1)` diagonal into two triangles of the same orientation.
+#[cfg(test)]
+pub(crate) fn grid_topology(w: usize, h: usize) -> Topology {
+    let mut faces = Vec::new();
+    for j in 0..h - 1 {
+        for i in 0..w - 1 {
+            let v = (j * w + i) as u32;
+            faces.push([v, v + 1, v + w as u32 + 1]);
+            faces.push([v, v + w as u32 + 1, v + w as u32]);
+        }
+    }
+    Topology::from_triangles(w * h, faces).unwrap()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

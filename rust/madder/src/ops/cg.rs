@@ -1213,15 +1213,7 @@ mod tests {
                 pos.push(DVec3::new(i as f64 * 0.1 + jit, j as f64 * 0.1 - jit, 0.0));
             }
         }
-        let mut faces = Vec::new();
-        for j in 0..n - 1 {
-            for i in 0..n - 1 {
-                let v = (j * n + i) as u32;
-                faces.push([v, v + 1, v + n as u32 + 1]);
-                faces.push([v, v + n as u32 + 1, v + n as u32]);
-            }
-        }
-        let topo = Topology::from_triangles(n * n, faces).unwrap();
+        let topo = crate::mesh::topology::grid_topology(n, n);
         let geom = Geometry::new(&topo, &pos).unwrap();
         let pattern = VertexPattern::new(&topo);
         let mut values = cotan_stiffness(&topo, &geom, &pattern, 0.05);
@@ -1267,15 +1259,7 @@ mod tests {
                 });
             }
         }
-        let mut faces = Vec::new();
-        for j in 0..n - 1 {
-            for i in 0..n - 1 {
-                let v = (j * n + i) as u32;
-                faces.push([v, v + 1, v + n as u32 + 1]);
-                faces.push([v, v + n as u32 + 1, v + n as u32]);
-            }
-        }
-        (Topology::from_triangles(n * n, faces).unwrap(), pos)
+        (crate::mesh::topology::grid_topology(n, n), pos)
     }
 
     /// `M + K_S` on the sheared mesh, `S` anisotropic (4:1, off the grid axes), scaled so

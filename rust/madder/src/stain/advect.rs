@@ -786,7 +786,9 @@ pub fn dual_fluxes(
     frames: &VertexFrames,
     velocity: &[DVec2],
 ) -> Vec<f64> {
-    dual_fluxes_where(topology, positions, frames, velocity, None, None)
+    let mut flux = Vec::new();
+    dual_fluxes_into(topology, positions, frames, velocity, None, None, &mut flux);
+    flux
 }
 
 /// [`dual_fluxes`] through the edges whose two ends are `active` (the simulator's active
@@ -821,21 +823,6 @@ pub(crate) fn dual_fluxes_in(
         share,
         flux,
     );
-}
-
-fn dual_fluxes_where(
-    topology: &Topology,
-    positions: &[DVec3],
-    frames: &VertexFrames,
-    velocity: &[DVec2],
-    active: Option<&[bool]>,
-    share: Option<&[(u32, u8)]>,
-) -> Vec<f64> {
-    let mut flux = Vec::new();
-    dual_fluxes_into(
-        topology, positions, frames, velocity, active, share, &mut flux,
-    );
-    flux
 }
 
 fn dual_fluxes_into(
@@ -1673,8 +1660,13 @@ mod tests {
                 .collect();
             // half the vertices active: faces with one active corner get no flux
             let active: Vec<bool> = (0..t.n_vertices()).map(|v| v % 7 != 3).collect();
-            let own = dual_fluxes_where(&t, &q, &frames, &u, Some(&active), None);
-            let shared = dual_fluxes_where(&t, &q, &frames, &u, Some(&active), Some(&share));
+            let fluxes = |share: Option<&[(u32, u8)]>| {
+                let mut flux = Vec::new();
+                dual_fluxes_in(&t, &q, &frames, &u, &active, share, &mut flux);
+                flux
+            };
+            let own = fluxes(None);
+            let shared = fluxes(Some(&share));
             let peak = own.iter().fold(0.0, |m: f64, x| m.max(x.abs()));
             let worst = own
                 .iter()
@@ -1689,7 +1681,7 @@ mod tests {
             }
             // the orientation matters: without the reflection's sign the fluxes are wrong
             let unsigned: Vec<(u32, u8)> = share.iter().map(|&(r, _)| (r, 0)).collect();
-            let wrong = dual_fluxes_where(&t, &q, &frames, &u, Some(&active), Some(&unsigned));
+            let wrong = fluxes(Some(&unsigned));
             let off = own
                 .iter()
                 .zip(&wrong)

@@ -1314,19 +1314,7 @@ mod tests {
         );
     }
 
-    /// A `w × h` grid of vertices `r·w + c`, each quad split along its (c,r)–(c+1,r+1)
-    /// diagonal.
-    fn grid(w: usize, h: usize) -> Topology {
-        let mut faces = Vec::new();
-        for r in 0..h - 1 {
-            for c in 0..w - 1 {
-                let v = |r: usize, c: usize| (r * w + c) as u32;
-                faces.push([v(r, c), v(r, c + 1), v(r + 1, c + 1)]);
-                faces.push([v(r, c), v(r + 1, c + 1), v(r + 1, c)]);
-            }
-        }
-        Topology::from_triangles(w * h, faces).unwrap()
-    }
+    use crate::mesh::topology::grid_topology as grid;
 
     #[test]
     fn exposure_marks_wet_border_and_wet_rim() {

@@ -1007,18 +1007,10 @@ mod tests {
 
     /// A `w × h` grid of unit spacing `d` on the plane `z = 0`, two triangles a cell.
     fn grid(w: usize, h: usize, d: f64) -> (Topology, Vec<DVec3>) {
-        let id = |i: usize, j: usize| (j * w + i) as u32;
-        let mut faces = Vec::new();
-        for j in 0..h - 1 {
-            for i in 0..w - 1 {
-                faces.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-                faces.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-            }
-        }
         let rest = (0..w * h)
             .map(|k| DVec3::new((k % w) as f64 * d, (k / w) as f64 * d, 0.0))
             .collect();
-        (Topology::from_triangles(w * h, faces).unwrap(), rest)
+        (crate::mesh::topology::grid_topology(w, h), rest)
     }
 
     /// The kept step arrays ([`StepScratch`]) carry no value from one frame to the next:

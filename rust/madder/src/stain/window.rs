@@ -314,7 +314,7 @@ impl Window {
             Some(share) => {
                 // the rotations `U_j`, then `U_j F̄_j` over them in place
                 c.adjacency
-                    .shared_rotations_into(&c.rest, positions, share, &mut out.frame);
+                    .shared_rotations(&c.rest, positions, share, &mut out.frame);
                 for (u, f) in out.frame.iter_mut().zip(&c.rest_frames.frame) {
                     *u *= *f;
                 }
