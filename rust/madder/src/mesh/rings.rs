@@ -107,33 +107,130 @@ struct FanScratch {
     local: Vec<u32>,
 }
 
-/// The fans of a run of vertices, laid end to end as in [`OneRings`].
-#[derive(Default)]
-struct FanChunk {
-    wedges: Vec<Wedge>,
+/// The fans of a run of vertices, laid end to end as in [`OneRings`]: the wedges straight
+/// into their place in the rings' array (a wedge per corner, so a run's place is known
+/// before its fans are walked), the spokes and their edges in arrays of the run's own,
+/// joined afterwards ([`OneRings::assemble`]).
+struct FanChunk<'a> {
+    wedges: Laid<'a>,
     spokes: Vec<u32>,
     spoke_edges: Vec<u32>,
-    /// Per vertex: (wedges, spokes) it added.
-    counts: Vec<(u32, u32)>,
+    /// Per vertex: the spokes it added.
+    counts: Vec<u32>,
     kind: Vec<FanKind>,
 }
 
-impl FanChunk {
-    /// Room for the fans of `vertices`, whose corners `corner_ptr` counts: a wedge per
-    /// corner, and at most one spoke more than wedges per vertex except at irregular
-    /// vertices (so the vectors are not grown, and copied, as the fans are laid: growing
-    /// them was a quarter of a Detail-2 run's page faults).
-    fn with_capacity(corner_ptr: &[u32], vertices: std::ops::Range<usize>) -> Self {
-        let wedges = (corner_ptr[vertices.end] - corner_ptr[vertices.start]) as usize;
-        let spokes = wedges + vertices.len();
-        Self {
-            wedges: Vec::with_capacity(wedges),
-            spokes: Vec::with_capacity(spokes),
-            spoke_edges: Vec::with_capacity(spokes),
-            counts: Vec::with_capacity(vertices.len()),
-            kind: Vec::with_capacity(vertices.len()),
-        }
+/// A run's slots in the wedge array, filled in order.
+struct Laid<'a> {
+    slots: &'a mut [Wedge],
+    len: usize,
+}
+
+impl Laid<'_> {
+    fn push(&mut self, w: Wedge) {
+        self.slots[self.len] = w;
+        self.len += 1;
     }
+}
+
+/// What a run of vertices leaves once its wedges are in place.
+struct Fans {
+    spokes: Vec<u32>,
+    spoke_edges: Vec<u32>,
+    counts: Vec<u32>,
+    kind: Vec<FanKind>,
+}
+
+/// The wedge every slot holds until its fan is laid.
+const UNLAID: Wedge = Wedge {
+    face: u32::MAX,
+    corner: 0,
+    forward: false,
+    from: u32::MAX,
+    to: u32::MAX,
+};
+
+/// Vertices per run of fans laid by one task.
+const CHUNK: usize = 4096;
+
+/// The fans of `n` vertices whose corners are `corners[corner_ptr[v]..corner_ptr[v + 1]]`,
+/// each laid by `fan` (which pushes one wedge per corner), in runs of [`CHUNK`] vertices
+/// side by side: the wedge array (in vertex order, `corner_ptr` its offsets) and each
+/// run's spokes. Writing the wedges in place instead of joining per-run copies halves the
+/// memory a build touches (fresh pages cost more than the walks on this kind of machine,
+/// ARCHITECTURE "Stain detail").
+fn lay_fans(
+    n: usize,
+    corner_ptr: &[u32],
+    corners: &[(u32, u8)],
+    fan: impl Fn(usize, &[(u32, u8)], &mut FanScratch, &mut FanChunk<'_>) -> FanKind + Sync,
+) -> (Vec<Wedge>, Vec<Fans>) {
+    let mut wedges = Vec::with_capacity(corners.len());
+    // filled side by side, so that the fresh pages are taken on both threads
+    wedges.par_extend(rayon::iter::repeat_n(UNLAID, corners.len()));
+    let mut slots = Vec::with_capacity(n.div_ceil(CHUNK));
+    let mut rest = &mut wedges[..];
+    for c in 0..n.div_ceil(CHUNK) {
+        let range = c * CHUNK..n.min((c + 1) * CHUNK);
+        let len = (corner_ptr[range.end] - corner_ptr[range.start]) as usize;
+        let (run, after) = std::mem::take(&mut rest).split_at_mut(len);
+        slots.push((range, run));
+        rest = after;
+    }
+    let fans = slots
+        .into_par_iter()
+        .map(|(range, run)| {
+            let mut scratch = FanScratch::default();
+            let spokes = run.len() + range.len();
+            let mut out = FanChunk {
+                wedges: Laid { slots: run, len: 0 },
+                spokes: Vec::with_capacity(spokes),
+                spoke_edges: Vec::with_capacity(spokes),
+                counts: Vec::with_capacity(range.len()),
+                kind: Vec::with_capacity(range.len()),
+            };
+            let base = corner_ptr[range.start];
+            for v in range {
+                let cs = &corners[corner_ptr[v] as usize..corner_ptr[v + 1] as usize];
+                let s0 = out.spokes.len();
+                let kind = fan(v, cs, &mut scratch, &mut out);
+                debug_assert_eq!(
+                    out.wedges.len as u32,
+                    corner_ptr[v + 1] - base,
+                    "a wedge per corner"
+                );
+                out.counts.push((out.spokes.len() - s0) as u32);
+                out.kind.push(kind);
+            }
+            assert_eq!(out.wedges.len, out.wedges.slots.len(), "a wedge per corner");
+            Fans {
+                spokes: out.spokes,
+                spoke_edges: out.spoke_edges,
+                counts: out.counts,
+                kind: out.kind,
+            }
+        })
+        .collect();
+    (wedges, fans)
+}
+
+/// `parts` end to end, each copied into its own slice of the result side by side.
+fn joined<T: Copy + Send + Sync>(parts: &[&[T]], fill: T) -> Vec<T> {
+    let total = parts.iter().map(|p| p.len()).sum();
+    let mut out = Vec::with_capacity(total);
+    out.par_extend(rayon::iter::repeat_n(fill, total));
+    let mut places = Vec::with_capacity(parts.len());
+    let mut rest = &mut out[..];
+    for part in parts {
+        let (place, after) = std::mem::take(&mut rest).split_at_mut(part.len());
+        places.push(place);
+        rest = after;
+    }
+    places
+        .into_par_iter()
+        .zip(parts)
+        .for_each(|(place, part)| place.copy_from_slice(part));
+    out
 }
 
 impl OneRings {
@@ -159,29 +256,13 @@ impl OneRings {
         let (edge_ptr, edge_end) = edge_index(topology);
         let face_edges = topology.face_edges();
 
-        // in chunks of vertices, each laid out as the whole is; joined in vertex order
-        const CHUNK: usize = 4096;
-        let chunks: Vec<FanChunk> = (0..n.div_ceil(CHUNK))
-            .into_par_iter()
-            .map(|c| {
-                let mut scratch = FanScratch::default();
-                let range = c * CHUNK..n.min((c + 1) * CHUNK);
-                let mut out = FanChunk::with_capacity(&corner_ptr, range.clone());
-                for v in range {
-                    let cs = &corners[corner_ptr[v] as usize..corner_ptr[v + 1] as usize];
-                    let (w0, s0) = (out.wedges.len(), out.spokes.len());
-                    let kind = order_fan(faces, face_edges, &flipped, cs, &mut scratch, &mut out);
-                    out.counts.push((
-                        (out.wedges.len() - w0) as u32,
-                        (out.spokes.len() - s0) as u32,
-                    ));
-                    out.kind.push(kind);
-                }
-                out
-            })
-            .collect();
-
-        Self::assemble(topology, flipped, edge_ptr, edge_end, chunks)
+        // in runs of vertices side by side, each laid out as the whole is
+        let (wedges, fans) = lay_fans(n, &corner_ptr, &corners, |_, cs, scratch, out| {
+            order_fan(faces, face_edges, &flipped, cs, scratch, out)
+        });
+        Self::assemble(
+            topology, flipped, edge_ptr, edge_end, corner_ptr, wedges, fans,
+        )
     }
 
     /// The fans of `topology`, a part of the mesh of `parent` cut out by
@@ -247,80 +328,70 @@ impl OneRings {
         let (corner_ptr, corners) = incidence(n, faces);
         let (edge_ptr, edge_end) = edge_index(topology);
         let face_edges = topology.face_edges();
-        const CHUNK: usize = 4096;
-        let chunks: Vec<FanChunk> = (0..n.div_ceil(CHUNK))
-            .into_par_iter()
-            .map(|c| {
-                let mut scratch = FanScratch::default();
-                let range = c * CHUNK..n.min((c + 1) * CHUNK);
-                let mut out = FanChunk::with_capacity(&corner_ptr, range.clone());
-                for v in range {
-                    let cs = &corners[corner_ptr[v] as usize..corner_ptr[v + 1] as usize];
-                    let pv = vertex_parent[v] as usize;
-                    let (w0, s0) = (out.wedges.len(), out.spokes.len());
-                    let whole = pv != u32::MAX as usize && cs.len() == parent.wedges(pv).len();
-                    let kind = if whole {
-                        // the whole fan: the parent's, renumbered
-                        out.wedges.extend(parent.wedges(pv).iter().map(|w| Wedge {
-                            face: face_local[w.face as usize],
-                            ..*w
-                        }));
-                        out.spokes
-                            .extend(parent.spokes(pv).iter().map(|&s| vertex_local[s as usize]));
-                        out.spoke_edges.extend(
-                            parent
-                                .spoke_edges(pv)
-                                .iter()
-                                .map(|&e| edge_local[e as usize]),
-                        );
-                        parent.kind(pv)
-                    } else {
-                        order_fan(faces, face_edges, &flipped, cs, &mut scratch, &mut out)
-                    };
-                    out.counts.push((
-                        (out.wedges.len() - w0) as u32,
-                        (out.spokes.len() - s0) as u32,
-                    ));
-                    out.kind.push(kind);
+        let (wedges, fans) = lay_fans(n, &corner_ptr, &corners, |v, cs, scratch, out| {
+            let pv = vertex_parent[v] as usize;
+            if pv != u32::MAX as usize && cs.len() == parent.wedges(pv).len() {
+                // the whole fan: the parent's, renumbered
+                for w in parent.wedges(pv) {
+                    out.wedges.push(Wedge {
+                        face: face_local[w.face as usize],
+                        ..*w
+                    });
                 }
-                out
-            })
-            .collect();
-        Self::assemble(topology, flipped, edge_ptr, edge_end, chunks)
+                out.spokes
+                    .extend(parent.spokes(pv).iter().map(|&s| vertex_local[s as usize]));
+                out.spoke_edges.extend(
+                    parent
+                        .spoke_edges(pv)
+                        .iter()
+                        .map(|&e| edge_local[e as usize]),
+                );
+                parent.kind(pv)
+            } else {
+                order_fan(faces, face_edges, &flipped, cs, scratch, out)
+            }
+        });
+        Self::assemble(
+            topology, flipped, edge_ptr, edge_end, corner_ptr, wedges, fans,
+        )
     }
 
-    /// Joins the fans of chunks of vertices (in vertex order) into the rings of
-    /// `topology`, with the orientation-reversing edges and the edges' spokes.
+    /// Joins the fans laid by [`lay_fans`] (wedges in place, `corner_ptr` their offsets;
+    /// the runs' spokes in vertex order) into the rings of `topology`, with the
+    /// orientation-reversing edges and the edges' spokes.
     fn assemble(
         topology: &Topology,
         flipped: Vec<bool>,
         edge_ptr: Vec<u32>,
         edge_end: Vec<u32>,
-        chunks: Vec<FanChunk>,
+        corner_ptr: Vec<u32>,
+        wedges: Vec<Wedge>,
+        fans: Vec<Fans>,
     ) -> Self {
         let n = topology.n_vertices();
         let faces = topology.faces();
         let edges = topology.edges();
-        let n_corners = 3 * faces.len();
-        let n_spokes: usize = chunks.iter().map(|c| c.spokes.len()).sum();
-        let mut wedge_ptr = Vec::with_capacity(n + 1);
+        // a wedge per corner: the wedges' offsets are the corners'
+        let wedge_ptr = corner_ptr;
         let mut spoke_ptr = Vec::with_capacity(n + 1);
-        wedge_ptr.push(0u32);
         spoke_ptr.push(0u32);
-        let mut wedges = Vec::with_capacity(n_corners);
-        let mut spoke_vertex = Vec::with_capacity(n_spokes);
-        let mut spoke_edge = Vec::with_capacity(n_spokes);
         let mut kind = Vec::with_capacity(n);
-        for c in chunks {
-            wedges.extend_from_slice(&c.wedges);
-            spoke_vertex.extend_from_slice(&c.spokes);
-            spoke_edge.extend_from_slice(&c.spoke_edges);
-            kind.extend_from_slice(&c.kind);
-            for (nw, ns) in c.counts {
-                wedge_ptr.push(wedge_ptr.last().unwrap() + nw);
+        for f in &fans {
+            kind.extend_from_slice(&f.kind);
+            for &ns in &f.counts {
                 spoke_ptr.push(spoke_ptr.last().unwrap() + ns);
             }
         }
+        let (spoke_vertex, spoke_edge) = rayon::join(
+            || joined(&fans.iter().map(|f| &f.spokes[..]).collect::<Vec<_>>(), 0),
+            || {
+                joined(
+                    &fans.iter().map(|f| &f.spoke_edges[..]).collect::<Vec<_>>(),
+                    0,
+                )
+            },
+        );
+        drop(fans);
 
         // sense in which each face corner is walked; an edge is orientation-reversing if a
         // face on it is walked forward at one end and backward at the other
@@ -548,7 +619,7 @@ fn order_fan(
     flipped: &[bool],
     corners: &[(u32, u8)],
     scratch: &mut FanScratch,
-    out: &mut FanChunk,
+    out: &mut FanChunk<'_>,
 ) -> FanKind {
     let m = corners.len();
     if m == 0 {
