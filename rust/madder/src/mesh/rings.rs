@@ -95,14 +95,20 @@ pub struct OneRings {
 struct FanScratch {
     /// The two spokes of each wedge in its face's harmonized orientation.
     ends: Vec<[u32; 2]>,
-    /// (spoke, wedge) for both spokes of every wedge, sorted.
+    /// The same as indices into `distinct`.
+    end_slot: Vec<[u32; 2]>,
+    /// (spoke, wedge) for both spokes of every wedge, sorted (large fans).
     touch: Vec<(u32, u32)>,
+    /// Per distinct spoke: how many wedges touch it, and the first two in wedge order.
+    count: Vec<u32>,
+    first: Vec<[usize; 2]>,
     visited: Vec<bool>,
     /// The walks of the fan's components, one after another: (wedge, forward).
     steps: Vec<(usize, bool)>,
     /// Per walk: its range in `steps` and whether it closed on itself.
     walks: Vec<(usize, usize, bool)>,
-    /// The distinct spokes (sorted) and their local index, once met.
+    /// The distinct spokes (sorted for a large fan, in order of appearance for a small
+    /// one) and their local index, once met.
     distinct: Vec<u32>,
     local: Vec<u32>,
 }
@@ -627,7 +633,10 @@ fn order_fan(
     }
     let FanScratch {
         ends,
+        end_slot,
         touch,
+        count,
+        first,
         visited,
         steps,
         walks,
@@ -641,44 +650,64 @@ fn order_fan(
         let (p, q) = (t[(k as usize + 1) % 3], t[(k as usize + 2) % 3]);
         if flipped[f as usize] { [q, p] } else { [p, q] }
     }));
-    // spoke → wedges touching it (how many, and the first two in wedge order): a scan of
-    // the wedges for a small fan, a sorted (spoke, wedge) list for a large one; both give
-    // the same answers
-    let small = m <= SMALL_FAN;
-    touch.clear();
-    if !small {
+    // the fan's distinct spokes, each with the wedges touching it (how many, and the first
+    // two in wedge order), and each wedge's two spokes among them: found once, so that
+    // the walk below reads them instead of searching (a scan of the spokes found so far
+    // for a small fan, a sorted (spoke, wedge) list for a large one; both give the same
+    // answers)
+    distinct.clear();
+    count.clear();
+    first.clear();
+    end_slot.clear();
+    end_slot.resize(m, [u32::MAX; 2]);
+    let touched = |i: usize, w: usize, count: &mut Vec<u32>, first: &mut Vec<[usize; 2]>| {
+        // a wedge touches a spoke once (its two spokes differ)
+        if (count[i] as usize) < 2 {
+            first[i][count[i] as usize] = w;
+        }
+        count[i] += 1;
+    };
+    if m <= SMALL_FAN {
+        for (w, e) in ends.iter().enumerate() {
+            for (side, &x) in e.iter().enumerate() {
+                let i = match distinct.iter().position(|&d| d == x) {
+                    Some(i) => i,
+                    None => {
+                        distinct.push(x);
+                        count.push(0);
+                        first.push([usize::MAX; 2]);
+                        distinct.len() - 1
+                    }
+                };
+                touched(i, w, count, first);
+                end_slot[w][side] = i as u32;
+            }
+        }
+    } else {
+        touch.clear();
         for (w, e) in ends.iter().enumerate() {
             touch.push((e[0], w as u32));
             touch.push((e[1], w as u32));
         }
         touch.sort_unstable();
-    }
-    let ends = &*ends;
-    let touch = &*touch;
-    let touching = |s: u32| -> (usize, [usize; 2]) {
-        let mut first = [usize::MAX; 2];
-        if small {
-            let mut count = 0;
-            for (w, e) in ends.iter().enumerate() {
-                // a wedge touches a spoke once (its two spokes differ)
-                if e[0] == s || e[1] == s {
-                    if count < 2 {
-                        first[count] = w;
-                    }
-                    count += 1;
-                }
+        for &(x, w) in touch.iter() {
+            if distinct.last() != Some(&x) {
+                distinct.push(x);
+                count.push(0);
+                first.push([usize::MAX; 2]);
             }
-            (count, first)
-        } else {
-            let lo = touch.partition_point(|&(x, _)| x < s);
-            let hi = touch.partition_point(|&(x, _)| x <= s);
-            for (slot, &(_, w)) in first.iter_mut().zip(&touch[lo..hi]) {
-                *slot = w as usize;
-            }
-            (hi - lo, first)
+            let (i, w) = (distinct.len() - 1, w as usize);
+            touched(i, w, count, first);
+            end_slot[w][usize::from(ends[w][0] != x)] = i as u32;
         }
+    }
+    let (ends, end_slot, count, first) = (&*ends, &*end_slot, &*count, &*first);
+    // the wedges touching end `side` of wedge `w`
+    let touching = |w: usize, side: usize| {
+        let i = end_slot[w][side] as usize;
+        (count[i] as usize, first[i])
     };
-    let open = |s: u32| touching(s).0 != 2;
+    let open = |w: usize, side: usize| touching(w, side).0 != 2;
 
     visited.clear();
     visited.resize(m, false);
@@ -687,11 +716,11 @@ fn order_fan(
     let mut n_visited = 0;
     while n_visited < m {
         let start = (0..m)
-            .find(|&w| !visited[w] && open(ends[w][0]))
+            .find(|&w| !visited[w] && open(w, 0))
             .map(|w| (w, true))
             .or_else(|| {
                 (0..m)
-                    .find(|&w| !visited[w] && open(ends[w][1]))
+                    .find(|&w| !visited[w] && open(w, 1))
                     .map(|w| (w, false))
             })
             .or_else(|| (0..m).find(|&w| !visited[w]).map(|w| (w, true)))
@@ -704,7 +733,7 @@ fn order_fan(
             n_visited += 1;
             steps.push((w, fwd));
             let exit = ends[w][if fwd { 1 } else { 0 }];
-            let (count, t) = touching(exit);
+            let (count, t) = touching(w, usize::from(fwd));
             if count != 2 {
                 break false;
             }
@@ -727,40 +756,20 @@ fn order_fan(
 
     // spokes in order of first meeting; wedges refer to them by local index
     let s0 = out.spokes.len();
-    distinct.clear();
     local.clear();
-    if !small {
-        distinct.extend(touch.iter().map(|t| t.0));
-        distinct.dedup();
-        local.resize(distinct.len(), u32::MAX);
-    }
+    local.resize(distinct.len(), u32::MAX);
     // `edge`: the spoke's edge, pushed with a spoke met for the first time
-    let mut slot = |s: u32, edge: u32, spokes: &mut Vec<u32>, spoke_edges: &mut Vec<u32>| {
-        if small {
-            // the spokes met so far are few: find it among them
-            return match spokes[s0..].iter().position(|&x| x == s) {
-                Some(k) => k as u32,
-                None => {
-                    spokes.push(s);
-                    spoke_edges.push(edge);
-                    (spokes.len() - 1 - s0) as u32
-                }
-            };
+    let mut slot = |i: u32, s: u32, edge: u32, out: &mut FanChunk<'_>| {
+        let i = i as usize;
+        if local[i] == u32::MAX {
+            local[i] = (out.spokes.len() - s0) as u32;
+            out.spokes.push(s);
+            out.spoke_edges.push(edge);
         }
-        let k = distinct.binary_search(&s).expect("a wedge's spoke");
-        if local[k] == u32::MAX {
-            local[k] = (spokes.len() - s0) as u32;
-            spokes.push(s);
-            spoke_edges.push(edge);
-        }
-        local[k]
+        local[i]
     };
     for &(w, fwd) in steps.iter() {
-        let (a, b) = if fwd {
-            (ends[w][0], ends[w][1])
-        } else {
-            (ends[w][1], ends[w][0])
-        };
+        let (a, b) = if fwd { (0, 1) } else { (1, 0) };
         // the edge from the corner `k` to vertex `x` of the face: the one opposite the
         // face's third corner
         let (f, k) = (corners[w].0 as usize, corners[w].1 as usize);
@@ -771,8 +780,9 @@ fn order_fan(
                 face_edges[f][(k + 1) % 3]
             }
         };
-        let from = slot(a, edge(a), &mut out.spokes, &mut out.spoke_edges);
-        let to = slot(b, edge(b), &mut out.spokes, &mut out.spoke_edges);
+        let (sa, sb) = (ends[w][a], ends[w][b]);
+        let from = slot(end_slot[w][a], sa, edge(sa), out);
+        let to = slot(end_slot[w][b], sb, edge(sb), out);
         out.wedges.push(Wedge {
             face: corners[w].0,
             corner: corners[w].1,
@@ -781,7 +791,8 @@ fn order_fan(
             to,
         });
     }
-    let manifold = out.spokes[s0..].iter().all(|&s| touching(s).0 <= 2);
+    // every wedge was walked, so every distinct spoke was met
+    let manifold = count.iter().all(|&c| c <= 2);
     match (walks.len(), manifold) {
         (1, true) if walks[0].2 => FanKind::Interior,
         (1, true) => FanKind::Boundary,
@@ -862,6 +873,35 @@ pub(super) mod tests {
         // vertex 1 = (1, 0) is on the border: counter-clockwise, its spokes point at 120°
         // (vertex 2, a border edge: the walk starts there), 180° (0) and 240° (6)
         assert_eq!(r.spokes(1), &[2, 0, 6]);
+    }
+
+    /// Fans of more than `SMALL_FAN` wedges take the sorted path: the same answers as a
+    /// small fan's, read off the geometry (a vertex with 24 faces around it, all of them,
+    /// 20 of them, and two separate fans of 10 meeting at it).
+    #[test]
+    fn large_fans_are_ordered_as_small_ones() {
+        let k = 24u32;
+        let around = |faces: &[u32]| -> Topology {
+            let faces = faces
+                .iter()
+                .map(|&j| [0, 1 + j, 1 + (j + 1) % k])
+                .collect();
+            Topology::from_triangles(1 + k as usize, faces).unwrap()
+        };
+        let all: Vec<u32> = (0..k).collect();
+        let r = OneRings::new(&around(&all));
+        assert_eq!(r.kind(0), FanKind::Interior);
+        assert_eq!(r.spokes(0), (1..=k).collect::<Vec<_>>());
+        let open: Vec<u32> = (0..20).collect();
+        let r = OneRings::new(&around(&open));
+        assert_eq!(r.kind(0), FanKind::Boundary);
+        assert_eq!(r.spokes(0), (1..=21).collect::<Vec<_>>());
+        assert!(r.wedges(0).iter().all(|w| w.forward));
+        let bow_tie: Vec<u32> = (0..10).chain(12..22).collect();
+        let r = OneRings::new(&around(&bow_tie));
+        assert_eq!(r.kind(0), FanKind::Irregular);
+        assert_eq!(r.wedges(0).len(), 20);
+        assert_eq!(r.spokes(0).len(), 22);
     }
 
     #[test]
