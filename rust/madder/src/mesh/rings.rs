@@ -162,9 +162,9 @@ const CHUNK: usize = 4096;
 /// The fans of `n` vertices whose corners are `corners[corner_ptr[v]..corner_ptr[v + 1]]`,
 /// each laid by `fan` (which pushes one wedge per corner), in runs of [`CHUNK`] vertices
 /// side by side: the wedge array (in vertex order, `corner_ptr` its offsets) and each
-/// run's spokes. Writing the wedges in place instead of joining per-run copies halves the
-/// memory a build touches (fresh pages cost more than the walks on this kind of machine,
-/// ARCHITECTURE "Stain detail").
+/// run's spokes. Writing the wedges in place saves copying every run's wedges into the
+/// rings afterwards on one thread (96 MB at a million vertices; ARCHITECTURE "Stain
+/// detail", the sixth look).
 fn lay_fans(
     n: usize,
     corner_ptr: &[u32],
@@ -882,10 +882,7 @@ pub(super) mod tests {
     fn large_fans_are_ordered_as_small_ones() {
         let k = 24u32;
         let around = |faces: &[u32]| -> Topology {
-            let faces = faces
-                .iter()
-                .map(|&j| [0, 1 + j, 1 + (j + 1) % k])
-                .collect();
+            let faces = faces.iter().map(|&j| [0, 1 + j, 1 + (j + 1) % k]).collect();
             Topology::from_triangles(1 + k as usize, faces).unwrap()
         };
         let all: Vec<u32> = (0..k).collect();
