@@ -13,6 +13,12 @@
 //! stain's cost per vertex over the all-wet cloth's, and Detail 2's cost per vertex over
 //! Detail 0's on the same stain (ARCHITECTURE, "Stain detail", the fifth look).
 //!
+//! The three cases run in turn three times (`MADDER_BENCH_ROUNDS` another count): the
+//! machine this was written on drifts by a quarter between minutes, so one round's ratio
+//! compares runs seconds apart, and the bench prints the median of the rounds' ratios,
+//! every round's figures and the factors of the medians (the first round's reports in
+//! full).
+//!
 //! The wet share is counted as in `tests/bench/bench_dynamic_paint.py`: the pour's radius
 //! is found by bisection, on untimed runs in a process of their own, until the fine
 //! vertices wetter than 1 g/m² at the last frame are within 5 % of 10 % of the refined
@@ -211,36 +217,80 @@ fn main() {
     };
     let radius = run(&["--calibrate", "2", "0.1"]);
     // the two cases, then Detail 0 with Detail 2's pour (the same local stain at
-    // the cloth's resolution), which splits the ratio into its factors
-    let mut cases = Vec::new();
-    for (level, radius) in [("0", "0"), ("2", radius.trim()), ("0", radius.trim())] {
-        let out = run(&["--case", level, radius]);
-        print!("{out}");
-        // the figures before " ms/frame" and " active vertices" on the case's first line
-        let figure = |unit: &str| {
-            out.split(unit)
-                .next()
-                .and_then(|head| head.rsplit(' ').next())
-                .and_then(|t| t.parse::<f64>().ok())
-        };
-        cases.extend(figure(" ms/frame").zip(figure(" active vertices")));
+    // the cloth's resolution), which splits the ratio into its factors; the three run in
+    // turn `rounds` times (the machine's speed drifts between minutes: each round's ratio
+    // compares runs seconds apart), the first round's reports printed
+    let rounds: usize = std::env::var("MADDER_BENCH_ROUNDS")
+        .ok()
+        .and_then(|r| r.parse().ok())
+        .unwrap_or(3)
+        .max(1);
+    let specs = [("0", "0"), ("2", radius.trim()), ("0", radius.trim())];
+    // per case: ms a frame of every round, and its active vertices per sub-step
+    let mut cases: Vec<(Vec<f64>, f64)> = vec![(Vec::new(), 0.0); specs.len()];
+    for round in 0..rounds {
+        for (case, (level, radius)) in cases.iter_mut().zip(specs) {
+            let out = run(&["--case", level, radius]);
+            if round == 0 {
+                print!("{out}");
+            }
+            // the figures before " ms/frame" and " active vertices" on the case's first line
+            let figure = |unit: &str| {
+                out.split(unit)
+                    .next()
+                    .and_then(|head| head.rsplit(' ').next())
+                    .and_then(|t| t.parse::<f64>().ok())
+            };
+            if let Some((ms, active)) = figure(" ms/frame").zip(figure(" active vertices")) {
+                case.0.push(ms);
+                case.1 = active;
+            }
+        }
     }
-    if let [(coarse, a_coarse), (fine, a_fine), (local, a_local)] = cases[..] {
-        println!(
-            "detail 2 at 10 % wet / detail 0 all wet: {:.2}× per frame (target ≤ 2×)",
-            fine / coarse
-        );
-        let per = |ms: f64, active: f64| 1e3 * ms / active;
-        let (c_coarse, c_fine, c_local) = (
-            per(coarse, a_coarse),
-            per(fine, a_fine),
-            per(local, a_local),
-        );
-        println!(
-            "    per active vertex and frame: detail 0 all wet {c_coarse:.2} µs, detail 0 with the same pour {c_local:.2} µs, detail 2 {c_fine:.2} µs; the ratio is {:.2} (active vertices) × {:.2} (a local stain's cost per vertex over the all-wet cloth's, at detail 0) × {:.2} (detail 2's over detail 0's on the same stain)",
-            a_fine / a_coarse,
-            c_local / c_coarse,
-            c_fine / c_local,
-        );
+    if cases.iter().any(|c| c.0.len() != rounds) {
+        println!("a case's figures could not be read: no ratio");
+        return;
     }
+    let median = |v: &[f64]| {
+        let mut v = v.to_vec();
+        v.sort_by(f64::total_cmp);
+        let m = v.len() / 2;
+        if v.len() % 2 == 1 {
+            v[m]
+        } else {
+            0.5 * (v[m - 1] + v[m])
+        }
+    };
+    let ratios: Vec<f64> = (0..rounds).map(|r| cases[1].0[r] / cases[0].0[r]).collect();
+    let listed = |v: &[f64], digits: usize| {
+        v.iter()
+            .map(|x| format!("{x:.digits$}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    println!(
+        "detail 2 at 10 % wet / detail 0 all wet: {:.2}× per frame (target ≤ 2×), the median of {rounds} rounds: {}",
+        median(&ratios),
+        listed(&ratios, 2),
+    );
+    let [(coarse, a_coarse), (fine, a_fine), (local, a_local)] =
+        [0, 1, 2].map(|k| (median(&cases[k].0), cases[k].1));
+    println!(
+        "    ms a frame, median (rounds): detail 0 all wet {coarse:.2} ({}), detail 2 {fine:.2} ({}), detail 0 with the same pour {local:.2} ({})",
+        listed(&cases[0].0, 1),
+        listed(&cases[1].0, 1),
+        listed(&cases[2].0, 1),
+    );
+    let per = |ms: f64, active: f64| 1e3 * ms / active;
+    let (c_coarse, c_fine, c_local) = (
+        per(coarse, a_coarse),
+        per(fine, a_fine),
+        per(local, a_local),
+    );
+    println!(
+        "    per active vertex and frame (medians): detail 0 all wet {c_coarse:.2} µs, detail 0 with the same pour {c_local:.2} µs, detail 2 {c_fine:.2} µs; the ratio of medians is {:.2} (active vertices) × {:.2} (a local stain's cost per vertex over the all-wet cloth's, at detail 0) × {:.2} (detail 2's over detail 0's on the same stain)",
+        a_fine / a_coarse,
+        c_local / c_coarse,
+        c_fine / c_local,
+    );
 }
