@@ -80,6 +80,7 @@ pub mod lcs;
 pub mod mesh;
 pub mod ops;
 pub mod rng;
+pub(crate) mod runs;
 pub mod stain;
 pub mod texture;
 pub mod weave;

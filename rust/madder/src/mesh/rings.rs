@@ -40,6 +40,7 @@
 use rayon::prelude::*;
 
 use super::{EdgeKind, Topology};
+use crate::runs::carve;
 
 /// The shape of the fan of faces around a vertex.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -113,20 +114,8 @@ struct FanScratch {
     local: Vec<u32>,
 }
 
-/// The fans of a run of vertices, laid end to end as in [`OneRings`]: the wedges straight
-/// into their place in the rings' array (a wedge per corner, so a run's place is known
-/// before its fans are walked), the spokes and their edges in arrays of the run's own,
-/// joined afterwards ([`OneRings::assemble`]).
-struct FanChunk<'a> {
-    wedges: Laid<'a>,
-    spokes: Vec<u32>,
-    spoke_edges: Vec<u32>,
-    /// Per vertex: the spokes it added.
-    counts: Vec<u32>,
-    kind: Vec<FanKind>,
-}
-
-/// A run's slots in the wedge array, filled in order.
+/// A run of vertices' slots in the rings' wedge array, filled in order (a wedge per
+/// corner, so a run's place is known before its fans are walked).
 struct Laid<'a> {
     slots: &'a mut [Wedge],
     len: usize,
@@ -139,7 +128,9 @@ impl Laid<'_> {
     }
 }
 
-/// What a run of vertices leaves once its wedges are in place.
+/// The rest of a run of vertices' fans, laid end to end as in [`OneRings`] and joined
+/// afterwards ([`OneRings::assemble`]): spokes, their edges, and per vertex the spokes it
+/// added and the fan's kind.
 struct Fans {
     spokes: Vec<u32>,
     spoke_edges: Vec<u32>,
@@ -169,27 +160,26 @@ fn lay_fans(
     n: usize,
     corner_ptr: &[u32],
     corners: &[(u32, u8)],
-    fan: impl Fn(usize, &[(u32, u8)], &mut FanScratch, &mut FanChunk<'_>) -> FanKind + Sync,
+    fan: impl Fn(usize, &[(u32, u8)], &mut FanScratch, &mut Laid<'_>, &mut Fans) -> FanKind + Sync,
 ) -> (Vec<Wedge>, Vec<Fans>) {
     let mut wedges = Vec::with_capacity(corners.len());
     // filled side by side, so that the fresh pages are taken on both threads
     wedges.par_extend(rayon::iter::repeat_n(UNLAID, corners.len()));
-    let mut slots = Vec::with_capacity(n.div_ceil(CHUNK));
-    let mut rest = &mut wedges[..];
-    for c in 0..n.div_ceil(CHUNK) {
-        let range = c * CHUNK..n.min((c + 1) * CHUNK);
-        let len = (corner_ptr[range.end] - corner_ptr[range.start]) as usize;
-        let (run, after) = std::mem::take(&mut rest).split_at_mut(len);
-        slots.push((range, run));
-        rest = after;
-    }
-    let fans = slots
+    let ranges: Vec<_> = (0..n.div_ceil(CHUNK))
+        .map(|c| c * CHUNK..n.min((c + 1) * CHUNK))
+        .collect();
+    let lens = ranges
+        .iter()
+        .map(|r| (corner_ptr[r.end] - corner_ptr[r.start]) as usize);
+    let runs = carve(&mut wedges, lens);
+    let fans = ranges
         .into_par_iter()
+        .zip(runs)
         .map(|(range, run)| {
             let mut scratch = FanScratch::default();
             let spokes = run.len() + range.len();
-            let mut out = FanChunk {
-                wedges: Laid { slots: run, len: 0 },
+            let mut laid = Laid { slots: run, len: 0 };
+            let mut out = Fans {
                 spokes: Vec::with_capacity(spokes),
                 spoke_edges: Vec::with_capacity(spokes),
                 counts: Vec::with_capacity(range.len()),
@@ -199,22 +189,17 @@ fn lay_fans(
             for v in range {
                 let cs = &corners[corner_ptr[v] as usize..corner_ptr[v + 1] as usize];
                 let s0 = out.spokes.len();
-                let kind = fan(v, cs, &mut scratch, &mut out);
+                let kind = fan(v, cs, &mut scratch, &mut laid, &mut out);
                 debug_assert_eq!(
-                    out.wedges.len as u32,
+                    laid.len as u32,
                     corner_ptr[v + 1] - base,
                     "a wedge per corner"
                 );
                 out.counts.push((out.spokes.len() - s0) as u32);
                 out.kind.push(kind);
             }
-            assert_eq!(out.wedges.len, out.wedges.slots.len(), "a wedge per corner");
-            Fans {
-                spokes: out.spokes,
-                spoke_edges: out.spoke_edges,
-                counts: out.counts,
-                kind: out.kind,
-            }
+            assert_eq!(laid.len, laid.slots.len(), "a wedge per corner");
+            out
         })
         .collect();
     (wedges, fans)
@@ -225,14 +210,7 @@ fn joined<T: Copy + Send + Sync>(parts: &[&[T]], fill: T) -> Vec<T> {
     let total = parts.iter().map(|p| p.len()).sum();
     let mut out = Vec::with_capacity(total);
     out.par_extend(rayon::iter::repeat_n(fill, total));
-    let mut places = Vec::with_capacity(parts.len());
-    let mut rest = &mut out[..];
-    for part in parts {
-        let (place, after) = std::mem::take(&mut rest).split_at_mut(part.len());
-        places.push(place);
-        rest = after;
-    }
-    places
+    carve(&mut out, parts.iter().map(|p| p.len()))
         .into_par_iter()
         .zip(parts)
         .for_each(|(place, part)| place.copy_from_slice(part));
@@ -263,8 +241,8 @@ impl OneRings {
         let face_edges = topology.face_edges();
 
         // in runs of vertices side by side, each laid out as the whole is
-        let (wedges, fans) = lay_fans(n, &corner_ptr, &corners, |_, cs, scratch, out| {
-            order_fan(faces, face_edges, &flipped, cs, scratch, out)
+        let (wedges, fans) = lay_fans(n, &corner_ptr, &corners, |_, cs, scratch, laid, out| {
+            order_fan(faces, face_edges, &flipped, cs, scratch, laid, out)
         });
         Self::assemble(
             topology, flipped, edge_ptr, edge_end, corner_ptr, wedges, fans,
@@ -334,12 +312,12 @@ impl OneRings {
         let (corner_ptr, corners) = incidence(n, faces);
         let (edge_ptr, edge_end) = edge_index(topology);
         let face_edges = topology.face_edges();
-        let (wedges, fans) = lay_fans(n, &corner_ptr, &corners, |v, cs, scratch, out| {
+        let (wedges, fans) = lay_fans(n, &corner_ptr, &corners, |v, cs, scratch, laid, out| {
             let pv = vertex_parent[v] as usize;
             if pv != u32::MAX as usize && cs.len() == parent.wedges(pv).len() {
                 // the whole fan: the parent's, renumbered
                 for w in parent.wedges(pv) {
-                    out.wedges.push(Wedge {
+                    laid.push(Wedge {
                         face: face_local[w.face as usize],
                         ..*w
                     });
@@ -354,7 +332,7 @@ impl OneRings {
                 );
                 parent.kind(pv)
             } else {
-                order_fan(faces, face_edges, &flipped, cs, scratch, out)
+                order_fan(faces, face_edges, &flipped, cs, scratch, laid, out)
             }
         });
         Self::assemble(
@@ -641,15 +619,16 @@ fn harmonize_walk(topology: &Topology, pairs: &[[u32; 2]]) -> Vec<bool> {
 const SMALL_FAN: usize = 16;
 
 /// Orders the fan of one vertex from its incident `(face, corner)` list, walking faces in
-/// their harmonized orientation (`flipped`); appends its wedges, spokes and the spokes'
-/// edges (read from the face met first, `face_edges`) to `out`.
+/// their harmonized orientation (`flipped`); lays its wedges in `wedges` and appends its
+/// spokes and the spokes' edges (read from the face met first, `face_edges`) to `out`.
 fn order_fan(
     faces: &[[u32; 3]],
     face_edges: &[[u32; 3]],
     flipped: &[bool],
     corners: &[(u32, u8)],
     scratch: &mut FanScratch,
-    out: &mut FanChunk<'_>,
+    wedges: &mut Laid<'_>,
+    out: &mut Fans,
 ) -> FanKind {
     let m = corners.len();
     if m == 0 {
@@ -783,7 +762,7 @@ fn order_fan(
     local.clear();
     local.resize(distinct.len(), u32::MAX);
     // `edge`: the spoke's edge, pushed with a spoke met for the first time
-    let mut slot = |i: u32, s: u32, edge: u32, out: &mut FanChunk<'_>| {
+    let mut slot = |i: u32, s: u32, edge: u32, out: &mut Fans| {
         let i = i as usize;
         if local[i] == u32::MAX {
             local[i] = (out.spokes.len() - s0) as u32;
@@ -807,7 +786,7 @@ fn order_fan(
         let (sa, sb) = (ends[w][a], ends[w][b]);
         let from = slot(end_slot[w][a], sa, edge(sa), out);
         let to = slot(end_slot[w][b], sb, edge(sb), out);
-        out.wedges.push(Wedge {
+        wedges.push(Wedge {
             face: corners[w].0,
             corner: corners[w].1,
             forward: fwd != flipped[corners[w].0 as usize],

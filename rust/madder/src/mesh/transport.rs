@@ -86,6 +86,7 @@ use rayon::prelude::*;
 use super::frames::{VertexFrames, tangent_direction};
 use super::rings::{FanKind, OneRings, find_edge};
 use super::{Geometry, Topology};
+use crate::runs::carve;
 
 /// Tip angles of the three corners of every face from the intrinsic edge lengths (in
 /// parallel; each corner's angle is computed once and read by the fan of its vertex). With
@@ -218,14 +219,7 @@ impl Transport {
         let alpha = &mut self.alpha;
         alpha.clear();
         alpha.resize(rings.spoke_vertex.len(), f64::NAN);
-        let mut slices: Vec<&mut [f64]> = Vec::with_capacity(n);
-        let mut rest = alpha.as_mut_slice();
-        for v in 0..n {
-            let (head, tail) = rest.split_at_mut(rings.spokes(v).len());
-            slices.push(head);
-            rest = tail;
-        }
-        slices
+        carve(alpha, (0..n).map(|v| rings.spokes(v).len()))
             .into_par_iter()
             .enumerate()
             .map(|(v, alpha)| {

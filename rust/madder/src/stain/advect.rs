@@ -219,6 +219,7 @@ use rayon::prelude::*;
 use crate::error::ParamError;
 use crate::mesh::transport::wrap_angle;
 use crate::mesh::{EdgeKind, Geometry, OneRings, Topology, Transport, VertexFrames, Wedge};
+use crate::runs::carve;
 
 /// Most triangle crossings of one back-trace. Reached only when `h|u|` spans hundreds of
 /// edges; the trace then stops at its last crossing point.
@@ -1452,25 +1453,27 @@ impl Flows {
         let n = self.in_ptr.len() - 1;
         let mut turns = vec![[0.0; 2]; self.in_from.len()];
         // runs of vertices, each filling its own stretch of the table
-        let mut runs = Vec::with_capacity(n.div_ceil(VERTICES_PER_TASK));
-        let mut rest = turns.as_mut_slice();
-        for start in (0..n).step_by(VERTICES_PER_TASK) {
-            let end = (start + VERTICES_PER_TASK).min(n);
-            let len = (self.in_ptr[end] - self.in_ptr[start]) as usize;
-            let (head, tail) = rest.split_at_mut(len);
-            runs.push((start..end, head));
-            rest = tail;
-        }
-        runs.into_par_iter().for_each(|(vertices, out)| {
-            let base = self.in_ptr[vertices.start] as usize;
-            for v in vertices {
-                for t in self.in_ptr[v] as usize..self.in_ptr[v + 1] as usize {
-                    let (_, d, e) = self.in_from[t];
-                    let [c, s] = cos_sin[e as usize];
-                    out[t - base] = if v < d as usize { [c, s] } else { [c, -s] };
+        let ranges: Vec<_> = (0..n)
+            .step_by(VERTICES_PER_TASK)
+            .map(|start| start..(start + VERTICES_PER_TASK).min(n))
+            .collect();
+        let lens = ranges
+            .iter()
+            .map(|r| (self.in_ptr[r.end] - self.in_ptr[r.start]) as usize);
+        let runs = carve(&mut turns, lens);
+        ranges
+            .into_par_iter()
+            .zip(runs)
+            .for_each(|(vertices, out)| {
+                let base = self.in_ptr[vertices.start] as usize;
+                for v in vertices {
+                    for t in self.in_ptr[v] as usize..self.in_ptr[v + 1] as usize {
+                        let (_, d, e) = self.in_from[t];
+                        let [c, s] = cos_sin[e as usize];
+                        out[t - base] = if v < d as usize { [c, s] } else { [c, -s] };
+                    }
                 }
-            }
-        });
+            });
         turns
     }
 
