@@ -147,7 +147,7 @@ fn bench(level: u32, radius: Option<f64>, frames: usize, report: bool) -> (usize
     );
     let per = |s: f64| s * 1e3 / frames as f64;
     println!(
-        "    per frame: window {:.1}, geometry {:.1}, forces {:.1}, advection {:.1}, diffusion {:.1}, interactions {:.1} ms; {:.1} sub-steps, {:.1} transport cycles, {} window rebuilds; read-outs checksum {checksum:016x}",
+        "    per frame: window {:.1}, geometry {:.1}, forces {:.1}, advection {:.1}, diffusion {:.1}, interactions {:.1} ms; {:.1} sub-steps, {:.1} transport cycles, CG iterations per sub-step {:.1} density (all fields) + {:.1} velocity, {} window rebuilds; read-outs checksum {checksum:016x}",
         per(p.window),
         per(p.geometry),
         per(p.forces),
@@ -156,6 +156,8 @@ fn bench(level: u32, radius: Option<f64>, frames: usize, report: bool) -> (usize
         per(p.interaction),
         p.substeps as f64 / frames as f64,
         p.transport_cycles as f64 / frames as f64,
+        p.density_iterations as f64 / p.substeps.max(1) as f64,
+        p.velocity_iterations as f64 / p.substeps.max(1) as f64,
         p.window_rebuilds
     );
     (wet, fine_n)

@@ -215,7 +215,7 @@ pub(crate) fn vertex_areas_par<'a, P: Copy + Into<DVec3> + Sync>(
 }
 
 /// A third of face `f`'s area (its share of each corner's lumped area).
-fn face_third<P: Copy + Into<DVec3>>(f: &[u32; 3], positions: &[P]) -> f64 {
+pub(crate) fn face_third<P: Copy + Into<DVec3>>(f: &[u32; 3], positions: &[P]) -> f64 {
     let p = f.map(|v| positions[v as usize].into());
     heron([
         p[1].distance(p[2]),

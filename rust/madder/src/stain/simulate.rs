@@ -76,6 +76,7 @@
 //! when the whole frame succeeded: an error (bad positions naming the vertex, a solver
 //! failure) leaves the simulator at the last good frame.
 
+use std::sync::atomic::AtomicU64;
 use std::time::Instant;
 
 use faer::Par;
@@ -249,6 +250,10 @@ pub struct Simulator {
     pub(super) tolerances: [f64; 2],
     /// The step's arrays, kept from frame to frame.
     pub(super) scratch: StepScratch,
+    /// Per face of the cloth (allocated when first needed): a third of its area at the
+    /// current positions, as bits, for the faces around the stained vertices outside the
+    /// window ([`Simulator::refresh_areas`]; each written by one corner, read by all).
+    pub(super) face_thirds: Vec<AtomicU64>,
 }
 
 /// The step's per-frame and per-sub-step arrays, kept from one frame to the next and
@@ -455,6 +460,7 @@ impl Simulator {
             spare: None,
             tolerances: [DENSITY_TOLERANCE, VELOCITY_TOLERANCE],
             scratch: StepScratch::default(),
+            face_thirds: Vec::new(),
         })
     }
 

@@ -22,6 +22,7 @@ use glam::{DVec2, DVec3};
 
 use super::simulate::Simulator;
 use crate::mesh::VertexFrames;
+use crate::runs;
 
 /// The interacting fields of every vertex (masses in kg; colour masses optional).
 ///
@@ -66,12 +67,9 @@ impl Fields {
         out
     }
 
-    /// [`Fields::gather`] into `out` (its arrays' allocations kept).
+    /// [`Fields::gather`] into `out` (its arrays' allocations kept), in parallel.
     pub(crate) fn gather_into(&self, index: &[u32], out: &mut Self) {
-        fn pick<T: Copy>(from: &[T], index: &[u32], to: &mut Vec<T>) {
-            to.clear();
-            to.extend(index.iter().map(|&i| from[i as usize]));
-        }
+        use runs::gather_into as pick;
         pick(&self.free_solvent, index, &mut out.free_solvent);
         pick(&self.solute, index, &mut out.solute);
         pick(&self.absorbed_solvent, index, &mut out.absorbed_solvent);
@@ -88,18 +86,14 @@ impl Fields {
         }
     }
 
-    /// Writes `part` (the fields of the vertices `index`, as [`Fields::gather`] gives
-    /// them) back into these fields.
+    /// Writes `part` (the fields of the vertices `index`, increasing, as
+    /// [`Fields::gather`] gives them) back into these fields, in parallel.
     ///
     /// # Panics
-    /// If `part` tracks colour and these fields do not, or the lengths differ.
+    /// If `part` tracks colour and these fields do not, the lengths differ, or `index`
+    /// is not increasing ([`runs::scatter_at`]).
     pub(crate) fn scatter(&mut self, index: &[u32], part: &Fields) {
-        fn put<T: Copy>(to: &mut [T], index: &[u32], from: &[T]) {
-            assert_eq!(index.len(), from.len(), "one value per index");
-            for (&i, &x) in index.iter().zip(from) {
-                to[i as usize] = x;
-            }
-        }
+        use runs::scatter_at as put;
         put(&mut self.free_solvent, index, &part.free_solvent);
         put(&mut self.solute, index, &part.solute);
         put(&mut self.absorbed_solvent, index, &part.absorbed_solvent);

@@ -90,6 +90,9 @@
 //! 1e-10 of the peak per step past three rings, where it evaporates at once; the region
 //! keeps that liquid (measured: up to 1e-5 of the peak after 200 steps).
 
+use std::sync::atomic::AtomicU64;
+use std::sync::atomic::Ordering::Relaxed;
+
 use glam::{DMat3, DVec2, DVec3};
 use rayon::prelude::*;
 
@@ -100,9 +103,10 @@ use super::forces::{
 use super::simulate::Simulator;
 use super::state::{Fields, Local};
 use crate::error::Error;
-use crate::mesh::geometry::vertex_area;
-use crate::mesh::{OneRings, RingAdjacency, Topology, VertexFrames};
+use crate::mesh::geometry::{face_third, vertex_area};
+use crate::mesh::{OneRings, RingAdjacency, Topology, VertexFrames, Wedge};
 use crate::ops::{Restriction, VertexPattern, WarmCg};
+use crate::runs;
 
 /// Rings of vertices the active region keeps around the flowing liquid, on top of one ring
 /// per transport sub-cycle of the previous sub-step (module doc).
@@ -589,15 +593,28 @@ impl Simulator {
         let st = &mut self.state;
         st.fields.scatter(&w.vertices, &local.fields);
         st.evaporated += local.evaporated;
-        for &j in &w.whole {
-            let (j, v) = (j as usize, w.vertices[j as usize] as usize);
-            st.velocity[v] = local.velocity[j];
-            st.frames.frame[v] = local.frames.frame[j];
-            st.stamp[v] = time;
-            st.vertex_area[v] = local.area[j];
-            if st.fields.is_live(v) || st.fields.adsorbed[v] > 0.0 {
-                st.mark_stained(v);
-            }
+        // the active and held vertices' cloth numbers, increasing as `whole` is: each
+        // array written in parallel
+        let whole: Vec<u32> = w
+            .whole
+            .par_iter()
+            .map(|&j| w.vertices[j as usize])
+            .collect();
+        let at = |k: usize| w.whole[k] as usize;
+        runs::for_each_at(&mut st.velocity, &whole, |k, u| *u = local.velocity[at(k)]);
+        runs::for_each_at(&mut st.frames.frame, &whole, |k, f| {
+            *f = local.frames.frame[at(k)];
+        });
+        runs::for_each_at(&mut st.stamp, &whole, |_, t| *t = time);
+        runs::for_each_at(&mut st.vertex_area, &whole, |k, a| *a = local.area[at(k)]);
+        // the stained list in the same order as one loop over `whole` gives it
+        let fields = &st.fields;
+        let marked: Vec<bool> = whole
+            .par_iter()
+            .map(|&v| fields.is_live(v as usize) || fields.adsorbed[v as usize] > 0.0)
+            .collect();
+        for (&v, _) in whole.iter().zip(&marked).filter(|(_, m)| **m) {
+            st.mark_stained(v as usize);
         }
         self.last_frame_cycles = local.cycles;
     }
@@ -635,32 +652,68 @@ impl Simulator {
                 0.0
             }
         };
-        let floor = ACTIVE_THRESHOLD
-            * st.stained
-                .iter()
-                .map(|&v| density(v as usize))
-                .fold(0.0, f64::max);
-        let whole = self.window.as_ref().map(|w| &w.whole_mask);
-        let (keep, dust): (Vec<u32>, Vec<u32>) = st
+        // in parallel; the largest is the same in any order, and the lists keep the
+        // stained list's order
+        let densities: Vec<f64> = st
             .stained
-            .iter()
-            .partition(|&&v| density(v as usize) > floor);
-        let stale: Vec<u32> = keep
-            .iter()
-            .copied()
-            .filter(|&v| whole.is_none_or(|m| !m[v as usize]))
-            .collect();
-        let area: Vec<f64> = stale
             .par_iter()
-            .map(|&v| self.current_area(v as usize))
+            .map(|&v| density(v as usize))
             .collect();
+        let floor = ACTIVE_THRESHOLD * densities.par_iter().copied().reduce(|| 0.0, f64::max);
+        let whole = self.window.as_ref().map(|w| &w.whole_mask);
+        let kept = |keep: bool| {
+            st.stained
+                .par_iter()
+                .zip(&densities)
+                .filter(move |&(_, &d)| (d > floor) == keep)
+                .map(|(&v, _)| v)
+        };
+        let (keep, dust): (Vec<u32>, Vec<u32>) =
+            rayon::join(|| kept(true).collect(), || kept(false).collect());
         let st = &mut self.state;
-        for (v, a) in stale.into_iter().zip(area) {
-            st.vertex_area[v as usize] = a;
-        }
-        for v in dust {
+        for &v in &dust {
             st.is_stained[v as usize] = false;
         }
         st.stained = keep;
+        // now a vertex is stale iff it is stained and outside the window
+        let st = &self.state;
+        let stale = |v: u32| st.is_stained[v as usize] && whole.is_none_or(|m| !m[v as usize]);
+        let stale_list: Vec<u32> = st
+            .stained
+            .par_iter()
+            .copied()
+            .filter(|&v| stale(v))
+            .collect();
+        if stale_list.is_empty() {
+            return;
+        }
+        // each face around them: its third once, by its lowest-numbered stale corner;
+        // then each vertex sums its fan's thirds in wedge order, as `current_area` does
+        // (the same operations on the same numbers)
+        let (faces, rings) = (self.cloth.topology.faces(), &self.cloth.rings);
+        if self.face_thirds.len() != faces.len() {
+            self.face_thirds = (0..faces.len()).map(|_| AtomicU64::new(0)).collect();
+        }
+        let thirds = &self.face_thirds;
+        stale_list.par_iter().for_each(|&v| {
+            for w in rings.wedges(v as usize) {
+                let f = &faces[w.face as usize];
+                if f.iter().copied().filter(|&u| stale(u)).min() == Some(v) {
+                    let third = face_third(f, &st.positions);
+                    thirds[w.face as usize].store(third.to_bits(), Relaxed);
+                }
+            }
+        });
+        let area: Vec<f64> = stale_list
+            .par_iter()
+            .map(|&v| {
+                let third = |w: &Wedge| f64::from_bits(thirds[w.face as usize].load(Relaxed));
+                rings.wedges(v as usize).iter().map(third).sum()
+            })
+            .collect();
+        let st = &mut self.state;
+        for (v, a) in stale_list.into_iter().zip(area) {
+            st.vertex_area[v as usize] = a;
+        }
     }
 }
