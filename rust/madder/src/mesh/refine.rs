@@ -39,6 +39,8 @@
 //!   `Σ_i φ_i = 1`, totals are preserved to rounding; a coarse density is `m_i / A_i` with
 //!   `A_i` the restriction of the fine areas.
 
+use rayon::prelude::*;
+
 use crate::error::{Error, MeshError, ParamError};
 use crate::mesh::{EdgeKind, Topology};
 
@@ -431,6 +433,7 @@ impl Partial {
     pub(crate) fn topology(&self) -> Result<Topology, MeshError> {
         let per = self.template.len();
         let polygon = (0..self.faces.len())
+            .into_par_iter()
             .map(|t| self.coarse.face_polygon()[self.built[t / per] as usize])
             .collect();
         Topology::with_polygons(
@@ -450,6 +453,7 @@ impl Partial {
     ) -> Result<(Topology, Vec<u32>), MeshError> {
         let per = self.template.len();
         let polygon = (0..self.faces.len())
+            .into_par_iter()
             .map(|t| self.coarse.face_polygon()[self.built[t / per] as usize])
             .collect();
         old.extended(

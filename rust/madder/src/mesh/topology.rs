@@ -10,7 +10,14 @@
 //! add-on can warn about it and later physics (evaporation boundary coefficient, eq. 4.8)
 //! can use it.
 
+use rayon::prelude::*;
+
 use crate::error::MeshError;
+use crate::runs;
+
+/// Old edges per task of [`Topology::extended`]'s merge, and vertices per task of its
+/// incidence lists.
+const GROWTH_CHUNK: usize = 4096;
 
 /// How many faces share an edge.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -191,8 +198,11 @@ impl Topology {
     /// what [`Topology::with_polygons`] on all the faces builds, with only the new faces'
     /// edges sorted. The new edges are merged into the old ones (both in lexicographic
     /// order), so a mesh that grows by a few faces at a time (the lazily refined cloth of
-    /// [`super::refine::Partial`]) pays for its new part and one pass over the old. Also
-    /// returns the new index of every old edge. `face_polygon` covers all the faces.
+    /// [`super::refine::Partial`]) pays for its new part and one pass over the old, and
+    /// every pass runs in parallel: the merge in runs of old edges (each run finds where
+    /// it starts among the new edges), the vertices' edge lists as each vertex's old list
+    /// renumbered and merged with its new edges, the new faces' sides and edges per face.
+    /// Also returns the new index of every old edge. `face_polygon` covers all the faces.
     pub(crate) fn extended(
         &self,
         n_vertices: usize,
@@ -201,51 +211,68 @@ impl Topology {
         n_polygons: usize,
     ) -> Result<(Self, Vec<u32>), MeshError> {
         let old_faces = self.faces.len();
-        let all: Vec<[u32; 3]> = self.faces.iter().chain(faces).copied().collect();
-        if n_vertices < self.n_vertices || face_polygon.len() != all.len() {
+        if n_vertices < self.n_vertices || face_polygon.len() != old_faces + faces.len() {
             // not a growth: built from scratch (which also names what is wrong)
+            let all: Vec<[u32; 3]> = self.faces.iter().chain(faces).copied().collect();
             let t = Self::with_polygons(n_vertices, all, face_polygon, n_polygons)?;
             return Ok((t, Vec::new()));
         }
         check_faces(n_vertices, faces, old_faces)?;
-        // the new faces' sides that are not edges of this mesh, sorted
-        let mut half: Vec<(u32, u32)> = faces
-            .iter()
-            .flat_map(|tri| {
+        // the new faces' sides that are not edges of this mesh, sorted (as `a << 32 | b`,
+        // `a < b`: the integers' order is the pairs' lexicographic order)
+        let mut keys: Vec<u64> = faces
+            .par_iter()
+            .flat_map_iter(|tri| {
                 (0..3).map(move |k| {
                     let (a, b) = (tri[(k + 1) % 3], tri[(k + 2) % 3]);
-                    (a.min(b), a.max(b))
+                    (u64::from(a.min(b)) << 32) | u64::from(a.max(b))
                 })
             })
-            .filter(|&(a, b)| self.find_edge(a, b).is_none())
+            .filter(|&key| self.find_edge((key >> 32) as u32, key as u32).is_none())
             .collect();
         // equal keys are equal pairs: the sorted list is the same whoever sorts it
-        rayon::slice::ParallelSliceMut::par_sort_unstable(&mut half[..]);
-        half.dedup();
-        // merge: old edges and new ones, both increasing
-        let mut edges = Vec::with_capacity(self.edges.len() + half.len());
-        let mut old_new = Vec::with_capacity(self.edges.len());
-        let mut fresh = half.iter().peekable();
-        for &[a, b] in &self.edges {
-            while let Some(&&(c, d)) = fresh.peek() {
-                if (c, d) > (a, b) {
-                    break;
-                }
-                edges.push([c, d]);
-                fresh.next();
-            }
-            old_new.push(edges.len() as u32);
-            edges.push([a, b]);
-        }
-        edges.extend(fresh.map(|&(c, d)| [c, d]));
-        let (vertex_edge_ptr, vertex_edge) = incidence(n_vertices, &edges);
+        keys.par_sort_unstable();
+        keys.dedup();
+        let half: Vec<[u32; 2]> = keys
+            .par_iter()
+            .map(|&key| [(key >> 32) as u32, key as u32])
+            .collect();
+        // the merge of the old edges and the new ones (both increasing), in parallel: an
+        // old edge moves up by the new edges before it, a new edge sits after the old
+        // edges before it
+        let new_sorted = &half[..];
+        let old_new: Vec<u32> = self
+            .edges
+            .par_chunks(GROWTH_CHUNK)
+            .enumerate()
+            .flat_map_iter(|(c, chunk)| {
+                let mut before = new_sorted.partition_point(|h| h < &chunk[0]);
+                chunk.iter().enumerate().map(move |(k, edge)| {
+                    while new_sorted.get(before).is_some_and(|h| h < edge) {
+                        before += 1;
+                    }
+                    (c * GROWTH_CHUNK + k + before) as u32
+                })
+            })
+            .collect();
+        let fresh: Vec<u32> = half
+            .par_iter()
+            .enumerate()
+            .map(|(k, h)| (k + self.edges.partition_point(|e| e < h)) as u32)
+            .collect();
+        let n_edges = self.edges.len() + half.len();
+        let mut edges = vec![[0u32; 2]; n_edges];
+        runs::scatter_at(&mut edges, &old_new, &self.edges);
+        runs::scatter_at(&mut edges, &fresh, &half);
+        let (vertex_edge_ptr, vertex_edge) =
+            self.grown_incidence(n_vertices, &old_new, &half, &fresh);
         let mut grown = Self {
             n_vertices,
-            faces: all,
+            faces: self.faces.par_iter().chain(faces).copied().collect(),
             edges,
             face_edges: self
                 .face_edges
-                .iter()
+                .par_iter()
                 .map(|fe| fe.map(|e| old_new[e as usize]))
                 .collect(),
             edge_face_count: Vec::new(),
@@ -254,20 +281,74 @@ impl Topology {
             vertex_edge_ptr,
             vertex_edge,
         };
-        let mut count = vec![0u32; grown.edges.len()];
-        for (&e, &c) in old_new.iter().zip(&self.edge_face_count) {
-            count[e as usize] = c;
-        }
-        for tri in faces {
-            let fe: [u32; 3] = std::array::from_fn(|k| {
-                let (a, b) = (tri[(k + 1) % 3], tri[(k + 2) % 3]);
-                grown.find_edge(a, b).expect("a side is an edge") as u32
-            });
+        let mut count = vec![0u32; n_edges];
+        runs::scatter_at(&mut count, &old_new, &self.edge_face_count);
+        let new_face_edges: Vec<[u32; 3]> = faces
+            .par_iter()
+            .map(|tri| {
+                std::array::from_fn(|k| {
+                    let (a, b) = (tri[(k + 1) % 3], tri[(k + 2) % 3]);
+                    grown.find_edge(a, b).expect("a side is an edge") as u32
+                })
+            })
+            .collect();
+        for fe in &new_face_edges {
             fe.iter().for_each(|&e| count[e as usize] += 1);
-            grown.face_edges.push(fe);
         }
+        grown.face_edges.extend(new_face_edges);
         grown.edge_face_count = count;
         Ok((grown, old_new))
+    }
+
+    /// The vertex → edge incidence of this mesh grown by the edges `half` (increasing) to
+    /// `n_vertices` vertices, its old edges renumbered by `old_new` and the new ones
+    /// numbered `fresh` (both increasing): each vertex's list is its old list renumbered
+    /// (the renumbering keeps the order) merged with its new edges, in parallel over
+    /// runs of vertices. The same lists as [`incidence`] on the grown edges.
+    fn grown_incidence(
+        &self,
+        n_vertices: usize,
+        old_new: &[u32],
+        half: &[[u32; 2]],
+        fresh: &[u32],
+    ) -> (Vec<u32>, Vec<u32>) {
+        // the new edges of each vertex, in increasing edge order
+        let (new_ptr, new_edges) = numbered_incidence(n_vertices, half, |k| fresh[k]);
+        let old = |v: usize| -> &[u32] {
+            if v < self.n_vertices {
+                self.vertex_edges(v)
+            } else {
+                &[]
+            }
+        };
+        let mut ptr = Vec::with_capacity(n_vertices + 1);
+        ptr.push(0u32);
+        for v in 0..n_vertices {
+            let degree = old(v).len() as u32 + new_ptr[v + 1] - new_ptr[v];
+            ptr.push(ptr[v] + degree);
+        }
+        let mut list = vec![0u32; ptr[n_vertices] as usize];
+        let lens = (0..n_vertices).map(|v| (ptr[v + 1] - ptr[v]) as usize);
+        runs::carve(&mut list, lens)
+            .into_par_iter()
+            .with_min_len(GROWTH_CHUNK)
+            .enumerate()
+            .for_each(|(v, out)| {
+                let mut was = old(v).iter().map(|&e| old_new[e as usize]).peekable();
+                let mut new = new_edges[new_ptr[v] as usize..new_ptr[v + 1] as usize]
+                    .iter()
+                    .copied()
+                    .peekable();
+                for slot in out {
+                    *slot = match (was.peek(), new.peek()) {
+                        (Some(&a), Some(&b)) if b < a => new.next(),
+                        (Some(_), _) => was.next(),
+                        _ => new.next(),
+                    }
+                    .expect("one edge per slot");
+                }
+            });
+        (ptr, list)
     }
 
     /// The edge between `i` and `j`, if any (a search among the edges of the lower).
@@ -398,6 +479,16 @@ fn check_faces(n_vertices: usize, faces: &[[u32; 3]], first: usize) -> Result<()
 /// Vertex → incident edge lists (counting sort over the edges, so each list is in
 /// increasing edge order).
 fn incidence(n: usize, edges: &[[u32; 2]]) -> (Vec<u32>, Vec<u32>) {
+    numbered_incidence(n, edges, |e| e as u32)
+}
+
+/// [`incidence`] with edge `k` of `edges` listed as `number(k)` (increasing in `k`, so
+/// each list stays increasing).
+fn numbered_incidence(
+    n: usize,
+    edges: &[[u32; 2]],
+    number: impl Fn(usize) -> u32,
+) -> (Vec<u32>, Vec<u32>) {
     let mut ptr = vec![0u32; n + 1];
     for &[a, b] in edges {
         ptr[a as usize + 1] += 1;
@@ -408,9 +499,9 @@ fn incidence(n: usize, edges: &[[u32; 2]]) -> (Vec<u32>, Vec<u32>) {
     }
     let mut next = ptr[..n].to_vec();
     let mut list = vec![0u32; ptr[n] as usize];
-    for (e, &[a, b]) in edges.iter().enumerate() {
+    for (k, &[a, b]) in edges.iter().enumerate() {
         for v in [a as usize, b as usize] {
-            list[next[v] as usize] = e as u32;
+            list[next[v] as usize] = number(k);
             next[v] += 1;
         }
     }
@@ -435,6 +526,40 @@ pub(crate) fn grid_topology(w: usize, h: usize) -> Topology {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_large_mesh_grown_in_scattered_batches_is_the_mesh_built_from_scratch() {
+        // a 130 × 130 grid (50k edges: many runs of the parallel merge and incidence),
+        // its faces appended in five interleaved batches, so that the new edges fall
+        // between old ones everywhere and most vertices gain edges at every growth
+        let grid = grid_topology(130, 130);
+        let batch = |r: usize| -> Vec<[u32; 3]> {
+            grid.faces()
+                .iter()
+                .enumerate()
+                .filter(|(f, _)| (f * 7) % 5 == r)
+                .map(|(_, &t)| t)
+                .collect()
+        };
+        let used = |faces: &[[u32; 3]]| faces.iter().flatten().max().map_or(0, |&v| v as usize + 1);
+        let mut faces = batch(0);
+        let mut t = Topology::from_triangles(used(&faces), faces.clone()).unwrap();
+        for r in 1..5 {
+            let new = batch(r);
+            faces.extend_from_slice(&new);
+            let n = used(&faces);
+            let k = faces.len();
+            let (grown, old_new) = t.extended(n, &new, (0..k as u32).collect(), k).unwrap();
+            let want = Topology::from_triangles(n, faces.clone()).unwrap();
+            assert_eq!(format!("{grown:?}"), format!("{want:?}"), "batch {r}");
+            // every old edge is found again at its new number
+            for (e, &ne) in old_new.iter().enumerate() {
+                assert_eq!(t.edges()[e], grown.edges()[ne as usize]);
+            }
+            t = grown;
+        }
+        assert_eq!(t.n_faces(), grid.n_faces());
+    }
 
     #[test]
     fn two_triangles_share_one_interior_edge() {
