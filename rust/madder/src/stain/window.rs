@@ -607,14 +607,10 @@ impl Simulator {
         });
         runs::for_each_at(&mut st.stamp, &whole, |_, t| *t = time);
         runs::for_each_at(&mut st.vertex_area, &whole, |k, a| *a = local.area[at(k)]);
-        // the stained list in the same order as one loop over `whole` gives it
-        let fields = &st.fields;
-        let marked: Vec<bool> = whole
-            .par_iter()
-            .map(|&v| fields.is_live(v as usize) || fields.adsorbed[v as usize] > 0.0)
-            .collect();
-        for (&v, _) in whole.iter().zip(&marked).filter(|(_, m)| **m) {
-            st.mark_stained(v as usize);
+        for &v in &whole {
+            if st.fields.is_live(v as usize) || st.fields.adsorbed[v as usize] > 0.0 {
+                st.mark_stained(v as usize);
+            }
         }
         self.last_frame_cycles = local.cycles;
     }
@@ -652,8 +648,8 @@ impl Simulator {
                 0.0
             }
         };
-        // in parallel; the largest is the same in any order, and the lists keep the
-        // stained list's order
+        // the densities in parallel (the largest is the same in any order); the dust
+        // leaves the list, which keeps its order
         let densities: Vec<f64> = st
             .stained
             .par_iter()
@@ -661,18 +657,14 @@ impl Simulator {
             .collect();
         let floor = ACTIVE_THRESHOLD * densities.par_iter().copied().reduce(|| 0.0, f64::max);
         let whole = self.window.as_ref().map(|w| &w.whole_mask);
-        let kept = |keep: bool| {
-            st.stained
-                .par_iter()
-                .zip(&densities)
-                .filter(move |&(_, &d)| (d > floor) == keep)
-                .map(|(&v, _)| v)
-        };
-        let (keep, dust): (Vec<u32>, Vec<u32>) =
-            rayon::join(|| kept(true).collect(), || kept(false).collect());
         let st = &mut self.state;
-        for &v in &dust {
-            st.is_stained[v as usize] = false;
+        let mut keep = Vec::with_capacity(st.stained.len());
+        for (&v, &d) in st.stained.iter().zip(&densities) {
+            if d > floor {
+                keep.push(v);
+            } else {
+                st.is_stained[v as usize] = false;
+            }
         }
         st.stained = keep;
         // now a vertex is stale iff it is stained and outside the window
