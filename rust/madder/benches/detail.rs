@@ -147,11 +147,14 @@ fn bench(level: u32, radius: Option<f64>, frames: usize, report: bool) -> (usize
     );
     let per = |s: f64| s * 1e3 / frames as f64;
     println!(
-        "    per frame: window {:.1}, geometry {:.1}, forces {:.1}, advection {:.1}, diffusion {:.1}, interactions {:.1} ms; {:.1} sub-steps, {:.1} transport cycles, CG iterations per sub-step {:.1} density (all fields) + {:.1} velocity, {} window rebuilds; read-outs checksum {checksum:016x}",
+        "    per frame: window {:.1}, geometry {:.1}, forces {:.1}, advection {:.1} (traces {:.1}, plan {:.1}, cycles {:.1}), diffusion {:.1}, interactions {:.1} ms; {:.1} sub-steps, {:.1} transport cycles, CG iterations per sub-step {:.1} density (all fields) + {:.1} velocity, {} window rebuilds; read-outs checksum {checksum:016x}",
         per(p.window),
         per(p.geometry),
         per(p.forces),
         per(p.advection),
+        per(p.advection_trace),
+        per(p.advection_plan),
+        per(p.advection_apply),
         per(p.diffusion),
         per(p.interaction),
         p.substeps as f64 / frames as f64,
