@@ -11,9 +11,13 @@
 //! A third case runs Detail 0 with Detail 2's pour (the same local stain at the cloth's
 //! resolution) and the bench prints the ratio's three factors: active vertices, a local
 //! stain's cost per vertex over the all-wet cloth's, and Detail 2's cost per vertex over
-//! Detail 0's on the same stain (ARCHITECTURE, "Stain detail", the fifth look).
+//! Detail 0's on the same stain (ARCHITECTURE, "Stain detail", the fifth look). A fourth
+//! runs Detail 0 with that pour on a cloth of Detail 2's spacing (the 20k flag with four
+//! times the vertices along each side, 316 825 vertices: the refined cloth's lattice, no
+//! refinement), and the bench prints Detail 2's cost against it, per frame and per active
+//! vertex: what the refinement costs over a cloth as fine (the eighth look).
 //!
-//! The three cases run in turn three times (`MADDER_BENCH_ROUNDS` another count): the
+//! The four cases run in turn three times (`MADDER_BENCH_ROUNDS` another count): the
 //! machine this was written on drifts by a quarter between minutes, so one round's ratio
 //! compares runs seconds apart, and the bench prints the median of the rounds' ratios,
 //! every round's figures and the factors of the medians (the first round's reports in
@@ -55,11 +59,20 @@ fn disk_radius(wet_fraction: f64) -> f64 {
     (wet_fraction * 2.4 / std::f64::consts::PI).sqrt()
 }
 
-/// Steps Detail `level` with a pour of `radius` (every vertex if `None`); prints the
-/// figures if `report`, and returns the fine vertices wetter than 1 g/m² at the end and
-/// the refined cloth's vertex count.
-fn bench(level: u32, radius: Option<f64>, frames: usize, report: bool) -> (usize, usize) {
-    let (topo, rest) = grid(181, 109); // 20 020 vertices on 2 × 1.2 m
+/// Steps Detail `level` with a pour of `radius` (every vertex if `None`) on the flag with
+/// `spacing` times the cloth's vertices along each side (1: the 20k-vertex cloth; 4: a
+/// cloth of Detail 2's spacing); prints the figures if `report`, and returns the fine
+/// vertices wetter than 1 g/m² at the end and the refined cloth's vertex count.
+fn bench(
+    level: u32,
+    radius: Option<f64>,
+    spacing: usize,
+    frames: usize,
+    report: bool,
+) -> (usize, usize) {
+    // 20 020 vertices on 2 × 1.2 m at spacing 1 (at 4: 316 825, the refined cloth's
+    // lattice at Detail 2)
+    let (topo, rest) = grid(181 * spacing, 109 * spacing);
     let n = topo.n_vertices();
     let dt = 1.0 / 24.0;
     let centre = DVec3::new(1.0, 0.0, 0.6);
@@ -172,7 +185,7 @@ fn calibrate(level: u32, share: f64, frames: usize) -> f64 {
     let (mut lo, mut hi) = (0.0, disk_radius(share));
     let mut radius = hi;
     for _ in 0..8 {
-        let (wet, fine) = bench(level, Some(radius), frames, false);
+        let (wet, fine) = bench(level, Some(radius), 1, frames, false);
         let got = wet as f64 / fine as f64;
         if (got / share - 1.0).abs() <= 0.05 {
             break;
@@ -198,7 +211,14 @@ fn main() {
     if let Some(i) = args.iter().position(|a| a == "--case") {
         let level: u32 = args[i + 1].parse().unwrap();
         let radius: f64 = args[i + 2].parse().unwrap();
-        bench(level, (radius > 0.0).then_some(radius), FRAMES, true);
+        let spacing: usize = args.get(i + 3).map_or(1, |k| k.parse().unwrap());
+        bench(
+            level,
+            (radius > 0.0).then_some(radius),
+            spacing,
+            FRAMES,
+            true,
+        );
         return;
     }
     if let Some(i) = args.iter().position(|a| a == "--calibrate") {
@@ -222,7 +242,7 @@ fn main() {
     };
     let radius = run(&["--calibrate", "2", "0.1"]);
     // the two cases, then Detail 0 with Detail 2's pour (the same local stain at
-    // the cloth's resolution), which splits the ratio into its factors; the three run in
+    // the cloth's resolution), which splits the ratio into its factors; the cases run in
     // turn `rounds` times (the machine's speed drifts between minutes: each round's ratio
     // compares runs seconds apart), the first round's reports printed
     let rounds: usize = std::env::var("MADDER_BENCH_ROUNDS")
@@ -230,12 +250,20 @@ fn main() {
         .and_then(|r| r.parse().ok())
         .unwrap_or(3)
         .max(1);
-    let specs = [("0", "0"), ("2", radius.trim()), ("0", radius.trim())];
+    // and a fourth: Detail 0 on a cloth of Detail 2's spacing with the same pour (the
+    // same stain on a cloth that is as fine as the refined one, no refinement)
+    let radius = radius.trim();
+    let specs = [
+        ["0", "0", "1"],
+        ["2", radius, "1"],
+        ["0", radius, "1"],
+        ["0", radius, "4"],
+    ];
     // per case: ms a frame of every round, and its active vertices per sub-step
     let mut cases: Vec<(Vec<f64>, f64)> = vec![(Vec::new(), 0.0); specs.len()];
     for round in 0..rounds {
-        for (case, (level, radius)) in cases.iter_mut().zip(specs) {
-            let out = run(&["--case", level, radius]);
+        for (case, [level, radius, spacing]) in cases.iter_mut().zip(specs) {
+            let out = run(&["--case", level, radius, spacing]);
             if round == 0 {
                 print!("{out}");
             }
@@ -278,13 +306,18 @@ fn main() {
         median(&ratios),
         listed(&ratios, 2),
     );
-    let [(coarse, a_coarse), (fine, a_fine), (local, a_local)] =
-        [0, 1, 2].map(|k| (median(&cases[k].0), cases[k].1));
+    let [
+        (coarse, a_coarse),
+        (fine, a_fine),
+        (local, a_local),
+        (native, a_native),
+    ] = [0, 1, 2, 3].map(|k| (median(&cases[k].0), cases[k].1));
     println!(
-        "    ms a frame, median (rounds): detail 0 all wet {coarse:.2} ({}), detail 2 {fine:.2} ({}), detail 0 with the same pour {local:.2} ({})",
+        "    ms a frame, median (rounds): detail 0 all wet {coarse:.2} ({}), detail 2 {fine:.2} ({}), detail 0 with the same pour {local:.2} ({}), detail 0 with the same pour on a cloth of detail 2's spacing {native:.2} ({})",
         listed(&cases[0].0, 1),
         listed(&cases[1].0, 1),
         listed(&cases[2].0, 1),
+        listed(&cases[3].0, 1),
     );
     let per = |ms: f64, active: f64| 1e3 * ms / active;
     let (c_coarse, c_fine, c_local) = (
@@ -297,5 +330,14 @@ fn main() {
         a_fine / a_coarse,
         c_local / c_coarse,
         c_fine / c_local,
+    );
+    let ratios: Vec<f64> = (0..rounds).map(|r| cases[1].0[r] / cases[3].0[r]).collect();
+    println!(
+        "    detail 2 / detail 0 on a cloth of detail 2's spacing, the same stain: {:.2}× per frame (median of rounds: {}), {:.2}× per active vertex ({:.2} against {:.2} µs, {a_native:.0} active vertices)",
+        median(&ratios),
+        listed(&ratios, 2),
+        c_fine / per(native, a_native),
+        c_fine,
+        per(native, a_native),
     );
 }
