@@ -331,11 +331,11 @@ fn main() {
         c_local / c_coarse,
         c_fine / c_local,
     );
-    let ratios: Vec<f64> = (0..rounds).map(|r| cases[1].0[r] / cases[3].0[r]).collect();
+    let against_fine: Vec<f64> = (0..rounds).map(|r| cases[1].0[r] / cases[3].0[r]).collect();
     println!(
         "    detail 2 / detail 0 on a cloth of detail 2's spacing, the same stain: {:.2}× per frame (median of rounds: {}), {:.2}× per active vertex ({:.2} against {:.2} µs, {a_native:.0} active vertices)",
-        median(&ratios),
-        listed(&ratios, 2),
+        median(&against_fine),
+        listed(&against_fine, 2),
         c_fine / per(native, a_native),
         c_fine,
         per(native, a_native),
