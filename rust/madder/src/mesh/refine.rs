@@ -431,11 +431,7 @@ impl Partial {
     /// The built part as a mesh of its own (local numbering; every fine face keeps its
     /// coarse face's polygon).
     pub(crate) fn topology(&self) -> Result<Topology, MeshError> {
-        let per = self.template.len();
-        let polygon = (0..self.faces.len())
-            .into_par_iter()
-            .map(|t| self.coarse.face_polygon()[self.built[t / per] as usize])
-            .collect();
+        let polygon = self.face_values(self.coarse.face_polygon());
         Topology::with_polygons(
             self.weights.len(),
             self.faces.clone(),
@@ -451,11 +447,7 @@ impl Partial {
         &self,
         old: &Topology,
     ) -> Result<(Topology, Vec<u32>), MeshError> {
-        let per = self.template.len();
-        let polygon = (0..self.faces.len())
-            .into_par_iter()
-            .map(|t| self.coarse.face_polygon()[self.built[t / per] as usize])
-            .collect();
+        let polygon = self.face_values(self.coarse.face_polygon());
         old.extended(
             self.weights.len(),
             &self.faces[old.n_faces()..],
@@ -464,11 +456,12 @@ impl Partial {
         )
     }
 
-    /// Per local fine face, the value of its coarse face.
-    pub(crate) fn face_values<T: Copy>(&self, coarse: &[T]) -> Vec<T> {
-        self.built
-            .iter()
-            .flat_map(|&f| std::iter::repeat_n(coarse[f as usize], self.template.len()))
+    /// Per local fine face, the value of its coarse face (in parallel).
+    pub(crate) fn face_values<T: Copy + Send + Sync>(&self, coarse: &[T]) -> Vec<T> {
+        let per = self.template.len();
+        (0..self.faces.len())
+            .into_par_iter()
+            .map(|t| coarse[self.built[t / per] as usize])
             .collect()
     }
 
