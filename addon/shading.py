@@ -29,7 +29,7 @@ using it gets its input nodes."""
 
 import bpy
 
-from . import images
+from . import compat, images
 from .bridge import DEPOSIT_ATTR, STAIN_ATTR, WETNESS_ATTR
 
 GROUP = "Madder Stain"
@@ -271,7 +271,7 @@ class MADDER_OT_add_stain_shader(bpy.types.Operator):
         mats = [s.material for s in obj.material_slots if s.material is not None]
         if not mats:
             mat = bpy.data.materials.new(f"{obj.name} Cloth")
-            mat.use_nodes = True
+            compat.ensure_node_tree(mat)
             obj.data.materials.append(mat)
             mats = [mat]
         added = [m.name for m in mats if add_to_material(m, obj)]

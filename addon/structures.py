@@ -14,7 +14,7 @@ bind mesh). The stored positions are the ridge at the computed frame, in Blender
 import bpy
 import numpy as np
 
-from . import bridge, handlers, lcs, playback
+from . import bridge, compat, handlers, lcs, playback
 from .errors import LcsError
 
 NODE_GROUP = "Madder Ridges"
@@ -95,10 +95,8 @@ def add_ridges(scene, obj, ridges, unit):
     verts, weights = lcs.binding(faces, ridges["triangles"], ridges["barycentric"])
     curves = bpy.data.hair_curves.new(f"{obj.name} Ridges")
     curves.add_curves([len(chain) for chain, _ in lines])
-    # poly curves; Blender 4.2 has no set_types (and creating its built-in curve_type
-    # attribute by hand corrupts memory there): the node group's Set Spline Type does it
-    if hasattr(curves, "set_types"):
-        curves.set_types(type="POLY")
+    # poly curves (where Python cannot set them, the node group's Set Spline Type does)
+    compat.set_poly(curves)
     pos = (np.asarray(ridges["points"])[order] / unit).astype(np.float32)
     curves.position_data.foreach_set("vector", pos.ravel())
     cyclic = curves.attributes.new("cyclic", "BOOLEAN", "CURVE")

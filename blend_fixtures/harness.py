@@ -11,6 +11,18 @@ import sys
 import tempfile
 
 REPO = "madder_test"
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def default_zip():
+    """The extension zip `make addon` builds here (Linux x64's), unless MADDER_ZIP names one."""
+    return os.environ.get("MADDER_ZIP") or os.path.join(ROOT, "dist", "madder-0.1.0-linux_x64.zip")
+
+
+def bpy_versions():
+    """The Blenders of the test matrix, newest first (tests/bpy-versions.txt)."""
+    with open(os.path.join(ROOT, "tests", "bpy-versions.txt")) as f:
+        return [v for v in (line.split("#")[0].strip() for line in f) if v]
 
 
 def crashes_at_exit():

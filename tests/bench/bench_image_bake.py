@@ -46,7 +46,7 @@ def main():
     work = tempfile.mkdtemp(prefix="madder-image-bake-")
     blend = os.path.join(work, "tablecloth.blend")
     demo.build_scene(blend)  # before the add-on: the factory settings would disable it
-    harness.install_extension(os.environ.get("MADDER_ZIP") or os.path.join(ROOT, "dist", "madder-0.1.0.zip"))
+    harness.install_extension(harness.default_zip())
     times = {False: [], True: []}
     for _ in range(args.rounds):
         for images in (False, True):

@@ -24,7 +24,7 @@ os.environ["BLENDER_USER_RESOURCES"] = tempfile.mkdtemp(prefix="madder-blender-u
 import bpy  # noqa: E402
 import harness  # noqa: E402
 
-ZIP = os.environ.get("MADDER_ZIP") or os.path.join(ROOT, "dist", "madder-0.1.0.zip")
+ZIP = harness.default_zip()
 
 # Installed before the test modules are imported: `import madder` in a test resolves to the
 # wheel the extension brought, which exists only once the extension is installed.

@@ -203,7 +203,7 @@ def test_playback_leaves_an_unbaked_cloth_where_it_is(open_fixture):
         me = shown(flag)
         co = np.empty(3 * len(me.vertices))
         me.vertices.foreach_get("co", co)
-        return co, point_attr(me, "madder_wetness", "value", 1)[1]
+        return co, point_attr(me, "madder_wetness", "value", 1)[1] if "madder_wetness" in me.attributes else None
 
     co, wet = play()
     np.testing.assert_allclose(wet, np.clip(reader.read(20, "wetness") / flag.madder.saturation, 0, 1), atol=1e-6)
@@ -212,7 +212,8 @@ def test_playback_leaves_an_unbaked_cloth_where_it_is(open_fixture):
     # bpy resimulates from the start frame after the bake's own edits (5.0: 20) or not (48)
     assert int(cloth_cache.info.split()[0]) >= 20, cloth_cache.info
     flag.madder.enabled = False  # playback leaves it alone: the cloth as Blender simulates it
-    bare, _ = play()
+    bare, none = play()
+    assert none is None  # and shows no stain (its modifier is not evaluated)
     assert np.abs(bare.reshape(-1, 3) - bare.reshape(-1, 3)[0]).max() > 0.1  # the cloth moved
     np.testing.assert_array_equal(co, bare)
 
@@ -254,3 +255,40 @@ def test_free_bake_removes_cache_and_attributes(open_fixture):
     assert "Madder Stain" not in flag.modifiers and ".madder_stain Flag" not in bpy.data.objects
     for name in ("madder_stain", "madder_wetness", "madder_deposit"):
         assert name not in flag.data.attributes and name not in shown(flag).attributes
+
+
+def test_switched_off_shows_no_stain_and_costs_no_evaluation(open_fixture, tmp_path):
+    """Unticking Madder Stain after playing leaves no stale stain at any frame (the
+    carrier held the last played frame's, shown at every frame before), and its modifier
+    is not evaluated: hidden in viewport and renders, so the evaluated cloth has no stain
+    attribute at all. Ticked again, the current frame's stain shows at once; saved and
+    reopened, a switched-off cloth stays bare."""
+    scene = open_fixture("flag.blend")
+    flag = setup_flag(scene)
+    assert bpy.ops.madder.bake() == {"FINISHED"}
+    reader = cache(flag)
+    for f in range(1, 21):
+        scene.frame_set(f)
+    assert point_attr(shown(flag), "madder_wetness", "value", 1)[1].max() > 0.1
+    flag.madder.enabled = False
+    m = flag.modifiers["Madder Stain"]
+    assert not m.show_viewport and not m.show_render
+    for f in (3, 10, 20):
+        scene.frame_set(f)
+        assert "madder_stain" not in shown(flag).attributes, f
+    # shown by hand (the artist ticks the modifier's eye): the carrier holds nothing stale
+    m.show_viewport = True
+    scene.frame_set(10)
+    assert np.abs(point_attr(shown(flag), "madder_stain", "color", 4)[1]).max() == 0.0
+    m.show_viewport = False
+    flag.madder.enabled = True
+    assert m.show_viewport and m.show_render
+    _, wet = point_attr(shown(flag), "madder_wetness", "value", 1)  # frame 10, no frame change
+    np.testing.assert_allclose(wet, np.clip(reader.read(10, "wetness") / flag.madder.saturation, 0, 1), atol=1e-6)
+    flag.madder.enabled = False
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "off.blend"))
+    bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "off.blend"))
+    flag = bpy.data.objects["Flag"]
+    assert not flag.modifiers["Madder Stain"].show_viewport
+    bpy.context.scene.frame_set(12)
+    assert "madder_stain" not in shown(flag).attributes

@@ -93,7 +93,7 @@ def test_compressed_flag_decodes_within_its_stated_error(flag, tmp_path):
     err = np.linalg.norm(frames.astype(np.float64) - motion, axis=2) / diagonal
     # the encoder measures in float64; the decoded frames are float32 (half an ulp of the
     # largest coordinate, over the diagonal, on top)
-    slack = np.abs(motion).max() * 2.0**-24 * math.sqrt(3) / diagonal
+    slack = float(np.abs(motion).max() * 2.0**-24 * math.sqrt(3) / diagonal)
     assert err.max() <= max_error + slack
     assert np.sqrt(np.mean(err**2)) == pytest.approx(rms_error, rel=1e-3, abs=slack)
     assert 0 < rms_error <= max_error < 0.01  # 12 bits: under 1 % of the diagonal (measured: README)

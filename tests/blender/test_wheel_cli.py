@@ -11,6 +11,7 @@ import subprocess
 import sys
 
 import bpy
+import harness
 import numpy as np
 from conftest import FIXTURES, ROOT
 
@@ -32,7 +33,7 @@ def wheel_path():
 
 def fresh_venv(where):
     """A venv without pip or packages; the test venv's bpy and numpy (installed from PyPI,
-    the same as `pip install bpy==5.0.1` would) are reused through a .pth file, which keeps
+    the same as `pip install bpy==…` would) are reused through a .pth file, which keeps
     the test fast. The test venv holds no madder, so the wheel is the only source of it."""
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(where)], check=True)
     site = next(where.glob("lib/python3*/site-packages"))
@@ -43,8 +44,9 @@ def fresh_venv(where):
 def test_readme_python_module_command_runs_with_the_wheel_alone(tmp_path):
     section = readme_farm_section()
     assert README_COMMAND in section.splitlines(), "the README's farm section no longer shows the command tested here"
-    assert re.search(r"pip install bpy==5\.0\.1 addon/wheels/madder-\S+\.whl", section), (
-        "the README must say what to install"
+    newest = harness.bpy_versions()[0]
+    assert re.search(rf"pip install bpy=={re.escape(newest)} addon/wheels/madder-\S+\.whl", section), (
+        f"the README must say what to install: the newest tested bpy, {newest}"
     )
 
     # the scene: the flag fixture with its spill enabled, saved under the README's name

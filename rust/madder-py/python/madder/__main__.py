@@ -1,7 +1,7 @@
 """`python -m madder bake scene.blend [...]`: the Madder command line with the `bpy` module
 (Blender as a Python module), where there is no `blender --command`.
 
-It needs nothing but `pip install bpy==5.0.1 madder-<version>.whl`: the wheel carries the
+It needs nothing but `pip install bpy madder-<version>.whl`: the wheel carries the
 add-on's Python code as `madder.addon` (copied in at build time from the repository's
 `addon/`, so there is one source). Which add-on runs:
 
@@ -61,7 +61,8 @@ def main(argv=None):
         import bpy  # noqa: F401
     except ImportError:
         print(
-            "madder: error: needs Blender's bpy module (pip install bpy==5.0.1, on CPython 3.11) "
+            "madder: error: needs Blender's bpy module (pip install bpy: 5.1 and later on CPython 3.13, "
+            "4.2-5.0 on CPython 3.11) "
             "or `blender --command madder`",
             file=sys.stderr,
         )
