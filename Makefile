@@ -139,8 +139,11 @@ test: test-rust test-python test-blender test-farm
 test-rust:
 	cargo test --release -p madder
 
-test-python: $(WHEELDIR)/.stamp
+# The bpy-free tests on both Pythons the wheel meets: CPython 3.11 with numpy 1.26 (Blender
+# 4.2-5.0) and the newest Blender's CPython 3.13 with numpy 2 (5.1 and later)
+test-python: $(WHEELDIR)/.stamp $(BLENDER_VENV)/.stamp
 	PYTHONPATH=$(abspath $(WHEELDIR)) $(PY) -m pytest -q tests/python
+	PYTHONPATH=$(abspath $(WHEELDIR)) $(BLENDER_PY) -m pytest -q tests/python
 
 test-blender: $(ZIP) $(BPY_STAMP)
 	$(BPY_ENV) $(BPY_PY) -m pytest -q $(BPY_RERUN) tests/blender

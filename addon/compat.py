@@ -10,7 +10,8 @@ The differences met so far (older Blender → newer Blender):
 
 - A Geometry Nodes modifier's inputs: ID properties on the modifier, `m[identifier]`,
   `m.get()`, `m.keys()` (to 5.1) → RNA structs, `m.properties.inputs.<identifier>.value`,
-  where `m[...]`, `m.get()` and `m.keys()` raise TypeError (5.2+).
+  where `m[...]`, `m.get()` and `m.keys()` raise TypeError (5.2+). On 5.2.3 writing an
+  Object input that way does not make the depsgraph follow that object (5.3.0 does).
 - Removing that modifier: releases the data-blocks its inputs held (to 5.1) → leaves each
   a user (5.2.3, 5.3.0), so the inputs are cleared first.
 - A Mesh Cache modifier's `flip_axis`: an enum set (to 4.5) → three booleans (5.0+).
@@ -49,8 +50,9 @@ def modifier_input(modifier, identifier):
 
 
 def set_modifier_input(modifier, identifier, value):
-    """Sets the Geometry Nodes modifier's input `identifier` to `value` and tags the object
-    so its stack is evaluated again. Raises KeyError if the input does not exist."""
+    """Sets the Geometry Nodes modifier's input `identifier` to `value`, so that the next
+    evaluation uses it (and follows the object or other data-block it names). Raises
+    KeyError if the input does not exist."""
     inputs = _interface_inputs(modifier)
     if inputs is not None:
         item = getattr(inputs, identifier, None)
@@ -62,9 +64,12 @@ def set_modifier_input(modifier, identifier, value):
                 getattr(s, "identifier", None) == identifier for s in modifier.node_group.interface.items_tree):
             raise KeyError(f"modifier '{modifier.name}' has no input {identifier!r}")
         modifier[identifier] = value
-    # an RNA write runs the input's update (which tags the object and the relations); an ID
-    # property write runs nothing: tag the object so its stack is evaluated again
-    modifier.id_data.update_tag()
+    # Neither write is sure to reach the depsgraph: an ID property write runs no update at
+    # all, and on 5.2.3 the RNA write of an Object input re-evaluates nothing (5.3.0's
+    # does), since the new dependency is not in the depsgraph's relations. Assigning the
+    # node group again rebuilds them (the group keeps its inputs' values) and tags the
+    # object, on every version.
+    modifier.node_group = modifier.node_group
 
 
 def remove_nodes_modifier(obj, modifier):
@@ -128,11 +133,10 @@ def ensure_node_tree(idblock):
 
 
 def _supports_blend_relative():
-    try:
-        bpy.props.StringProperty(subtype="FILE_PATH", options={"PATH_SUPPORTS_BLEND_RELATIVE"})
-    except TypeError:
-        return False
-    return True
+    """Whether properties can say they hold `//` paths. `bpy.props` checks its options only
+    when the class registers (a Blender without the option then refuses the whole class),
+    so this asks RNA, which reports the option on every property where it exists."""
+    return "is_path_supports_blend_relative" in bpy.types.Property.bl_rna.properties
 
 
 # Keyword arguments for a path property that holds `//`-relative paths (Blender 4.5+ warns

@@ -132,10 +132,16 @@ def test_ensure_node_tree_gives_a_new_material_its_tree(compat):
 
 
 def test_blend_relative_option_is_offered_where_blender_knows_it(compat):
+    """Registering a class is where Blender checks the option (4.2 refuses the class)."""
+
+    class Probe(bpy.types.PropertyGroup):
+        path: bpy.props.StringProperty(subtype="FILE_PATH", options={"PATH_SUPPORTS_BLEND_RELATIVE"})
+
     try:
-        bpy.props.StringProperty(subtype="FILE_PATH", options={"PATH_SUPPORTS_BLEND_RELATIVE"})
+        bpy.utils.register_class(Probe)
         known = True
-    except TypeError:
+        bpy.utils.unregister_class(Probe)
+    except (ValueError, RuntimeError):
         known = False
     assert bool(compat.BLEND_RELATIVE) == known
     # the settings that hold `//` paths say so, where Blender can tell
