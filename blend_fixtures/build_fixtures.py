@@ -113,7 +113,7 @@ def setup_world(scene: bpy.types.Scene) -> None:
     """A plain grey-blue background (node trees exist by default in 5.0)."""
     world = bpy.data.worlds.new("World")
     world.color = WORLD_COLOUR[:3]
-    if bpy.app.version < (5, 0, 0):  # before 5.0 the node tree comes with use_nodes
+    if world.node_tree is None:  # made on request (use_nodes) before 5.0
         world.use_nodes = True
     background = world.node_tree.nodes["Background"]
     background.inputs["Color"].default_value = WORLD_COLOUR
@@ -154,7 +154,7 @@ def make_material(name: str, base_colour, roughness=0.8, checker=None) -> bpy.ty
     """
     mat = bpy.data.materials.new(name)
     mat.diffuse_color = base_colour
-    if bpy.app.version < (5, 0, 0):  # before 5.0 the node tree comes with use_nodes
+    if mat.node_tree is None:  # made on request (use_nodes) before 5.0
         mat.use_nodes = True
     nodes = mat.node_tree.nodes
     bsdf = nodes["Principled BSDF"]
@@ -511,7 +511,7 @@ def build_disk(path: str) -> dict:
     # the slot assigned to the object (Action.fcurves no longer exists).
     # (4.2 has the action's own F-curves; layered actions came in 4.4.)
     anim = disk.animation_data
-    if bpy.app.version >= (4, 4, 0):
+    if hasattr(anim, "action_slot"):
         fcurves = anim_utils.action_get_channelbag_for_slot(anim.action, anim.action_slot).fcurves
     else:
         fcurves = anim.action.fcurves

@@ -30,7 +30,8 @@ def crashes_at_exit():
     property with a Python `update` callback has been registered, even after
     unregistering it. Madder's presets use update callbacks. Seen with bpy 4.2.23 from
     PyPI (a bare `FloatProperty(update=f)` on a PropertyGroup reproduces it); 4.5.15 and
-    5.0.1 exit cleanly. A Blender binary is not affected."""
+    later exit cleanly. A Blender binary is not affected. (A crash has no feature to test
+    for: this is the one version check outside `addon/compat.py`.)"""
     import bpy
 
     return bpy.app.version < (4, 5, 0)

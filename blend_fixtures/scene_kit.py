@@ -13,7 +13,7 @@ def material(name, colour, roughness=0.8):
     """A Principled BSDF material (node trees exist by default in 5.0, not before)."""
     mat = bpy.data.materials.new(name)
     mat.diffuse_color = (*colour[:3], 1.0)
-    if bpy.app.version < (5, 0, 0):
+    if mat.node_tree is None:  # made on request (use_nodes) before 5.0
         mat.use_nodes = True
     bsdf = mat.node_tree.nodes["Principled BSDF"]
     bsdf.inputs["Base Color"].default_value = (*colour[:3], 1.0)
@@ -58,7 +58,7 @@ def sun(scene, rotation_deg, energy, angle_deg=3.0, name="Sun"):
 
 def world(scene, colour, strength=1.0):
     w = bpy.data.worlds.new("World")
-    if bpy.app.version < (5, 0, 0):
+    if w.node_tree is None:  # made on request (use_nodes) before 5.0
         w.use_nodes = True
     bg = w.node_tree.nodes["Background"]
     bg.inputs["Color"].default_value = (*colour[:3], 1.0)
@@ -75,7 +75,7 @@ def cycles(scene, width, height, samples):
     scene.cycles.use_adaptive_sampling = True
     scene.render.resolution_x, scene.render.resolution_y = width, height
     scene.render.resolution_percentage = 100
-    scene.view_settings.view_transform = "Filmic" if bpy.app.version < (4, 0, 0) else "AgX"
+    scene.view_settings.view_transform = "AgX"
     scene.view_settings.look = "None"
 
 
