@@ -17,7 +17,7 @@ from bpy.props import (
     StringProperty,
 )
 
-from . import carrier, compat, presets, textures
+from . import carrier, compat, handlers, presets, textures
 
 # The liquid presets (values and where they come from) and the bake references are plain
 # data and functions in `presets` (bpy-free); these names stay here for callers.
@@ -64,8 +64,6 @@ def _enabled_update(self, context):
         return
     carrier.show(obj, self.enabled)
     if self.enabled and context.scene is not None:
-        from . import handlers  # imports this module's neighbours: load it when first needed
-
         handlers.on_frame_change(context.scene)
 
 
