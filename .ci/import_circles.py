@@ -15,7 +15,9 @@ The dependency graph must be acyclic: data types below, the algorithms that use 
 Prints every strongly connected component with more than one module, and the edges inside
 it with the line that makes each one, then exits 1; exits 0 when there is none.
 
-    python .ci/import_circles.py [--graph]   # --graph prints every edge too
+    python .ci/import_circles.py [--graph] [--addon DIR] [--core DIR]
+
+(`--graph` prints every edge too; `--addon`/`--core` check other trees, as the test does.)
 """
 
 from __future__ import annotations
@@ -37,8 +39,8 @@ Edges = dict[str, dict[str, str]]  # module -> {dependency: where}
 # The add-on
 
 
-def addon_edges() -> Edges:
-    modules = {p.stem: p for p in ADDON.glob("*.py")}
+def addon_edges(addon: Path = ADDON) -> Edges:
+    modules = {p.stem: p for p in addon.glob("*.py")}
     edges: Edges = defaultdict(dict)
     for name, path in sorted(modules.items()):
         tree = ast.parse(path.read_text(), str(path))
@@ -53,7 +55,7 @@ def addon_edges() -> Edges:
                 raise SystemExit(f"{path}:{node.lineno}: an import above the add-on")
             for target in targets:
                 if target in modules and target != name:
-                    edges[name].setdefault(target, f"addon/{path.name}:{node.lineno}")
+                    edges[name].setdefault(target, f"{path.name}:{node.lineno}")
     return edges
 
 
@@ -128,10 +130,10 @@ def cut_test_items(code: str) -> str:
     return code
 
 
-def core_modules() -> dict[tuple[str, ...], Path]:
+def core_modules(core: Path) -> dict[tuple[str, ...], Path]:
     modules = {}
-    for path in CORE.rglob("*.rs"):
-        parts = path.relative_to(CORE).with_suffix("").parts
+    for path in core.rglob("*.rs"):
+        parts = path.relative_to(core).with_suffix("").parts
         if parts == ("lib",):
             parts = ()
         elif parts[-1] == "mod":
@@ -142,6 +144,7 @@ def core_modules() -> dict[tuple[str, ...], Path]:
 
 def expand_use(tree: str) -> list[list[str]]:
     """`a::{b, c::{d, e as f}, self}` into [[a,b], [a,c,d], [a,c,e], [a]]."""
+    tree = re.sub(r"\s+as\s+\w+", "", tree)  # `x as y` names x
     tree = re.sub(r"\s+", "", tree)
 
     def parse(s: str, i: int, prefix: list[str]) -> tuple[list[list[str]], int]:
@@ -164,7 +167,7 @@ def expand_use(tree: str) -> list[list[str]]:
                 segs, seg = list(prefix), ""
             elif c in ",}":
                 if seg:
-                    paths.append(segs + [seg.split("as")[0] if "as" in seg else seg])
+                    paths.append(segs + [seg])
                 elif segs != prefix:
                     paths.append(segs)
                 return paths, i
@@ -179,8 +182,8 @@ def expand_use(tree: str) -> list[list[str]]:
     return [[p for p in path if p] for path in paths]
 
 
-def core_edges() -> Edges:
-    modules = core_modules()
+def core_edges(core: Path = CORE) -> Edges:
+    modules = core_modules(core)
     code = {m: strip_rust(p.read_text()) for m, p in modules.items()}
     # What each module re-exports: name -> absolute path of the item it names.
     reexports: dict[tuple[str, ...], dict[str, list[str]]] = defaultdict(dict)
@@ -242,7 +245,7 @@ def core_edges() -> Edges:
             # use, as any other; only `mod` lines and re-exports are not.
             name = "::".join(target) or "crate"
             source = "::".join(module) or "crate"
-            rel = modules[module].relative_to(ROOT)
+            rel = modules[module].relative_to(core)
             edges[source].setdefault(name, f"{rel}:{line}")
     return edges
 
@@ -287,10 +290,12 @@ def circles(edges: Edges) -> list[list[str]]:
     return found
 
 
-def main() -> int:
-    show_graph = "--graph" in sys.argv[1:]
+def main(argv: list[str]) -> int:
+    show_graph = "--graph" in argv
+    addon = Path(argv[argv.index("--addon") + 1]) if "--addon" in argv else ADDON
+    core = Path(argv[argv.index("--core") + 1]) if "--core" in argv else CORE
     failed = False
-    for label, edges in (("add-on", addon_edges()), ("core", core_edges())):
+    for label, edges in (("add-on", addon_edges(addon)), ("core", core_edges(core))):
         if show_graph:
             for source in sorted(edges):
                 for target, where in sorted(edges[source].items()):
@@ -311,4 +316,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(main(sys.argv[1:]))

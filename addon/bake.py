@@ -27,12 +27,12 @@ from . import (
     presets,
     schedule,
     shading,
+    stored,
     textures,
 )
 from .errors import BakeError, ExportError, FabricSettingsError, MotionCodecError
 from .placement import check_transform as _check_transform, placed
 
-CACHE_EXT = ".madder"
 FIELDS, COLOR_FIELDS, FLOW_FIELDS = bridge.FIELDS, bridge.COLOR_FIELDS, bridge.FLOW_FIELDS
 __all__ = ["BakeError", "BakeJob", "MotionFile", "bake", "free", "placed", "simulator_settings", "unit_scale"]
 
@@ -44,26 +44,6 @@ def core():
     except ImportError as e:  # a broken install must say so, not fail obscurely later
         raise BakeError(f"Madder's native module could not be loaded ({e}); reinstall the extension") from e
     return madder
-
-
-def cache_path(obj):
-    """Absolute path of the cache file `obj` bakes to."""
-    settings = obj.madder
-    folder = settings.cache_dir or "//madder_cache/"
-    if folder.startswith("//") and not bpy.data.filepath:
-        raise BakeError(f"'{obj.name}': save the .blend first, or set an absolute cache folder", object=obj.name)
-    folder = bpy.path.abspath(folder)
-    return os.path.join(folder, bpy.path.clean_name(obj.name) + CACHE_EXT)
-
-
-def stored_path(path):
-    """Path to store in the .blend: relative to it when it is saved (a moved project keeps working)."""
-    if bpy.data.filepath:
-        try:
-            return bpy.path.relpath(path)
-        except ValueError:  # another drive
-            return path
-    return path
 
 
 def check_object(obj, sources=()):
@@ -353,7 +333,7 @@ class BakeJob(Stepper):
     def __init__(self, scene, obj, frames=None):
         super().__init__(scene, obj)
         settings = obj.madder
-        self.path = cache_path(obj)
+        self.path = stored.target_path(obj)
         self.first, self.last = frames or (scene.frame_start, scene.frame_end)
         if self.last < self.first:
             raise BakeError(f"'{obj.name}': the frame range {self.first}-{self.last} is empty", object=obj.name)
@@ -473,7 +453,7 @@ class BakeJob(Stepper):
 
     def _begin_images(self):
         """The staging folder of the images, and the fine cache in it."""
-        fine, folder, _ = images.paths(self.obj, self.path)
+        fine, folder, _ = stored.image_paths(self.obj, self.path)
         self.staging = textures.Staging(folder)
         self.staging.begin()
         self.fine_staged = os.path.join(self.staging.path, os.path.basename(fine))
@@ -529,7 +509,7 @@ class BakeJob(Stepper):
         try:
             self.writer.finish()
             self.writer = None
-            fine, _, _ = images.paths(obj, self.path)
+            fine, _, _ = stored.image_paths(obj, self.path)
             if self.images is not None:
                 try:
                     os.replace(self.fine_staged, fine)
@@ -549,9 +529,9 @@ class BakeJob(Stepper):
         handlers.forget(self.path)
         handlers.forget(fine)
         s = obj.madder
-        s.cache_file = stored_path(self.path)
+        s.cache_file = stored.stored_path(self.path)
         s.bake_references = self.references
-        s.bake_topology = handlers.topology_fingerprint(obj.data)
+        s.bake_topology = stored.topology_fingerprint(obj.data)
         s.bake_detail = self.detail
         if self.images is not None:
             size, _, uv_map = self.images

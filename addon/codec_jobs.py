@@ -12,7 +12,7 @@ import os
 
 import bpy
 
-from . import bake, bridge, codec, compat, handlers
+from . import bake, bridge, codec, compat, handlers, stored
 from .errors import MotionCodecError
 
 # the Mesh Cache modifier Decompress adds when none reads the PC2 already
@@ -188,7 +188,7 @@ def point_mesh_cache(obj, path, frame_start, frame_scale):
     if m is None:
         m = obj.modifiers.new(MODIFIER_NAME, "MESH_CACHE")
     m.cache_format = "PC2"
-    m.filepath = bake.stored_path(path)
+    m.filepath = stored.stored_path(path)
     m.time_mode, m.play_mode = "FRAME", "SCENE"
     m.frame_start, m.frame_scale = frame_start, frame_scale
     m.deform_mode, m.interpolation = "OVERWRITE", "LINEAR"

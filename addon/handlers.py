@@ -27,18 +27,15 @@ import os
 import re
 import sys
 import tempfile
-import zlib
 
 import bpy
-import numpy as np
 from bpy.app.handlers import persistent
 
-from . import bridge, carrier, frames, images, playback, presets
+from . import bridge, carrier, frames, images, playback, presets, shading, stored
 from .errors import RelocateError
 
 _readers = {}  # absolute path -> (mtime_ns, size, CacheReader)
 _corrupt = {}  # (path, mtime_ns, size) -> {frame: message}: blocks that failed to read
-_topology = {}  # mesh pointer -> ((counts, corner layer pointer, fingerprint), matches)
 _suspended = 0  # > 0 while a bake walks the frames: playback must not touch the meshes
 _render = None  # while a render runs: {"filepath": the user's output path, "stopped": reason}
 _remapped = []  # (object, its cache path before) while a Save As runs
@@ -80,51 +77,13 @@ def forget(path):
         del _corrupt[key]
 
 
-def topology_fingerprint(mesh):
-    """A cheap fingerprint of `mesh`'s faces: the counts of vertices, edges, faces and
-    corners, then a CRC of every corner's vertex. The bake records it; playback compares
-    it, so a stain baked for other faces is not shown on these."""
-    corners = np.empty(len(mesh.loops), dtype=np.int32)
-    layer = mesh.attributes.get(".corner_vert")
-    if layer is not None:  # the fast path (mesh.loops' "vertex_index" is 100× slower)
-        layer.data.foreach_get("value", corners)
-    else:
-        mesh.loops.foreach_get("vertex_index", corners)
-    return f"{_counts(mesh)}{zlib.crc32(corners.tobytes()):08x}"
-
-
-def _counts(mesh):
-    return f"{len(mesh.vertices)}:{len(mesh.edges)}:{len(mesh.polygons)}:{len(mesh.loops)}:"
-
-
-def same_topology(mesh, recorded):
-    """Whether `mesh`'s faces match the fingerprint `recorded`. The counts are compared
-    every frame; the CRC again only when the mesh's corner layer moved (Edit Mode rebuilds
-    it), the counts changed, the depsgraph reported a geometry edit of the mesh, or a
-    file was opened."""
-    counts = _counts(mesh)
-    if not recorded.startswith(counts):
-        return False
-    layer = mesh.attributes.get(".corner_vert")
-    key = (counts, layer.as_pointer() if layer is not None else 0, recorded)
-    hit = _topology.get(mesh.as_pointer())
-    if hit is None or hit[0] != key:
-        hit = _topology[mesh.as_pointer()] = (key, topology_fingerprint(mesh) == recorded)
-    return hit[1]
-
-
 @persistent
 def on_depsgraph_update(scene, depsgraph):
     """An edited mesh (Edit Mode, a script's bmesh) has its faces checked again."""
-    if _topology:
+    if stored.remembers_topology():
         for update in depsgraph.updates:
             if update.is_updated_geometry and isinstance(update.id, bpy.types.Mesh):
-                _topology.pop(update.id.original.as_pointer(), None)
-
-
-def cache_path(obj):
-    """Absolute path of the cache `obj` plays back ("" when it has none)."""
-    return bpy.path.abspath(obj.madder.cache_file) if obj.madder.cache_file else ""
+                stored.forget_topology(update.id.original.as_pointer())
 
 
 def problem(obj, frame):
@@ -137,7 +96,7 @@ def problem(obj, frame):
 def wants_attributes(obj):
     """Whether playback writes `obj`'s stain attributes: Vertex Colors is on, or the
     shader cannot read images instead (none baked): never a stale stain on screen."""
-    return obj.madder.output_vertex_colors or not images.uses_images(obj)
+    return obj.madder.output_vertex_colors or not stored.uses_images(obj)
 
 
 def _check(obj, frame):
@@ -146,7 +105,7 @@ def _check(obj, frame):
     settings = obj.madder
     if not settings.cache_file:
         return None, None, None
-    path = cache_path(obj)
+    path = stored.played_path(obj)
     if not os.path.isfile(path):
         return f"Cache not found: {path}", None, None
     import madder
@@ -158,7 +117,7 @@ def _check(obj, frame):
     why = playback.mismatch(path, reader, len(obj.data.vertices))
     if why is not None:
         return why, None, None
-    if settings.bake_topology and not same_topology(obj.data, settings.bake_topology):
+    if settings.bake_topology and not stored.same_topology(obj.data, settings.bake_topology):
         return f"Stale cache: the mesh's faces changed since the bake ({path}): bake again", None, None
     why, at = playback.frame_to_read(path, reader, frame, _corrupt.get(_file_key(path, reader), {}))
     return why, (reader if why is None else None), at
@@ -167,7 +126,7 @@ def _check(obj, frame):
 def damage(obj):
     """A warning when `obj`'s cache is truncated (some frames show no stain), else None."""
     try:
-        reader = _reader(cache_path(obj)) if obj.madder.cache_file else None
+        reader = _reader(stored.played_path(obj)) if obj.madder.cache_file else None
     except Exception:
         return None  # `problem()` says why
     return playback.truncation(reader) if reader is not None else None
@@ -190,7 +149,7 @@ def _read(obj, reader, at, refs, color, buffers):
     try:
         reader.read_stain(at, refs, color, *buffers)
     except madder.CacheError as e:
-        _corrupt.setdefault(_file_key(cache_path(obj), reader), {})[at] = str(e)
+        _corrupt.setdefault(_file_key(stored.played_path(obj), reader), {})[at] = str(e)
         return f"Damaged cache: {e}: bake again"
     return None
 
@@ -265,7 +224,7 @@ def on_frame_change(scene, depsgraph=None):
 def on_load(*_args):
     """A file just opened shows its current frame from the cache, not the stain saved in
     the .blend (which is stale when the cache moved or is gone)."""
-    _topology.clear()  # the meshes of the old file are gone; their addresses get reused
+    stored.forget_topology()  # the meshes of the old file are gone; their addresses get reused
     for obj in bpy.data.objects:  # a file saved with Madder switched off (by an older Madder)
         if obj.type == "MESH" and obj.library is None and not obj.madder.enabled:
             carrier.show(obj, False)
@@ -403,7 +362,7 @@ def unregister():
             handlers.remove(fn)
     _readers.clear()
     _corrupt.clear()
-    _topology.clear()
+    stored.forget_topology()
     _told.clear()
 
 
@@ -413,8 +372,6 @@ def relocate(obj, path):
     then keeps its path. Returns the problem left at the current frame (e.g. a truncated
     file), or None."""
     import madder
-
-    from . import bake
 
     path = os.path.abspath(bpy.path.abspath(path))
     where = dict(object=obj.name, filename=path)
@@ -429,10 +386,8 @@ def relocate(obj, path):
     if missing:
         raise RelocateError(f"{path} has no '{missing[0]}' field: not a Madder stain cache", **where)
     forget(path)
-    obj.madder.cache_file = bake.stored_path(path)
-    if images.uses_images(obj):  # the images beside the cache: point the shader's at them
-        from . import shading
-
+    obj.madder.cache_file = stored.stored_path(path)
+    if stored.uses_images(obj):  # the images beside the cache: point the shader's at them
         shading.sync_object(obj)
         images.reload(obj)
     frame = bpy.context.scene.frame_current

@@ -1,6 +1,6 @@
 """Image-sequence output, the bpy side: the object's sequence as Blender images, and the
-job that writes a sequence from a fine cache a frame at a time (inside a bake, or as
-Re-export Textures). Paths, numbering, staging and the export loop are bpy-free, in
+export that writes a sequence from a fine cache a frame at a time (inside a bake, or as
+Re-export Textures: `reexport`). Paths, numbering, staging and the export loop are bpy-free, in
 `textures`; the shader nodes that read the images are in `shading`."""
 
 import os
@@ -8,33 +8,19 @@ import os
 import bpy
 import numpy as np
 
-from . import bridge, fabrics, handlers, presets, textures
+from . import fabrics, stored, textures
 from .errors import ExportError
 
 KINDS = textures.KINDS
 
 
-def uses_images(obj):
-    """Whether `obj`'s stain shader reads images: it wants them (Image Sequence) and a
-    bake or re-export wrote them."""
-    s = obj.madder
-    return bool(s.output_images and s.image_baked and s.cache_file)
-
-
-def paths(obj, cache=None):
-    """(fine cache, image folder, file prefix) of `obj`, derived from its cache path
-    (`cache`, default the one it plays)."""
-    cache = cache or handlers.cache_path(obj)
-    return textures.fine_cache_path(cache), textures.image_folder(cache), textures.stem(cache)
-
-
 def frame_problem(obj, frame):
     """The missing image of scene `frame` (clamped to the baked range, as shown), as a
     message naming it, or None."""
-    if not uses_images(obj):
+    if not stored.uses_images(obj):
         return None
     first, last = obj.madder.image_frames
-    _, folder, name = paths(obj)
+    _, folder, name = stored.image_paths(obj)
     missing = textures.missing_file(folder, name, min(max(frame, first), last))
     if missing is None:
         return None
@@ -51,9 +37,9 @@ def sequence_image(obj, kind):
     same as the attributes), alpha channel-packed (RGB and A are read as stored: the
     stain is premultiplied already)."""
     s = obj.madder
-    _, folder, name = paths(obj)
+    _, folder, name = stored.image_paths(obj)
     path = textures.frame_file(folder, name, kind, s.image_frames[0])
-    stored = _stored_path(path)
+    stored_as = stored.stored_path(path)
     img = bpy.data.images.get(_image_name(obj, kind))
     if img is None:
         if os.path.isfile(path):
@@ -62,8 +48,8 @@ def sequence_image(obj, kind):
         else:  # not there (yet): the image shows it is missing, as any image would
             img = bpy.data.images.new(_image_name(obj, kind), 1, 1, float_buffer=True)
     img.source = "SEQUENCE"
-    if img.filepath != stored:
-        img.filepath = stored
+    if img.filepath != stored_as:
+        img.filepath = stored_as
     img.colorspace_settings.name = "Non-Color"
     img.alpha_mode = "CHANNEL_PACKED"
     return img
@@ -93,15 +79,6 @@ def remove_images(obj):
         img = bpy.data.images.get(_image_name(obj, kind))
         if img is not None and img.users == 0:
             bpy.data.images.remove(img)
-
-
-def _stored_path(path):
-    if bpy.data.filepath:
-        try:
-            return bpy.path.relpath(path)
-        except ValueError:  # another drive
-            return path
-    return path
 
 
 def rest_positions(obj, unit):
@@ -241,88 +218,3 @@ def forget(obj):
     s.image_frames = (0, 0)
     s.image_baked_size = 0
     s.image_uv_map = ""
-
-
-class ReexportJob:
-    """Re-export Textures: `obj`'s image sequence rewritten from its fine cache at the
-    current Size, a frame per `step()`, without a bake. Checks first (nothing written
-    on error); `finish()` swaps the new sequence in, `cancel()` (or an error) keeps the
-    previous one."""
-
-    def __init__(self, scene, obj):
-        from . import bake  # bake imports this module
-
-        self.madder = bake.core()
-        self.obj = obj
-        s = obj.madder
-        where = dict(object=obj.name)
-        if obj.type != "MESH" or not s.cache_file:
-            raise ExportError(f"'{obj.name}' has no bake: bake it with Image Sequence on", **where)
-        fine, folder, name = paths(obj)
-        if not os.path.isfile(fine):
-            raise ExportError(f"'{obj.name}': its fine cache {fine} is missing: bake with Image Sequence on",
-                              filename=fine, **where)
-        if s.bake_topology and not handlers.same_topology(obj.data, s.bake_topology):
-            raise ExportError(f"'{obj.name}': the mesh's faces changed since the bake: bake again", **where)
-        size = textures.check_size(s.image_size)
-        faces, face_polygon, n_polygons = bridge.topology_arrays(obj.data)
-        uv = bridge.corner_uvs(obj.data)
-        if uv is None:
-            raise ExportError(f"'{obj.name}' has no UV map: the image sequence needs one", **where)
-        self.uv_map = obj.data.uv_layers.active.name
-        try:
-            topology = self.madder.Topology(faces, len(obj.data.vertices), face_polygon, n_polygons)
-        except self.madder.MadderError as e:
-            raise ExportError(f"'{obj.name}': {e}", **where) from e
-        refs = tuple(s.bake_references)
-        if not any(refs):
-            refs = presets.references(s)
-        self.staging = textures.Staging(folder)
-        weave = weave_detail(self.madder, obj, faces, face_polygon, uv, s.bake_detail, size,
-                             bake.unit_scale(scene))
-        self.export = SequenceExport(self.madder, obj, fine, topology, s.bake_detail, uv, refs, size,
-                                     self.staging.path, name, weave=weave)
-        self.size = size
-        self.warnings = []
-        self._begun = False
-
-    @property
-    def done(self):
-        return self.export.done
-
-    @property
-    def total(self):
-        return self.export.total
-
-    @property
-    def frame(self):
-        return self.export.frame
-
-    def step(self):
-        try:
-            if not self._begun:
-                self.staging.begin()
-                self._begun = True
-            return self.export.step()
-        except BaseException:
-            self.cancel()
-            raise
-
-    def finish(self):
-        try:
-            self.warnings += self.export.warnings()
-            self.export.close()
-            folder = self.staging.commit()
-        except BaseException:
-            self.cancel()
-            raise
-        record(self.obj, self.export.first, self.export.last, self.size, self.uv_map)
-        from . import shading
-
-        shading.sync_object(self.obj)
-        reload(self.obj)
-        return folder
-
-    def cancel(self):
-        self.export.close()
-        self.staging.discard()

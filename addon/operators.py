@@ -7,7 +7,7 @@ bake) and blocking when executed from a script or in background mode."""
 import bpy
 from bpy.props import BoolProperty, StringProperty
 
-from . import bake, bridge, codec, codec_jobs, handlers, images, preview, structures
+from . import bake, bridge, codec, codec_jobs, handlers, preview, reexport, stored, structures
 from .errors import ExportError, LcsError, MotionCodecError, RelocateError
 
 
@@ -123,7 +123,7 @@ class MADDER_OT_bake(bpy.types.Operator):
             self.report({"WARNING"}, f"Madder: '{obj.name}': {w}")
         also = ""
         if obj.madder.image_baked:
-            also = f", its images to {images.paths(obj, path)[1]}"
+            also = f", its images to {stored.image_paths(obj, path)[1]}"
         self.report({"INFO"}, f"Madder: baked '{obj.name}' to {path}{also}")
 
 
@@ -164,7 +164,7 @@ class MADDER_OT_export_textures(bpy.types.Operator):
 
     def execute(self, context):
         try:
-            job = images.ReexportJob(context.scene, context.object)
+            job = reexport.ReexportJob(context.scene, context.object)
             while job.step():
                 pass
             self._done(job, job.finish())
@@ -177,7 +177,7 @@ class MADDER_OT_export_textures(bpy.types.Operator):
         if context.window_manager is None or not context.window:
             return self.execute(context)
         try:
-            self._job = images.ReexportJob(context.scene, context.object)
+            self._job = reexport.ReexportJob(context.scene, context.object)
         except ExportError as e:
             self.report({"ERROR"}, f"Madder: {e}")
             return {"CANCELLED"}
@@ -236,7 +236,7 @@ class MADDER_OT_relocate_cache(bpy.types.Operator):
         subtype="FILE_PATH",
     )
     filter_glob: StringProperty(
-        default="*" + bake.CACHE_EXT,
+        default="*" + stored.CACHE_EXT,
         description="Which files the file browser lists: Madder caches",
         options={"HIDDEN"},
     )
@@ -247,7 +247,7 @@ class MADDER_OT_relocate_cache(bpy.types.Operator):
 
     def invoke(self, context, event):
         if not self.filepath:
-            self.filepath = handlers.cache_path(context.object) or bpy.path.abspath(context.object.madder.cache_dir)
+            self.filepath = stored.played_path(context.object) or bpy.path.abspath(context.object.madder.cache_dir)
         context.window_manager.fileselect_add(self)
         return {"RUNNING_MODAL"}
 

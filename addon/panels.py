@@ -4,7 +4,7 @@ import textwrap
 
 import bpy
 
-from . import fabrics, handlers, images, preview
+from . import fabrics, handlers, preview, stored
 
 
 class _PhysicsPanel:
@@ -118,7 +118,7 @@ class MADDER_PT_stain_output(_StainSubPanel, bpy.types.Panel):
             col.label(text="Needs a UV map", icon="ERROR")
         if not s.cache_file:
             return
-        if images.uses_images(obj):
+        if stored.uses_images(obj):
             first, last = s.image_frames
             col.label(text=f"Images: {s.image_baked_size} px, frames {first}–{last}", icon="IMAGE_DATA")
             if s.image_baked_size != int(s.image_size):

@@ -26,7 +26,7 @@ import sys
 import bpy
 from bpy.app.handlers import persistent
 
-from . import bake, bridge, carrier, handlers, images, live, shading, textures
+from . import bake, bridge, carrier, handlers, images, live, shading, stored, textures
 from .errors import BakeError
 
 _sessions = {}  # object name -> Session
@@ -227,7 +227,7 @@ def bake_from_preview(scene, obj):
             f"({obj.madder.live_memory:g} MB; {len(held)} frames held): raise it and play again from frame {s.first}",
             object=obj.name)
     st = s.stepper
-    path = bake.cache_path(obj)
+    path = stored.target_path(obj)
     try:
         os.makedirs(os.path.dirname(path), exist_ok=True)
     except OSError as e:
@@ -247,9 +247,9 @@ def bake_from_preview(scene, obj):
         raise BakeError(f"'{obj.name}': {e}", object=obj.name, filename=getattr(e, "filename", None)) from e
     handlers.forget(path)
     settings = obj.madder
-    settings.cache_file = bake.stored_path(path)
+    settings.cache_file = stored.stored_path(path)
     settings.bake_references = st.references
-    settings.bake_topology = handlers.topology_fingerprint(obj.data)
+    settings.bake_topology = stored.topology_fingerprint(obj.data)
     settings.bake_detail = st.detail
     images.forget(obj)
     try:

@@ -29,7 +29,7 @@ using it gets its input nodes."""
 
 import bpy
 
-from . import compat, images
+from . import compat, images, stored
 from .bridge import DEPOSIT_ATTR, STAIN_ATTR, WETNESS_ATTR
 
 GROUP = "Madder Stain"
@@ -167,7 +167,7 @@ def sync_material(material, obj):
     for n in [n for n in nt.nodes if n.name.startswith(INPUT_PREFIX)]:
         nt.nodes.remove(n)
     x, y = node.location.x - 300, node.location.y
-    if obj is not None and images.uses_images(obj):
+    if obj is not None and stored.uses_images(obj):
         _image_inputs(nt, node, obj, x, y)
     else:
         _attribute_inputs(nt, node, x, y)
@@ -275,7 +275,7 @@ class MADDER_OT_add_stain_shader(bpy.types.Operator):
             obj.data.materials.append(mat)
             mats = [mat]
         added = [m.name for m in mats if add_to_material(m, obj)]
-        source = "its image sequence" if images.uses_images(obj) else "its vertex colors"
+        source = "its image sequence" if stored.uses_images(obj) else "its vertex colors"
         if added:
             self.report({"INFO"}, f"Madder: stain shader added to {', '.join(added)}, reading {source}")
         else:
@@ -284,7 +284,7 @@ class MADDER_OT_add_stain_shader(bpy.types.Operator):
         for mat in mats:
             # images are per object: a material shared with another stained object shows one of them
             other = next((o for o in bpy.data.objects if o != obj and o.type == "MESH" and o.madder.enabled
-                          and (images.uses_images(o) or images.uses_images(obj))
+                          and (stored.uses_images(o) or stored.uses_images(obj))
                           and any(s.material == mat for s in o.material_slots)), None)
             if other is not None:
                 self.report({"WARNING"}, f"Madder: material '{mat.name}' is shared with '{other.name}': its "

@@ -14,7 +14,7 @@ bind mesh). The stored positions are the ridge at the computed frame, in Blender
 import bpy
 import numpy as np
 
-from . import bridge, compat, handlers, lcs, playback
+from . import bridge, compat, lcs, playback, stored
 from .errors import LcsError
 
 NODE_GROUP = "Madder Ridges"
@@ -37,13 +37,13 @@ def open_cache(madder, obj):
         raise LcsError(f"'{name}' is a {obj.type.lower()}, not a mesh with a baked stain", object=name)
     if not obj.madder.cache_file:
         raise LcsError(f"'{name}' has no bake: tick Bake Flow and bake the stain first", object=name)
-    path = handlers.cache_path(obj)
+    path = stored.played_path(obj)
     try:
         reader = madder.CacheReader(path)
     except (OSError, madder.MadderError) as e:
         raise LcsError(f"'{name}': cannot read its cache: {e}", object=name, filename=path) from e
     why = playback.mismatch(path, reader, len(obj.data.vertices))
-    if why is None and obj.madder.bake_topology and not handlers.same_topology(obj.data, obj.madder.bake_topology):
+    if why is None and obj.madder.bake_topology and not stored.same_topology(obj.data, obj.madder.bake_topology):
         why = f"the faces of '{name}' changed since the bake of {path}: bake again"
     if why is not None:
         raise LcsError(f"'{name}': {why}", object=name, filename=path)

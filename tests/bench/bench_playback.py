@@ -35,6 +35,7 @@ def main():
     import madder
 
     handlers = sys.modules[module + ".handlers"]
+    stored = sys.modules[module + ".stored"]
     bpy.ops.wm.read_homefile(use_empty=True)
     bpy.ops.mesh.primitive_grid_add(x_subdivisions=316, y_subdivisions=316, size=2)
     obj = bpy.context.object
@@ -51,7 +52,7 @@ def main():
     s.enabled = True
     s.cache_file = path
     s.bake_references = (0.01, 0.1, 0.01)  # as a bake records them
-    s.bake_topology = handlers.topology_fingerprint(obj.data)
+    s.bake_topology = stored.topology_fingerprint(obj.data)
     scene = bpy.context.scene
     scene.frame_start, scene.frame_end = 1, FRAMES
     assert handlers.apply_frame(obj, 1) is None  # warm: reader opened, attributes created
