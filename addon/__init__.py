@@ -1,9 +1,10 @@
 """Madder: stains on moving cloth. This file only registers the add-on's parts.
 
 The parts that use bpy are imported when the add-on registers (or when one is asked for,
-e.g. `madder.addon.cli`), not on import: the package's bpy-free modules (`presets`,
-`placement`, `motion`, `codec`, `pour`, `schedule`, `live`, `textures`, `errors`) can then be
-imported, and tested, without Blender."""
+e.g. `madder.addon.cli`), not on import: the package's bpy-free modules (those that import
+bpy neither themselves nor through another; tests/python/test_addon_logic.py finds them from
+the source and imports each with bpy blocked) can then be imported, and tested, without
+Blender."""
 
 import importlib
 
