@@ -127,6 +127,7 @@ lint: rust-tools $(WHEELDIR)/.stamp
 	CARGO_TARGET_DIR=$(abspath target/fuzz) cargo check --manifest-path $(FUZZ)
 	$(VENV)/bin/ruff check addon tests blend_fixtures rust/madder-py/python .ci
 	$(VENV)/bin/actionlint .github/workflows/*.yml
+	$(PY) .ci/import_circles.py
 	PYTHONPATH=$(abspath $(WHEELDIR)) $(PY) -m pytest -q tests/python/test_stubs.py
 
 # rustfmt and clippy come with rustup's default profile; a minimal toolchain gets them here
