@@ -117,8 +117,8 @@ def test_bad_calls(tmp_path):
             c.read_frame(k)
     with pytest.raises(madder.ParameterError):
         madder.write_pc2(p, f[:, :, :2].copy())
-    with pytest.raises(TypeError):
-        madder.write_pc2(p, f.astype(np.float64))
+    with pytest.raises(madder.ParameterError, match="frames must be a float array"):
+        madder.write_pc2(p, f.astype(str))
     with pytest.raises(madder.CacheError, match="1 times for 2 frames"):
         madder.write_mdd(tmp_path / "a.mdd", f, [0.0])
     with pytest.raises(madder.CacheError, match="missing.pc2"):

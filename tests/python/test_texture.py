@@ -127,7 +127,7 @@ def test_bad_input_raises_typed_errors_naming_what_is_wrong(tmp_path):
     assert (e.value.name, e.value.expected, e.value.got) == ("uv", len(faces), len(faces) - 1)
     with pytest.raises(madder.ParameterError, match=r"shape \(T, 3, 2\)"):
         madder.rasterize(faces, fuv[:, :, :1], values, 8)
-    with pytest.raises(madder.ParameterError, match="float32 or float64"):
+    with pytest.raises(madder.ParameterError, match="uv must be a float array"):
         madder.rasterize(faces, fuv.astype(np.int32), values, 8)
     bad = fuv.copy()
     bad[5, 1, 0] = np.nan

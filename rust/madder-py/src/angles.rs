@@ -2,14 +2,14 @@
 //! `angles`, seed ch. 3). Conversion only; the GIL is released around the core calls.
 
 use glam::DVec3;
-use numpy::{
-    PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
-};
+use numpy::ndarray::{Ix1, Ix2};
+use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
 use madder::AngleError;
 use madder::angles::{AngleMesh, Angles, Placement, ReconstructOptions};
 
+use crate::args;
 use crate::errors::{ParameterError, to_py};
 
 fn shape_error(name: &str, expected: &str, got: &[usize]) -> PyErr {
@@ -20,7 +20,8 @@ fn shape_error(name: &str, expected: &str, got: &[usize]) -> PyErr {
     })
 }
 
-fn faces_of(faces: &PyReadonlyArray2<'_, u32>) -> PyResult<Vec<[u32; 3]>> {
+fn faces_of(faces: &Bound<'_, PyAny>) -> PyResult<Vec<[u32; 3]>> {
+    let faces = args::indices::<Ix2>("faces", faces)?;
     let shape = faces.shape();
     if shape[1] != 3 || shape[0] == 0 {
         return Err(shape_error("faces", "(F, 3) with F > 0", shape));
@@ -33,7 +34,8 @@ fn faces_of(faces: &PyReadonlyArray2<'_, u32>) -> PyResult<Vec<[u32; 3]>> {
         .collect())
 }
 
-fn rows3(name: &str, a: &PyReadonlyArray2<'_, f64>, n: Option<usize>) -> PyResult<Vec<DVec3>> {
+fn rows3(name: &str, a: &Bound<'_, PyAny>, n: Option<usize>) -> PyResult<Vec<DVec3>> {
+    let a: PyReadonlyArray2<'_, f64> = args::floats(name, a)?;
     let shape = a.shape();
     if shape[1] != 3 || n.is_some_and(|n| n != shape[0]) {
         let expected = n.map_or("(N, 3)".to_string(), |n| format!("({n}, 3)"));
@@ -57,15 +59,15 @@ fn vertex_count(faces: &[[u32; 3]]) -> usize {
 #[allow(clippy::type_complexity)]
 pub fn encode_angles<'py>(
     py: Python<'py>,
-    faces: PyReadonlyArray2<'py, u32>,
-    positions: PyReadonlyArray2<'py, f64>,
+    faces: &Bound<'py, PyAny>,
+    positions: &Bound<'py, PyAny>,
 ) -> PyResult<(
     Bound<'py, PyArray2<f64>>,
     Bound<'py, PyArray1<f64>>,
     Bound<'py, PyArray2<u32>>,
 )> {
-    let tris = faces_of(&faces)?;
-    let pos = rows3("positions", &positions, None)?;
+    let tris = faces_of(faces)?;
+    let pos = rows3("positions", positions, None)?;
     let n = pos.len();
     let (angles, edges) = py
         .detach(|| {
@@ -93,16 +95,17 @@ pub fn encode_angles<'py>(
 #[allow(clippy::too_many_arguments)]
 pub fn decode_angles<'py>(
     py: Python<'py>,
-    faces: PyReadonlyArray2<'py, u32>,
-    corners: PyReadonlyArray2<'py, f64>,
-    dihedrals: PyReadonlyArray1<'py, f64>,
+    faces: &Bound<'py, PyAny>,
+    corners: &Bound<'py, PyAny>,
+    dihedrals: &Bound<'py, PyAny>,
     reference_face: Option<usize>,
-    reference_positions: Option<PyReadonlyArray2<'py, f64>>,
+    reference_positions: Option<&Bound<'py, PyAny>>,
     refine_iterations: usize,
     method: &str,
-    previous: Option<PyReadonlyArray2<'py, f64>>,
+    previous: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-    let tris = faces_of(&faces)?;
+    let tris = faces_of(faces)?;
+    let corners: PyReadonlyArray2<'_, f64> = args::floats("corners", corners)?;
     let cs = corners.shape();
     if cs[1] != 3 {
         return Err(shape_error("corners", &format!("({}, 3)", tris.len()), cs));
@@ -113,11 +116,13 @@ pub fn decode_angles<'py>(
         .into_iter()
         .map(|r| [r[0], r[1], r[2]])
         .collect();
-    let dihedrals = dihedrals.as_array().to_vec();
+    let dihedrals = args::floats::<f64, Ix1>("dihedrals", dihedrals)?
+        .as_array()
+        .to_vec();
     let placement = match (reference_face, reference_positions) {
         (None, None) => None,
         (Some(face), Some(p)) => {
-            let p = rows3("reference_positions", &p, Some(3))?;
+            let p = rows3("reference_positions", p, Some(3))?;
             Some(Placement {
                 face,
                 positions: [p[0], p[1], p[2]],
@@ -134,7 +139,7 @@ pub fn decode_angles<'py>(
     }
     let n = vertex_count(&tris);
     let previous = previous
-        .map(|p| rows3("previous", &p, Some(n)))
+        .map(|p| rows3("previous", p, Some(n)))
         .transpose()?;
     if method == "sequential" && previous.is_some() {
         return Err(ParameterError::new_err(

@@ -327,6 +327,22 @@ fn build(py: Python<'_>, e: &madder::Error) -> PyResult<PyErr> {
     Ok(PyErr::from_value(value))
 }
 
+/// A `ParameterError` about the argument `name` (the binding's own check of an array
+/// argument, `args.rs`), with `name` set as the core's parameter errors set it (a name
+/// followed by what the argument takes, "topology (a Topology or ...)", sets the name).
+pub fn argument_error(name: &str, message: String) -> PyErr {
+    Python::attach(|py| {
+        let f = Fields::new(py).set("name", name.split(" (").next().unwrap_or(name));
+        if let Some(err) = f.err {
+            return err;
+        }
+        py.import("madder._errors")
+            .and_then(|m| m.getattr("_from_core"))
+            .and_then(|make| make.call1((py.get_type::<ParameterError>(), message, f.dict)))
+            .map_or_else(|err| err, PyErr::from_value)
+    })
+}
+
 fn solve_fields<'py>(f: Fields<'py>, s: &madder::error::SolveError) -> Fields<'py> {
     use madder::error::SolveError as S;
     match s {

@@ -2,10 +2,12 @@
 
 use std::path::PathBuf;
 
-use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadwriteArray1};
+use numpy::ndarray::Ix1;
+use numpy::{PyArray1, PyArrayMethods, PyReadwriteArray1};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
+use crate::args;
 use crate::errors::{CacheError, to_py};
 
 /// Writes a cache atomically: frames go to a temporary file that replaces `path` only on
@@ -41,13 +43,17 @@ impl CacheWriter {
         Ok(Self { inner: Some(inner) })
     }
 
-    /// Appends the next frame; `fields` holds one float32 array per field, in order.
-    fn push_frame(
-        &mut self,
-        py: Python<'_>,
-        fields: Vec<PyReadonlyArray1<'_, f32>>,
-    ) -> PyResult<()> {
-        let data: Vec<Vec<f32>> = fields.iter().map(|f| f.as_array().to_vec()).collect();
+    /// Appends the next frame; `fields` holds one `(N,)` array per field, in order (any
+    /// float dtype, stored as float32).
+    fn push_frame(&mut self, py: Python<'_>, fields: Vec<Bound<'_, PyAny>>) -> PyResult<()> {
+        let data = fields
+            .iter()
+            .enumerate()
+            .map(|(i, f)| {
+                let f = args::floats::<f32, Ix1>(&format!("fields[{i}]"), f)?;
+                Ok(f.as_array().to_vec())
+            })
+            .collect::<PyResult<Vec<Vec<f32>>>>()?;
         let w = self.open()?;
         py.detach(|| {
             let refs: Vec<&[f32]> = data.iter().map(Vec::as_slice).collect();

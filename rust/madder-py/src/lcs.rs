@@ -5,8 +5,9 @@
 //! each call), the GIL released for everything else.
 
 use glam::DVec3;
+use numpy::ndarray::{Ix1, Ix2, IxDyn};
 use numpy::{
-    PyArray1, PyArrayDyn, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArrayDyn,
+    PyArray1, PyArrayDyn, PyArrayMethods, PyReadonlyArray2, PyReadonlyArrayDyn,
     PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
@@ -15,10 +16,13 @@ use pyo3::types::PyDict;
 use madder::LcsError;
 use madder::lcs::{FrameTimes, Located, Motion, RidgeOptions, Scheme, Velocity, VertexVelocity};
 
+use crate::args;
 use crate::errors::to_py;
 
-/// The topology of `faces` (`(F, 3)` uint32), an error naming a mesh without triangles.
-fn topology(faces: &PyReadonlyArray2<'_, u32>, n: usize) -> PyResult<madder::mesh::Topology> {
+/// The topology of `faces` (`(F, 3)`, any integer dtype), an error naming a mesh without
+/// triangles.
+fn topology(faces: &Bound<'_, PyAny>, n: usize) -> PyResult<madder::mesh::Topology> {
+    let faces: PyReadonlyArray2<'_, u32> = args::indices("faces", faces)?;
     let shape = faces.shape();
     if shape[1] != 3 {
         return Err(to_py(shape_error("faces", "(F, 3)", shape)));
@@ -147,26 +151,27 @@ impl Velocity for PyVelocity<'_> {
 
 /// Finite-time Lyapunov exponent `σ = ln √λ_max / |T|` at every vertex (seed §5.2, §5.5.1).
 ///
-/// `faces` `(F, 3)` uint32; `positions` `(N, 3)` float64 for a fixed mesh or `(K, N, 3)`
+/// `faces` `(F, 3)` (any integer dtype); `positions` `(N, 3)` for a fixed mesh or `(K, N, 3)`
 /// per frame (at `times`, `(K,)` increasing); `velocity` a callable
 /// `f(t, points (M, 3)) -> (M, 3)` of world points (called once per Runge–Kutta stage with
 /// all particles) or a `(K, N, 3)` array of per-vertex velocities at `times` (`(N, 3)`:
 /// constant), relative to the cloth, projected on each triangle. Particles start at the
 /// vertices at `t0` and are traced over `T` (negative: backward) in `steps` fixed steps of
 /// `method`: `"rk4"` (classical, 4 stages) or `"rk8"` (DOP853's eighth-order solution, 12
-/// stages). Returns `(N,)` float64.
+/// stages). Array arguments take any float dtype (converted to float64). Returns `(N,)`
+/// float64.
 #[pyfunction]
 #[pyo3(signature = (faces, positions, velocity, t0, T, *, steps=100, times=None, method="rk4"))]
 #[allow(non_snake_case, clippy::too_many_arguments)]
 pub fn ftle<'py>(
     py: Python<'py>,
-    faces: PyReadonlyArray2<'py, u32>,
-    positions: PyReadonlyArrayDyn<'py, f64>,
+    faces: &Bound<'py, PyAny>,
+    positions: &Bound<'py, PyAny>,
     velocity: Bound<'py, PyAny>,
     t0: f64,
     T: f64,
     steps: usize,
-    times: Option<PyReadonlyArray1<'py, f64>>,
+    times: Option<&Bound<'py, PyAny>>,
     method: &str,
 ) -> PyResult<Bound<'py, PyArray1<f64>>> {
     let scheme = Scheme::from_name(method).ok_or_else(|| {
@@ -174,10 +179,14 @@ pub fn ftle<'py>(
             method: method.into(),
         })
     })?;
+    let positions = args::floats::<f64, IxDyn>("positions", positions)?;
     let (pos_frames, n) = frames("positions", &positions)?;
-    let topo = topology(&faces, n)?;
+    let topo = topology(faces, n)?;
     let times = match times {
-        Some(t) => Some(FrameTimes::new(t.as_array().to_vec()).map_err(to_py)?),
+        Some(t) => {
+            let t = args::floats::<f64, Ix1>("times", t)?.as_array().to_vec();
+            Some(FrameTimes::new(t).map_err(to_py)?)
+        }
         None => None,
     };
     let need_times = |what: &str, k: usize| -> PyResult<FrameTimes> {
@@ -214,13 +223,8 @@ pub fn ftle<'py>(
             (Err(e), _) => return Err(to_py(e)),
         }
     } else {
-        let arr: PyReadonlyArrayDyn<'py, f64> = velocity.extract().map_err(|_| {
-            to_py(shape_error(
-                "velocity",
-                "a callable f(t, points) or a float64 array (K, N, 3)",
-                &[],
-            ))
-        })?;
+        let arr: PyReadonlyArrayDyn<'py, f64> =
+            args::floats("velocity (a callable f(t, points) or an array)", &velocity)?;
         let (vel_frames, nv) = frames("velocity", &arr)?;
         if nv != n {
             return Err(to_py(shape_error(
@@ -270,15 +274,15 @@ impl Velocity for Constant {
 /// implicit diffusion times in units of the mean edge length squared; `threshold` is
 /// `σ0` (default `0.75 max + 0.25 min`); `s0` the candidate level of the smoothed
 /// indicator (0–1000); components under `min_edges` edges and T-junction branches and
-/// loops under `min_branch` edges are removed.
+/// loops under `min_branch` edges are removed. Array arguments as for `ftle`.
 #[pyfunction]
 #[pyo3(signature = (faces, positions, field, *, smoothing=1.0, hessian_smoothing=1.0, field_smoothing=0.0, threshold=None, s0=100.0, min_edges=20, min_branch=10, join=true, remove_valleys=false))]
 #[allow(clippy::too_many_arguments)]
 pub fn ridges<'py>(
     py: Python<'py>,
-    faces: PyReadonlyArray2<'py, u32>,
-    positions: PyReadonlyArray2<'py, f64>,
-    field: PyReadonlyArray1<'py, f64>,
+    faces: &Bound<'py, PyAny>,
+    positions: &Bound<'py, PyAny>,
+    field: &Bound<'py, PyAny>,
     smoothing: f64,
     hessian_smoothing: f64,
     field_smoothing: f64,
@@ -289,12 +293,15 @@ pub fn ridges<'py>(
     join: bool,
     remove_valleys: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let positions = args::floats::<f64, Ix2>("positions", positions)?;
     if positions.shape()[1] != 3 {
         return Err(to_py(shape_error("positions", "(N, 3)", positions.shape())));
     }
     let pos = rows3(&positions.as_array().into_dyn());
-    let topo = topology(&faces, pos.len())?;
-    let field = field.as_array().to_vec();
+    let topo = topology(faces, pos.len())?;
+    let field = args::floats::<f64, Ix1>("field", field)?
+        .as_array()
+        .to_vec();
     let options = RidgeOptions {
         field_smoothing,
         smoothing,

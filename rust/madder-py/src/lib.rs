@@ -1,6 +1,7 @@
 //! Python bindings of the madder core, importable as `madder._core`.
 //!
-//! This crate only converts: numpy arrays in (copied into owned Rust data), numpy arrays
+//! This crate only converts: numpy arrays in (any float dtype for floats, any integer dtype
+//! for indices, any layout: one convention, `args.rs`; copied into owned Rust data), numpy arrays
 //! out (Rust vectors handed to numpy without a copy), core errors to typed Python
 //! exceptions (`errors.rs`, the one place that maps them), and the GIL released around
 //! every heavy call. One file per core module.
@@ -8,6 +9,7 @@
 use pyo3::prelude::*;
 
 mod angles;
+mod args;
 mod errors;
 mod io;
 mod lcs;

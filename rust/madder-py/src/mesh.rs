@@ -1,14 +1,15 @@
 //! `Topology`: fixed triangle connectivity (core module `mesh`).
 
-use numpy::{
-    PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods,
-};
+use numpy::ndarray::{Ix1, Ix2, Ix3};
+use numpy::{Element, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
+use crate::args;
 use crate::errors::{ParameterError, to_py};
 
-/// Triangle topology of a mesh: `faces` is a `(F, 3)` uint32 array of vertex indices;
-/// `face_polygon` (optional, `(F,)` uint32) maps each triangle to its source polygon.
+/// Triangle topology of a mesh: `faces` is a `(F, 3)` array of vertex indices;
+/// `face_polygon` (optional, `(F,)`) maps each triangle to its source polygon (any integer
+/// dtype, non-negative).
 #[pyclass(module = "madder", frozen)]
 pub struct Topology {
     pub inner: madder::mesh::Topology,
@@ -19,11 +20,15 @@ impl Topology {
     #[new]
     #[pyo3(signature = (faces, n_vertices, face_polygon=None, n_polygons=None))]
     fn new(
-        faces: PyReadonlyArray2<'_, u32>,
+        faces: &Bound<'_, PyAny>,
         n_vertices: usize,
-        face_polygon: Option<PyReadonlyArray1<'_, u32>>,
+        face_polygon: Option<&Bound<'_, PyAny>>,
         n_polygons: Option<usize>,
     ) -> PyResult<Self> {
+        let faces = args::indices::<Ix2>("faces", faces)?;
+        let face_polygon = face_polygon
+            .map(|fp| args::indices::<Ix1>("face_polygon", fp))
+            .transpose()?;
         if faces.shape()[1] != 3 {
             return Err(ParameterError::new_err(format!(
                 "faces must have shape (F, 3), got {:?}",
@@ -105,39 +110,55 @@ impl Topology {
     }
 }
 
-/// Copies a `(N, 3)` float32 array into owned points.
-pub fn points(a: &PyReadonlyArray2<'_, f32>) -> PyResult<Vec<glam::Vec3>> {
+/// The `(N, 3)` rows of float argument `name` read as `T` (any float dtype, see `args`).
+fn rows3<T: Element + Copy>(name: &str, a: &Bound<'_, PyAny>) -> PyResult<Vec<[T; 3]>> {
+    let a: PyReadonlyArray2<'_, T> = args::floats(name, a)?;
     if a.shape()[1] != 3 {
         return Err(ParameterError::new_err(format!(
-            "positions must have shape (N, 3), got {:?}",
-            a.shape()
+            "{name} must have shape (N, 3), got {}",
+            args::shape(a.shape())
         )));
     }
     Ok(a.as_array()
         .rows()
         .into_iter()
-        .map(|r| glam::Vec3::new(r[0], r[1], r[2]))
+        .map(|r| [r[0], r[1], r[2]])
+        .collect())
+}
+
+/// The `(N, 3)` float argument `name` as float32 points (for the core's float32 meshes).
+pub fn points(name: &str, a: &Bound<'_, PyAny>) -> PyResult<Vec<glam::Vec3>> {
+    Ok(rows3::<f32>(name, a)?
+        .into_iter()
+        .map(glam::Vec3::from_array)
+        .collect())
+}
+
+/// The `(N, 3)` float argument `name` as float64 points: float16 and float32 values
+/// exactly, float64 ones keeping their precision (the core works in f64).
+pub fn dpoints(name: &str, a: &Bound<'_, PyAny>) -> PyResult<Vec<glam::DVec3>> {
+    Ok(rows3::<f64>(name, a)?
+        .into_iter()
+        .map(glam::DVec3::from_array)
         .collect())
 }
 
 /// Weft direction of every triangle at `positions`, as `(F, 3)` float32 unit vectors: the
-/// UV u axis on the surface (`face_uv` `(F, 3, 2)` float32), turned by `face_angle`
-/// radians about the face normal.
+/// UV u axis on the surface (`face_uv` `(F, 3, 2)`), turned by `face_angle` radians about
+/// the face normal. Array arguments take any float dtype.
 #[pyfunction]
 #[pyo3(signature = (topology, positions, face_uv, face_angle=None))]
 pub fn weft_directions<'py>(
     py: Python<'py>,
     topology: &Topology,
-    positions: PyReadonlyArray2<'py, f32>,
-    face_uv: numpy::PyReadonlyArray3<'py, f32>,
-    face_angle: Option<PyReadonlyArray1<'py, f32>>,
+    positions: &Bound<'py, PyAny>,
+    face_uv: &Bound<'py, PyAny>,
+    face_angle: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyArray2<f32>>> {
-    let pos: Vec<glam::DVec3> = points(&positions)?
-        .into_iter()
-        .map(glam::DVec3::from)
-        .collect();
+    let pos = dpoints("positions", positions)?;
     let t = &topology.inner;
     madder::mesh::geometry::check_positions(t, &pos).map_err(to_py)?;
+    let face_uv = args::floats::<f64, Ix3>("face_uv", face_uv)?;
     let uv = face_uv.as_array();
     if uv.shape() != [t.n_faces(), 3, 2] {
         return Err(ParameterError::new_err(format!(
@@ -147,10 +168,12 @@ pub fn weft_directions<'py>(
         )));
     }
     let uv: Vec<[[f64; 2]; 3]> = (0..t.n_faces())
-        .map(|f| std::array::from_fn(|k| [uv[[f, k, 0]] as f64, uv[[f, k, 1]] as f64]))
+        .map(|f| std::array::from_fn(|k| [uv[[f, k, 0]], uv[[f, k, 1]]]))
         .collect();
     let angle: Vec<f64> = match face_angle {
-        Some(a) => a.as_array().iter().map(|&x| x as f64).collect(),
+        Some(a) => args::floats::<f64, Ix1>("face_angle", a)?
+            .as_array()
+            .to_vec(),
         None => vec![0.0; t.n_faces()],
     };
     if angle.len() != t.n_faces() {
@@ -167,25 +190,20 @@ pub fn weft_directions<'py>(
     PyArray1::from_vec(py, flat).reshape([w.len(), 3])
 }
 
-/// Distance from each of `points` `(N, 3)` float32 to the triangle mesh (`vertices`
-/// `(M, 3)` float32, `triangles` `(K, 3)` uint32), as `(N,)` float32; `inf` where it is
+/// Distance from each of `points` `(N, 3)` to the triangle mesh (`vertices` `(M, 3)`, any
+/// float dtype; `triangles` `(K, 3)`, any integer dtype), as `(N,)` float32; `inf` where it is
 /// farther than `cutoff`. For liquid sources: how close the brush is to each cloth vertex.
 #[pyfunction]
 pub fn distances_within<'py>(
     py: Python<'py>,
-    points_: PyReadonlyArray2<'py, f32>,
-    vertices: PyReadonlyArray2<'py, f32>,
-    triangles: PyReadonlyArray2<'py, u32>,
+    points_: &Bound<'py, PyAny>,
+    vertices: &Bound<'py, PyAny>,
+    triangles: &Bound<'py, PyAny>,
     cutoff: f64,
 ) -> PyResult<Bound<'py, PyArray1<f32>>> {
-    let p: Vec<glam::DVec3> = points(&points_)?
-        .into_iter()
-        .map(glam::DVec3::from)
-        .collect();
-    let v: Vec<glam::DVec3> = points(&vertices)?
-        .into_iter()
-        .map(glam::DVec3::from)
-        .collect();
+    let p = dpoints("points_", points_)?;
+    let v = dpoints("vertices", vertices)?;
+    let triangles = args::indices::<Ix2>("triangles", triangles)?;
     if triangles.shape()[1] != 3 {
         return Err(ParameterError::new_err(format!(
             "triangles must have shape (K, 3), got {:?}",
@@ -257,14 +275,15 @@ impl Refinement {
     }
 
     /// The refined triangles' corner UVs, `(T, 3, 2)` float32, from the cloth triangles'
-    /// corner UVs `face_uv` `(F, 3, 2)` float32 (the same barycentric combination that
-    /// places the fine vertices).
+    /// corner UVs `face_uv` `(F, 3, 2)` (any float dtype; the same barycentric combination
+    /// that places the fine vertices).
     fn face_uv<'py>(
         &self,
         py: Python<'py>,
-        face_uv: numpy::PyReadonlyArray3<'py, f32>,
+        face_uv: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, numpy::PyArray3<f32>>> {
         let n = self.inner.fine().n_faces() / self.inner.faces_per_face();
+        let face_uv = args::floats::<f64, Ix3>("face_uv", face_uv)?;
         let uv = face_uv.as_array();
         if uv.shape() != [n, 3, 2] {
             return Err(ParameterError::new_err(format!(
@@ -273,7 +292,7 @@ impl Refinement {
             )));
         }
         let coarse: Vec<[[f64; 2]; 3]> = (0..n)
-            .map(|f| std::array::from_fn(|k| [uv[[f, k, 0]] as f64, uv[[f, k, 1]] as f64]))
+            .map(|f| std::array::from_fn(|k| [uv[[f, k, 0]], uv[[f, k, 1]]]))
             .collect();
         let fine = py.detach(|| self.inner.face_uv(&coarse));
         let t = fine.len();

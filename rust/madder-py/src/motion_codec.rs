@@ -4,9 +4,8 @@
 use std::path::PathBuf;
 
 use glam::DVec3;
-use numpy::{
-    PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods,
-};
+use numpy::ndarray::{Ix2, Ix3};
+use numpy::{PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
@@ -14,6 +13,7 @@ use madder::CodecError;
 use madder::angles::codec::position_baseline;
 use madder::angles::{CodecOptions, MotionDecoder, MotionEncoder as CoreEncoder};
 
+use crate::args;
 use crate::errors::{ParameterError, to_py};
 
 fn usage(path: &std::path::Path, reason: String) -> PyErr {
@@ -43,7 +43,7 @@ impl MotionEncoder {
     fn new(
         py: Python<'_>,
         path: PathBuf,
-        faces: PyReadonlyArray2<'_, u32>,
+        faces: &Bound<'_, PyAny>,
         start: f64,
         rate: f64,
         bits: u32,
@@ -52,6 +52,7 @@ impl MotionEncoder {
         keyframe_interval: u32,
         warm: &str,
     ) -> PyResult<Self> {
+        let faces = args::indices::<Ix2>("faces", faces)?;
         let shape = faces.shape();
         if shape[1] != 3 || shape[0] == 0 {
             return Err(usage(
@@ -102,7 +103,7 @@ impl MotionEncoder {
         })
     }
 
-    /// Encodes the next frame: `(N, 3)` float32 or float64 object-space positions. Returns
+    /// Encodes the next frame: `(N, 3)` object-space positions (any float dtype). Returns
     /// the positions the decoder will produce for it, `(N, 3)` float32. A NaN, a wrong
     /// count or a degenerate face raises `MeshError` naming the file, frame and vertex/face.
     fn add_frame<'py>(
@@ -110,26 +111,14 @@ impl MotionEncoder {
         py: Python<'py>,
         positions: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, PyArray2<f32>>> {
-        let rows: Vec<DVec3> = if let Ok(a) = positions.extract::<PyReadonlyArray2<'py, f64>>() {
-            check_shape(&self.path, a.shape())?;
-            a.as_array()
-                .rows()
-                .into_iter()
-                .map(|r| DVec3::new(r[0], r[1], r[2]))
-                .collect()
-        } else if let Ok(a) = positions.extract::<PyReadonlyArray2<'py, f32>>() {
-            check_shape(&self.path, a.shape())?;
-            a.as_array()
-                .rows()
-                .into_iter()
-                .map(|r| DVec3::new(r[0] as f64, r[1] as f64, r[2] as f64))
-                .collect()
-        } else {
-            return Err(usage(
-                &self.path,
-                "positions must be an (N, 3) float32 or float64 array".into(),
-            ));
-        };
+        let a = args::floats::<f64, Ix2>("positions", positions)?;
+        check_shape(&self.path, a.shape())?;
+        let rows: Vec<DVec3> = a
+            .as_array()
+            .rows()
+            .into_iter()
+            .map(|r| DVec3::new(r[0], r[1], r[2]))
+            .collect();
         let Some(inner) = self.inner.as_mut() else {
             return Err(usage(&self.path, "the encoder is finished".into()));
         };
@@ -285,7 +274,7 @@ impl MotionCodec {
     }
 }
 
-/// The position baseline the codec is compared with: `frames` `(T, N, 3)` float64
+/// The position baseline the codec is compared with: `frames` `(T, N, 3)` (any float dtype)
 /// quantized with `bits` bits per coordinate on the bounding cube; `predict=True`: temporal
 /// prediction and the codec's range coder, else raw. Returns a dict like
 /// `MotionEncoder.finish()`'s: `bits_per_vertex_frame`, `max_error`, `rms_error` (over the
@@ -294,10 +283,11 @@ impl MotionCodec {
 #[pyo3(signature = (frames, bits, predict=true))]
 pub fn position_baseline_stats<'py>(
     py: Python<'py>,
-    frames: PyReadonlyArray3<'py, f64>,
+    frames: &Bound<'py, PyAny>,
     bits: u32,
     predict: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let frames = args::floats::<f64, Ix3>("frames", frames)?;
     let shape = frames.shape();
     if shape[0] == 0 || shape[1] == 0 || shape[2] != 3 || !(1..=24).contains(&bits) {
         return Err(ParameterError::new_err(format!(

@@ -3,11 +3,11 @@
 
 use std::path::PathBuf;
 
-use numpy::{
-    PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2, PyReadonlyArray3, PyUntypedArrayMethods,
-};
+use numpy::ndarray::{Ix2, Ix3};
+use numpy::{PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
+use crate::args;
 use crate::errors::{CacheError, ParameterError, to_py};
 use madder::io::point_cache::{self as core, Format, Timing};
 
@@ -138,8 +138,9 @@ impl PointCache {
     }
 }
 
-/// Copies an `(F, N, 3)` float32 array into owned frames.
-fn frames(a: &PyReadonlyArray3<'_, f32>) -> PyResult<Vec<Vec<[f32; 3]>>> {
+/// The `(F, N, 3)` float argument `frames` as float32 frames (any float dtype, see `args`).
+fn frames(a: &Bound<'_, PyAny>) -> PyResult<Vec<Vec<[f32; 3]>>> {
+    let a = args::floats::<f32, Ix3>("frames", a)?;
     let shape = a.shape();
     if shape[2] != 3 {
         return Err(ParameterError::new_err(format!(
@@ -152,32 +153,32 @@ fn frames(a: &PyReadonlyArray3<'_, f32>) -> PyResult<Vec<Vec<[f32; 3]>>> {
         .collect())
 }
 
-/// Writes `frames` (`(F, N, 3)` float32) to a PC2 file, frame `k` at scene frame
-/// `start + k·rate`. Atomic: `path` is replaced only once the whole file is on disk.
+/// Writes `frames` (`(F, N, 3)`, any float dtype, stored as float32) to a PC2 file, frame
+/// `k` at scene frame `start + k·rate`. Atomic: `path` is replaced only once the whole file is on disk.
 #[pyfunction]
 #[pyo3(signature = (path, frames, start=1.0, rate=1.0))]
 pub fn write_pc2(
     py: Python<'_>,
     path: PathBuf,
-    frames: PyReadonlyArray3<'_, f32>,
+    frames: &Bound<'_, PyAny>,
     start: f32,
     rate: f32,
 ) -> PyResult<()> {
-    let frames = self::frames(&frames)?;
+    let frames = self::frames(frames)?;
     py.detach(|| core::write_pc2(&path, start, rate, &frames))
         .map_err(to_py)
 }
 
-/// Writes `frames` (`(F, N, 3)` float32) to an MDD file, frame `k` at `times[k]` seconds
-/// (stored as float32; strictly increasing). Atomic like `write_pc2`.
+/// Writes `frames` (`(F, N, 3)`, any float dtype, stored as float32) to an MDD file, frame
+/// `k` at `times[k]` seconds (stored as float32; strictly increasing). Atomic like `write_pc2`.
 #[pyfunction]
 pub fn write_mdd(
     py: Python<'_>,
     path: PathBuf,
-    frames: PyReadonlyArray3<'_, f32>,
+    frames: &Bound<'_, PyAny>,
     times: Vec<f64>,
 ) -> PyResult<()> {
-    let frames = self::frames(&frames)?;
+    let frames = self::frames(frames)?;
     let times: Vec<f32> = times.iter().map(|&t| t as f32).collect();
     py.detach(|| core::write_mdd(&path, &times, &frames))
         .map_err(to_py)
@@ -215,8 +216,9 @@ impl Pc2Writer {
         })
     }
 
-    /// Appends the next frame: `(N, 3)` float32 positions.
-    fn add_frame(&mut self, py: Python<'_>, positions: PyReadonlyArray2<'_, f32>) -> PyResult<()> {
+    /// Appends the next frame: `(N, 3)` positions (any float dtype, stored as float32).
+    fn add_frame(&mut self, py: Python<'_>, positions: &Bound<'_, PyAny>) -> PyResult<()> {
+        let positions = args::floats::<f32, Ix2>("positions", positions)?;
         let shape = positions.shape();
         if shape[1] != 3 {
             return Err(ParameterError::new_err(format!(

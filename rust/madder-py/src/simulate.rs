@@ -1,15 +1,14 @@
 //! `Simulator`: the full stain simulator of chapter 4 (core module `stain::simulate`).
 
 use glam::DVec3;
-use numpy::{
-    PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
-    PyUntypedArrayMethods,
-};
+use numpy::ndarray::Ix1;
+use numpy::{PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
+use crate::args;
 use crate::errors::{ParameterError, to_py};
-use crate::mesh::{Topology, points};
+use crate::mesh::{Topology, dpoints};
 use crate::stain::conductivity;
 use crate::threads::Pool;
 
@@ -24,10 +23,11 @@ use crate::threads::Pool;
 /// carry_solute=False, residual_saturation=0, vapour_limited=False, substeps=1, use_gravity=True, use_rectilinear=True,
 /// use_coriolis=True, momentum_advection=True, detail=0, threads=None)`.
 ///
-/// `topology` is a `Topology` or an `(F, 3)` uint32 face array; `rest` and `positions`
-/// `(N, 3)` float32 or float64 world positions in metres (rest pose; first frame), one
-/// row per vertex of the topology. The densities diffuse isotropically at `diffusion`
-/// m²/s, or per face along the weave (`face_tensors` `(F, 3)` float64 in m²/s, `face_uv`
+/// `topology` is a `Topology` or an `(F, 3)` face array (any integer dtype); `rest` and
+/// `positions` `(N, 3)` world positions in metres (rest pose; first frame), one row per
+/// vertex of the topology, of any float dtype and layout (as every array argument of the
+/// module, `args.rs`; read as float64). The densities diffuse isotropically at `diffusion`
+/// m²/s, or per face along the weave (`face_tensors` `(F, 3)` in m²/s, `face_uv`
 /// `(F, 3, 2)`, `face_angle` `(F,)`, as for `DiffusionStepper`; `face_angle` only with
 /// the other two); the default is isotropic, `DEFAULT_DIFFUSION` m²/s (2e-4: wicking in
 /// cotton, whose front advances about a centimetre in the first second: `D ≈ L²/2t`).
@@ -75,48 +75,9 @@ const DEFAULT_COLOR: (f64, f64, f64) = {
     (r, g, b)
 };
 
-fn f64s(a: &PyReadonlyArray1<'_, f32>) -> Vec<f64> {
-    a.as_array().iter().map(|&x| x as f64).collect()
-}
-
-fn dpoints(a: &PyReadonlyArray2<'_, f32>) -> PyResult<Vec<DVec3>> {
-    Ok(points(a)?.into_iter().map(|p| p.as_dvec3()).collect())
-}
-
-/// The `(N, 3)` positions passed as argument `name`, float32 or float64 (a float64 array
-/// keeps its precision: the core works in f64). Anything else is a `ParameterError` that
-/// names the argument and says what it got.
-fn positions_arg(name: &str, a: &Bound<'_, PyAny>) -> PyResult<Vec<DVec3>> {
-    fn rows<T: numpy::Element + Copy + Into<f64>>(
-        name: &str,
-        a: &PyReadonlyArray2<'_, T>,
-    ) -> PyResult<Vec<DVec3>> {
-        if let [n, k] = *a.shape()
-            && k != 3
-        {
-            return Err(ParameterError::new_err(format!(
-                "{name} must have shape (N, 3), got ({n}, {k})"
-            )));
-        }
-        Ok(a.as_array()
-            .rows()
-            .into_iter()
-            .map(|r| DVec3::new(r[0].into(), r[1].into(), r[2].into()))
-            .collect())
-    }
-    if let Ok(a) = a.extract::<PyReadonlyArray2<'_, f32>>() {
-        return rows(name, &a);
-    }
-    if let Ok(a) = a.extract::<PyReadonlyArray2<'_, f64>>() {
-        return rows(name, &a);
-    }
-    let got = match (a.getattr("dtype"), a.getattr("shape")) {
-        (Ok(dtype), Ok(shape)) => format!("a {dtype} array of shape {shape}"),
-        _ => format!("a {}", a.get_type().name()?),
-    };
-    Err(ParameterError::new_err(format!(
-        "{name} must be an (N, 3) float32 or float64 array, got {got}"
-    )))
+/// The `(N,)` float argument `name` as float64 values (any float dtype, see `args`).
+fn f64s(name: &str, a: &Bound<'_, PyAny>) -> PyResult<Vec<f64>> {
+    Ok(args::floats::<f64, Ix1>(name, a)?.as_array().to_vec())
 }
 
 fn out1<'py>(py: Python<'py>, v: &[f64]) -> Bound<'py, PyArray1<f32>> {
@@ -150,9 +111,9 @@ impl Simulator {
         rest: &Bound<'_, PyAny>,
         positions: &Bound<'_, PyAny>,
         diffusion: Option<f64>,
-        face_tensors: Option<PyReadonlyArray2<'_, f64>>,
-        face_uv: Option<PyReadonlyArray3<'_, f32>>,
-        face_angle: Option<PyReadonlyArray1<'_, f32>>,
+        face_tensors: Option<&Bound<'_, PyAny>>,
+        face_uv: Option<&Bound<'_, PyAny>>,
+        face_angle: Option<&Bound<'_, PyAny>>,
         color: (f64, f64, f64),
         gravity: (f64, f64, f64),
         viscosity: Option<f64>,
@@ -179,8 +140,8 @@ impl Simulator {
         detail: u32,
         threads: Option<usize>,
     ) -> PyResult<Self> {
-        let rest = positions_arg("rest", rest)?;
-        let pos = positions_arg("positions", positions)?;
+        let rest = dpoints("rest", rest)?;
+        let pos = dpoints("positions", positions)?;
         if rest.len() != pos.len() {
             return Err(ParameterError::new_err(format!(
                 "rest has {} rows but positions has {}: both need one row per vertex",
@@ -196,11 +157,10 @@ impl Simulator {
         let topo = if let Ok(t) = topology.cast::<Topology>() {
             t.get().inner.clone()
         } else {
-            let faces: PyReadonlyArray2<'_, u32> = topology.extract().map_err(|_| {
-                ParameterError::new_err(
-                    "topology must be a madder.Topology or an (F, 3) uint32 face array",
-                )
-            })?;
+            let faces = args::indices::<numpy::ndarray::Ix2>(
+                "topology (a madder.Topology or an (F, 3) face array)",
+                topology,
+            )?;
             if faces.shape()[1] != 3 {
                 return Err(ParameterError::new_err(format!(
                     "faces must have shape (F, 3), got {:?}",
@@ -283,7 +243,7 @@ impl Simulator {
         })
     }
 
-    /// Advances one frame: the cloth moves to `positions` ((N, 3) float32 or float64) over `dt`
+    /// Advances one frame: the cloth moves to `positions` ((N, 3), any float dtype) over `dt`
     /// seconds. `after`, the positions one frame later when known, makes the cloth's
     /// acceleration second-order accurate (and right at the first frame). Releases the
     /// GIL. On error the simulator stays at the previous frame.
@@ -295,38 +255,38 @@ impl Simulator {
         dt: f64,
         after: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<()> {
-        let pos = positions_arg("positions", positions)?;
-        let after = after.map(|a| positions_arg("after", a)).transpose()?;
+        let pos = dpoints("positions", positions)?;
+        let after = after.map(|a| dpoints("after", a)).transpose()?;
         self.run(py, |s| s.step(&pos, dt, after.as_deref()))
             .map_err(to_py)
     }
 
-    /// Pours `solvent` ((N,) float32, kg/m², ≥ 0) at every vertex, with `concentration`
+    /// Pours `solvent` ((N,) floats, kg/m², ≥ 0) at every vertex, with `concentration`
     /// kg of solute per kg of solvent, of `color` (RGB; default the liquid's colour).
     #[pyo3(signature = (solvent, concentration=0.05, color=None))]
     fn add_liquid(
         &mut self,
-        solvent: PyReadonlyArray1<'_, f32>,
+        solvent: &Bound<'_, PyAny>,
         concentration: f64,
         color: Option<[f64; 3]>,
     ) -> PyResult<()> {
-        let d = f64s(&solvent);
+        let d = f64s("solvent", solvent)?;
         self.inner
             .add_liquid(&d, concentration, color)
             .map_err(to_py)
     }
 
     /// A splash: a random outgoing velocity (m/s) away from `center` (world), for the
-    /// vertices with `weights` > 0 ((N,) float32, scaling the speed), reproducible from
+    /// vertices with `weights` > 0 ((N,) floats, scaling the speed), reproducible from
     /// `seed`.
     fn splash(
         &mut self,
         center: (f64, f64, f64),
         speed: f64,
         seed: u64,
-        weights: PyReadonlyArray1<'_, f32>,
+        weights: &Bound<'_, PyAny>,
     ) -> PyResult<()> {
-        let w = f64s(&weights);
+        let w = f64s("weights", weights)?;
         let c = DVec3::new(center.0, center.1, center.2);
         self.inner.splash(c, speed, seed, &w).map_err(to_py)
     }
@@ -445,11 +405,11 @@ impl Simulator {
         )
     }
 
-    /// Sets the velocity from world vectors ((N, 3) float32, projected on each vertex's
-    /// tangent plane).
+    /// Sets the velocity from world vectors ((N, 3), any float dtype, projected on each
+    /// vertex's tangent plane).
     #[setter]
-    fn set_velocity(&mut self, velocity: PyReadonlyArray2<'_, f32>) -> PyResult<()> {
-        let w = dpoints(&velocity)?;
+    fn set_velocity(&mut self, velocity: &Bound<'_, PyAny>) -> PyResult<()> {
+        let w = dpoints("velocity", velocity)?;
         self.inner.set_velocity_world(&w).map_err(to_py)
     }
 

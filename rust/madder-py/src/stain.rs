@@ -1,23 +1,23 @@
 //! `DiffusionStepper`: implicit diffusion on a deforming mesh (core module `stain`).
 
-use numpy::{
-    PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
-    PyUntypedArrayMethods,
-};
+use numpy::ndarray::{Ix1, Ix2, Ix3};
+use numpy::{PyArray1, PyArrayMethods, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
+use crate::args;
 use crate::errors::{ParameterError, to_py};
-use crate::mesh::{Topology, points};
+use crate::mesh::{Topology, dpoints, points};
 use crate::threads::Pool;
 
 /// Diffuses a density (per unit area, one value per vertex) while the mesh moves.
 ///
 /// `DiffusionStepper(topology, positions, density, rate=None, *, face_tensors=None,
-/// face_uv=None, face_angle=None, threads=None)`: `positions` is the `(N, 3)` float32 start
-/// pose, `density` a `(N,)` float32 array. Either `rate`, an isotropic diffusion coefficient
-/// in m²/s, or a woven cloth: `face_tensors` `(F, 3)` float64 `[s11, s12, s22]` in m²/s in
-/// each face's (weft, warp) basis, `face_uv` `(F, 3, 2)` float32 corner UVs (the weft is the
-/// UV u axis) and optionally `face_angle` `(F,)` float32 weft offsets in radians.
+/// face_uv=None, face_angle=None, threads=None)`: `positions` is the `(N, 3)` start pose
+/// (read as float32), `density` a `(N,)` array. Either `rate`, an isotropic diffusion
+/// coefficient in m²/s, or a woven cloth: `face_tensors` `(F, 3)` `[s11, s12, s22]` in m²/s
+/// in each face's (weft, warp) basis, `face_uv` `(F, 3, 2)` corner UVs (the weft is the UV
+/// u axis) and optionally `face_angle` `(F,)` weft offsets in radians. Array arguments take
+/// any float dtype and layout (see `args.rs`).
 /// `threads` caps the worker threads (results do not depend on it).
 #[pyclass(module = "madder")]
 pub struct DiffusionStepper {
@@ -33,17 +33,19 @@ impl DiffusionStepper {
     fn new(
         py: Python<'_>,
         topology: &Topology,
-        positions: PyReadonlyArray2<'_, f32>,
-        density: PyReadonlyArray1<'_, f32>,
+        positions: &Bound<'_, PyAny>,
+        density: &Bound<'_, PyAny>,
         rate: Option<f64>,
-        face_tensors: Option<PyReadonlyArray2<'_, f64>>,
-        face_uv: Option<PyReadonlyArray3<'_, f32>>,
-        face_angle: Option<PyReadonlyArray1<'_, f32>>,
+        face_tensors: Option<&Bound<'_, PyAny>>,
+        face_uv: Option<&Bound<'_, PyAny>>,
+        face_angle: Option<&Bound<'_, PyAny>>,
         threads: Option<usize>,
     ) -> PyResult<Self> {
         let conductivity = conductivity(rate, face_tensors, face_uv, face_angle)?;
-        let pos = points(&positions)?;
-        let density: Vec<f64> = density.as_array().iter().map(|&d| d as f64).collect();
+        let pos = points("positions", positions)?;
+        let density = args::floats::<f64, Ix1>("density", density)?
+            .as_array()
+            .to_vec();
         let topo = topology.inner.clone();
         let pool = Pool::new(threads)?;
         let inner = pool.run(py, || {
@@ -55,17 +57,17 @@ impl DiffusionStepper {
         })
     }
 
-    /// Moves the mesh to `positions` ((N, 3) float32) over `dt` seconds, diffusing in
+    /// Moves the mesh to `positions` ((N, 3), read as float32) over `dt` seconds, diffusing in
     /// `substeps` implicit steps. Releases the GIL. On error the state is unchanged.
     #[pyo3(signature = (positions, dt, substeps=1))]
     fn step(
         &mut self,
         py: Python<'_>,
-        positions: PyReadonlyArray2<'_, f32>,
+        positions: &Bound<'_, PyAny>,
         dt: f64,
         substeps: u32,
     ) -> PyResult<()> {
-        let pos = points(&positions)?;
+        let pos = points("positions", positions)?;
         let Self { inner, pool } = self;
         pool.run(py, || inner.step(&pos, dt, substeps))
             .map_err(to_py)
@@ -89,25 +91,23 @@ impl DiffusionStepper {
         self.inner.degenerate_uv_faces()
     }
 
-    /// Starts tracking the liquid's colour; `colors` `(N, 3)` float32 is the RGB of the
+    /// Starts tracking the liquid's colour; `colors` `(N, 3)` is the RGB of the
     /// liquid now at each vertex. Colours then mix by mass as the liquid spreads.
-    fn enable_color(&mut self, colors: PyReadonlyArray2<'_, f32>) -> PyResult<()> {
-        let c: Vec<[f64; 3]> = points(&colors)?
+    fn enable_color(&mut self, colors: &Bound<'_, PyAny>) -> PyResult<()> {
+        let c: Vec<[f64; 3]> = dpoints("colors", colors)?
             .into_iter()
-            .map(|v| v.as_dvec3().to_array())
+            .map(|v| v.to_array())
             .collect();
         self.inner.enable_color(&c).map_err(to_py)
     }
 
-    /// Adds `delta` `(N,)` float32 liquid per unit area (≥ 0) at every vertex, of colour
+    /// Adds `delta` `(N,)` liquid per unit area (≥ 0) at every vertex, of colour
     /// `color` (RGB; required once colour is tracked).
     #[pyo3(signature = (delta, color=None))]
-    fn add_liquid(
-        &mut self,
-        delta: PyReadonlyArray1<'_, f32>,
-        color: Option<[f64; 3]>,
-    ) -> PyResult<()> {
-        let d: Vec<f64> = delta.as_array().iter().map(|&x| x as f64).collect();
+    fn add_liquid(&mut self, delta: &Bound<'_, PyAny>, color: Option<[f64; 3]>) -> PyResult<()> {
+        let d = args::floats::<f64, Ix1>("delta", delta)?
+            .as_array()
+            .to_vec();
         self.inner.add_liquid(&d, color).map_err(to_py)
     }
 
@@ -129,11 +129,17 @@ impl DiffusionStepper {
 
 pub(crate) fn conductivity(
     rate: Option<f64>,
-    tensors: Option<PyReadonlyArray2<'_, f64>>,
-    uv: Option<PyReadonlyArray3<'_, f32>>,
-    angle: Option<PyReadonlyArray1<'_, f32>>,
+    tensors: Option<&Bound<'_, PyAny>>,
+    uv: Option<&Bound<'_, PyAny>>,
+    angle: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<madder::stain::Conductivity> {
     use madder::stain::{Conductivity, WovenFaces};
+    let tensors = tensors
+        .map(|t| args::floats::<f64, Ix2>("face_tensors", t))
+        .transpose()?;
+    let uv = uv
+        .map(|u| args::floats::<f64, Ix3>("face_uv", u))
+        .transpose()?;
     match (rate, tensors, uv) {
         (Some(d), None, None) => Ok(Conductivity::Isotropic(d)),
         (None, Some(t), Some(uv)) => {
@@ -152,10 +158,12 @@ pub(crate) fn conductivity(
                 .collect();
             let uv = uv.as_array();
             let uv: Vec<[[f64; 2]; 3]> = (0..uv.shape()[0])
-                .map(|f| std::array::from_fn(|k| [uv[[f, k, 0]] as f64, uv[[f, k, 1]] as f64]))
+                .map(|f| std::array::from_fn(|k| [uv[[f, k, 0]], uv[[f, k, 1]]]))
                 .collect();
             let angle = match angle {
-                Some(a) => a.as_array().iter().map(|&x| x as f64).collect(),
+                Some(a) => args::floats::<f64, Ix1>("face_angle", a)?
+                    .as_array()
+                    .to_vec(),
                 None => vec![0.0; tensor.len()],
             };
             Ok(Conductivity::Woven(WovenFaces { tensor, uv, angle }))

@@ -5,55 +5,34 @@ use std::path::PathBuf;
 
 use std::sync::Arc;
 
-use numpy::{
-    PyArray1, PyArrayDyn, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
-    PyReadonlyArrayDyn, PyUntypedArrayMethods,
-};
+use numpy::ndarray::{Ix1, Ix2, Ix3, IxDyn};
+use numpy::{PyArray1, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
+use crate::args;
 use crate::errors::{ParameterError, to_py};
 use crate::threads::Pool;
 use crate::weave::Corrector;
 use madder::texture as core;
 
-/// The `(T, 3, 2)` UVs, float32 or float64, as owned `f64` triples.
+/// The `(T, 3, 2)` UVs (any float dtype) as owned `f64` triples.
 fn uv_arg(a: &Bound<'_, PyAny>) -> PyResult<Vec<[[f64; 2]; 3]>> {
-    fn rows<T: numpy::Element + Copy + Into<f64>>(
-        a: &PyReadonlyArray3<'_, T>,
-    ) -> PyResult<Vec<[[f64; 2]; 3]>> {
-        let shape = a.shape();
-        if shape[1] != 3 || shape[2] != 2 {
-            return Err(ParameterError::new_err(format!(
-                "uv must have shape (T, 3, 2), got {shape:?}"
-            )));
-        }
-        let a = a.as_array();
-        Ok(a.outer_iter()
-            .map(|t| std::array::from_fn(|k| [t[[k, 0]].into(), t[[k, 1]].into()]))
-            .collect())
+    let a = args::floats::<f64, Ix3>("uv", a)?;
+    let shape = a.shape();
+    if shape[1] != 3 || shape[2] != 2 {
+        return Err(ParameterError::new_err(format!(
+            "uv must have shape (T, 3, 2), got {shape:?}"
+        )));
     }
-    if let Ok(a) = a.extract::<PyReadonlyArray3<'_, f32>>() {
-        return rows(&a);
-    }
-    if let Ok(a) = a.extract::<PyReadonlyArray3<'_, f64>>() {
-        return rows(&a);
-    }
-    Err(ParameterError::new_err(format!(
-        "uv must be a (T, 3, 2) float32 or float64 array, got {}",
-        describe(a)?
-    )))
+    let a = a.as_array();
+    Ok(a.outer_iter()
+        .map(|t| std::array::from_fn(|k| [t[[k, 0]], t[[k, 1]]]))
+        .collect())
 }
 
-/// What an argument is, for an error message.
-fn describe(a: &Bound<'_, PyAny>) -> PyResult<String> {
-    Ok(match (a.getattr("dtype"), a.getattr("shape")) {
-        (Ok(dtype), Ok(shape)) => format!("a {dtype} array of shape {shape}"),
-        _ => format!("a {}", a.get_type().name()?),
-    })
-}
-
-/// A float32 array of 1 to 3 dimensions, copied (C order) into owned data, with its shape.
-fn floats(name: &str, a: &PyReadonlyArrayDyn<'_, f32>, ndim: &[usize]) -> PyResult<Vec<f32>> {
+/// The float32 values of `a` (converted by `args`) with one of `ndim` dimensions, copied in
+/// C order.
+fn flat(name: &str, a: &PyReadonlyArrayDyn<'_, f32>, ndim: &[usize]) -> PyResult<Vec<f32>> {
     if !ndim.contains(&a.ndim()) {
         return Err(ParameterError::new_err(format!(
             "{name} must have {} dimensions, got shape {:?}",
@@ -64,9 +43,12 @@ fn floats(name: &str, a: &PyReadonlyArrayDyn<'_, f32>, ndim: &[usize]) -> PyResu
             a.shape()
         )));
     }
-    Ok(match a.as_slice() {
-        Ok(s) => s.to_vec(),
-        Err(_) => a.as_array().iter().copied().collect(),
+    // ndarray's `as_slice` is C order only (numpy's would also give a Fortran-order
+    // array's memory, which is not the values in C order)
+    let view = a.as_array();
+    Ok(match view.as_slice() {
+        Some(s) => s.to_vec(),
+        None => view.iter().copied().collect(),
     })
 }
 
@@ -83,8 +65,8 @@ fn size_arg(name: &str, size: i64) -> PyResult<usize> {
 /// The weave's fine scale for `rasterize(..., weave=)` (core `texture::WeaveDetail`).
 ///
 /// `WeaveDetail(correctors, face_fabric, face_map, uptake)`: `correctors` a list of
-/// `Corrector`s (`fabric_corrector`); `face_fabric` `(T,)` uint32, per triangle its
-/// corrector's index or `NO_WEAVE`; `face_map` `(T, 2, 2)` float64, per triangle the map
+/// `Corrector`s (`fabric_corrector`); `face_fabric` `(T,)` (any integer dtype), per
+/// triangle its corrector's index or `NO_WEAVE`; `face_map` `(T, 2, 2)` floats, per triangle the map
 /// from UV to threads along the weft (row 0) and the warp (row 1), zero for none;
 /// `uptake`, per image channel, whether the threads' uptake applies (the deposit) or only
 /// the corrector (wetness). Checked against the faces by `rasterize`.
@@ -101,10 +83,12 @@ impl WeaveDetail {
     #[new]
     fn new(
         correctors: Vec<PyRef<'_, Corrector>>,
-        face_fabric: PyReadonlyArray1<'_, u32>,
-        face_map: PyReadonlyArray3<'_, f64>,
+        face_fabric: &Bound<'_, PyAny>,
+        face_map: &Bound<'_, PyAny>,
         uptake: Vec<bool>,
     ) -> PyResult<Self> {
+        let face_fabric = args::indices::<Ix1>("face_fabric", face_fabric)?;
+        let face_map = args::floats::<f64, Ix3>("face_map", face_map)?;
         let m = face_map.as_array();
         if m.shape()[1..] != [2, 2] {
             return Err(ParameterError::new_err(format!(
@@ -135,10 +119,10 @@ impl WeaveDetail {
 /// `rasterize(faces, uv, values, size, padding=4, *, out=None, threads=None, weave=None)
 /// -> (image, overlapping_texels)`
 ///
-/// `faces` `(T, 3)` uint32: the vertices whose values triangle `t` interpolates; `uv`
-/// `(T, 3, 2)` float32 or float64: its corners' UVs (one triple per triangle, so a vertex
-/// on a UV seam has a UV on each side); `values` `(N, C)` float32 (or `(N,)`, one
-/// channel). The image is `(size, size, C)` float32 (`(size, size)` for 1-D values),
+/// `faces` `(T, 3)` (any integer dtype): the vertices whose values triangle `t`
+/// interpolates; `uv` `(T, 3, 2)` (any float dtype, read as float64): its corners' UVs (one
+/// triple per triangle, so a vertex on a UV seam has a UV on each side); `values` `(N, C)`
+/// (any float dtype, read as float32; or `(N,)`, one channel). The image is `(size, size, C)` float32 (`(size, size)` for 1-D values),
 /// row 0 at the bottom (`v ∈ [0, 1/size)`), as Blender's `Image.pixels`: each texel whose
 /// centre lies in a triangle holds the barycentric interpolation of its vertex values
 /// there, each island is then grown by `padding` texels (each new texel the mean of its
@@ -160,9 +144,9 @@ impl WeaveDetail {
 #[allow(clippy::type_complexity, clippy::too_many_arguments)]
 pub fn rasterize<'py>(
     py: Python<'py>,
-    faces: PyReadonlyArray2<'py, u32>,
+    faces: &Bound<'py, PyAny>,
     uv: &Bound<'py, PyAny>,
-    values: PyReadonlyArrayDyn<'py, f32>,
+    values: &Bound<'py, PyAny>,
     size: i64,
     padding: i64,
     out: Option<Bound<'py, PyArrayDyn<f32>>>,
@@ -193,6 +177,7 @@ pub fn rasterize<'py>(
     let size = size_arg("size", size)?;
     let padding = usize::try_from(padding)
         .map_err(|_| ParameterError::new_err(format!("padding must be ≥ 0, got {padding}")))?;
+    let faces = args::indices::<Ix2>("faces", faces)?;
     if faces.shape()[1] != 3 {
         return Err(ParameterError::new_err(format!(
             "faces must have shape (T, 3), got {:?}",
@@ -206,9 +191,10 @@ pub fn rasterize<'py>(
         .map(|r| [r[0], r[1], r[2]])
         .collect();
     let uv = uv_arg(uv)?;
+    let values = args::floats::<f32, IxDyn>("values", values)?;
     let one = values.ndim() == 1;
     let channels = if one { 1 } else { values.shape()[1] };
-    let values = floats("values", &values, &[1, 2])?;
+    let values = flat("values", &values, &[1, 2])?;
     let pool = Pool::new(threads)?;
     let shape: Vec<usize> = if one {
         vec![size, size]
@@ -216,6 +202,12 @@ pub fn rasterize<'py>(
         vec![size, size, channels]
     };
     if let Some(out) = out {
+        if !out.is_c_contiguous() {
+            // numpy's `as_slice_mut` would also give a Fortran-order array's memory
+            return Err(ParameterError::new_err(
+                "out must be a C-contiguous, writeable float32 array",
+            ));
+        }
         if out.shape() != shape.as_slice() {
             return Err(ParameterError::new_err(format!(
                 "out must have shape {shape:?}, got {:?}",
@@ -265,8 +257,8 @@ pub fn rasterize<'py>(
 
 /// Writes an image as a half-float OpenEXR file, atomically.
 ///
-/// `write_exr(path, image, channels=("R", "G", "B", "A"))`: `image` `(H, W, C)` float32
-/// (or `(H, W)` with one channel name), row 0 at the bottom as `rasterize` returns it
+/// `write_exr(path, image, channels=("R", "G", "B", "A"))`: `image` `(H, W, C)` (any float
+/// dtype; or `(H, W)` with one channel name), row 0 at the bottom as `rasterize` returns it
 /// (EXR stores the top row first: rows are flipped in the file); `channels` one name per
 /// channel. RLE-compressed. The file is written beside `path` and renamed over it, so a
 /// failure never leaves a partial file there (and keeps a previous one). Raises
@@ -277,12 +269,13 @@ pub fn rasterize<'py>(
 pub fn write_exr(
     py: Python<'_>,
     path: PathBuf,
-    image: PyReadonlyArrayDyn<'_, f32>,
+    image: &Bound<'_, PyAny>,
     channels: Vec<String>,
 ) -> PyResult<()> {
+    let image = args::floats::<f32, IxDyn>("image", image)?;
     let shape = image.shape().to_vec();
     let c = if shape.len() == 3 { shape[2] } else { 1 };
-    let pixels = floats("image", &image, &[2, 3])?;
+    let pixels = flat("image", &image, &[2, 3])?;
     if c != channels.len() {
         return Err(ParameterError::new_err(format!(
             "image has {c} channels (shape {shape:?}), but {} channel names were given: {channels:?}",

@@ -2,9 +2,11 @@
 
 use std::sync::Arc;
 
-use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray3};
+use numpy::ndarray::Ix3;
+use numpy::{PyArray1, PyArray2, PyArrayMethods};
 use pyo3::prelude::*;
 
+use crate::args;
 use crate::errors::{ParameterError, to_py};
 use madder::weave::{PairCoefficients, Tile, Weave};
 
@@ -86,13 +88,14 @@ pub fn fabric_tensor<'py>(
     Ok(PyArray1::from_vec(py, eff.to_vec()))
 }
 
-/// Effective tensor of a tile of per-cell tensors, `tensors` `(H, W, 3)` float64, row 0
+/// Effective tensor of a tile of per-cell tensors, `tensors` `(H, W, 3)` (any float dtype), row 0
 /// at the bottom (y = 0).
 #[pyfunction]
 pub fn homogenize<'py>(
     py: Python<'py>,
-    tensors: PyReadonlyArray3<'py, f64>,
+    tensors: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let tensors = args::floats::<f64, Ix3>("tensors", tensors)?;
     let a = tensors.as_array();
     let &[h, w, k] = a.shape() else {
         unreachable!()

@@ -3,7 +3,15 @@
 Checked against the binding by `tests/python/test_stubs.py`: every class, method,
 property, function and constant here exists there and the other way round, with the same
 parameter names and defaults wherever pyo3 gives a signature. A binding change without a
-change here fails that test. Arrays are numpy arrays; float32 at the boundary unless said.
+change here fails that test.
+
+Array arguments follow one convention (the binding's `args.rs`): a float argument
+(`_Floats`) takes any float dtype (float16, float32, float64) in any layout (C or Fortran
+order, strided views) or anything `numpy.asarray` turns into one, converted once (float16
+and float32 to float64 exactly, float64 to float32 rounded to nearest where the core reads
+float32); an index argument (`_Indices`: faces, face_polygon, ...) takes any integer dtype
+and refuses negative indices. Anything else is a `ParameterError` naming the argument.
+Returned arrays are numpy arrays of the dtype their annotation says.
 """
 
 from collections.abc import Callable
@@ -16,6 +24,10 @@ import numpy.typing as npt
 _F32 = npt.NDArray[np.float32]
 _F64 = npt.NDArray[np.float64]
 _U32 = npt.NDArray[np.uint32]
+_Floats = npt.ArrayLike
+"""A float array argument: any float dtype, any layout (see the module docstring)."""
+_Indices = npt.ArrayLike
+"""An index array argument: any integer dtype, no negative index (see the module docstring)."""
 _Path = str | PathLike[str]
 _RGB = tuple[float, float, float]
 
@@ -35,9 +47,9 @@ class MadderError(Exception):
 class Topology:
     def __new__(
         cls,
-        faces: _U32,
+        faces: _Indices,
         n_vertices: int,
-        face_polygon: _U32 | None = None,
+        face_polygon: _Indices | None = None,
         n_polygons: int | None = None,
     ) -> Topology: ...
     @property
@@ -54,23 +66,23 @@ class Topology:
     def __repr__(self) -> str: ...
 
 def ftle(
-    faces: _U32,
-    positions: _F64,
-    velocity: Callable[[float, _F64], npt.ArrayLike] | _F64,
+    faces: _Indices,
+    positions: _Floats,
+    velocity: Callable[[float, _F64], npt.ArrayLike] | _Floats,
     t0: float,
     T: float,
     *,
     steps: int = 100,
-    times: _F64 | None = None,
+    times: _Floats | None = None,
     method: Literal["rk4", "rk8"] = "rk4",
 ) -> _F64:
     """FTLE σ = ln √λmax / |T| per vertex (seed §5.2, §5.5.1); positions (N, 3) or (K, N, 3);
     `steps` fixed steps of `method` ("rk4": classical RK4; "rk8": DOP853's 8th-order solution)."""
 
 def ridges(
-    faces: _U32,
-    positions: _F64,
-    field: _F64,
+    faces: _Indices,
+    positions: _Floats,
+    field: _Floats,
     *,
     smoothing: float = 1.0,
     hessian_smoothing: float = 1.0,
@@ -84,52 +96,52 @@ def ridges(
 ) -> dict[str, npt.NDArray[Any]]:
     """Ridges of a field: triangles (P,), barycentric (P, 3), points (P, 3), edges (E, 2)."""
 
-def encode_angles(faces: _U32, positions: _F64) -> tuple[_F64, _F64, _U32]:
+def encode_angles(faces: _Indices, positions: _Floats) -> tuple[_F64, _F64, _U32]:
     """Corner angles (F, 3), signed dihedral angles (E,) and interior edges (E, 2) (seed ch. 3)."""
 
 def decode_angles(
-    faces: _U32,
-    corners: _F64,
-    dihedrals: _F64,
+    faces: _Indices,
+    corners: _Floats,
+    dihedrals: _Floats,
     *,
     reference_face: int | None = None,
-    reference_positions: _F64 | None = None,
+    reference_positions: _Floats | None = None,
     refine_iterations: int = 0,
     method: str = "spectral",
-    previous: _F64 | None = None,
+    previous: _Floats | None = None,
 ) -> _F64:
     """Vertex positions (N, 3) from corner and dihedral angles (spectral, tracked or sequential)."""
 
 def weft_directions(
     topology: Topology,
-    positions: _F32,
-    face_uv: _F32,
-    face_angle: _F32 | None = None,
+    positions: _Floats,
+    face_uv: _Floats,
+    face_angle: _Floats | None = None,
 ) -> _F32: ...
-def distances_within(points_: _F32, vertices: _F32, triangles: _U32, cutoff: float) -> _F32: ...
+def distances_within(points_: _Floats, vertices: _Floats, triangles: _Indices, cutoff: float) -> _F32: ...
 
 class DiffusionStepper:
     def __new__(
         cls,
         topology: Topology,
-        positions: _F32,
-        density: _F32,
+        positions: _Floats,
+        density: _Floats,
         rate: float | None = None,
         *,
-        face_tensors: _F64 | None = None,
-        face_uv: _F32 | None = None,
-        face_angle: _F32 | None = None,
+        face_tensors: _Floats | None = None,
+        face_uv: _Floats | None = None,
+        face_angle: _Floats | None = None,
         threads: int | None = None,
     ) -> DiffusionStepper: ...
-    def step(self, positions: _F32, dt: float, substeps: int = 1) -> None: ...
+    def step(self, positions: _Floats, dt: float, substeps: int = 1) -> None: ...
     @property
     def density(self) -> _F32: ...
     @property
     def vertex_area(self) -> _F64: ...
     @property
     def degenerate_uv_faces(self) -> int: ...
-    def enable_color(self, colors: _F32) -> None: ...
-    def add_liquid(self, delta: _F32, color: _RGB | None = None) -> None: ...
+    def enable_color(self, colors: _Floats) -> None: ...
+    def add_liquid(self, delta: _Floats, color: _RGB | None = None) -> None: ...
     @property
     def color(self) -> _F32 | None: ...
     def total_mass(self) -> float: ...
@@ -137,14 +149,14 @@ class DiffusionStepper:
 class Simulator:
     def __new__(
         cls,
-        topology: Topology | _U32,
-        rest: _F32 | _F64,
-        positions: _F32 | _F64,
+        topology: Topology | _Indices,
+        rest: _Floats,
+        positions: _Floats,
         *,
         diffusion: float | None = None,
-        face_tensors: _F64 | None = None,
-        face_uv: _F32 | None = None,
-        face_angle: _F32 | None = None,
+        face_tensors: _Floats | None = None,
+        face_uv: _Floats | None = None,
+        face_angle: _Floats | None = None,
         color: _RGB = ...,
         gravity: _RGB = (0.0, 0.0, -9.81),
         viscosity: float | None = None,
@@ -171,9 +183,9 @@ class Simulator:
         detail: int = 0,
         threads: int | None = None,
     ) -> Simulator: ...
-    def step(self, positions: _F32 | _F64, dt: float, after: _F32 | _F64 | None = None) -> None: ...
-    def add_liquid(self, solvent: _F32, concentration: float = 0.05, color: _RGB | None = None) -> None: ...
-    def splash(self, center: _RGB, speed: float, seed: int, weights: _F32) -> None: ...
+    def step(self, positions: _Floats, dt: float, after: _Floats | None = None) -> None: ...
+    def add_liquid(self, solvent: _Floats, concentration: float = 0.05, color: _RGB | None = None) -> None: ...
+    def splash(self, center: _RGB, speed: float, seed: int, weights: _Floats) -> None: ...
     def wetness(self, *, fine: bool = False) -> _F32: ...
     def stain(self, *, fine: bool = False) -> _F32: ...
     def deposit(self, *, fine: bool = False) -> _F32: ...
@@ -183,7 +195,7 @@ class Simulator:
     @property
     def velocity(self) -> _F32: ...
     @velocity.setter
-    def velocity(self, velocity: _F32) -> None: ...
+    def velocity(self, velocity: _Floats) -> None: ...
     @property
     def vertex_area(self) -> _F64: ...
     def profile(self) -> dict[str, float | int | dict[str, dict[str, float]]]: ...
@@ -203,13 +215,13 @@ class Refinement:
     @property
     def n_faces(self) -> int: ...
     def faces(self) -> _U32: ...
-    def face_uv(self, face_uv: _F32) -> _F32: ...
+    def face_uv(self, face_uv: _Floats) -> _F32: ...
     def __repr__(self) -> str: ...
 
 def rasterize(
-    faces: _U32,
-    uv: _F32 | _F64,
-    values: _F32,
+    faces: _Indices,
+    uv: _Floats,
+    values: _Floats,
     size: int,
     padding: int = 4,
     *,
@@ -221,11 +233,11 @@ def rasterize(
 
 class WeaveDetail:
     def __new__(
-        cls, correctors: list[Corrector], face_fabric: _U32, face_map: _F64, uptake: list[bool]
+        cls, correctors: list[Corrector], face_fabric: _Indices, face_map: _Floats, uptake: list[bool]
     ) -> WeaveDetail: ...
     @property
     def n_faces(self) -> int: ...
-def write_exr(path: _Path, image: _F32, channels: list[str] = ...) -> None: ...
+def write_exr(path: _Path, image: _Floats, channels: list[str] = ...) -> None: ...
 def read_exr(path: _Path) -> _F32: ...
 
 class CacheWriter:
@@ -238,7 +250,7 @@ class CacheWriter:
         n_frames: int,
         frame_time: float = 0.0,
     ) -> CacheWriter: ...
-    def push_frame(self, fields: list[_F32]) -> None: ...
+    def push_frame(self, fields: list[_Floats]) -> None: ...
     def finish(self) -> Any: ...
     def abort(self) -> None: ...
 
@@ -303,7 +315,7 @@ class Corrector:
     def energy(self) -> list[float]: ...
     def __repr__(self) -> str: ...
 
-def homogenize(tensors: _F64) -> _F64: ...
+def homogenize(tensors: _Floats) -> _F64: ...
 def ellipse(tensor: tuple[float, float, float]) -> tuple[float, float]: ...
 
 class PointCache:
@@ -335,7 +347,7 @@ class MotionEncoder:
     def __new__(
         cls,
         path: _Path,
-        faces: _U32,
+        faces: _Indices,
         *,
         start: float = 1.0,
         rate: float = 1.0,
@@ -345,7 +357,7 @@ class MotionEncoder:
         keyframe_interval: int = 16,
         warm: str = "tracked",
     ) -> MotionEncoder: ...
-    def add_frame(self, positions: _F32 | _F64) -> _F32: ...
+    def add_frame(self, positions: _Floats) -> _F32: ...
     def finish(self) -> dict[str, Any]: ...
     def abort(self) -> None: ...
     @property
@@ -378,10 +390,10 @@ class MotionCodec:
     def __len__(self) -> int: ...
     def __repr__(self) -> str: ...
 
-def position_baseline_stats(frames: _F64, bits: int, predict: bool = True) -> dict[str, float]: ...
+def position_baseline_stats(frames: _Floats, bits: int, predict: bool = True) -> dict[str, float]: ...
 class Pc2Writer:
     def __new__(cls, path: _Path, n_points: int, start: float = 1.0, rate: float = 1.0) -> Pc2Writer: ...
-    def add_frame(self, positions: _F32) -> None: ...
+    def add_frame(self, positions: _Floats) -> None: ...
     def finish(self) -> None: ...
     def abort(self) -> None: ...
     @property
@@ -390,5 +402,5 @@ class Pc2Writer:
     def path(self) -> Any: ...
     def __repr__(self) -> str: ...
 
-def write_pc2(path: _Path, frames: _F32, start: float = 1.0, rate: float = 1.0) -> None: ...
-def write_mdd(path: _Path, frames: _F32, times: list[float]) -> None: ...
+def write_pc2(path: _Path, frames: _Floats, start: float = 1.0, rate: float = 1.0) -> None: ...
+def write_mdd(path: _Path, frames: _Floats, times: list[float]) -> None: ...

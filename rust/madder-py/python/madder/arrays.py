@@ -1,6 +1,7 @@
-"""Array conversion at the Python boundary: the native module takes C-contiguous float32
-positions of shape (N, 3) and uint32 faces of shape (F, 3); these helpers convert anything
-array-like without copying when it already has that form."""
+"""Array shaping for callers: the native module itself takes any float dtype and layout for
+float arguments and any integer dtype for indices (converting once; see `_core.pyi`); these
+helpers give the add-on's usual forms, (N, 3) float32 positions and (F, 3) uint32 faces,
+C-contiguous, without copying when the array already has that form."""
 
 import numpy as np
 
