@@ -7,7 +7,7 @@ use super::solver::{WarmCg, refill};
 impl WarmCg {
     /// The factor's pattern (the strict lower triangle by columns and by rows) and IC(0)'s
     /// updates, from the full pattern: what [`Self::solve`] needs beyond the product
-    /// (module doc). Done once per pattern, when a scalar solve first needs it, or at
+    /// (`precond.rs`). Done once per pattern, when a scalar solve first needs it, or at
     /// [`Self::rebuild`] for IC(0).
     pub(super) fn analyze(&mut self) {
         let n = self.n;
@@ -98,7 +98,7 @@ impl WarmCg {
         self.analyzed = true;
     }
 
-    /// `L̃ = L D⁻¹`, `D̃ = D` (module doc): symmetric Gauss–Seidel.
+    /// `L̃ = L D⁻¹`, `D̃ = D` (`precond.rs`): symmetric Gauss–Seidel.
     pub(super) fn gauss_seidel(&mut self, values: &[f64]) {
         for j in 0..self.n {
             let inv = self.inv_diag[j];
@@ -117,7 +117,7 @@ pub(super) const IC_SHIFTS: [f64; 3] = [0.0, 1e-2, 1e-1];
 /// A pivot below this fraction of its (shifted) diagonal counts as a breakdown.
 const MIN_PIVOT: f64 = 1e-8;
 
-/// IC(0) of `A + shift·diag(A)` on the pattern, as `(I + L̃) D̃ (I + L̃)ᵀ` (module doc),
+/// IC(0) of `A + shift·diag(A)` on the pattern, as `(I + L̃) D̃ (I + L̃)ᵀ` (`precond.rs`),
 /// right-looking: column `k` updates the diagonal and the in-pattern entries of the
 /// columns it couples, then is scaled by `1/d_k`. Returns `false` on a pivot that is not
 /// positive (or not finite).

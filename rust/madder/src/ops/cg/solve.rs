@@ -32,7 +32,7 @@ impl WarmCg {
         self.solve_columns(values, b, x, false)
     }
 
-    /// [`Self::solve`] for columns that are related (module doc, "Related columns"): one
+    /// [`Self::solve`] for columns that are related (`chained.rs`): one
     /// after the other, each warm start first improved along the correction the previous
     /// column's solve made to its own warm start. Sequential, so deterministic; the same
     /// tolerance per column.

@@ -28,7 +28,7 @@ pub(crate) const RELATIVE_TOLERANCE: f64 = 1e-12;
 pub(crate) const MAX_ITERATIONS: usize = 2000;
 
 /// A symmetric positive definite system on a fixed pattern, solved by warm-started
-/// CG preconditioned by IC(0) (module doc).
+/// CG preconditioned by IC(0) (overview in the `cg` module doc).
 pub struct WarmCg {
     pub(super) n: usize,
     /// The full symmetric pattern, compressed by columns (= by rows).
@@ -106,7 +106,7 @@ impl WarmCg {
     }
 
     /// The same solver with another preconditioner: for benchmarks and tests that compare
-    /// them (module doc); the default is the fastest measured.
+    /// them (`precond.rs`); the default is the fastest measured.
     #[doc(hidden)]
     pub fn with_preconditioner(mut self, precond: Preconditioner) -> Self {
         self.precond = precond;
