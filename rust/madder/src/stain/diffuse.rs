@@ -151,6 +151,7 @@
 use faer::Par;
 use glam::{DVec2, DVec3};
 
+use super::check::check_range;
 use super::state::{Fields, merge_rgb, split_rgb};
 use crate::error::{Error, ParamError};
 use crate::mesh::geometry::check_positions;
@@ -1105,22 +1106,5 @@ fn repair_negative(adjacency: &RingAdjacency, mass: &mut [f64], vertices: &[u32]
             let keep = (1.0 - leftover / pool).max(0.0);
             vertices.iter().for_each(|&v| mass[v as usize] *= keep);
         }
-    }
-}
-
-pub(crate) fn check_range(
-    name: &'static str,
-    value: f64,
-    ok: bool,
-    requirement: &'static str,
-) -> Result<(), ParamError> {
-    if value.is_finite() && ok {
-        Ok(())
-    } else {
-        Err(ParamError::OutOfRange {
-            name,
-            requirement,
-            value,
-        })
     }
 }
