@@ -6,7 +6,8 @@
 //!   stain–surface interactions ([`interact`], §4.5) — and, beside them, the window's
 //!   upkeep, liquid poured, splashes and initial velocities, and what is read out;
 //! - [`window`]: the active region a frame works on, cut out of the cloth;
-//! - [`work`]: what each phase must move and compute at least, for the benchmarks;
+//! - `work` (the `roofline` feature): what each phase must move and compute at least, for
+//!   the benchmarks;
 //! - [`state`]: the per-vertex fields and the simulator's state;
 //! - [`check`]: the checks of the parameters, shared by every part;
 //! - [`DiffusionStepper`] ([`diffuse`]): the diffusion alone (the first slice, kept for the
@@ -23,6 +24,7 @@ pub(crate) mod irregular;
 pub(crate) mod simulate;
 pub(crate) mod state;
 pub(crate) mod window;
+#[cfg(feature = "roofline")]
 pub(crate) mod work;
 
 pub use detail::Detailed;
@@ -32,4 +34,5 @@ pub use interact::InteractionRates;
 pub use irregular::Irregularity;
 pub use simulate::{DEFAULT_SOLUTE_COLOR, Profile, Simulator, StainParams};
 pub use state::{Fields, Totals};
+#[cfg(feature = "roofline")]
 pub use work::{PhaseWork, TRANSCENDENTAL};

@@ -45,7 +45,7 @@ pub struct Profile {
     /// Times the window was rebuilt.
     pub window_rebuilds: usize,
     /// Window edges, summed over the sub-steps (for the work model of
-    /// [`Profile::least_work`]).
+    /// `Profile::least_work`, the `roofline` feature).
     pub window_edges: usize,
     /// Window faces, summed over the sub-steps.
     pub window_faces: usize,
