@@ -50,7 +50,7 @@
 //! On a refined cloth the window also knows, per vertex, which fine vertices lie inside
 //! one coarse face or on one coarse edge ([`crate::mesh::refine::Partial::congruence`]):
 //! those with whole one-rings there share one Kabsch rotation per face and edge
-//! ([`Window::corotating_frames`], module doc of [`crate::mesh::kabsch`]). Per window
+//! ([`Window::corotating_frames_into`], module doc of [`crate::mesh::kabsch`]). Per window
 //! face it keeps the first window face of the same coarse face and the shift of its
 //! corners ([`crate::mesh::refine::Partial::face_congruence`]): the similar fine faces
 //! share their tip angles ([`crate::mesh::Transport::with_shared_tips`]) and their
@@ -160,7 +160,7 @@ pub(super) struct Window {
     pub(super) cg: Option<(WarmCg, WarmCg)>,
     /// On a refined cloth, per window vertex the one whose Kabsch rotation it takes (its
     /// own, or the first active or held vertex of its coarse face or edge, when it is
-    /// active or held itself: a whole one-ring), see [`Window::corotating_frames`].
+    /// active or held itself: a whole one-ring), see [`Window::corotating_frames_into`].
     pub(super) share: Option<Vec<u32>>,
     /// On a refined cloth, per window face the window face whose tip angles it takes and
     /// the shift of its corners ([`crate::mesh::Transport::with_shared_tips`]): the first
@@ -444,6 +444,8 @@ pub(super) fn grow_on(
 }
 
 /// What the next frame's window is to be ([`Simulator::plan_window`]).
+///
+/// [`Simulator::plan_window`]: super::Simulator::plan_window
 pub(super) enum WindowPlan {
     /// The current window still serves.
     Keep,

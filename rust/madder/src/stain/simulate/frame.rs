@@ -5,6 +5,8 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
+#[cfg(doc)]
+use super::StainParams;
 use super::profile::{Laps, Profile};
 use super::scratch::StepScratch;
 use super::{MAX_AUTO_SUBSTEPS, MAX_TURN, Simulator};

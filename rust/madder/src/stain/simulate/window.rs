@@ -43,7 +43,7 @@ impl Simulator {
     }
 
     /// Finds the liquid and decides whether the current window still serves the next
-    /// frame or which one to build (module doc), without building it: [`super::detail`]
+    /// frame or which one to build (module doc), without building it: [`crate::stain::detail`]
     /// first makes sure the refined cloth is built around the new window's vertices.
     pub(in crate::stain) fn plan_window(&mut self) -> WindowPlan {
         let n = self.cloth.topology.n_vertices();
