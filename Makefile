@@ -123,7 +123,9 @@ lint: rust-tools $(WHEELDIR)/.stamp
 	cargo fmt --all --check
 	cargo fmt --manifest-path $(FUZZ) --check
 	cargo clippy --workspace --all-targets -- -D warnings
+	cargo clippy --workspace --all-targets --features madder/roofline -- -D warnings
 	RUSTDOCFLAGS="-D warnings" cargo doc -p madder --no-deps
+	RUSTDOCFLAGS="-D warnings" cargo doc -p madder --no-deps --features roofline
 	CARGO_TARGET_DIR=$(abspath target/fuzz) cargo check --manifest-path $(FUZZ)
 	$(VENV)/bin/ruff check addon tests blend_fixtures rust/madder-py/python .ci
 	$(VENV)/bin/actionlint .github/workflows/*.yml
@@ -170,7 +172,7 @@ gallery: $(ZIP) $(BPY_VENV)/.stamp
 # cloth export) run in the newest Blender, the wheel on their path
 BENCH_ENV := MADDER_ZIP=$(abspath $(ZIP)) PYTHONPATH=$(abspath $(WHEELDIR))
 bench: $(ZIP) $(WHEELDIR)/.stamp
-	cargo bench -p madder
+	cargo bench -p madder --features roofline
 	MADDER_ZIP=$(abspath $(ZIP)) $(BLENDER_PY) tests/bench/bench_playback.py
 	MADDER_ZIP=$(abspath $(ZIP)) $(BLENDER_PY) tests/bench/bench_image_bake.py
 	$(BENCH_ENV) $(BLENDER_PY) tests/bench/bench_dynamic_paint.py --size 316 --frames 12

@@ -423,9 +423,8 @@ impl Simulator {
     /// Wall-clock seconds per phase since the simulator was built, and counters: a dict
     /// with `window`, `geometry`, `forces`, `advection` (its parts `advection_trace`,
     /// `advection_plan`, `advection_apply`), `diffusion`, `interaction` (s), the counters
-    /// of `Profile` (`substeps`, `density_iterations`, ...), and `least_work`: per phase,
-    /// the bytes and flops it must move and do at least and its per-sweep working set
-    /// (`Profile::least_work`, module `stain/work.rs`).
+    /// of `Profile` (`substeps`, `density_iterations`, ...). The work model of each phase
+    /// (`Profile::least_work`) is the benches' alone (madder's `roofline` feature).
     fn profile<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let p = self.inner.profile();
         let d = PyDict::new(py);
@@ -459,15 +458,6 @@ impl Simulator {
         ] {
             d.set_item(k, v)?;
         }
-        let least = PyDict::new(py);
-        for w in p.least_work() {
-            let e = PyDict::new(py);
-            e.set_item("bytes", w.bytes)?;
-            e.set_item("flops", w.flops)?;
-            e.set_item("working_set", w.working_set)?;
-            least.set_item(w.name, e)?;
-        }
-        d.set_item("least_work", least)?;
         Ok(d)
     }
 

@@ -74,9 +74,9 @@ use faer::Par;
 use glam::{DMat3, DVec2, DVec3};
 use rayon::prelude::*;
 
+use super::check::{check_each_nonnegative, check_length};
 use super::diffuse::{Conductivity, WovenFaces};
 use super::simulate::{Profile, Simulator, StainParams};
-use super::sources::{check_each_nonnegative, check_length};
 use super::state::{Fields, Totals};
 use crate::error::{Error, ParamError};
 use crate::mesh::geometry::{check_positions, vertex_area, vertex_areas, vertex_areas_par};
@@ -471,7 +471,7 @@ impl Detailed {
         if let Some(a) = after {
             check_positions(fine.partial.coarse(), a)?;
         }
-        super::diffuse::check_range("time step", dt, dt > 0.0, "finite and > 0")?;
+        super::check::check_range("time step", dt, dt > 0.0, "finite and > 0")?;
         // in the rayon pool, as `Simulator::step` runs its frame: the parallel loops of a
         // growth, a window build and the placement then start from a worker
         let sim = &mut self.sim;

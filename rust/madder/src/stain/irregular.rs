@@ -36,7 +36,7 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::diffuse::check_range;
+use super::check::check_range;
 use crate::error::ParamError;
 use crate::mesh::Topology;
 use crate::rng::SplitMix64;

@@ -3,15 +3,18 @@
 //! - [`simulate`]: [`Simulator`] and its parameters, the split step of §4.3 — body forces
 //!   ([`forces`], §4.4), advection ([`advect`], §4.3.1–4.3.2, with the velocity extended
 //!   over the dry cloth by [`extend`]), diffusion ([`diffuse`], §4.3.3–4.3.4) and
-//!   stain–surface interactions ([`interact`], §4.5);
+//!   stain–surface interactions ([`interact`], §4.5) — and, beside them, the window's
+//!   upkeep, liquid poured, splashes and initial velocities, and what is read out;
 //! - [`window`]: the active region a frame works on, cut out of the cloth;
-//! - [`work`]: what each phase must move and compute at least, for the benchmarks;
-//! - [`state`]: the per-vertex fields and the simulator's state, and what is read out of it;
-//! - [`sources`]: liquid poured, splashes and initial velocities;
+//! - `work` (the `roofline` feature): what each phase must move and compute at least, for
+//!   the benchmarks;
+//! - [`state`]: the per-vertex fields and the simulator's state;
+//! - [`check`]: the checks of the parameters, shared by every part;
 //! - [`DiffusionStepper`] ([`diffuse`]): the diffusion alone (the first slice, kept for the
 //!   fabric experiments).
 
 pub mod advect;
+pub(crate) mod check;
 pub(crate) mod detail;
 pub(crate) mod diffuse;
 pub mod extend;
@@ -19,9 +22,9 @@ pub(crate) mod forces;
 pub(crate) mod interact;
 pub(crate) mod irregular;
 pub(crate) mod simulate;
-pub(crate) mod sources;
 pub(crate) mod state;
 pub(crate) mod window;
+#[cfg(feature = "roofline")]
 pub(crate) mod work;
 
 pub use detail::Detailed;
@@ -31,4 +34,5 @@ pub use interact::InteractionRates;
 pub use irregular::Irregularity;
 pub use simulate::{DEFAULT_SOLUTE_COLOR, Profile, Simulator, StainParams};
 pub use state::{Fields, Totals};
+#[cfg(feature = "roofline")]
 pub use work::{PhaseWork, TRANSCENDENTAL};

@@ -3,7 +3,7 @@
 //! names the first bad vertex or argument; none steps the simulation.
 //!
 //! Poured liquid adds masses `A_i σ_i` at the vertices' current areas (the state stores
-//! masses, [`super::state`]); a colour different from the liquid's switches on the
+//! masses, [`crate::stain::state`]); a colour different from the liquid's switches on the
 //! per-vertex colour masses (solute mass × colour), which every phase then carries. A
 //! splash sets velocities; the random numbers come from the seed and the vertex index
 //! only ([`crate::rng::SplitMix64`]), so a splash is the same on any number of threads.
@@ -11,41 +11,11 @@
 use glam::{DMat3, DVec2, DVec3};
 use rayon::prelude::*;
 
-use super::diffuse::check_range;
-use super::forces::corotating_frames_with;
-use super::simulate::Simulator;
+use super::Simulator;
 use crate::error::ParamError;
 use crate::rng::SplitMix64;
-
-/// `got` values where one per vertex, `expected`, are needed, else the error naming both.
-pub(super) fn check_length(
-    name: &'static str,
-    expected: usize,
-    got: usize,
-) -> Result<(), ParamError> {
-    if got == expected {
-        Ok(())
-    } else {
-        Err(ParamError::Length {
-            name,
-            expected,
-            got,
-        })
-    }
-}
-
-/// Every value finite and `≥ 0`, else the error names the first vertex that is not.
-pub(super) fn check_each_nonnegative(name: &'static str, values: &[f64]) -> Result<(), ParamError> {
-    match values.iter().position(|x| !(x.is_finite() && *x >= 0.0)) {
-        None => Ok(()),
-        Some(index) => Err(ParamError::OutOfRangeAt {
-            name,
-            index,
-            requirement: "finite and ≥ 0",
-            value: values[index],
-        }),
-    }
-}
+use crate::stain::check::{check_each_nonnegative, check_length, check_range};
+use crate::stain::forces::corotating_frames_with;
 
 impl Simulator {
     /// Replaces the velocity field by world vectors (projected on each vertex's tangent
@@ -72,7 +42,11 @@ impl Simulator {
         Ok(())
     }
 
-    pub(super) fn check_len(&self, name: &'static str, got: usize) -> Result<(), ParamError> {
+    pub(in crate::stain) fn check_len(
+        &self,
+        name: &'static str,
+        got: usize,
+    ) -> Result<(), ParamError> {
         check_length(name, self.cloth.topology.n_vertices(), got)
     }
 

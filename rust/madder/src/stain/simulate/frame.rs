@@ -1,0 +1,214 @@
+//! One frame: its checks, the window, the sub-step count (module doc, "Fast rotation")
+//! and the sub-steps on the window's copy of the state, committed when all succeeded
+//! ("Failure").
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+#[cfg(doc)]
+use super::StainParams;
+use super::profile::{Laps, Profile};
+use super::scratch::StepScratch;
+use super::{MAX_AUTO_SUBSTEPS, MAX_TURN, Simulator};
+use crate::error::Error;
+use crate::mesh::VertexFrames;
+use crate::mesh::geometry::check_positions;
+use crate::stain::check::check_range;
+use crate::stain::forces::{frame_angular_velocity, second_difference};
+use crate::stain::state::Local;
+use crate::stain::window::{Window, pick_into};
+
+impl Simulator {
+    /// Advances one frame to `positions` over `dt` seconds in `params.substeps`
+    /// sub-steps. `after`, if known, is the frame after `positions` (one more `dt`
+    /// later): the rectilinear force then uses the frame interval's mean acceleration
+    /// `½(p̈_k + p̈_{k+1})` (second order) instead of `p̈_k`, and the first frame gets its
+    /// acceleration from the motion instead of assuming none. On error the simulator
+    /// stays at the previous frame.
+    pub fn step(
+        &mut self,
+        positions: &[DVec3],
+        dt: f64,
+        after: Option<&[DVec3]>,
+    ) -> Result<(), Error> {
+        // run the frame on a thread of the rayon pool: the many short parallel loops of a
+        // step then start from a worker (work stealing) instead of each handing its work
+        // over from outside the pool and blocking the caller until it is done
+        rayon::scope(|_| self.step_in_pool(positions, dt, after))
+    }
+
+    fn step_in_pool(
+        &mut self,
+        positions: &[DVec3],
+        dt: f64,
+        after: Option<&[DVec3]>,
+    ) -> Result<(), Error> {
+        check_range("time step", dt, dt > 0.0, "finite and > 0")?;
+        check_positions(&self.cloth.topology, positions)?;
+        if let Some(a) = after {
+            check_positions(&self.cloth.topology, a)?;
+        }
+        let mut laps = Laps::start();
+        let rebuilt = !std::mem::take(&mut self.prepared) && self.prepare_window()?;
+        let mut prof = self.profile;
+        prof.window_rebuilds += usize::from(rebuilt);
+        prof.frames += 1;
+        laps.lap(&mut prof.window);
+        let t_end = self.state.time + dt;
+        let mut window = self.window.take();
+        let mut scratch = std::mem::take(&mut self.scratch);
+        let result = match window.as_mut() {
+            Some(w) => self
+                .run_frame(w, positions, dt, after, &mut prof, &mut scratch)
+                .map(|local| {
+                    self.commit(w, &local, t_end);
+                    scratch.local = Some(local);
+                }),
+            None => Ok(()),
+        };
+        self.window = window;
+        self.scratch = scratch;
+        self.profile = prof;
+        // nothing is written before the whole frame succeeded (module doc, "Failure")
+        result?;
+        let st = &mut self.state;
+        st.time = t_end;
+        let mut buffer = st.previous.take().unwrap_or_default();
+        buffer.clear();
+        buffer.extend_from_slice(positions);
+        st.previous = Some(std::mem::replace(&mut st.positions, buffer));
+        self.refresh_areas();
+        Ok(())
+    }
+
+    /// One frame on the window `w`, on copies of its state: nothing in `self` changes
+    /// (but the kept arrays of `scratch`).
+    fn run_frame(
+        &self,
+        w: &mut Window,
+        positions: &[DVec3],
+        dt: f64,
+        after: Option<&[DVec3]>,
+        prof: &mut Profile,
+        scratch: &mut StepScratch,
+    ) -> Result<Local, Error> {
+        let mut laps = Laps::start();
+        let (p, st) = (&self.params, &self.state);
+        scratch.fit(w.vertices.len());
+        let StepScratch {
+            cur,
+            next,
+            between,
+            acceleration,
+            omega,
+            end_frames,
+            local,
+            sub,
+            ..
+        } = scratch;
+        pick_into(&w.vertices, &st.positions, cur);
+        pick_into(&w.vertices, positions, next);
+        // p̈ over the frame interval: the mean of the centred differences at its two ends
+        // when the frame after is known (module doc of `forces`)
+        if p.forces.rectilinear {
+            w.vertices
+                .par_iter()
+                .map(|&v| {
+                    let v = v as usize;
+                    let (c, x) = (st.positions[v], positions[v]);
+                    let start = match (&st.previous, after) {
+                        (Some(prev), _) => second_difference(prev[v], c, x, dt),
+                        (None, Some(a)) => second_difference(c, x, a[v], dt),
+                        (None, None) => DVec3::ZERO,
+                    };
+                    match after {
+                        Some(a) => 0.5 * (start + second_difference(c, x, a[v], dt)),
+                        None => start,
+                    }
+                })
+                .collect_into_vec(acceleration);
+        } else {
+            acceleration.clear();
+            acceleration.resize(w.vertices.len(), DVec3::ZERO);
+        }
+        let mut local = local.take().unwrap_or_default();
+        w.vertices
+            .par_iter()
+            .zip(&*acceleration)
+            .map(|(&v, &a)| self.caught_up(v as usize, a))
+            .unzip_into_vecs(&mut local.velocity, &mut local.frames.frame);
+        st.fields.gather_into(&w.vertices, &mut local.fields);
+        pick_into(&w.vertices, &st.vertex_area, &mut local.area);
+        local.evaporated = 0.0;
+        local.cycles = 0;
+        laps.lap(&mut prof.forces);
+        // the frames at the frame's end: the sub-step count reads them, and the last
+        // sub-step's frames are these (the same formula at the same positions)
+        w.corotating_frames_into(next, &mut sub.frames);
+        let (s_count, omega) = self.substeps(w, &sub.frames, &local.frames, dt, omega);
+        // several sub-steps: the end's frames wait for the last one
+        if s_count > 1 {
+            std::mem::swap(&mut sub.frames, end_frames);
+        }
+        // one sub-step: its turn is the frame's, just computed
+        let omega = omega.filter(|_| s_count == 1);
+        laps.lap(&mut prof.geometry);
+        let h = dt / s_count as f64;
+        for s in 1..=s_count {
+            let last = s == s_count;
+            if last && s_count > 1 {
+                std::mem::swap(&mut sub.frames, end_frames);
+            } else if !last {
+                let t = s as f64 / s_count as f64;
+                between.clear();
+                between.extend(cur.iter().zip(&*next).map(|(a, b)| a.lerp(*b, t)));
+            }
+            let q = if last { &next[..] } else { &between[..] };
+            let turns = if last { omega } else { None };
+            self.substep(w, &mut local, q, last, turns, h, acceleration, prof, sub)?;
+        }
+        Ok(local)
+    }
+
+    /// Sub-steps of a frame of `dt` on the window `w` from the vertex frames `start` to the
+    /// frames `end` at the frame's positions (window order): the user's
+    /// [`StainParams::substeps`], or more so that the frames of the active vertices turn
+    /// (about their normals) by at most [`MAX_TURN`] per sub-step (module doc, "Fast
+    /// rotation").
+    ///
+    /// Also returns, with the Coriolis force on, every window vertex's `ω_z` over the
+    /// whole frame: with one sub-step it is the sub-step's own, which the forces then
+    /// take instead of computing it again (the same call on the same frames and `h = dt`).
+    /// `omega` is filled (its allocation kept) and returned.
+    fn substeps<'a>(
+        &self,
+        w: &Window,
+        end: &VertexFrames,
+        start: &VertexFrames,
+        dt: f64,
+        omega: &'a mut Vec<f64>,
+    ) -> (usize, Option<&'a [f64]>) {
+        let asked = self.params.substeps as usize;
+        if !self.params.forces.coriolis {
+            return (asked, None);
+        }
+        (0..w.vertices.len())
+            .into_par_iter()
+            .map(|j| frame_angular_velocity(&start.frame[j], &end.frame[j], dt).z)
+            .collect_into_vec(omega);
+        let turn = w
+            .region
+            .vertices
+            .par_iter()
+            .map(|&j| omega[j as usize].abs() * dt)
+            .reduce(|| 0.0, f64::max);
+        // a NaN turn (never from finite positions) keeps the user's count
+        let needed = (turn / MAX_TURN).ceil();
+        let count = if needed > asked as f64 {
+            (needed as usize).min(MAX_AUTO_SUBSTEPS)
+        } else {
+            asked
+        };
+        (count, Some(omega))
+    }
+}

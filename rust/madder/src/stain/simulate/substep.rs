@@ -1,0 +1,435 @@
+//! One sub-step of the window, phase by phase (module doc, steps 1–5): the geometry at
+//! the sub-step's end, the first half kick of the forces, the advection, the second half
+//! kick, the diffusion and the interactions; each phase's seconds go into its
+//! [`Profile`] time.
+
+use glam::{DVec2, DVec3};
+use rayon::prelude::*;
+
+use super::profile::{Laps, Profile};
+use super::scratch::SubstepScratch;
+use super::{DRY_DENSITY, Simulator};
+use crate::error::Error;
+use crate::stain::advect::{UpwindPlan, advect_velocity_in, dual_fluxes_in};
+use crate::stain::diffuse::{DensityWork, Ops, SoluteMotion, diffuse_densities, diffuse_velocity};
+use crate::stain::extend::{extend_velocity, wet_vertices};
+use crate::stain::forces::{VelocityStep, frame_angular_velocity, frame_body_acceleration};
+use crate::stain::interact::{exposure, interact_varied, vapour_exposure};
+use crate::stain::irregular::face_means;
+use crate::stain::state::{Local, merge_rgb, split_rgb};
+use crate::stain::window::{Window, pick};
+
+impl Simulator {
+    /// One sub-step `h` of the window to positions `q` (window order), whose vertex frames
+    /// are in `sub.frames` if `frames_ready` and whose frames' turns `ω_z` over the
+    /// sub-step are `turns` if the caller has them; in `sub`'s arrays.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn substep(
+        &self,
+        w: &mut Window,
+        loc: &mut Local,
+        q: &[DVec3],
+        frames_ready: bool,
+        turns: Option<&[f64]>,
+        h: f64,
+        acceleration: &[DVec3],
+        prof: &mut Profile,
+        sub: &mut SubstepScratch,
+    ) -> Result<(), Error> {
+        let mut laps = Laps::start();
+        Self::geometry_phase(w, q, frames_ready, sub)?;
+        let topo = &w.cloth.topology;
+        prof.active_vertices += w.region.vertices.len();
+        prof.window_vertices += w.vertices.len();
+        prof.window_edges += topo.n_edges();
+        prof.window_faces += topo.n_faces();
+        laps.lap(&mut prof.geometry);
+
+        self.first_half_kick(w, loc, turns, h, acceleration, sub);
+        laps.lap(&mut prof.forces);
+
+        self.advection_phase(w, loc, q, h, prof, sub)?;
+        laps.lap(&mut prof.advection);
+
+        self.second_half_kick(loc, sub);
+        laps.lap(&mut prof.forces);
+
+        self.diffusion_phase(w, loc, h, prof, sub)?;
+        laps.lap(&mut prof.diffusion);
+
+        self.interaction_phase(w, loc, h, sub)?;
+        std::mem::swap(&mut loc.frames, &mut sub.frames);
+        std::mem::swap(&mut loc.area, &mut sub.geometry.vertex_area);
+        laps.lap(&mut prof.interaction);
+        prof.substeps += 1;
+        Ok(())
+    }
+
+    /// The geometry at positions `q` into `sub`: lengths, areas and cotangents, the vertex
+    /// frames (unless `frames_ready`) and the transport `R_ij`.
+    fn geometry_phase(
+        w: &Window,
+        q: &[DVec3],
+        frames_ready: bool,
+        sub: &mut SubstepScratch,
+    ) -> Result<(), Error> {
+        let topo = &w.cloth.topology;
+        sub.geometry.renew(topo, q)?;
+        if !frames_ready {
+            w.corotating_frames_into(q, &mut sub.frames);
+        }
+        sub.transport.renew(
+            topo,
+            &w.cloth.rings,
+            &sub.geometry,
+            &sub.frames,
+            q,
+            w.tip_share.as_deref(),
+        );
+        Ok(())
+    }
+
+    /// Step 1 of the module doc, body forces (§4.4): the first half kick into
+    /// `sub.forced` and the sub-step's mean velocity under them into `sub.mean`, both
+    /// extended over the dry cloth.
+    fn first_half_kick(
+        &self,
+        w: &Window,
+        loc: &Local,
+        turns: Option<&[f64]>,
+        h: f64,
+        acceleration: &[DVec3],
+        sub: &mut SubstepScratch,
+    ) {
+        let p = &self.params;
+        let n = w.vertices.len();
+        let topo = &w.cloth.topology;
+        let (geometry, frames, transport) = (&sub.geometry, &sub.frames, &sub.transport);
+        // body forces (§4.4), friction and the Coriolis turn, exactly over half the
+        // sub-step at the vertex the liquid leaves (kick–drift–kick, module doc); the
+        // densities drift with the exact mean velocity of a whole sub-step under them
+        // — each vertex's half kick is the same propagator before and after the
+        // advection (the same turn, friction and h/2), and the decay e^{-kh} is every
+        // vertex's: both computed once (`VelocityStep`, the same bits as separate calls)
+        let (decay_half, decay_full) = (
+            VelocityStep::decay(p.friction, 0.5 * h),
+            VelocityStep::decay(p.friction, h),
+        );
+        (0..n)
+            .into_par_iter()
+            .map(|j| {
+                let f = &frames.frame[j];
+                let a = frame_body_acceleration(f, acceleration[j], p.gravity, p.forces);
+                let turn = match turns {
+                    Some(t) => t[j],
+                    None if p.forces.coriolis => {
+                        frame_angular_velocity(&loc.frames.frame[j], f, h).z
+                    }
+                    None => 0.0,
+                };
+                let half = VelocityStep::with_decay(decay_half, turn, p.friction, 0.5 * h);
+                (a, turn, half)
+            })
+            .collect_into_vec(&mut sub.force);
+        let force = &sub.force;
+        let (forced, mean) = (&mut sub.forced, &mut sub.mean);
+        force
+            .par_iter()
+            .zip(&loc.velocity)
+            .map(|(&(a, turn, half), &u)| {
+                let full = VelocityStep::with_decay(decay_full, turn, p.friction, h);
+                (half.end(u, a), full.mean(u, a))
+            })
+            .unzip_into_vecs(forced, mean);
+        // the velocity is the liquid's: on the dry cloth it is the wet region's, extended
+        let wet = wet_vertices(
+            &loc.fields.free_solvent,
+            &geometry.vertex_area,
+            &w.region.mask,
+        );
+        extend_velocity(topo, transport, &wet, &mut [forced, mean]);
+    }
+
+    /// Step 2 of the module doc: advection (§4.3.1–4.3.2), closed inside the active region:
+    /// the velocity (`sub.advected`, semi-Lagrangian), the dual fluxes of the sub-step's
+    /// centred velocity and their upwind plan, then the densities (and with the momentum
+    /// form the solvent's momentum, into `sub.arrived`).
+    fn advection_phase(
+        &self,
+        w: &Window,
+        loc: &mut Local,
+        q: &[DVec3],
+        h: f64,
+        prof: &mut Profile,
+        sub: &mut SubstepScratch,
+    ) -> Result<(), Error> {
+        let p = &self.params;
+        let n = w.vertices.len();
+        let topo = &w.cloth.topology;
+        let SubstepScratch {
+            geometry,
+            frames,
+            transport,
+            forced,
+            mean,
+            advected,
+            centred,
+            arrived,
+            flux,
+            plan,
+            ..
+        } = sub;
+        let (forced, mean) = (&*forced, &*mean);
+        let active = &w.region.mask;
+        let mut part = Laps::start();
+        advect_velocity_in(
+            topo,
+            &w.cloth.rings,
+            geometry,
+            transport,
+            forced,
+            h,
+            active,
+            advected,
+        );
+        let advected = &*advected;
+        part.lap(&mut prof.advection_trace);
+        // the densities move with the sub-step's mean velocity: the exact mean under the
+        // forces, plus half the change the advection made at its end (module doc)
+        (0..n)
+            .into_par_iter()
+            .map(|j| {
+                if active[j] {
+                    mean[j] + 0.5 * (advected[j] - forced[j])
+                } else {
+                    DVec2::ZERO
+                }
+            })
+            .collect_into_vec(centred);
+        dual_fluxes_in(
+            topo,
+            q,
+            frames,
+            centred,
+            active,
+            w.tip_share.as_deref(),
+            flux,
+        );
+        let plan = plan.get_or_insert_with(UpwindPlan::empty);
+        plan.renew(topo, &geometry.vertex_area, flux, h)?;
+        let plan = &*plan;
+        prof.transport_cycles += plan.substeps();
+        loc.cycles += plan.substeps();
+        part.lap(&mut prof.advection_plan);
+        // the densities, and with the momentum form the solvent's momentum alongside
+        let f = &mut loc.fields;
+        let mut color = f.color_free.as_ref().map(|c| split_rgb(c));
+        let mut fields: Vec<&mut [f64]> = vec![&mut f.free_solvent, &mut f.solute];
+        if let Some(c) = color.as_mut() {
+            fields.extend(c.iter_mut().map(|v| v.as_mut_slice()));
+        }
+        prof.transport_passes += plan.substeps() * fields.len();
+        if p.momentum_advection {
+            plan.transport_with_momentum_into(
+                topo,
+                transport,
+                &mut fields,
+                forced,
+                advected,
+                arrived,
+            );
+        } else {
+            plan.transport_all(topo, &mut fields);
+        }
+        if let (Some(c), Some(cf)) = (color, f.color_free.as_mut()) {
+            merge_rgb(&c, cf);
+        }
+        part.lap(&mut prof.advection_apply);
+        Ok(())
+    }
+
+    /// Step 3 of the module doc: forces, the second half kick, at the vertex the liquid
+    /// arrived at (the velocity the advection gave: `sub.arrived` with the momentum form,
+    /// else `sub.advected`), which becomes the frame's velocity.
+    fn second_half_kick(&self, loc: &mut Local, sub: &mut SubstepScratch) {
+        let arrived = if self.params.momentum_advection {
+            &mut sub.arrived
+        } else {
+            &mut sub.advected
+        };
+        // the second half of the forces, at the vertex the liquid arrived at
+        arrived
+            .par_iter_mut()
+            .zip(&sub.force)
+            .for_each(|(u, (a, _, half))| *u = half.end(*u, *a));
+        std::mem::swap(&mut loc.velocity, arrived);
+    }
+
+    /// Step 4 of the module doc: diffusion (§4.3.3–4.3.4, eq. 4.6): the densities and the
+    /// velocity, solved side by side ([`crate::stain::diffuse`]).
+    fn diffusion_phase(
+        &self,
+        w: &mut Window,
+        loc: &mut Local,
+        h: f64,
+        prof: &mut Profile,
+        sub: &SubstepScratch,
+    ) -> Result<(), Error> {
+        let p = &self.params;
+        let n = w.vertices.len();
+        let topo = &w.cloth.topology;
+        let (geometry, transport) = (&sub.geometry, &sub.transport);
+        // the densities and the velocity are independent systems, solved side by side
+        let ops = Ops {
+            topology: topo,
+            adjacency: &w.cloth.adjacency,
+            pattern: &w.pattern,
+            conductivity: &w.cloth.conductivity,
+            region: &w.region,
+        };
+        // the wicking factor of every face, from the liquid before the solve (lagged),
+        // times the irregular fabric's
+        let wicking = p.wicking.is_on().then(|| {
+            let f = &loc.fields;
+            let liquid: Vec<f64> = (0..n)
+                .map(|j| {
+                    let a = geometry.vertex_area[j];
+                    let m = f.free_solvent[j] + f.absorbed_solvent[j];
+                    if a > 0.0 { m / a } else { 0.0 }
+                })
+                .collect();
+            p.wicking.face_factors(topo, &liquid)
+        });
+        let irregular = w.cloth.irregular.as_ref();
+        let face_scale = match (wicking, irregular.map(|m| face_means(topo, m))) {
+            (Some(g), Some(r)) => Some(g.iter().zip(&r).map(|(g, r)| g * r).collect()),
+            (g, r) => g.or(r),
+        };
+        // the fibres' liquid moves only between vertices above the residual saturation
+        // (a pinned edge, "Tide lines" in `diffuse`)
+        let held_scale = (p.carry_solute && p.residual_saturation > 0.0).then(|| {
+            let floor = p.residual_saturation * p.interaction.saturation;
+            let f = &loc.fields;
+            let mobile: Vec<bool> = (0..n)
+                .map(|j| {
+                    let a = geometry.vertex_area[j];
+                    a > 0.0 && f.absorbed_solvent[j] > floor * a
+                })
+                .collect();
+            topo.faces()
+                .iter()
+                .enumerate()
+                .map(|(t, c)| {
+                    if c.iter().all(|&v| mobile[v as usize]) {
+                        face_scale.as_ref().map_or(1.0, |g| g[t])
+                    } else {
+                        0.0
+                    }
+                })
+                .collect::<Vec<f64>>()
+        });
+        let (fields, velocity) = (&mut loc.fields, &mut loc.velocity);
+        let (densities, viscous) = match w.cg.as_mut() {
+            None => (
+                Ok(DensityWork {
+                    iterations: 0,
+                    solves: 0,
+                    carried: 0,
+                }),
+                Ok(0),
+            ),
+            Some((scalar_cg, vector_cg)) => {
+                scalar_cg.set_tolerance(self.tolerances[0]);
+                vector_cg.set_tolerance(self.tolerances[1]);
+                rayon::join(
+                    || {
+                        diffuse_densities(
+                            &ops,
+                            scalar_cg,
+                            fields,
+                            geometry,
+                            h,
+                            face_scale.as_deref(),
+                            if p.carry_solute {
+                                SoluteMotion::Carried {
+                                    held_scale: held_scale.as_deref(),
+                                }
+                            } else {
+                                SoluteMotion::Diffused
+                            },
+                        )
+                    },
+                    || {
+                        if p.viscosity > 0.0 {
+                            let scale = h * p.viscosity;
+                            diffuse_velocity(&ops, vector_cg, velocity, geometry, transport, scale)
+                        } else {
+                            Ok(0)
+                        }
+                    },
+                )
+            }
+        };
+        let densities = densities?;
+        prof.density_iterations += densities.iterations;
+        prof.density_solves += densities.solves;
+        prof.carried_fields += densities.carried;
+        prof.velocity_iterations += viscous?;
+        Ok(())
+    }
+
+    /// Step 5 of the module doc: interactions (§4.5) on the active and held vertices, the
+    /// evaporation faster on the wet patch's rim ([`crate::stain::interact`]).
+    fn interaction_phase(
+        &self,
+        w: &Window,
+        loc: &mut Local,
+        h: f64,
+        sub: &SubstepScratch,
+    ) -> Result<(), Error> {
+        let p = &self.params;
+        let n = w.vertices.len();
+        let topo = &w.cloth.topology;
+        let geometry = &sub.geometry;
+        let irregular = w.cloth.irregular.as_ref();
+        // on the active and held vertices (the halo's areas are partial; it holds nothing
+        // that can change)
+        let wet: Vec<f64> = (0..n)
+            .map(|j| {
+                let a = geometry.vertex_area[j];
+                let m = loc.fields.free_solvent[j] + loc.fields.absorbed_solvent[j];
+                if a > 0.0 { m / a } else { 0.0 }
+            })
+            .collect();
+        let exposed = if p.vapour_limited {
+            vapour_exposure(
+                topo,
+                &geometry.edge_length,
+                &geometry.vertex_area,
+                &w.cloth.boundary,
+                &wet,
+                DRY_DENSITY,
+            )
+        } else {
+            exposure(
+                topo,
+                &w.cloth.boundary,
+                &wet,
+                DRY_DENSITY,
+                p.interaction.evaporation_boundary,
+            )
+        };
+        let mut part = loc.fields.gather(&w.whole);
+        let absorption_scale = irregular.map(|m| pick(&w.whole, m));
+        loc.evaporated += interact_varied(
+            &p.interaction,
+            &pick(&w.whole, &geometry.vertex_area),
+            &pick(&w.whole, &exposed),
+            absorption_scale.as_deref(),
+            h,
+            &mut part,
+        )?;
+        loc.fields.scatter(&w.whole, &part);
+        Ok(())
+    }
+}
