@@ -49,7 +49,7 @@
 //! ## Chapter 5: Lagrangian coherent structures — [`lcs`]
 //! | seed | what | where |
 //! |---|---|---|
-//! | §5.2, §5.5.1 | particles traced through a time-dependent tangent velocity on a (deforming) mesh, RK4 with edge crossings | [`lcs::flow_map`] (`lcs/trace.rs`) |
+//! | §5.2, §5.5.1 | particles traced through a time-dependent tangent velocity on a (deforming) mesh, RK4 with edge crossings | [`lcs::flow_map`] (`lcs/trace/`) |
 //! | §5.2 | flow-map gradient, Cauchy–Green, FTLE `σ` | [`lcs::ftle()`] (`lcs/ftle.rs`) |
 //! | §5.4, §5.5.2–§5.5.5, eqs. 5.3–5.4 | ridges: threshold, smoothing, Hessian, zero crossings, marching triangles, joining, cleanup | [`lcs::ridges()`] (`lcs/ridges.rs`) |
 //!

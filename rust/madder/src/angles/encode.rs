@@ -2,13 +2,10 @@
 //! manifold and consistently oriented) and the encoder: positions → corner and dihedral
 //! angles (seed §3.3, eq. 3.1).
 
-use std::sync::Mutex;
-
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::spectral::SolverCache;
-use super::track::TrackerCache;
+use super::cache::{SolverCache, TrackerCache};
 use crate::error::AngleError;
 use crate::mesh::Topology;
 use crate::mesh::geometry::check_positions;
@@ -24,48 +21,6 @@ pub(crate) struct Interior {
     pub(crate) f2: u32,
     pub(crate) c1: u8,
     pub(crate) c2: u8,
-}
-
-/// Solver state an [`AngleMesh`] keeps between reconstructions (it depends on the
-/// connectivity only): taken out while a reconstruction runs and put back after, so
-/// concurrent reconstructions of one mesh never share it (a second one builds its own);
-/// a clone of the mesh starts empty. No result depends on it.
-pub(crate) struct Kept<T>(Mutex<Option<T>>);
-
-impl<T> Kept<T> {
-    /// The kept state, or a new one from `build`.
-    pub(crate) fn take_or<E>(&self, build: impl FnOnce() -> Result<T, E>) -> Result<T, E> {
-        match self.0.lock().map(|mut g| g.take()).unwrap_or(None) {
-            Some(t) => Ok(t),
-            None => build(),
-        }
-    }
-    /// Keeps `t` for the next reconstruction.
-    pub(crate) fn put(&self, t: T) {
-        if let Ok(mut g) = self.0.lock() {
-            *g = Some(t);
-        }
-    }
-}
-
-impl<T> Default for Kept<T> {
-    fn default() -> Self {
-        Self(Mutex::new(None))
-    }
-}
-
-impl<T> Clone for Kept<T> {
-    /// A clone starts empty (the state is rebuilt on its first use).
-    fn clone(&self) -> Self {
-        Self::default()
-    }
-}
-
-impl<T> std::fmt::Debug for Kept<T> {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let filled = self.0.lock().map(|g| g.is_some()).unwrap_or(false);
-        f.debug_struct("Kept").field("filled", &filled).finish()
-    }
 }
 
 /// Marks a boundary edge in [`AngleMesh::face_interior`].

@@ -254,6 +254,7 @@
 //! groups of columns, one rayon task each), so the result is bit-identical whatever the
 //! number of threads.
 
+mod cache;
 pub mod codec;
 mod encode;
 mod local;

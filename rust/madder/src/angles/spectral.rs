@@ -3,19 +3,18 @@
 //! affine correction by voting, and the optional descent (§3.3.3). The math is in the
 //! module docs of [`crate::angles`].
 
-use std::sync::Arc;
-
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 
-use super::encode::{AngleMesh, Angles, Kept};
+use super::cache::Pattern;
+use super::encode::{AngleMesh, Angles};
 use super::local::{frame, preprocess, transitions};
 use super::place::Placement;
 use super::refine::{descend, embed, residual};
 use crate::error::{AngleError, SolveError};
 use crate::mesh::kabsch::svd3;
 use crate::ops::restrict::entry_index;
-use crate::ops::{CscPattern, LowerCsc, PrefactoredSpd};
+use crate::ops::{CscPattern, PrefactoredSpd};
 use crate::rng::SplitMix64;
 
 /// The shift `σ` relative to the mean diagonal of `A₁` (see the module docs).
@@ -59,27 +58,6 @@ pub struct Reconstruction {
     pub eigenvalues: [f64; 4],
     /// Subspace-iteration rounds.
     pub rounds: usize,
-}
-
-/// `A₁`'s lower triangle in CSC: unknown `v` for vertex `v`, `V + f` for face `f`'s frame
-/// column `m_f` (one coordinate). The arrays are shared, so a copy is cheap.
-#[derive(Clone)]
-pub(crate) struct Pattern {
-    n: usize,
-    col_ptr: Arc<[u32]>,
-    row_idx: Arc<[u32]>,
-}
-
-impl LowerCsc for Pattern {
-    fn n(&self) -> usize {
-        self.n
-    }
-    fn col_ptr(&self) -> &[u32] {
-        &self.col_ptr
-    }
-    fn row_idx(&self) -> &[u32] {
-        &self.row_idx
-    }
 }
 
 /// One element of the energy: its unknowns and the rows `Σ coef · unknown` it penalizes.
@@ -180,13 +158,6 @@ fn values_of(mesh: &AngleMesh, pattern: &Pattern, r: &[DMat3]) -> Vec<f64> {
     }
     values
 }
-
-/// What a reconstruction of one mesh can keep for the next (module docs, "Warm start"): the
-/// pattern of `A₁` with its symbolic Cholesky analysis and factor buffers, which depend on
-/// the connectivity only. Taken out while a reconstruction runs and put back after, so
-/// concurrent reconstructions of one mesh never share it (a second one builds its own).
-/// The cache changes no result: the numeric factorization is redone for every matrix.
-pub(crate) type SolverCache = Kept<PrefactoredSpd<Pattern>>;
 
 /// `y = A x` for the symmetric matrix whose lower triangle is `values` on `p`.
 fn sym_matvec(p: &Pattern, values: &[f64], x: &[f64], y: &mut [f64]) {

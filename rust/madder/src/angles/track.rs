@@ -6,7 +6,8 @@
 use glam::{DMat3, DQuat, DVec3};
 use rayon::prelude::*;
 
-use super::encode::{AngleMesh, Angles, Kept, NONE};
+use super::cache::Tracker;
+use super::encode::{AngleMesh, Angles, NONE};
 use super::local::preprocess;
 use super::refine::{descend, embed};
 use super::spectral::{Reconstruction, normalize};
@@ -67,17 +68,6 @@ fn laplacian(n: usize, pairs: &[(u32, u32)]) -> Result<PrefactoredSpd<CscPattern
     Ok(solver)
 }
 
-/// The two factorized Laplacians: the dual graph (faces, one pair per interior edge) and the
-/// vertex graph (one pair per face side, so an interior edge counts twice); and a
-/// breadth-first spanning tree of the dual graph from face 0, for the cold start.
-pub(crate) struct Tracker {
-    dual: PrefactoredSpd<CscPattern>,
-    primal: PrefactoredSpd<CscPattern>,
-    /// Every face but face 0 in breadth-first order, with the interior edge to its parent
-    /// (the face across it, reached earlier).
-    tree: Vec<(u32, u32)>,
-}
-
 impl Tracker {
     fn new(mesh: &AngleMesh) -> Result<Self, SolveError> {
         let dual: Vec<(u32, u32)> = mesh.interior().iter().map(|e| (e.f1, e.f2)).collect();
@@ -124,9 +114,6 @@ fn spanning_tree(mesh: &AngleMesh) -> Vec<(u32, u32)> {
     }
     tree
 }
-
-/// The mesh's [`Tracker`], built on first use and kept between frames.
-pub(crate) type TrackerCache = Kept<Tracker>;
 
 /// A face's unit-side shape from its corners `α` (module docs): the sines and cosines of
 /// the half corners, from which everything else follows without another transcendental.

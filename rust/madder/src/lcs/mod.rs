@@ -12,14 +12,17 @@
 //! transverse, estimated from the Hessian of a smoothed indicator of high `σ`.
 //!
 //! ## The pipeline and the files
-//! - [`trace`] (§5.5.1): the particle `(triangle, barycentric)`, charts and edge crossings
-//!   by unfolding, the fixed-step integrator ([`flow_map`], [`flow_map_with`]); velocities from an analytic
-//!   function ([`FnVelocity`]), per-vertex values per frame ([`VertexVelocity`]) or any
-//!   [`Velocity`] (the Python binding's callable); a fixed or deforming mesh ([`Motion`]).
+//! - [`trace`] (§5.5.1), a folder, a file per concern: the particle `(triangle,
+//!   barycentric)` (`located.rs`), charts (`charts.rs`) and edge crossings by unfolding
+//!   (`walk.rs`), the fixed-step integrator ([`flow_map`], [`flow_map_with`], `flow.rs`);
+//!   velocities from an analytic function ([`FnVelocity`]), per-vertex values per frame
+//!   ([`VertexVelocity`]) or any [`Velocity`] (the Python binding's callable,
+//!   `velocity.rs`); a fixed or deforming mesh ([`Motion`], `time.rs`).
 //! - [`rk`] (§5.5.1): the explicit Runge–Kutta schemes, classical RK4 (the default) and
 //!   DOP853's eighth-order solution with fixed steps ([`Scheme`]).
-//! - `planar` (§5.5.1): the same flow map on a flat fixed mesh without walking, where a
-//!   bucket grid proves a segment stays inside (a fast path of `trace`).
+//! - `trace/planar.rs` (§5.5.1): the same flow map on a flat fixed mesh without walking,
+//!   where a bucket grid (`trace/buckets.rs`) proves a segment stays inside (a fast path of
+//!   `trace`).
 //! - [`ftle`](mod@ftle) (§5.2, §5.5.1): the flow map's gradient by least squares over the one-ring
 //!   in the vertex's tangent frame, Cauchy–Green, `σ` ([`ftle()`](ftle::ftle)).
 //! - [`ridges`](mod@ridges) (§5.4, §5.5.2–§5.5.5): threshold into `S` (eq. 5.3), implicit diffusion
@@ -28,7 +31,7 @@
 //!   ([`ridges()`](ridges::ridges)).
 
 pub mod ftle;
-mod planar;
+
 pub mod ridges;
 pub mod rk;
 pub mod trace;

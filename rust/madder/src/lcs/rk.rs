@@ -36,7 +36,7 @@
 //! On a flat or developable mesh these are the same points as from `p`, up to rounding and
 //! to walks stopped at a border (a stage point stopped at a border is where the walks from
 //! it start: which stage a walk starts from matters there; the flat path
-//! [`super::planar`] walks from the same sources, so the two agree). On a curved mesh they
+//! (`trace/planar.rs`) walks from the same sources, so the two agree). On a curved mesh they
 //! differ by the holonomy of the vertices passed, a discretization error of the
 //! unfolding's order. Stage `c_i = 1` is evaluated at the step's end time computed as
 //! `t0 + (n + 1) h`, so it lands on the frames' times exactly.

@@ -45,6 +45,7 @@
 //! threads) and give the same bits on any number of threads; see each module.
 
 pub mod clip;
+pub(crate) mod coverage;
 pub mod exr;
 pub mod pad;
 pub mod raster;

@@ -40,7 +40,7 @@
 //! How the texel pass is laid out for speed:
 //!
 //! - **Two phases per triangle.** The coverage scan only marks the texels the triangle
-//!   covers first ([`super::raster::CLAIMED`]) and keeps, per row, the span between the
+//!   covers first ([`super::coverage::CLAIMED`]) and keeps, per row, the span between the
 //!   first and the last ([`Run`]); [`Texels::shade`] then walks the spans. (Shading
 //!   inside the scan, on each texel as it is claimed, measured no faster.)
 //! - **The tile position in 64-bit fixed point**, as the fraction of the tile along each
@@ -73,7 +73,7 @@
 //!
 //! Measured in `benches/texture.rs` (ARCHITECTURE.md has the figures).
 
-use super::raster::{CLAIMED, INSIDE, MAX_CHANNELS};
+use super::coverage::{CLAIMED, INSIDE, MAX_CHANNELS};
 use crate::error::TextureError;
 use crate::weave::Corrector;
 use crate::weave::corrector::Sampler;

@@ -23,7 +23,8 @@ use std::hash::{DefaultHasher, Hash, Hasher};
 use std::sync::{Mutex, OnceLock};
 
 use super::Tensor2;
-use super::homogenize::{HomogenizeOptions, bits, check_cells, homogenize_with, reduce_checked};
+use super::check::check_cells;
+use super::homogenize::{HomogenizeOptions, bits, homogenize_with, reduce_checked};
 use crate::error::WeaveError;
 
 /// A bounded map from tile content (hashed) to its effective tensor.

@@ -80,7 +80,7 @@ use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par, Side};
 use std::sync::{Arc, Mutex, OnceLock};
 
-use super::homogenize::{check_cells, scale_exponent};
+use super::check::{check_cells, scale_exponent};
 use super::{Tensor2, tensor};
 use crate::error::{SolveError, WeaveError};
 

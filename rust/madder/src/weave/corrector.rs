@@ -88,7 +88,8 @@ use std::hash::{DefaultHasher, Hash, Hasher};
 use std::sync::{Arc, Mutex, OnceLock};
 
 use super::cell_problem::{Grid, corrector_energy};
-use super::homogenize::{bits, check_tile, refine, scale_exponent};
+use super::check::{check_tile, scale_exponent};
+use super::homogenize::{bits, refine};
 use super::pattern::{Cell, PairCoefficients, Tile, cell_tensors};
 use super::{Tensor2, tensor};
 use crate::error::WeaveError;

@@ -34,6 +34,7 @@
 
 pub(crate) mod cache;
 pub(crate) mod cell_problem;
+pub(crate) mod check;
 pub(crate) mod corrector;
 pub mod homogenize;
 pub(crate) mod pattern;
