@@ -52,7 +52,7 @@ def files(folder):
 
 def damaged(data, k):
     """The .madm file `data` with a byte of frame `k`'s payload flipped (the layout of
-    rust/madder/src/angles/codec/mod.rs: a 48-byte header, 12 bytes per face, then per
+    rust/madder/src/angles/codec/format.rs: a 48-byte header, 12 bytes per face, then per
     frame its length, its checksum and its payload)."""
     n_faces = int.from_bytes(data[16:20], "little")
     at = 48 + 12 * n_faces

@@ -27,19 +27,19 @@
 //! ## Chapter 4: fluid simulation on a deforming surface — [`mesh`], [`ops`], [`stain`]
 //! | seed | what | where |
 //! |---|---|---|
-//! | §4.3, eqs. 4.1–4.3, Fig. 1.3 | the split step: forces, advection, diffusion, interactions | [`stain::Simulator`] (`stain/simulate.rs`), its state [`stain::Fields`] (`stain/state.rs`), the active region it steps (`stain/window.rs`), poured liquid and splashes (`stain/sources.rs`) |
+//! | §4.3, eqs. 4.1–4.3, Fig. 1.3 | the split step: forces, advection, diffusion, interactions | [`stain::Simulator`] (`stain/simulate/`: a frame, the sub-step's phases, the read-outs), its state [`stain::Fields`] (`stain/state.rs`), the active region it steps (`stain/window.rs`), poured liquid and splashes (`stain/simulate/sources.rs`) |
 //! | §4.3.1 | the fixed connectivity, and the one-ring fans the frames and the polar map walk | [`mesh::Topology`], [`mesh::OneRings`] and the adjacency `RingAdjacency` (`mesh/topology.rs`, `mesh/rings.rs`) |
 //! | §4.3.1 | the vertex frames `F_i` | [`mesh::VertexFrames`] (`mesh/frames.rs`) |
 //! | §4.3.1, eq. 4.4 | the geodesic polar map and the transport `R_ij` | [`mesh::Transport`] (`mesh/transport.rs`) |
 //! | §4.3.1, eq. 4.5 | semi-Lagrangian velocity; finite-volume densities with cotan weights | [`stain::advect`] |
 //! | §4.3.2 | momentum advection | [`stain::advect::UpwindPlan::momentum_velocity`] |
 //! | §4.3.3 | per-frame geometry (lengths, areas, cotans), cotan stiffness, lumped mass | [`mesh::Geometry`], [`ops::cotan_stiffness`], [`ops::add_lumped_mass`] |
-//! | §4.3.3 | implicit diffusion `(M + hL_S) σ' = M σ`, prefactored or warm-started CG | [`stain::DiffusionStepper`] (`stain/diffuse.rs`), [`ops::PrefactoredSpd`], [`ops::WarmCg`] |
+//! | §4.3.3 | implicit diffusion `(M + hL_S) σ' = M σ`, prefactored or warm-started CG | [`stain::DiffusionStepper`] (`stain/diffuse/`), [`ops::PrefactoredSpd`], [`ops::WarmCg`] (`ops/cg/`) |
 //! | §4.3.3, eq. 4.6 | the Bochner (connection) Laplacian of the velocity | [`ops::BochnerSystem`] (`ops/bochner.rs`), restricted to the active region by [`ops::Restriction`] |
 //! | §4.3.4 | anisotropic stiffness of a woven face, weft from the UVs | [`ops::weft_directions`], [`stain::Conductivity`] (`ops/aniso.rs`) |
 //! | §4.4 | comoving–corotating frames by Kabsch, fictitious forces | [`mesh::kabsch`], [`stain::Forces`] (`stain/forces.rs`) |
 //! | §4.5, eqs. 4.7–4.10 | absorption, adsorption, evaporation | [`stain::InteractionRates`] (`stain/interact.rs`) |
-//! | §4.5, Fig. 4.6 | the look: saturation-dependent wicking (porous-medium law), solute carried by the solvent's flux, tide lines (a residual saturation pinning the wet edge, vapour-limited evaporation fastest there), an irregular fabric | [`stain::Wicking`] (`stain/diffuse.rs`), `carry_solute`, `residual_saturation`, `vapour_limited` in [`stain::StainParams`] (`stain/diffuse.rs`, `stain/interact.rs`), [`stain::Irregularity`] (`stain/irregular.rs`) |
+//! | §4.5, Fig. 4.6 | the look: saturation-dependent wicking (porous-medium law), solute carried by the solvent's flux, tide lines (a residual saturation pinning the wet edge, vapour-limited evaporation fastest there), an irregular fabric | [`stain::Wicking`] (`stain/diffuse/wicking.rs`), `carry_solute`, `residual_saturation`, `vapour_limited` in [`stain::StainParams`] (`stain/diffuse/solve.rs`, `stain/interact.rs`), [`stain::Irregularity`] (`stain/irregular.rs`) |
 //!
 //! Beyond the seed, for the same chapter: the velocity extended over the dry cloth
 //! ([`stain::extend`]), the distance from a brush to the cloth ([`mesh::proximity`]), and

@@ -78,7 +78,7 @@ impl Profile {
         );
         // diffusion: assembly and factorizations per sub-step, then per solve and per
         // iteration (module doc)
-        // the velocity's values: `(a c, a s)` per scalar entry (`ops/cg.rs`, "Rotated
+        // the velocity's values: `(a c, a s)` per scalar entry (`ops/cg/rotated.rs`, "Rotated
         // blocks"), 16 bytes and two products; only the densities' matrix is factored
         let assembly = (
             36.0 * f + 8.0 * n + 16.0 * e + (8.0 + 16.0) * nnz_s * s,

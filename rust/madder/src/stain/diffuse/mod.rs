@@ -49,7 +49,7 @@
 //! assemble it). The densities are solved with IC(0)-preconditioned CG. The velocity's
 //! Bochner system is never expanded into its `2×2` blocks: the scalar values and the
 //! edges' rotations are its operator, with symmetric Gauss–Seidel on the blocks as the
-//! preconditioner ([`WarmCg::solve_rotated`], module doc of `ops/cg.rs`, "Rotated
+//! preconditioner ([`WarmCg::solve_rotated`], module doc of `ops/cg/rotated.rs`, "Rotated
 //! blocks"), so no block assembly, gather or factorization remains.
 //!
 //! ## In the simulator: tolerances
