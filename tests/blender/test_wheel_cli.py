@@ -1,4 +1,4 @@
-"""README's `python -m madder bake scene.blend --all`, run verbatim on a fresh machine: a
+"""The farm page's (docs/farm.md) `python -m madder bake scene.blend --all`, run verbatim on a fresh machine: a
 clean virtual environment that has the bpy module and then only `pip install` of the
 Madder wheel. No extension installed, an empty Blender user folder, no PYTHONPATH."""
 
@@ -17,12 +17,13 @@ from conftest import FIXTURES, ROOT
 
 import madder
 
-README_COMMAND = "python -m madder bake scene.blend --all"
+FARM_COMMAND = "python -m madder bake scene.blend --all"
 
 
-def readme_farm_section():
-    text = open(os.path.join(ROOT, "README.md"), encoding="utf-8").read()
-    return text.split("### On a render farm", 1)[1].split("\n## ", 1)[0]
+def farm_section():
+    """docs/farm.md's command-line section (the README links there)."""
+    text = open(os.path.join(ROOT, "docs", "farm.md"), encoding="utf-8").read()
+    return text.split("## The command line", 1)[1].split("\n## ", 1)[0]
 
 
 def wheel_path():
@@ -41,15 +42,15 @@ def fresh_venv(where):
     return where / "bin"
 
 
-def test_readme_python_module_command_runs_with_the_wheel_alone(tmp_path):
-    section = readme_farm_section()
-    assert README_COMMAND in section.splitlines(), "the README's farm section no longer shows the command tested here"
+def test_the_farm_pages_python_module_command_runs_with_the_wheel_alone(tmp_path):
+    section = farm_section()
+    assert FARM_COMMAND in section.splitlines(), "docs/farm.md no longer shows the command tested here"
     newest = harness.bpy_versions()[0]
     assert re.search(rf"pip install bpy=={re.escape(newest)} addon/wheels/madder-\S+\.whl", section), (
-        f"the README must say what to install: the newest tested bpy, {newest}"
+        f"docs/farm.md must say what to install: the newest tested bpy, {newest}"
     )
 
-    # the scene: the flag fixture with its spill enabled, saved under the README's name
+    # the scene: the flag fixture with its spill enabled, saved under the farm page's name
     bpy.ops.wm.open_mainfile(filepath=os.path.join(FIXTURES, "flag.blend"))
     flag = bpy.data.objects["Flag"]
     flag.madder.enabled = True
@@ -69,7 +70,7 @@ def test_readme_python_module_command_runs_with_the_wheel_alone(tmp_path):
                wheel_path()]
     subprocess.run(install, check=True, env=env)
 
-    run = subprocess.run(["bash", "-c", README_COMMAND], cwd=tmp_path, env=env, capture_output=True, text=True)
+    run = subprocess.run(["bash", "-c", FARM_COMMAND], cwd=tmp_path, env=env, capture_output=True, text=True)
     assert run.returncode == 0, run.stdout + run.stderr
     assert "using the add-on packaged in the madder" in run.stdout
     assert "baked 'Flag'" in run.stdout and "saved" in run.stdout
