@@ -111,14 +111,20 @@ impl Topology {
 }
 
 /// The `(N, 3)` rows of float argument `name` read as `T` (any float dtype, see `args`).
-fn rows3<T: Element + Copy>(name: &str, a: &Bound<'_, PyAny>) -> PyResult<Vec<[T; 3]>> {
-    let a: PyReadonlyArray2<'_, T> = args::floats(name, a)?;
-    if a.shape()[1] != 3 {
+/// An `(N, 3)` argument's shape check.
+fn check_rows3(name: &str, shape: &[usize]) -> PyResult<()> {
+    if shape[1] != 3 {
         return Err(ParameterError::new_err(format!(
             "{name} must have shape (N, 3), got {}",
-            args::shape(a.shape())
+            args::shape(shape)
         )));
     }
+    Ok(())
+}
+
+fn rows3<T: Element + Copy>(name: &str, a: &Bound<'_, PyAny>) -> PyResult<Vec<[T; 3]>> {
+    let a: PyReadonlyArray2<'_, T> = args::floats(name, a)?;
+    check_rows3(name, a.shape())?;
     Ok(a.as_array()
         .rows()
         .into_iter()
@@ -135,11 +141,25 @@ pub fn points(name: &str, a: &Bound<'_, PyAny>) -> PyResult<Vec<glam::Vec3>> {
 }
 
 /// The `(N, 3)` float argument `name` as float64 points: float16 and float32 values
-/// exactly, float64 ones keeping their precision (the core works in f64).
+/// exactly, float64 ones keeping their precision (the core works in f64). A float32 array
+/// (what the add-on passes every frame) is widened where it lies, in any layout, with no
+/// float64 copy made first.
 pub fn dpoints(name: &str, a: &Bound<'_, PyAny>) -> PyResult<Vec<glam::DVec3>> {
-    Ok(rows3::<f64>(name, a)?
+    if let Ok(a) = a.cast::<PyArray2<f32>>() {
+        return widened(name, &a.try_readonly()?);
+    }
+    widened(name, &args::floats::<f64, Ix2>(name, a)?)
+}
+
+fn widened<T: Element + Copy + Into<f64>>(
+    name: &str,
+    a: &PyReadonlyArray2<'_, T>,
+) -> PyResult<Vec<glam::DVec3>> {
+    check_rows3(name, a.shape())?;
+    Ok(a.as_array()
+        .rows()
         .into_iter()
-        .map(glam::DVec3::from_array)
+        .map(|r| glam::DVec3::new(r[0].into(), r[1].into(), r[2].into()))
         .collect())
 }
 
