@@ -63,6 +63,10 @@ def addon_edges(addon: Path = ADDON) -> Edges:
 # The core
 
 
+RAW_STRING = re.compile(r'(?<!\w)r(#*)"')  # r"…", r#"…"#, not the end of an identifier
+CHAR = re.compile(r"'(\\.[^']*|[^\\'])'")  # 'a', '\n', '\u{1F600}', not a lifetime 'a
+
+
 def strip_rust(text: str) -> str:
     """Comments, strings and char literals blanked (lines kept), `#[cfg(test)]` items cut."""
     out = []
@@ -84,9 +88,7 @@ def strip_rust(text: str) -> str:
                     j += 1
             out.append("\n" * text.count("\n", i, j))
             i = j
-        elif m := re.match(r'r(#*)"', text[i : i + 8]) if c == "r" and (
-            i == 0 or not (text[i - 1].isalnum() or text[i - 1] == "_")
-        ) else None:
+        elif m := RAW_STRING.match(text, i):
             end = '"' + m.group(1)
             j = text.find(end, i + len(m.group(0)))
             j = n if j < 0 else j + len(end)
@@ -98,8 +100,7 @@ def strip_rust(text: str) -> str:
                 j += 2 if text[j] == "\\" else 1
             out.append('""' + "\n" * text.count("\n", i, j))
             i = j + 1
-        elif c == "'" and re.match(r"'(\\.[^']*|[^\\'])'", text[i : i + 12]):
-            m = re.match(r"'(\\.[^']*|[^\\'])'", text[i : i + 12])
+        elif m := CHAR.match(text, i):
             out.append("' '")
             i += len(m.group(0))
         else:

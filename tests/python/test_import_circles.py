@@ -43,6 +43,8 @@ CORE_OK = {
     "data/mod.rs": "mod types;\npub use types::Field;\n",
     "data/types.rs": "/// uses crate::algo::run in a comment\npub struct Field;\n"
                      "const S: &str = \"crate::algo::run\";\n"
+                     "const R: &str = r#\"a \"quoted\" crate::algo::run\"#;\n"
+                     "const C: char = '\"'; fn f<'a>(x: &'a str) -> &'a str { x }\n"
                      "#[cfg(test)]\nmod tests {\n    use crate::algo::run;\n}\n",
     "algo.rs": "use crate::data::Field;\npub fn run(_: Field) {}\n",
 }
