@@ -34,19 +34,35 @@ from .bridge import DEPOSIT_ATTR, STAIN_ATTR, WETNESS_ATTR
 
 GROUP = "Madder Stain"
 INPUT_PREFIX = "Madder Input: "
-# the group's inputs: name, socket type, default, range
+TRANSLUCENT = "Madder Translucent"  # the material's Translucent BSDF and its Mix Shader
+MIX = "Madder Wet Transmission"
+# the group's inputs: name, socket type, default, range, tooltip
 _INPUTS = (
-    ("Base Color", "NodeSocketColor", (0.8, 0.8, 0.8, 1.0), None),
-    ("Roughness", "NodeSocketFloat", 0.5, (0.0, 1.0)),
-    ("Wet Darkening", "NodeSocketFloat", 0.35, (0.0, 1.0)),
-    ("Wet Roughness", "NodeSocketFloat", 0.25, (0.0, 1.0)),
-    ("Deposit Darkening", "NodeSocketFloat", 0.15, (0.0, 1.0)),
-    ("Stain", "NodeSocketColor", (0.0, 0.0, 0.0, 1.0), None),
-    ("Coverage", "NodeSocketFloat", 0.0, (0.0, 1.0)),
-    ("Wetness", "NodeSocketFloat", 0.0, (0.0, 1.0)),
-    ("Deposit", "NodeSocketFloat", 0.0, (0.0, 1.0)),
+    ("Base Color", "NodeSocketColor", (0.8, 0.8, 0.8, 1.0), None, "The clean, dry cloth's colour"),
+    ("Roughness", "NodeSocketFloat", 0.5, (0.0, 1.0), "The dry cloth's roughness"),
+    ("Wet Roughness", "NodeSocketFloat", 0.25, (0.0, 1.0), "Roughness where the cloth is full of liquid"),
+    ("Surface White", "NodeSocketFloat", 0.06, (0.0, 0.5),
+     "Neutral reflectance of the dry fibres' surfaces, sent to the specular direction once a water film covers them"),
+    ("Wet Scattering", "NodeSocketFloat", 0.0, (0.0, 10.0),
+     "How much water in the fibres raises K/S (it replaces the air that scattered): K/S·(1 + this·wetness)"),
+    ("Film Reflection", "NodeSocketFloat", 0.47, (0.0, 0.95),
+     "Internal reflectance of the water film for diffuse light (Lekner & Dorf 1988; 0.47 for water)"),
+    ("Translucency", "NodeSocketFloat", 0.05, (0.0, 1.0), "Fraction of the light the dry cloth transmits"),
+    ("Wet Translucency", "NodeSocketFloat", 0.3, (0.0, 1.0), "Fraction the cloth transmits full of liquid"),
+    ("Yarn", "NodeSocketFloat", 1.0, (0.0, 2.0),
+     "The weave's local reflectance factor, mean 1; 1 = no weave"),
+    ("Stain", "NodeSocketColor", (0.0, 0.0, 0.0, 1.0), None,
+     "The liquid's colour times the dye amount (premultiplied)"),
+    ("Coverage", "NodeSocketFloat", 0.0, (0.0, 1.0), "Dye amount: 1 = a spot saturated with the liquid"),
+    ("Wetness", "NodeSocketFloat", 0.0, (0.0, 1.0), "Liquid in the fibres: 1 = full"),
+    ("Deposit", "NodeSocketFloat", 0.0, (0.0, 1.0), "Bound dye (passed through as an output)"),
 )
-_OUTPUTS = (("Base Color", "NodeSocketColor"), ("Roughness", "NodeSocketFloat"))
+_OUTPUTS = (("Base Color", "NodeSocketColor"), ("Roughness", "NodeSocketFloat"),
+            ("Translucency", "NodeSocketFloat"), ("Deposit", "NodeSocketFloat"))
+# smallest reflectance the K/S maths sees (K/S = (1 − R)²/2R is infinite at R = 0)
+R_MIN = 1e-3
+# smallest dye amount the liquid's colour is recovered from (Stain / Coverage)
+A_MIN = 1e-4
 
 
 def _sockets(group, in_out):
@@ -54,26 +70,78 @@ def _sockets(group, in_out):
 
 
 def _ensure_sockets(group):
-    """Adds the sockets `group` lacks (existing ones keep their identifiers)."""
+    """Adds the sockets `group` lacks (existing ones keep their identifiers) and removes
+    those an older Madder made that this model no longer has ("Wet Darkening", "Deposit
+    Darkening"); puts the inputs in the order of `_INPUTS`."""
+    names = {name for name, *_ in _INPUTS}
+    for s in list(_sockets(group, "INPUT").values()):
+        if s.name not in names:
+            group.interface.remove(s)
     have = _sockets(group, "INPUT")
-    for name, kind, default, bounds in _INPUTS:
-        if name not in have:
+    for name, kind, default, bounds, tip in _INPUTS:
+        s = have.get(name)
+        if s is None:
             s = group.interface.new_socket(name, in_out="INPUT", socket_type=kind)
             s.default_value = default
             if bounds is not None:
                 s.min_value, s.max_value = bounds
+        s.description = tip
     have = _sockets(group, "OUTPUT")
     for name, kind in _OUTPUTS:
         if name not in have:
             group.interface.new_socket(name, in_out="OUTPUT", socket_type=kind)
 
 
-def _mix(nodes, data_type, blend="MIX"):
-    n = nodes.new("ShaderNodeMix")
-    n.data_type = data_type
-    if data_type == "RGBA":
-        n.blend_type = blend
-    return n
+class _Maths:
+    """Scalar Math nodes in `nodes`, each call one node (inputs: sockets or numbers)."""
+
+    def __init__(self, nodes, links):
+        self.nodes, self.links, self.made = nodes, links, []
+
+    def op(self, operation, *args, clamp=False):
+        n = self.nodes.new("ShaderNodeMath")
+        n.operation = operation
+        n.use_clamp = clamp
+        for i, a in enumerate(args):
+            if isinstance(a, (int, float)):
+                n.inputs[i].default_value = a
+            else:
+                self.links.new(a, n.inputs[i])
+        self.made.append(n)
+        return n.outputs[0]
+
+    def ks(self, r):
+        """K/S = (1 − R)² / 2R (Kubelka–Munk), R clamped to [R_MIN, 1]."""
+        r = self.op("MINIMUM", self.op("MAXIMUM", r, R_MIN), 1.0)
+        one_minus = self.op("SUBTRACT", 1.0, r)
+        return self.op("DIVIDE", self.op("MULTIPLY", one_minus, one_minus), self.op("MULTIPLY", r, 2.0))
+
+    def reflectance(self, q):
+        """R∞ = 1 + K/S − √((K/S)² + 2·K/S), the inverse of `ks`."""
+        root = self.op("SQRT", self.op("MULTIPLY_ADD", q, self.op("ADD", q, 2.0), 0.0))
+        return self.op("SUBTRACT", self.op("ADD", q, 1.0), root)
+
+    def mix(self, a, b, t):
+        """a + t·(b − a)."""
+        return self.op("MULTIPLY_ADD", t, self.op("SUBTRACT", b, a), a)
+
+
+def _channel(m, base, stain, g):
+    """One colour channel of the group's maths (module doc): `base` and `stain` the
+    channel's sockets, `g` the group input node."""
+    amount = m.op("MAXIMUM", g.outputs["Coverage"], 0.0)
+    dye = m.op("DIVIDE", stain, m.op("MAXIMUM", amount, A_MIN))  # the liquid's colour
+    q = m.op("MULTIPLY_ADD", amount, m.ks(dye), m.ks(base))  # K/S, cloth + dye
+    wet = g.outputs["Wetness"]
+    q = m.op("MULTIPLY", q, m.op("MULTIPLY_ADD", g.outputs["Wet Scattering"], wet, 1.0))
+    r = m.reflectance(q)
+    white = g.outputs["Surface White"]  # the body under the dry surface's neutral reflection
+    body = m.op("DIVIDE", m.op("SUBTRACT", r, white), m.op("SUBTRACT", 1.0, white), clamp=True)
+    ri = g.outputs["Film Reflection"]  # Lekner & Dorf: B (1 − r_i) / (1 − r_i B)
+    film = m.op("DIVIDE", m.op("MULTIPLY", body, m.op("SUBTRACT", 1.0, ri)),
+                m.op("SUBTRACT", 1.0, m.op("MULTIPLY", ri, body)))
+    r = m.mix(r, film, wet)
+    return m.op("MINIMUM", m.op("MULTIPLY", r, g.outputs["Yarn"]), 1.0)
 
 
 def _build(group):
@@ -82,48 +150,27 @@ def _build(group):
     nodes, links = group.nodes, group.links
     nodes.clear()
     gin, gout = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
-    # base · (1 − coverage) + stain
-    keep = _mix(nodes, "RGBA")
-    keep.inputs["B"].default_value = (0.0, 0.0, 0.0, 1.0)
-    links.new(gin.outputs["Coverage"], keep.inputs["Factor"])
-    links.new(gin.outputs["Base Color"], keep.inputs["A"])
-    over = _mix(nodes, "RGBA", "ADD")
-    over.inputs["Factor"].default_value = 1.0
-    links.new(keep.outputs["Result"], over.inputs["A"])
-    links.new(gin.outputs["Stain"], over.inputs["B"])
-    # darken with wetness: multiply by (1 − darkening · wetness)
-    amount = nodes.new("ShaderNodeMath")
-    amount.operation = "MULTIPLY"
-    amount.use_clamp = True
-    links.new(gin.outputs["Wet Darkening"], amount.inputs[0])
-    links.new(gin.outputs["Wetness"], amount.inputs[1])
-    dark = _mix(nodes, "RGBA")
-    dark.inputs["B"].default_value = (0.0, 0.0, 0.0, 1.0)
-    links.new(amount.outputs["Value"], dark.inputs["Factor"])
-    links.new(over.outputs["Result"], dark.inputs["A"])
-    # and with the deposit: multiply by (1 − deposit darkening · deposit)
-    mark = nodes.new("ShaderNodeMath")
-    mark.operation = "MULTIPLY"
-    mark.use_clamp = True
-    links.new(gin.outputs["Deposit Darkening"], mark.inputs[0])
-    links.new(gin.outputs["Deposit"], mark.inputs[1])
-    marked = _mix(nodes, "RGBA")
-    marked.inputs["B"].default_value = (0.0, 0.0, 0.0, 1.0)
-    links.new(mark.outputs["Value"], marked.inputs["Factor"])
-    links.new(dark.outputs["Result"], marked.inputs["A"])
-    links.new(marked.outputs["Result"], gout.inputs["Base Color"])
-    # roughness towards the wet roughness
-    rough = _mix(nodes, "FLOAT")
-    links.new(gin.outputs["Wetness"], rough.inputs["Factor"])
-    links.new(gin.outputs["Roughness"], rough.inputs["A"])
-    links.new(gin.outputs["Wet Roughness"], rough.inputs["B"])
-    links.new(rough.outputs["Result"], gout.inputs["Roughness"])
-    for i, n in enumerate((gin, keep, over, amount, dark, mark, marked, rough, gout)):
-        n.location = (200 * i, 0)
+    m = _Maths(nodes, links)
+    split_base, split_stain = nodes.new("ShaderNodeSeparateColor"), nodes.new("ShaderNodeSeparateColor")
+    links.new(gin.outputs["Base Color"], split_base.inputs[0])
+    links.new(gin.outputs["Stain"], split_stain.inputs[0])
+    join = nodes.new("ShaderNodeCombineColor")
+    for i in range(3):
+        links.new(_channel(m, split_base.outputs[i], split_stain.outputs[i], gin), join.inputs[i])
+    links.new(join.outputs[0], gout.inputs["Base Color"])
+    wet = gin.outputs["Wetness"]
+    links.new(m.mix(gin.outputs["Roughness"], gin.outputs["Wet Roughness"], wet), gout.inputs["Roughness"])
+    links.new(m.mix(gin.outputs["Translucency"], gin.outputs["Wet Translucency"], wet), gout.inputs["Translucency"])
+    links.new(gin.outputs["Deposit"], gout.inputs["Deposit"])
+    gin.location, split_base.location, split_stain.location = (-400, 0), (-200, 100), (-200, -100)
+    for i, n in enumerate(m.made):
+        n.location, n.hide = (40 * (i % 40), -40 * (i // 40) - 300), True
+    join.location, gout.location = (1700, 0), (1900, 0)
 
 
 def _current(group):
-    return set(_sockets(group, "INPUT")) >= {name for name, *_ in _INPUTS}
+    return (set(_sockets(group, "INPUT")) == {name for name, *_ in _INPUTS}
+            and set(_sockets(group, "OUTPUT")) >= {name for name, _ in _OUTPUTS})
 
 
 def stain_group():
@@ -137,9 +184,10 @@ def stain_group():
         _build(group)
         return group
     _build(group)
-    for mat in bpy.data.materials:  # the old group read the attributes itself: feed them now
+    for mat in bpy.data.materials:  # an old group read the attributes itself, or had no transmission
         if _group_node(mat) is not None:
             sync_material(mat, _owner(mat))
+            _ensure_transmission(mat)
     return group
 
 
@@ -227,18 +275,19 @@ def sync_object(obj):
 
 def add_to_material(material, obj=None):
     """Inserts the group in front of the material's Principled BSDF (Base Color and
-    Roughness), keeping whatever fed them, and its input nodes for `obj`. Returns False
-    when the group was already there (its inputs are synced again) or the material has
-    no Principled BSDF."""
+    Roughness), keeping whatever fed them, its input nodes for `obj`, and the wet cloth's
+    transmission behind it (`_ensure_transmission`). Returns False when the group was
+    already there (its inputs are synced again) or the material has no Principled BSDF."""
     nt = material.node_tree
     if nt is None:
         return False
-    bsdf = next((n for n in nt.nodes if n.type == "BSDF_PRINCIPLED"), None)
+    bsdf = _principled(material)
     if bsdf is None:
         return False
     group = stain_group()
     if _group_node(material) is not None:
         sync_material(material, obj)
+        _ensure_transmission(material)
         return False
     node = nt.nodes.new("ShaderNodeGroup")
     node.node_tree = group
@@ -252,6 +301,37 @@ def add_to_material(material, obj=None):
             node.inputs[name].default_value = src.default_value
         nt.links.new(node.outputs[name], src)
     sync_material(material, obj)
+    _ensure_transmission(material)
+    return True
+
+
+def _principled(material):
+    return next((n for n in material.node_tree.nodes if n.type == "BSDF_PRINCIPLED"), None)
+
+
+def _ensure_transmission(material):
+    """Makes the Principled BSDF's output pass through a Mix Shader (factor: the group's
+    Translucency) with a Translucent BSDF of the group's colour, wherever the BSDF fed
+    (the Material Output, usually), so that a wet cloth shows what is behind it. Does
+    nothing when the material has them already, or has no Principled BSDF or group."""
+    nt, node = material.node_tree, _group_node(material)
+    bsdf = _principled(material) if nt is not None else None
+    if node is None or bsdf is None or nt.nodes.get(MIX) is not None:
+        return False
+    out = compat.shader_output(bsdf)
+    targets = [link.to_socket for link in out.links]
+    translucent = nt.nodes.new("ShaderNodeBsdfTranslucent")
+    translucent.name = translucent.label = TRANSLUCENT
+    translucent.location = (bsdf.location.x, bsdf.location.y - 700)
+    nt.links.new(node.outputs["Base Color"], translucent.inputs["Color"])
+    mix = nt.nodes.new("ShaderNodeMixShader")
+    mix.name = mix.label = MIX
+    mix.location = (bsdf.location.x + 300, bsdf.location.y)
+    nt.links.new(node.outputs["Translucency"], mix.inputs[0])  # "Fac" (4.x) / "Factor" (5.x)
+    nt.links.new(out, mix.inputs[1])
+    nt.links.new(translucent.outputs[0], mix.inputs[2])
+    for target in targets:
+        nt.links.new(mix.outputs[0], target)
     return True
 
 
