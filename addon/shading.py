@@ -1,16 +1,65 @@
 """The "Madder Stain" shader node group, the nodes that feed it, and the one-click
 operator that adds them to an object's materials.
 
-The group takes the material's Base Color and Roughness and returns them stained:
+The group takes the material's Base Color and Roughness and returns them stained and
+wetted, per colour channel (the maths runs on scalar Math nodes, three times):
 
-    color  = base · (1 − coverage) + stain          (stain: RGB = color × coverage,
-                                                     premultiplied "over")
-    color *= 1 − darkening · wetness                (wet fabric looks darker)
-    color *= 1 − deposit darkening · deposit        (bound dye is a little darker still)
-    rough  = mix(roughness, wet roughness, wetness) (and shinier)
+**Dye (Kubelka–Munk).** An opaque layer of absorption K and scattering S reflects
+R∞ = 1 + K/S − √((K/S)² + 2·K/S), the inverse of K/S = (1 − R)²/2R (Kubelka & Munk
+1931; Kubelka 1948); K/S of a mixture is the sum of its parts' K/S. So
 
-`stain`, `coverage`, `wetness` and `deposit` (each in [0, 1]) are inputs of the group,
-fed in the material by nodes that `sync_material` places (named "Madder Input: …"):
+    q_cloth = (1 − B)² / 2B                 B: the clean cloth's colour (Base Color)
+    q_dye   = (1 − C)² / 2C                 C: the liquid's colour = Stain / Coverage
+    q       = q_cloth + a·q_dye             a: the dye amount (Coverage)
+    R_dry   = R∞(q)
+
+with reflectances clamped to [1e-3, 1]. The dye amount counts all the dye, dissolved in
+the liquid and bound to the fibres alike (the dye shows either way): it is the total
+solute over the solute of fibres saturated with the liquid (`bridge.write_stain`), so
+at a = 1 the cloth has the liquid's own colour (plus the cloth's), a thin stain is a
+pale tint of the same hue and colour depth grows as K/S does, linearly with the dye.
+
+**Water.** Wetness w (the liquid in the fibres over what they hold) changes the optics
+three ways, each weighted by w so a dry cloth keeps R_dry exactly:
+
+1. water replacing the air between the fibres lowers their scattering:
+   q → q·(1 + s·w), s = "Wet Scattering" (0 by default: the film alone already gives
+   the measured darkening);
+2. the dry fibres' rough surfaces reflect a neutral ρ ("Surface White", 0.06) in every
+   direction, which whitens every colour; a water film's smooth surface sends that
+   reflection to the specular direction instead (the Principled BSDF's own specular),
+   leaving the body's reflectance Rb = (R − ρ)/(1 − ρ);
+3. light scattered back by the body reaches the film's surface and, beyond the critical
+   angle, is totally internally reflected back to be absorbed again (Lekner & Dorf 1988,
+   "Why some things are darker when wet", Appl. Opt. 27, 1278):
+   R_film = Rb·(1 − r_i)/(1 − r_i·Rb), with r_i ("Film Reflection") = 1 − (1 − r_e)/n²
+   ≈ 0.47 for water (n = 1.33, r_e ≈ 0.066 the diffuse external reflectance).
+
+    R_wet = R + w·(R_film − R)              R = R∞(q·(1 + s·w))
+    Base Color = min(Yarn · R_wet, 1)
+
+Darker channels lose proportionally more (R_film/Rb = (1 − r_i)/(1 − r_i·Rb) is smallest
+for small Rb) and the neutral ρ is gone, so wet colours are darker *and* more saturated;
+the cloth's own colour and the stain's alike. Roughness goes to "Wet Roughness" (0.1)
+with w: the film is smooth, so its gloss is a tight glint near the mirror direction.
+(A broad wet lobe, 0.25 before, spread the sun's reflection over every direction near
+it: seen from above with the sun 12° off the zenith, as in the gallery, it added about
+0.17 of white to the wet wine, which read paler than the dry stain, the "darker as it
+dries" of issue 35; the attributes and images were right all along: coverage 1 at the
+spill's centre from the first minute.) Wet fabric also lets more light through (water fills the gaps
+between and inside the yarns and matches the fibres' index, so less is scattered back):
+the group's Translucency output, mix("Translucency", "Wet Translucency", w), is the
+factor of a Mix Shader that `add_to_material` puts after the Principled BSDF, whose
+other shader is a Transparent BSDF tinted by the stained colour, so what lies behind a
+wet cloth shows through (Cycles and EEVEE alike; see `_ensure_transmission`).
+
+**Yarn** is the weave's local reflectance factor (mean 1; 1 = no weave): it multiplies
+the finished colour, clean cloth and stain alike, since the yarns carry both. The
+weave's own node group (`weave_shader`) feeds it. The Deposit input (bound dye) does
+not change the colour; it is passed through as an output for the material's own nodes.
+
+`Stain`, `Coverage`, `Wetness` and `Deposit` are inputs of the group, fed in the
+material by nodes that `sync_material` places (named "Madder Input: …"):
 
 - *Vertex Colors*: Attribute nodes reading `madder_stain` (Color, Alpha),
   `madder_wetness` and `madder_deposit` (0 where an object has none, so the group is
@@ -23,9 +72,11 @@ fed in the material by nodes that `sync_material` places (named "Madder Input: �
 
 A bake, a re-export, Free Bake and switching the output re-run `sync_object`, so a
 material that has the group always reads what its object has. A group made by an older
-Madder (it read the attributes itself) is upgraded in place: its sockets keep their
-identifiers (the material's links stay), it gains the four inputs, and every material
-using it gets its input nodes."""
+Madder is rebuilt in place: its sockets keep their identifiers (the material's links
+stay), it gains the inputs it lacks and loses "Wet Darkening" and "Deposit Darkening"
+(the old neutral darkening `1 − 0.35·w` and the bound dye's extra darkening, replaced by
+the model above), and every material using it gets its input nodes and the Mix Shader
+with the Transparent BSDF."""
 
 import bpy
 
@@ -34,13 +85,14 @@ from .bridge import DEPOSIT_ATTR, STAIN_ATTR, WETNESS_ATTR
 
 GROUP = "Madder Stain"
 INPUT_PREFIX = "Madder Input: "
-TRANSLUCENT = "Madder Translucent"  # the material's Translucent BSDF and its Mix Shader
+SEE_THROUGH = "Madder See-Through"  # the material's Transparent BSDF and its Mix Shader
 MIX = "Madder Wet Transmission"
 # the group's inputs: name, socket type, default, range, tooltip
 _INPUTS = (
     ("Base Color", "NodeSocketColor", (0.8, 0.8, 0.8, 1.0), None, "The clean, dry cloth's colour"),
     ("Roughness", "NodeSocketFloat", 0.5, (0.0, 1.0), "The dry cloth's roughness"),
-    ("Wet Roughness", "NodeSocketFloat", 0.25, (0.0, 1.0), "Roughness where the cloth is full of liquid"),
+    ("Wet Roughness", "NodeSocketFloat", 0.1, (0.0, 1.0),
+     "Roughness where the cloth is full of liquid (the water film is smooth)"),
     ("Surface White", "NodeSocketFloat", 0.06, (0.0, 0.5),
      "Neutral reflectance of the dry fibres' surfaces, sent to the specular direction once a water film covers them"),
     ("Wet Scattering", "NodeSocketFloat", 0.0, (0.0, 10.0),
@@ -311,25 +363,30 @@ def _principled(material):
 
 def _ensure_transmission(material):
     """Makes the Principled BSDF's output pass through a Mix Shader (factor: the group's
-    Translucency) with a Translucent BSDF of the group's colour, wherever the BSDF fed
-    (the Material Output, usually), so that a wet cloth shows what is behind it. Does
-    nothing when the material has them already, or has no Principled BSDF or group."""
+    Translucency) with a Transparent BSDF tinted by the group's colour, wherever the BSDF
+    fed (the Material Output, usually), so that a wet cloth shows what is behind it.
+    Transparent rather than Translucent: EEVEE's Translucent BSDF is lit by lights alone,
+    so a backing would not show through it; a Transparent BSDF shows it in Cycles and in
+    EEVEE (its default Dithered render method) alike, and the light that reaches the
+    backing through the cloth and comes back through it is Cycles' and EEVEE's own
+    (transparent shadows). Does nothing when the material has them already, or has no
+    Principled BSDF or group."""
     nt, node = material.node_tree, _group_node(material)
     bsdf = _principled(material) if nt is not None else None
     if node is None or bsdf is None or nt.nodes.get(MIX) is not None:
         return False
     out = compat.shader_output(bsdf)
     targets = [link.to_socket for link in out.links]
-    translucent = nt.nodes.new("ShaderNodeBsdfTranslucent")
-    translucent.name = translucent.label = TRANSLUCENT
-    translucent.location = (bsdf.location.x, bsdf.location.y - 700)
-    nt.links.new(node.outputs["Base Color"], translucent.inputs["Color"])
+    through = nt.nodes.new("ShaderNodeBsdfTransparent")
+    through.name = through.label = SEE_THROUGH
+    through.location = (bsdf.location.x, bsdf.location.y - 700)
+    nt.links.new(node.outputs["Base Color"], through.inputs["Color"])
     mix = nt.nodes.new("ShaderNodeMixShader")
     mix.name = mix.label = MIX
     mix.location = (bsdf.location.x + 300, bsdf.location.y)
     nt.links.new(node.outputs["Translucency"], mix.inputs[0])  # "Fac" (4.x) / "Factor" (5.x)
     nt.links.new(out, mix.inputs[1])
-    nt.links.new(translucent.outputs[0], mix.inputs[2])
+    nt.links.new(through.outputs[0], mix.inputs[2])
     for target in targets:
         nt.links.new(mix.outputs[0], target)
     return True
