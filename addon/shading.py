@@ -112,6 +112,9 @@ _INPUTS = (
 )
 _OUTPUTS = (("Base Color", "NodeSocketColor"), ("Roughness", "NodeSocketFloat"),
             ("Translucency", "NodeSocketFloat"), ("Deposit", "NodeSocketFloat"))
+# defaults of an older Madder's group that this one changed (an upgrade moves a material's
+# value still at the old default to the new one)
+_OLD_DEFAULTS = {"Wet Roughness": 0.25}
 # smallest reflectance the K/S maths sees (K/S = (1 − R)²/2R is infinite at R = 0)
 R_MIN = 1e-3
 # smallest dye amount the liquid's colour is recovered from (Stain / Coverage)
@@ -125,24 +128,26 @@ def _sockets(group, in_out):
 def _ensure_sockets(group):
     """Adds the sockets `group` lacks (existing ones keep their identifiers) and removes
     those an older Madder made that this model no longer has ("Wet Darkening", "Deposit
-    Darkening"); puts the inputs in the order of `_INPUTS`."""
+    Darkening"). Returns the names of the inputs it added."""
     names = {name for name, *_ in _INPUTS}
     for s in list(_sockets(group, "INPUT").values()):
         if s.name not in names:
             group.interface.remove(s)
-    have = _sockets(group, "INPUT")
+    have, added = _sockets(group, "INPUT"), []
     for name, kind, default, bounds, tip in _INPUTS:
         s = have.get(name)
         if s is None:
             s = group.interface.new_socket(name, in_out="INPUT", socket_type=kind)
-            s.default_value = default
-            if bounds is not None:
-                s.min_value, s.max_value = bounds
+            added.append(name)
+        s.default_value = default
+        if bounds is not None:
+            s.min_value, s.max_value = bounds
         s.description = tip
     have = _sockets(group, "OUTPUT")
     for name, kind in _OUTPUTS:
         if name not in have:
             group.interface.new_socket(name, in_out="OUTPUT", socket_type=kind)
+    return added
 
 
 class _Maths:
@@ -198,8 +203,9 @@ def _channel(m, base, stain, g):
 
 
 def _build(group):
-    """The group's maths, from its inputs (see the module doc)."""
-    _ensure_sockets(group)
+    """The group's maths, from its inputs (see the module doc). Returns the names of the
+    inputs it added to an existing group."""
+    added = _ensure_sockets(group)
     nodes, links = group.nodes, group.links
     nodes.clear()
     gin, gout = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
@@ -219,6 +225,7 @@ def _build(group):
     for i, n in enumerate(m.made):
         n.location, n.hide = (40 * (i % 40), -40 * (i // 40) - 300), True
     join.location, gout.location = (1700, 0), (1900, 0)
+    return added
 
 
 def _current(group):
@@ -236,11 +243,19 @@ def stain_group():
         group = bpy.data.node_groups.new(GROUP, "ShaderNodeTree")
         _build(group)
         return group
-    _build(group)
+    added = _build(group)
+    defaults = {name: default for name, _kind, default, *_ in _INPUTS}
     for mat in bpy.data.materials:  # an old group read the attributes itself, or had no transmission
-        if _group_node(mat) is not None:
+        node = _group_node(mat)
+        if node is not None:
             sync_material(mat, _owner(mat))
             _ensure_transmission(mat)
+            for name in added:  # a socket added to a group leaves its nodes' values at 0
+                node.inputs[name].default_value = defaults[name]
+            for name, value in _OLD_DEFAULTS.items():  # values nobody changed take the new default
+                socket = node.inputs.get(name)
+                if socket is not None and not socket.is_linked and abs(socket.default_value - value) < 1e-6:
+                    socket.default_value = defaults[name]
     return group
 
 

@@ -258,3 +258,44 @@ def test_red_wine_dries_lighter(tmp_path):
         px = render(scene, str(tmp_path / f"wine{frame}.png"))
         lstar[frame] = lab(px[28:36, 28:36].reshape(-1, 3).mean(axis=0))[0]
     assert lstar[61] > lstar[2] + 1.0, lstar
+
+
+def test_the_previous_group_is_upgraded_in_place(open_fixture):
+    """The group of the Madder before this model (its nine inputs, a neutral wet
+    darkening, no Yarn, no transmission) becomes this one on Add Stain Shader: the
+    material keeps its links, gains the see-through Mix Shader between its BSDF and its
+    output, and a Wet Roughness left at the old default takes the new one."""
+    from conftest import make_active
+
+    open_fixture("flag.blend")
+    flag = make_active(bpy.data.objects["Flag"])
+    mat = flag.active_material
+    nt = mat.node_tree
+    group = bpy.data.node_groups.new("Madder Stain", "ShaderNodeTree")
+    old = (("Base Color", "NodeSocketColor"), ("Roughness", "NodeSocketFloat"), ("Wet Darkening", "NodeSocketFloat"),
+           ("Wet Roughness", "NodeSocketFloat"), ("Deposit Darkening", "NodeSocketFloat"),
+           ("Stain", "NodeSocketColor"), ("Coverage", "NodeSocketFloat"), ("Wetness", "NodeSocketFloat"),
+           ("Deposit", "NodeSocketFloat"))
+    for name, kind in old:
+        group.interface.new_socket(name, in_out="INPUT", socket_type=kind)
+    for name, kind in (("Base Color", "NodeSocketColor"), ("Roughness", "NodeSocketFloat")):
+        group.interface.new_socket(name, in_out="OUTPUT", socket_type=kind)
+    node = nt.nodes.new("ShaderNodeGroup")
+    node.node_tree = group
+    node.inputs["Wet Roughness"].default_value = 0.25
+    bsdf = next(n for n in nt.nodes if n.type == "BSDF_PRINCIPLED")
+    output = next(n for n in nt.nodes if n.type == "OUTPUT_MATERIAL")
+    nt.links.new(node.outputs["Base Color"], bsdf.inputs["Base Color"])
+    nt.links.new(node.outputs["Roughness"], bsdf.inputs["Roughness"])
+    assert bpy.ops.madder.add_stain_shader() == {"FINISHED"}
+    assert bpy.data.node_groups["Madder Stain"] == group and len(bpy.data.node_groups) == 1
+    assert "Yarn" in node.inputs and "Wet Darkening" not in node.inputs and "Deposit Darkening" not in node.inputs
+    assert node.inputs["Yarn"].default_value == 1.0
+    assert node.inputs["Wet Roughness"].default_value == pytest.approx(0.1)
+    assert bsdf.inputs["Base Color"].links[0].from_node == node
+    assert node.inputs["Wetness"].links[0].from_node.attribute_name == "madder_wetness"
+    mix = output.inputs["Surface"].links[0].from_node
+    assert mix.type == "MIX_SHADER" and mix.inputs[0].links[0].from_socket == node.outputs["Translucency"]
+    assert mix.inputs[1].links[0].from_node == bsdf and mix.inputs[2].links[0].from_node.type == "BSDF_TRANSPARENT"
+    assert bpy.ops.madder.add_stain_shader() == {"FINISHED"}  # idempotent
+    assert sum(n.type == "MIX_SHADER" for n in nt.nodes) == 1
