@@ -270,19 +270,40 @@ def stain_measures(stained, bare):
     return int((d > 0.5 * d.max()).sum()), np.array([(xs * d).sum(), (ys * d).sum()]) / d.sum()
 
 
+def show_dye(material, group):
+    """Makes `material` emit the dye amount its group reads (its Coverage input's source),
+    whichever nodes feed it now: the stain's shading is not linear in the dye
+    (Kubelka–Munk, test_shading.py), so a half-peak contour of the shaded colour would sit
+    in the faint rim, which the vertex colours spread over one cloth cell."""
+    nt = material.node_tree
+    emit = nt.nodes.get("dye") or nt.nodes.new("ShaderNodeEmission")
+    emit.name = "dye"
+    for link in emit.inputs["Color"].links:
+        nt.links.remove(link)
+    emit.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+    if group.inputs["Coverage"].is_linked:
+        nt.links.new(group.inputs["Coverage"].links[0].from_socket, emit.inputs["Color"])
+    out = next(n for n in nt.nodes if n.type == "OUTPUT_MATERIAL")
+    nt.links.new(emit.outputs[0], out.inputs["Surface"])
+
+
 def test_renders_of_the_vertex_colours_and_of_the_images_agree(open_fixture, tmp_path):
     scene, flag = bake_flag(open_fixture, detail=1)
     bpy.ops.madder.add_stain_shader()
     setup_render(scene, (160, 96), samples=8)
     scene.frame_set(8)
-    group = next(n for n in flag.active_material.node_tree.nodes if n.type == "GROUP")
+    mat = flag.active_material
+    group = next(n for n in mat.node_tree.nodes if n.type == "GROUP")
+    show_dye(mat, group)
     images = render_still(scene, str(tmp_path / "images.exr"))
     flag.madder.output_images = False  # the same material, fed by the attributes
+    show_dye(mat, group)
     colours = render_still(scene, str(tmp_path / "colours.exr"))
-    nt = flag.active_material.node_tree
+    nt = mat.node_tree
     for name in ("Stain", "Coverage", "Wetness", "Deposit"):  # unfed, they are 0: the bare cloth
         for link in group.inputs[name].links:
             nt.links.remove(link)
+    show_dye(mat, group)
     bare = render_still(scene, str(tmp_path / "bare.exr"))
     area_c, centre_c = stain_measures(colours, bare)
     area_i, centre_i = stain_measures(images, bare)
