@@ -409,7 +409,7 @@ def _ensure_transmission(material):
 
 
 class MADDER_OT_add_stain_shader(bpy.types.Operator):
-    """Add the Madder Stain node group to every material of the active object"""
+    """Add the Madder Stain node group (stained, wet and see-through cloth) to every material of the active object"""
 
     bl_idname = "madder.add_stain_shader"
     bl_label = "Add Stain Shader"
