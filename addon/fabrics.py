@@ -92,6 +92,13 @@ class MadderFabric(bpy.types.PropertyGroup):
         soft_max=100.0,
         precision=1,
     )
+    shader_weave: BoolProperty(
+        name="Weave in Shader",
+        description="Draw the weave in the material (a Madder Weave node: the yarns' light and bump on the "
+        "whole cloth, clean or stained, filtered to the pixel) and bake the Image Sequence smooth. Off: the "
+        "Image Sequence draws the weave into the stain at the Thread Count, as before",
+        default=True,
+    )
 
 
 def fabric_key(fabric):
@@ -144,8 +151,8 @@ def face_weave(obj, face_polygon):
     for s in obj.material_slots:
         m = s.material
         fab = m.madder_fabric if m is not None else None
-        if fab is None or not fab.enabled or fab.thread_count <= 0.0:
-            slots.append(None)
+        if fab is None or not fab.enabled or fab.thread_count <= 0.0 or fab.shader_weave:
+            slots.append(None)  # no weave, or the shader draws it (weave_shader)
         else:
             slots.append((m.name, fabric_key(fab), 100.0 * fab.thread_count, fab.angle))
     if not any(slots):

@@ -29,7 +29,7 @@ using it gets its input nodes."""
 
 import bpy
 
-from . import compat, images, stored
+from . import compat, images, stored, weave_shader
 from .bridge import DEPOSIT_ATTR, STAIN_ATTR, WETNESS_ATTR
 
 GROUP = "Madder Stain"
@@ -45,6 +45,7 @@ _INPUTS = (
     ("Coverage", "NodeSocketFloat", 0.0, (0.0, 1.0)),
     ("Wetness", "NodeSocketFloat", 0.0, (0.0, 1.0)),
     ("Deposit", "NodeSocketFloat", 0.0, (0.0, 1.0)),
+    ("Yarn", "NodeSocketFloat", 1.0, (0.0, 10.0)),  # the weave's reflectance factor (weave_shader)
 )
 _OUTPUTS = (("Base Color", "NodeSocketColor"), ("Roughness", "NodeSocketFloat"))
 
@@ -111,14 +112,22 @@ def _build(group):
     marked.inputs["B"].default_value = (0.0, 0.0, 0.0, 1.0)
     links.new(mark.outputs["Value"], marked.inputs["Factor"])
     links.new(dark.outputs["Result"], marked.inputs["A"])
-    links.new(marked.outputs["Result"], gout.inputs["Base Color"])
+    # the weave's local reflectance factor (mean 1 over a tile: weave_shader)
+    yarn = _mix(nodes, "RGBA", "MULTIPLY")
+    yarn.inputs["Factor"].default_value = 1.0
+    links.new(marked.outputs["Result"], yarn.inputs["A"])
+    combine = nodes.new("ShaderNodeCombineColor")
+    for c in ("Red", "Green", "Blue"):
+        links.new(gin.outputs["Yarn"], combine.inputs[c])
+    links.new(combine.outputs["Color"], yarn.inputs["B"])
+    links.new(yarn.outputs["Result"], gout.inputs["Base Color"])
     # roughness towards the wet roughness
     rough = _mix(nodes, "FLOAT")
     links.new(gin.outputs["Wetness"], rough.inputs["Factor"])
     links.new(gin.outputs["Roughness"], rough.inputs["A"])
     links.new(gin.outputs["Wet Roughness"], rough.inputs["B"])
     links.new(rough.outputs["Result"], gout.inputs["Roughness"])
-    for i, n in enumerate((gin, keep, over, amount, dark, mark, marked, rough, gout)):
+    for i, n in enumerate((gin, keep, over, amount, dark, mark, marked, combine, yarn, rough, gout)):
         n.location = (200 * i, 0)
 
 
@@ -164,6 +173,7 @@ def sync_material(material, obj):
     if node is None:
         return False
     nt = material.node_tree
+    kept_normal = weave_shader.user_normal(nt)
     for n in [n for n in nt.nodes if n.name.startswith(INPUT_PREFIX)]:
         nt.nodes.remove(n)
     x, y = node.location.x - 300, node.location.y
@@ -171,6 +181,7 @@ def sync_material(material, obj):
         _image_inputs(nt, node, obj, x, y)
     else:
         _attribute_inputs(nt, node, x, y)
+    weave_shader.place(material, obj, node, INPUT_PREFIX, x, y, kept_normal)
     return True
 
 
@@ -294,7 +305,9 @@ class MADDER_OT_add_stain_shader(bpy.types.Operator):
 
 def register():
     bpy.utils.register_class(MADDER_OT_add_stain_shader)
+    weave_shader.register()
 
 
 def unregister():
+    weave_shader.unregister()
     bpy.utils.unregister_class(MADDER_OT_add_stain_shader)
