@@ -69,7 +69,7 @@ NODE = "Weave"  # the node's name in a material, after shading.INPUT_PREFIX
 TERMS = 10
 AMPLITUDE = 0.12
 SIGMA = 0.6  # the pixel filter's standard deviation, in pixel footprints
-RELIEF = 0.15  # the bump's height at Relief 1, in thread pitches
+RELIEF = 0.05  # the bump's height at Relief 1, in thread pitches
 MIN_COSINE = 0.25
 SAMPLES = 24  # midpoint rule, per cell and axis
 
@@ -406,9 +406,14 @@ def place(material, obj, stain_node, prefix, x, y, kept_normal):
     s = metres_per_uv(obj, uv_name)
     if s is None:
         return None
+    try:
+        group = weave_group(fab)
+    except Exception as e:  # an invalid custom grid: the fabric panel names the problem
+        print(f"Madder: material '{material.name}': no weave in the shader: {e}")
+        return None
     nt = material.node_tree
     node = nt.nodes.new("ShaderNodeGroup")
-    node.node_tree = weave_group(fab)
+    node.node_tree = group
     node.name = node.label = prefix + NODE
     node.location = (x - 250, y - 420)
     node.hide = True

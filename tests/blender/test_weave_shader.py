@@ -237,9 +237,12 @@ def test_one_weave_at_every_distance(addon, tmp_path):
           f"clean {ciede2000(lab(wc.mean(0)), lab(cc.mean(0))):.3f}")
     # without the filter (no pixel footprint) the wide shot is not even: the filter is what makes it so
     node.inputs["Pixel Angle"].default_value = 0.0
-    handlers = [h for h in bpy.app.handlers.render_pre if getattr(h, "__module__", "").endswith("weave_shader")]
-    for h in handlers:
-        bpy.app.handlers.render_pre.remove(h)
+    # (the handlers would set the pixel angle again: rendering runs render_pre and frame_change_pre)
+    lists = (bpy.app.handlers.render_pre, bpy.app.handlers.frame_change_pre)
+    handlers = [[h for h in lst if getattr(h, "__module__", "").endswith("weave_shader")] for lst in lists]
+    for lst, hs in zip(lists, handlers, strict=True):
+        for h in hs:
+            lst.remove(h)
     try:
         scene.cycles.samples = 1
         scene.cycles.seed = 1
@@ -247,7 +250,8 @@ def test_one_weave_at_every_distance(addon, tmp_path):
         node.inputs["Pixel Angle"].default_value = 2 * math.atan(18 / 50) / SIZE
         filtered = halves(render(scene, tmp_path, "filtered", WIDE))[0]
     finally:
-        bpy.app.handlers.render_pre.extend(handlers)
+        for lst, hs in zip(lists, handlers, strict=True):
+            lst.extend(hs)
     print(f"wide, 1 sample a pixel: variation unfiltered {variation(raw):.4f}, filtered {variation(filtered):.4f}")
     assert variation(filtered) < 0.02 < variation(raw)
 
