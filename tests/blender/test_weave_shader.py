@@ -281,3 +281,20 @@ def test_yarn_averages_to_one_over_a_tile(addon, tmp_path):
     assert y.max() < 1.13 and y.min() > 0.87
     assert y.mean() == pytest.approx(1.0, abs=0.003)
     assert os.path.exists(scene.render.filepath + ".exr")
+
+
+def test_one_weave_at_every_distance_in_eevee(addon, tmp_path):
+    """The same shots in EEVEE (its first render compiles the shaders, about 2 minutes)."""
+    scene, obj, mat = cloth_scene(addon)
+    engines = scene.render.bl_rna.properties["engine"].enum_items.keys()
+    scene.render.engine = "BLENDER_EEVEE_NEXT" if "BLENDER_EEVEE_NEXT" in engines else "BLENDER_EEVEE"
+    scene.eevee.taa_render_samples = 16
+    ws, wc = halves(render(scene, tmp_path, "eevee_wide", WIDE))
+    cs, cc = halves(render(scene, tmp_path, "eevee_close", CLOSE))
+    des = [ciede2000(lab(far.mean(axis=0)), lab(near.mean(axis=0))) for far, near in ((ws, cs), (wc, cc))]
+    vs, vc = variation(cs), variation(cc)
+    print(f"EEVEE wide: variation stain {variation(ws):.4f} clean {variation(wc):.4f}; close: stain {vs:.4f} "
+          f"clean {vc:.4f}; dE00 stain {des[0]:.3f} clean {des[1]:.3f}")
+    assert max(des) < 2.0
+    assert variation(ws) < 0.02 and variation(wc) < 0.02
+    assert vs > 0.02 and vc > 0.02 and 0.5 < vs / vc < 2.0
