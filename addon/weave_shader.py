@@ -31,7 +31,19 @@ The cloth's UV `u` is turned into thread coordinates as the image sequence's wea
 (`textures.weave_maps`): `t = n s R(−θ) u` with `n` threads per metre, `s` metres of rest
 surface per UV unit (measured on the object when the material is synced: the median ratio
 of world edge length to UV edge length) and `θ` the weft angle from the u axis; the tile
-is anchored at UV (0, 0); cells are `c · t`.
+is anchored at UV (0, 0); cells are `c · t`. The bump's height is the same sum over `A`
+(±1) times `RELIEF` thread pitches: a larger relief tilts the shading normals enough to
+darken the close-up on average (0.15 pitch: 7 % under a uniform white world, ΔE00 1.7
+against the wide shot; 0.05: ΔE00 0.25, tests/blender/test_weave_shader.py).
+
+# With the image sequence
+
+With the fabric's "Weave in Shader" on (the default) the Image Sequence is baked smooth
+(`fabrics.face_weave` skips the fabric) and this node draws the weave on stained and clean
+cloth alike: the images' own weave sampled the tile at the texel (1.3 threads a pixel in
+the demo's wide shot) and aliased into a speckle, 11 % relative variation at 1 sample a
+pixel on the test's flat stain without this filter, and showed yarns only where the stain
+has a gradient. Off, the images carry the weave as before and no Weave node is placed.
 
 # The filter
 
@@ -54,8 +66,15 @@ far away is an even tone, the mean unchanged (the filter touches no mean).
 
 `α` and the orthographic pixel size are inputs of each node, kept current from the
 scene's active camera (lens, sensor and fit, resolution and its percentage) by handlers
-on `render_pre`, `frame_change_pre` and `load_post`, and when the material is synced
-(`update_cameras`)."""
+on `render_pre`, `frame_change_pre` (a render runs both) and `load_post`, and when the
+material is synced (`update_cameras`); a handler rather than a driver, since a driver
+would name one camera object and the scene's active camera may change.
+
+Measured (tests/blender/test_weave_shader.py, Cycles, 5 threads/cm, 64 px, 50 mm lens on
+36 mm): wide (1.4 threads a pixel) the stain's relative variation is < 0.01 % (0.107
+unfiltered at 1 sample a pixel); close (9 px a thread) 5.4 % stained and 5.5 % clean;
+ΔE00 between the wide and close means 0.25 (stain) and 0.27 (clean); the rendered Yarn
+averages 0.99998 over 4 × 4 tiles."""
 
 import math
 import statistics
