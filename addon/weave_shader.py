@@ -318,7 +318,10 @@ def metres_per_uv(obj, uv_name=""):
     UV length) of world edge length / UV edge length, on UV map `uv_name` (the active
     render map when empty). None when no edge has a UV length."""
     mesh = obj.data
-    layer = mesh.uv_layers.get(uv_name) if uv_name else (mesh.uv_layers.active)
+    if uv_name:
+        layer = mesh.uv_layers.get(uv_name)
+    else:  # what a UV Map node without a name reads: the active render map
+        layer = next((u for u in mesh.uv_layers if u.active_render), mesh.uv_layers.active)
     if layer is None or not mesh.loops:
         return None
     n = len(mesh.loops)
