@@ -74,7 +74,8 @@ Measured (tests/blender/test_weave_shader.py, Cycles, 5 threads/cm, 64 px, 50 mm
 36 mm): wide (1.4 threads a pixel) the stain's relative variation is < 0.01 % (0.107
 unfiltered at 1 sample a pixel); close (9 px a thread) 5.4 % stained and 5.5 % clean;
 ΔE00 between the wide and close means 0.25 (stain) and 0.27 (clean); the rendered Yarn
-averages 0.99998 over 4 × 4 tiles."""
+averages 0.99998 over 4 × 4 tiles. EEVEE (16 samples), the same shots: wide 0.02 % and
+0.01 %, close 4.6 % and 4.6 %, ΔE00 0.02 and 0.05."""
 
 import math
 import statistics
