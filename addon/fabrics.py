@@ -27,6 +27,15 @@ PAIRS = ("gap_gap", "weft_weft", "warp_warp", "gap_weft", "gap_warp", "weft_warp
 PAIR_DEFAULTS = dict(gap_gap=1.0, weft_weft=100.0, warp_warp=500.0, gap_weft=10.0, gap_warp=50.0, weft_warp=200.0)
 
 
+def _resync(fabric, context):
+    """Re-wires the material's Madder Weave node (weave_shader) after a change of its fabric."""
+    from . import shading
+
+    mat = fabric.id_data
+    if isinstance(mat, bpy.types.Material) and shading._group_node(mat) is not None:
+        shading.sync_material(mat, shading._owner(mat))
+
+
 def _coefficient(pair):
     a, b = pair.split("_")
     return FloatProperty(
@@ -45,6 +54,7 @@ class MadderFabric(bpy.types.PropertyGroup):
         default=False,
     )
     weave: EnumProperty(
+        update=_resync,
         name="Weave",
         description="How the warp and weft threads interlace in the fabric's repeating tile "
         "(it sets how much faster the stain spreads along one direction than across)",
@@ -52,11 +62,13 @@ class MadderFabric(bpy.types.PropertyGroup):
         default="PLAIN",
     )
     gaps: BoolProperty(
+        update=_resync,
         name="Gaps",
         description="Leave gap cells between the yarns of a built-in weave (an open weave)",
         default=True,
     )
     grid: StringProperty(
+        update=_resync,
         name="Grid",
         description="Custom tile, rows separated by '/', top row first: W/w warp up/down, "
         "F/f weft up/down, . gap (e.g. 'Wf/fW')",
@@ -76,12 +88,14 @@ class MadderFabric(bpy.types.PropertyGroup):
         soft_max=10.0,
     )
     angle: FloatProperty(
+        update=_resync,
         name="Weft Angle",
         description="Rotates the weft away from the UV u axis (a fabric cut on the bias)",
         subtype="ANGLE",
         default=0.0,
     )
     thread_count: FloatProperty(
+        update=_resync,
         name="Thread Count",
         description="Threads per centimetre (warp and weft). The Image Sequence draws the weave at this "
         "scale into the stain: the threads and gaps take up the deposit differently, and the stain's "
@@ -91,6 +105,14 @@ class MadderFabric(bpy.types.PropertyGroup):
         min=0.0,
         soft_max=100.0,
         precision=1,
+    )
+    shader_weave: BoolProperty(
+        update=_resync,
+        name="Weave in Shader",
+        description="Draw the weave in the material (a Madder Weave node: the yarns' light and bump on the "
+        "whole cloth, clean or stained, filtered to the pixel) and bake the Image Sequence smooth. Off: the "
+        "Image Sequence draws the weave into the stain at the Thread Count, as before",
+        default=True,
     )
 
 
@@ -144,8 +166,8 @@ def face_weave(obj, face_polygon):
     for s in obj.material_slots:
         m = s.material
         fab = m.madder_fabric if m is not None else None
-        if fab is None or not fab.enabled or fab.thread_count <= 0.0:
-            slots.append(None)
+        if fab is None or not fab.enabled or fab.thread_count <= 0.0 or fab.shader_weave:
+            slots.append(None)  # no weave, or the shader draws it (weave_shader)
         else:
             slots.append((m.name, fabric_key(fab), 100.0 * fab.thread_count, fab.angle))
     if not any(slots):

@@ -305,6 +305,7 @@ class MADDER_PT_fabric(bpy.types.Panel):
         layout.prop(fab, "speed")
         layout.prop(fab, "angle")
         layout.prop(fab, "thread_count")
+        layout.prop(fab, "shader_weave")
         col = layout.column(heading="Permeability", align=True)
         for pair in fabrics.PAIRS:
             col.prop(fab, pair)

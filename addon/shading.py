@@ -80,7 +80,7 @@ with the Transparent BSDF."""
 
 import bpy
 
-from . import compat, images, stored
+from . import compat, images, stored, weave_shader
 from .bridge import DEPOSIT_ATTR, STAIN_ATTR, WETNESS_ATTR
 
 GROUP = "Madder Stain"
@@ -280,6 +280,7 @@ def sync_material(material, obj):
     if node is None:
         return False
     nt = material.node_tree
+    kept_normal = weave_shader.user_normal(nt)
     for n in [n for n in nt.nodes if n.name.startswith(INPUT_PREFIX)]:
         nt.nodes.remove(n)
     x, y = node.location.x - 300, node.location.y
@@ -287,6 +288,7 @@ def sync_material(material, obj):
         _image_inputs(nt, node, obj, x, y)
     else:
         _attribute_inputs(nt, node, x, y)
+    weave_shader.place(material, obj, node, INPUT_PREFIX, x, y, kept_normal)
     return True
 
 
@@ -447,7 +449,9 @@ class MADDER_OT_add_stain_shader(bpy.types.Operator):
 
 def register():
     bpy.utils.register_class(MADDER_OT_add_stain_shader)
+    weave_shader.register()
 
 
 def unregister():
+    weave_shader.unregister()
     bpy.utils.unregister_class(MADDER_OT_add_stain_shader)
