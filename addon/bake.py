@@ -168,7 +168,15 @@ class Stepper:
         if len(faces) == 0:
             raise BakeError(f"'{obj.name}' has no faces", object=obj.name)
         settings = obj.madder
-        self.detail = settings.detail
+        self.unit = unit_scale(scene)
+        # Detail: the user's level, or chosen from the cloth's mean edge (issue 34)
+        self.mean_edge = mean_edge_length(obj, self.unit)
+        self.auto_detail = presets.use_auto_detail(settings.detail_auto, settings.is_property_set("detail_auto"),
+                                                   settings.is_property_set("detail"))
+        if self.auto_detail:
+            self.detail = presets.auto_detail(self.mean_edge, len(mesh.vertices))
+        else:
+            self.detail = settings.detail
         self.wet0 = bridge.vertex_group_weights(obj, settings.source_group) if settings.source_group else None
         # with sources, colours can differ: track them (three more fields)
         self.fields = FIELDS + (COLOR_FIELDS if self.sources else [])
@@ -187,7 +195,6 @@ class Stepper:
         )
         if self.references[0] == 0.0:
             self.warnings.append("its liquid has no solute (concentration 0): it wets the cloth but leaves no stain")
-        self.unit = unit_scale(scene)
         self.faces = faces.astype(np.int64)
         self.motion = MotionFile(self.madder, obj) if settings.motion_file else None
         self.sim = None
@@ -371,15 +378,22 @@ class BakeJob(Stepper):
             return None
         uv = bridge.corner_uvs(obj.data)
         if uv is None:
+            if not settings.is_property_set("output_images") and settings.output_vertex_colors:
+                # on by default (issue 34): a cloth without a UV map bakes vertex colours only
+                self.warnings.append("has no UV map: baked without the Image Sequence (vertex colors only)")
+                return None
             raise BakeError(f"'{obj.name}' has no UV map: its Image Sequence needs one to lay out the images "
                             "(add a UV map, or untick Image Sequence)", object=obj.name)
         why = textures.frames_problem(self.first, self.last)
         if why is not None:
             raise BakeError(f"'{obj.name}': {why}", object=obj.name)
-        try:
-            size = textures.check_size(settings.image_size)
-        except ExportError as e:
-            raise BakeError(f"'{obj.name}': {e}", object=obj.name) from e
+        if settings.image_size == "AUTO":
+            size = auto_image_size(obj, uv, self.unit, self.mean_edge / 2**self.detail)
+        else:
+            try:
+                size = textures.check_size(settings.image_size)
+            except ExportError as e:
+                raise BakeError(f"'{obj.name}': {e}", object=obj.name) from e
         return size, uv, obj.data.uv_layers.active.name
 
     @property
@@ -578,9 +592,53 @@ class BakeJob(Stepper):
 def simulator_settings(scene, obj, unit=None):
     """Keyword arguments of `madder.Simulator` from the object's settings and the scene's
     gravity (`presets.simulator_keywords`), scaled by `unit` (metres per unit; default the
-    scene's Unit Scale) like the positions."""
+    scene's Unit Scale) like the positions. The grain (irregularity) is the fabric's
+    covering most of the cloth (`fabrics.cloth_grain`; plain cotton where no fabric is
+    assigned) unless Grain From is Object; a file saved before Grain From existed that
+    set the object's Irregularity keeps it."""
     unit = unit_scale(scene) if unit is None else unit
-    return presets.simulator_keywords(obj.madder, scene.gravity, scene.use_gravity, unit)
+    return presets.simulator_keywords(obj.madder, scene.gravity, scene.use_gravity, unit, grain=grain_of(obj))
+
+
+def grain_of(obj):
+    """`(irregularity, length mm, seed)` the bake uses for `obj`, or None for the object's own."""
+    s = obj.madder
+    legacy = not s.is_property_set("grain_from") and s.is_property_set("irregularity") and s.irregularity > 0.0
+    if s.grain_from == "OBJECT" or legacy:
+        return None
+    return fabrics.cloth_grain(obj)
+
+
+def mean_edge_length(obj, unit):
+    """Mean length (m) of the cloth's edges at rest, in world scale (the object's scale
+    and the scene's Unit Scale), what Auto Detail refines."""
+    mesh = obj.data
+    ev = np.empty(2 * len(mesh.edges), dtype=np.int64)
+    mesh.edges.foreach_get("vertices", ev)
+    if len(ev) == 0:
+        raise BakeError(f"'{obj.name}' has no edges", object=obj.name)
+    co = bridge.rest_positions(mesh).astype(np.float64)
+    co = co @ np.asarray(obj.matrix_world.to_3x3(), dtype=np.float64).T
+    ev = ev.reshape(-1, 2)
+    return float(np.linalg.norm(co[ev[:, 0]] - co[ev[:, 1]], axis=1).mean()) * unit
+
+
+def auto_image_size(obj, uv, unit, refined_edge):
+    """Image size (px) of Auto: a texel of half the refined mean edge (`presets.auto_image_size`),
+    from the cloth's rest area (m²) and the area its faces cover in the UV square."""
+    mesh = obj.data
+    n = len(mesh.polygons)
+    area = np.empty(n, dtype=np.float64)
+    mesh.polygons.foreach_get("area", area)
+    scale = abs(obj.matrix_world.to_3x3().determinant()) ** (2.0 / 3.0)
+    surface = float(area.sum()) * scale * unit * unit
+    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 3, 2)
+    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    uv_area = float(0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum())
+    if uv_area <= 0.0:
+        raise BakeError(f"'{obj.name}': its UV map covers no area: the Image Sequence cannot be laid out",
+                        object=obj.name)
+    return presets.auto_image_size(surface, uv_area, refined_edge, textures.SIZES)
 
 
 def bake(scene, obj, progress=None, frames=None):

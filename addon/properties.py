@@ -399,7 +399,18 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         soft_max=3.0,
         update=_mark_custom,
     )
-    # -- The look of the stain (issue 13)
+    # -- The look of the stain (issue 13; the liquid's preset sets Wicking and how it
+    # rings, the fabric sets the grain, issue 34)
+    grain_from: EnumProperty(
+        name="Grain From",
+        description="Where the stain's uneven outline comes from",
+        items=[
+            ("FABRIC", "Fabric", "The Irregularity of the fabric covering most of the cloth (a cloth "
+             "without a Madder fabric is plain cotton)", 0),
+            ("OBJECT", "Object", "This object's own Irregularity, Grain and Seed below", 1),
+        ],
+        default="FABRIC",
+    )
     wicking: FloatProperty(
         name="Wicking",
         description="How much faster the fabric draws liquid in where it is wetter (the spreading "
@@ -409,6 +420,7 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         min=0.0,
         max=8.0,
         soft_max=4.0,
+        update=_mark_custom,
     )
     irregularity: FloatProperty(
         name="Irregularity",
@@ -468,6 +480,12 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
     )
 
     # -- Output: the simulation's resolution and what playback and renders read
+    detail_auto: BoolProperty(
+        name="Auto Detail",
+        description="Choose Detail from the cloth's mean edge at the bake: the smallest level whose "
+        "refined edge is at most 2.5 mm, kept to at most a million refined vertices",
+        default=True,
+    )
     detail: IntProperty(
         name="Detail",
         description="Simulate on a finer mesh than the cloth's: each of its triangles split into "
@@ -489,16 +507,19 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         name="Image Sequence",
         description="The bake also writes the stain as OpenEXR image sequences in UV space, at the "
         "Detail mesh's resolution, next to the cache; the stain shader reads them through the "
-        "active UV map. Needs a UV map",
-        default=False,
+        "active UV map. Needs a UV map (on by default: a cloth without one bakes vertex colors only)",
+        default=True,
         update=_output_update,
     )
     image_size: EnumProperty(
         name="Size",
         description="Width and height of the images, in pixels (Re-export Textures writes them "
         "again at another size without a bake)",
-        items=[(str(n), f"{n} px", f"{n} × {n} pixels") for n in textures.SIZES],
-        default=str(textures.DEFAULT_SIZE),
+        # numbered: files saved before Auto store the sizes' positions 0–3
+        items=[(str(n), f"{n} px", f"{n} × {n} pixels", i) for i, n in enumerate(textures.SIZES)]
+        + [("AUTO", "Auto", "A texel of half the refined mean edge on the cloth (from the UV map's "
+            "area and the cloth's), the smallest size reaching it", len(textures.SIZES))],
+        default="AUTO",
     )
     image_baked: BoolProperty(
         name="Images Baked",

@@ -9,15 +9,17 @@ sheet's scale), and a 3 cm spill (0.8 kg/m² at its centre, eight times what the
 centre. Labels are Blender text objects.
 
 The add-on is used as a user would: installed from the built zip, each square's Liquid
-preset, Detail 1 and Image Sequence set in its properties, all baked by `madder.bake`
-(All Objects), the "Madder Stain" shader added by `madder.add_stain_shader`. Drying takes
-real time (a saturated cotton cloth dries in about half an hour), so the scene's clock
-runs at one minute per frame (fps 1, fps base 60) over an hour, each frame in
-`SUBSTEPS` simulation steps. Three frames are rendered from above with Cycles and
+preset, weave and thread count set in its properties and nothing of the look (the
+wicking, the grain, the rings, the Detail and the images are the defaults, issue 34),
+all baked by `madder.bake` (All Objects), the "Madder Stain" shader added by
+`madder.add_stain_shader`. Drying takes real time (a saturated cotton cloth dries in
+about half an hour), so the scene's clock runs at one minute per frame (fps 1, fps base
+60) over an hour, each frame in the default simulation steps (`--check-steps` measures
+their error against 30 steps). Three frames are rendered from above with Cycles and
 stitched side by side (numpy, saved by Blender's image API): wet (1 min after the
 spill), drying (15 min) and dry (60 min).
 
-`--check-steps` bakes one square (Coffee, plain) twice, with `SUBSTEPS` and with 30 steps per
+`--check-steps` bakes one square (Coffee, plain) twice, with `SUBSTEPS` (4) and with 30 steps per
 frame, and prints how far the two stains differ: the long steps' error."""
 
 import argparse
@@ -100,8 +102,11 @@ def text(scene, body, location, size, align, material):
     return obj
 
 
-def configure(obj, preset, weave, substeps, image_size):
-    """The Madder settings a user would set on a square (its fabric on its material)."""
+def configure(obj, preset, weave, substeps=None, image_size=None):
+    """The Madder settings a user would set on a square, and only those: its fabric (on its
+    material: the weave and the thread count), the Spill Group, the amount and the Liquid
+    preset. The look, the Detail and the images are the defaults' (issue 34). `substeps`
+    and `image_size` override the defaults (for `--check-steps` and `--image-size`)."""
     fab = obj.material_slots[0].material.madder_fabric
     fab.enabled, fab.weave, fab.thread_count = True, weave, THREADS_PER_CM
     s = obj.madder
@@ -109,14 +114,10 @@ def configure(obj, preset, weave, substeps, image_size):
     s.source_group = "stain_source"
     s.liquid = preset
     s.amount = AMOUNT
-    s.wicking = 2.0
-    s.irregularity, s.irregularity_length, s.irregularity_seed = 0.5, 4.0, 7
-    s.carry_solute = True
-    s.substeps = substeps
-    s.detail = 1
-    s.output_images = True
-    s.output_vertex_colors = False
-    s.image_size = image_size
+    if substeps is not None:
+        s.substeps = substeps
+    if image_size is not None:
+        s.image_size = str(image_size)
 
 
 def bake_all(blend, zip_path, substeps, image_size, only=None):
@@ -136,8 +137,9 @@ def bake_all(blend, zip_path, substeps, image_size, only=None):
     t0 = time.perf_counter()
     if bpy.ops.madder.bake(all_objects=True) != {"FINISHED"}:
         sys.exit("gallery: the bake failed (see the message above)")
-    print(f"gallery: baked {len(squares)} squares ({len(squares[0].data.vertices)} vertices each, Detail 1, "
-          f"{FRAMES} frames of {SECONDS_PER_FRAME} s in {substeps} steps each) in {time.perf_counter() - t0:.1f} s")
+    print(f"gallery: baked {len(squares)} squares ({len(squares[0].data.vertices)} vertices each, Detail "
+          f"{squares[0].madder.bake_detail}, {squares[0].madder.image_baked_size} px images, {FRAMES} frames of "
+          f"{SECONDS_PER_FRAME} s in {squares[0].madder.substeps} steps each) in {time.perf_counter() - t0:.1f} s")
     return squares
 
 
@@ -170,7 +172,7 @@ def main():
     ap.add_argument("--out", default="docs/gallery.png")
     ap.add_argument("--samples", type=int, default=24)
     ap.add_argument("--scale", type=int, default=100, help="render resolution percentage")
-    ap.add_argument("--image-size", default="512", help="stain image size, px")
+    ap.add_argument("--image-size", default=None, help="stain image size, px (default: Auto)")
     ap.add_argument("--check-steps", action="store_true", help="measure the long steps' error instead")
     args = ap.parse_args()
     out = os.path.abspath(args.out)
@@ -184,7 +186,7 @@ def main():
     import bpy
     import numpy as np
 
-    bake_all(os.path.join(work, "gallery.blend"), args.zip, SUBSTEPS, args.image_size)
+    bake_all(os.path.join(work, "gallery.blend"), args.zip, None, args.image_size)
     scene = bpy.context.scene
     for obj in scene.objects:
         if obj.type == "MESH" and obj.madder.enabled:
