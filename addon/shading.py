@@ -7,6 +7,8 @@ The group takes the material's Base Color and Roughness and returns them stained
                                                      premultiplied "over")
     color *= 1 − darkening · wetness                (wet fabric looks darker)
     color *= 1 − deposit darkening · deposit        (bound dye is a little darker still)
+    color *= yarn                                   (the weave's reflectance factor, mean 1:
+                                                     the Madder Weave node, weave_shader)
     rough  = mix(roughness, wet roughness, wetness) (and shinier)
 
 `stain`, `coverage`, `wetness` and `deposit` (each in [0, 1]) are inputs of the group,
