@@ -59,6 +59,12 @@ def _resync(fabric, context):
         shading.sync_material(mat, shading._owner(mat))
 
 
+def _edited(fabric, context):
+    """A fabric value was edited: it leaves its preset, and the material re-syncs."""
+    _fabric_custom(fabric, context)
+    _resync(fabric, context)
+
+
 def _coefficient(pair):
     a, b = pair.split("_")
     return FloatProperty(
@@ -86,20 +92,18 @@ class MadderFabric(bpy.types.PropertyGroup):
         update=_fabric_preset_update,
     )
     weave: EnumProperty(
-        update=_resync,
         name="Weave",
         description="How the warp and weft threads interlace in the fabric's repeating tile "
         "(it sets how much faster the stain spreads along one direction than across)",
         items=WEAVES,
         default="PLAIN",
-        update=_fabric_custom,
+        update=_edited,
     )
     gaps: BoolProperty(
-        update=_resync,
         name="Gaps",
         description="Leave gap cells between the yarns of a built-in weave (an open weave)",
         default=True,
-        update=_fabric_custom,
+        update=_edited,
     )
     grid: StringProperty(
         update=_resync,
@@ -155,7 +159,6 @@ class MadderFabric(bpy.types.PropertyGroup):
         min=0,
     )
     thread_count: FloatProperty(
-        update=_resync,
         name="Thread Count",
         description="Threads per centimetre (warp and weft). The Image Sequence draws the weave at this "
         "scale into the stain: the threads and gaps take up the deposit differently, and the stain's "
@@ -165,7 +168,7 @@ class MadderFabric(bpy.types.PropertyGroup):
         min=0.0,
         soft_max=100.0,
         precision=1,
-        update=_fabric_custom,
+        update=_edited,
     )
     shader_weave: BoolProperty(
         update=_resync,

@@ -128,15 +128,17 @@ def cloth_scene(addon):
     for loop in mesh.loops:
         x, y, _ = verts[loop.vertex_index]
         uv.data[loop.index].uv = (x + 0.5, y + 0.5)
-    stain = mesh.color_attributes.new("madder_stain", "FLOAT_COLOR", "CORNER")
-    wet = mesh.attributes.new("madder_wetness", "FLOAT", "CORNER")
-    dep = mesh.attributes.new("madder_deposit", "FLOAT", "CORNER")
+    mesh.color_attributes.new("madder_stain", "FLOAT_COLOR", "CORNER")
+    mesh.attributes.new("madder_wetness", "FLOAT", "CORNER")
+    mesh.attributes.new("madder_deposit", "FLOAT", "CORNER")
+    # (looked up again by name: on 4.2 adding an attribute invalidates the others' references)
+    rgba = np.zeros((len(mesh.loops), 4))
     for poly in mesh.polygons:
-        on = poly.index == 0
-        for li in poly.loop_indices:
-            stain.data[li].color = tuple(c * COVERAGE for c in STAIN) + (COVERAGE,) if on else (0, 0, 0, 0)
-            wet.data[li].value = 0.0
-            dep.data[li].value = 0.0
+        if poly.index == 0:
+            rgba[list(poly.loop_indices)] = tuple(c * COVERAGE for c in STAIN) + (COVERAGE,)
+    mesh.attributes["madder_stain"].data.foreach_set("color", rgba.ravel())
+    for name in ("madder_wetness", "madder_deposit"):
+        mesh.attributes[name].data.foreach_set("value", np.zeros(len(mesh.loops)))
     obj = bpy.data.objects.new("Cloth", mesh)
     scene.collection.objects.link(obj)
     mat = bpy.data.materials.new("Linen")
