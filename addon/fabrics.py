@@ -106,7 +106,7 @@ class MadderFabric(bpy.types.PropertyGroup):
         update=_edited,
     )
     grid: StringProperty(
-        update=_resync,
+        update=_edited,
         name="Grid",
         description="Custom tile, rows separated by '/', top row first: W/w warp up/down, "
         "F/f weft up/down, . gap (e.g. 'Wf/fW')",
