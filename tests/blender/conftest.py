@@ -31,6 +31,21 @@ ZIP = harness.default_zip()
 ADDON = harness.install_extension(ZIP)
 
 
+# The newest Blender of the matrix (the first line of tests/bpy-versions.txt), what a new
+# user downloads
+with open(os.path.join(ROOT, "tests", "bpy-versions.txt")) as f:
+    NEWEST_BPY = next(v for v in (line.split("#")[0].strip() for line in f) if v)
+
+
+def eevee_on_newest_only():
+    """Skips an EEVEE render on every Blender but the newest: EEVEE compiles its shaders
+    for minutes on the CPU-only machines CI runs on, so the EEVEE cases run on the newest
+    Blender and the Cycles cases of the same checks on every Blender of the matrix."""
+    here = ".".join(str(v) for v in bpy.app.version)
+    if here != NEWEST_BPY:
+        pytest.skip(f"EEVEE runs on the newest Blender of the matrix ({NEWEST_BPY}); this is {here}")
+
+
 _status = [0]
 
 

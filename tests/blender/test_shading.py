@@ -10,7 +10,7 @@ import sys
 import bpy
 import numpy as np
 import pytest
-from conftest import ADDON
+from conftest import ADDON, eevee_on_newest_only
 
 shading = sys.modules[ADDON + ".shading"]
 compat = sys.modules[ADDON + ".compat"]
@@ -183,6 +183,7 @@ def swatches(request, tmp_path_factory, addon):
         scene.cycles.samples, scene.cycles.use_denoising = 64, False
         scene.cycles.device = "CPU"
     else:
+        eevee_on_newest_only()
         scene.render.engine = compat.eevee_engine()
         scene.eevee.taa_render_samples = 16
     px = render(scene, str(tmp_path_factory.mktemp("swatches") / f"{request.param}.png"))

@@ -19,6 +19,7 @@ import os
 import bpy
 import numpy as np
 import pytest
+from conftest import eevee_on_newest_only
 
 THREADS = 5.0  # per cm, the demo's
 STAIN = (0.55, 0.08, 0.12)  # the stain's colour (straight, not premultiplied)
@@ -287,6 +288,7 @@ def test_yarn_averages_to_one_over_a_tile(addon, tmp_path):
 
 def test_one_weave_at_every_distance_in_eevee(addon, tmp_path):
     """The same shots in EEVEE (its first render compiles the shaders, about 2 minutes)."""
+    eevee_on_newest_only()
     scene, obj, mat = cloth_scene(addon)
     engines = scene.render.bl_rna.properties["engine"].enum_items.keys()
     scene.render.engine = "BLENDER_EEVEE_NEXT" if "BLENDER_EEVEE_NEXT" in engines else "BLENDER_EEVEE"
