@@ -14,7 +14,7 @@
 //!    the mass-weighted `|p_i + u_i t − c|` of the launch velocities says.
 //! 4. **Fast rotation**: on a disk spinning at 2 rad/s at 25 fps (one sub-step asked) a
 //!    blob goes straight in the inertial frame within 5 %, near the axis and crossing the
-//!    cloth away from it (the automatic sub-steps count the liquid's speed too).
+//!    cloth away from it.
 
 use faer::Par;
 use glam::{DVec2, DVec3};
@@ -358,12 +358,12 @@ fn a_blob_on_a_fast_spinning_disk_goes_straight_without_asking_for_substeps() {
                 "at {omega} rad/s the path is {:.1}% off",
                 100.0 * error
             );
-            // at least the sub-steps of the frames' turn per frame (ω dt / 0.1 rad); more
-            // as the blob speeds up over the cloth (module doc of `simulate`)
+            // the sub-steps follow the turn of the frames per frame (ω dt / 0.1 rad)
             let turn = omega / 25.0;
-            assert!(
-                per_frame >= (turn / 0.1).ceil().max(1.0),
-                "sub-steps at {omega} rad/s: {per_frame}"
+            assert_eq!(
+                per_frame,
+                (turn / 0.1).ceil().max(1.0),
+                "sub-steps at {omega} rad/s"
             );
         }
     }
@@ -443,11 +443,8 @@ fn liquid_crossing_a_spinning_disk_away_from_the_axis_goes_straight() {
     ] {
         let (error, per_frame) = crossing_path_error(2.0, c0, v, 0.75, 1);
         assert!(error <= 0.05, "from {c0}: path {:.1}% off", 100.0 * error);
-        // the liquid's speed over the cloth asks for more than the frames' turn alone
-        assert!(
-            per_frame > 1.0,
-            "from {c0}: {per_frame} sub-steps per frame"
-        );
+        // the frames' turn alone sets the sub-steps (0.08 rad a frame: one)
+        assert_eq!(per_frame, 1.0, "from {c0}");
     }
 }
 

@@ -145,7 +145,7 @@ impl Simulator {
         // the frames at the frame's end: the sub-step count reads them, and the last
         // sub-step's frames are these (the same formula at the same positions)
         w.corotating_frames_into(next, &mut sub.frames);
-        let (s_count, omega) = self.substeps(w, &sub.frames, &local, dt, omega);
+        let (s_count, omega) = self.substeps(w, &sub.frames, &local.frames, dt, omega);
         // several sub-steps: the end's frames wait for the last one
         if s_count > 1 {
             std::mem::swap(&mut sub.frames, end_frames);
@@ -170,14 +170,11 @@ impl Simulator {
         Ok(local)
     }
 
-    /// Sub-steps of a frame of `dt` on the window `w` from the vertex frames of `start` to
-    /// the frames `end` at the frame's positions (window order): the user's
-    /// [`StainParams::substeps`], or more so that at every active vertex the frame's turn
-    /// (about its normal) times one plus the liquid's Courant number stays below
-    /// [`MAX_TURN`] per sub-step, `|ω| h (1 + |u| h / ℓ) ≤ MAX_TURN` with `u` the liquid's
-    /// velocity at the frame's start (`start`'s) and `ℓ = √A` its vertex's length (module
-    /// doc, "Fast rotation"). Where the liquid is still (`u = 0`) the count is the turn's
-    /// alone, `⌈|ω| dt / MAX_TURN⌉`, computed by the same expression.
+    /// Sub-steps of a frame of `dt` on the window `w` from the vertex frames `start` to the
+    /// frames `end` at the frame's positions (window order): the user's
+    /// [`StainParams::substeps`], or more so that the frames of the active vertices turn
+    /// (about their normals) by at most [`MAX_TURN`] per sub-step (module doc, "Fast
+    /// rotation").
     ///
     /// Also returns, with the Coriolis force on, every window vertex's `ω_z` over the
     /// whole frame: with one sub-step it is the sub-step's own, which the forces then
@@ -187,7 +184,7 @@ impl Simulator {
         &self,
         w: &Window,
         end: &VertexFrames,
-        start: &Local,
+        start: &VertexFrames,
         dt: f64,
         omega: &'a mut Vec<f64>,
     ) -> (usize, Option<&'a [f64]>) {
@@ -197,44 +194,21 @@ impl Simulator {
         }
         (0..w.vertices.len())
             .into_par_iter()
-            .map(|j| frame_angular_velocity(&start.frames.frame[j], &end.frame[j], dt).z)
+            .map(|j| frame_angular_velocity(&start.frame[j], &end.frame[j], dt).z)
             .collect_into_vec(omega);
-        let needed = w
+        let turn = w
             .region
             .vertices
             .par_iter()
-            .map(|&j| {
-                let j = j as usize;
-                let turn = omega[j].abs() * dt;
-                let area = start.area[j];
-                let courant = if area > 0.0 {
-                    start.velocity[j].length() * dt / area.sqrt()
-                } else {
-                    0.0
-                };
-                substeps_for(turn, courant)
-            })
+            .map(|&j| omega[j as usize].abs() * dt)
             .reduce(|| 0.0, f64::max);
         // a NaN turn (never from finite positions) keeps the user's count
-        let needed = needed.ceil();
+        let needed = (turn / MAX_TURN).ceil();
         let count = if needed > asked as f64 {
             (needed as usize).min(MAX_AUTO_SUBSTEPS)
         } else {
             asked
         };
         (count, Some(omega))
-    }
-}
-
-/// The real number of sub-steps `S` that keeps `(a/S)(1 + c/S) ≤ MAX_TURN` for a frame
-/// turn `a = |ω| dt` and a frame Courant number `c = |u| dt / ℓ` (module doc, "Fast
-/// rotation"): the positive root of `MAX_TURN S² − a S − a c = 0`. With `c = 0` it is
-/// `a / MAX_TURN`, the frames' turn alone, by the same expression as before the liquid's
-/// term existed (so a still liquid gets the same count bit for bit).
-fn substeps_for(turn: f64, courant: f64) -> f64 {
-    if courant > 0.0 {
-        (turn + (turn * turn + 4.0 * MAX_TURN * turn * courant).sqrt()) / (2.0 * MAX_TURN)
-    } else {
-        turn / MAX_TURN
     }
 }

@@ -63,28 +63,13 @@
 //! ## Fast rotation
 //! The splitting of forces and advection errs where the frames turn fast: on a disk
 //! spinning at 8 rad/s at 25 fps, 7 % off the inertial path at one sub-step. A frame
-//! therefore takes as many sub-steps as keep, at every active vertex, the frame's turn
-//! about its normal times one plus the liquid's Courant number below [`MAX_TURN`]
-//! (0.1 rad) per sub-step, on top of the ones asked for ([`StainParams::substeps`]):
-//!
-//! `θ = |ω_z| h (1 + |u| h / ℓ) ≤ MAX_TURN`, `h = dt/S`, `ℓ = √A_i`.
-//!
-//! Why the liquid's speed (a bound argued, not derived: its
-//! constant is the turn's own): the kick–drift–kick applies the frames' turn (the Coriolis
-//! rotation `2ω_z h` of `u`, and the rectilinear force of the turning frame) at the vertex
-//! the liquid leaves and at the one it reaches. Within one cell (`|u| h ≤ ℓ`) that samples
-//! the turn the liquid sees along its way; a liquid crossing `C = |u| h / ℓ` cells in one
-//! sub-step meets the forces of the cells between only in the two end kicks, so its
-//! direction errs by about the turn per sub-step times the cells crossed, `ω h · C`, on
-//! top of the `ω h` of the sub-step itself. `S` is the positive root of
-//! `MAX_TURN S² − a S − a c = 0` (`a = |ω_z| dt`, `c = |u| dt / ℓ`, the frame's values),
-//! rounded up. A still liquid (`u = 0`) gets the frames' turn alone, `⌈|ω_z| dt / MAX_TURN⌉`
-//! (same expression, same bits): 1 at 2 rad/s, 4 at 8 rad/s at 25 fps; a still cloth
-//! (`ω = 0`) never adds any. The turn is measured on the window's active vertices only
-//! (where liquid can be), from the frames at the start of the frame to the Kabsch frames
-//! at its end, `u` and `A_i` at the frame's start; its `ω_z` is computed for every window
-//! vertex, so that with one sub-step (the usual case) the forces take it instead of
-//! computing it again.
+//! therefore takes as many sub-steps as keep the largest turn of an active vertex's frame
+//! about its normal to [`MAX_TURN`] (0.1 rad) per sub-step, on top of the ones asked for
+//! ([`StainParams::substeps`]): 1 at 2 rad/s, 4 at 8 rad/s at 25 fps, and the path stays
+//! within 5 %. The turn is measured on the window's active vertices only (where liquid can
+//! be), from the frames at the start of the frame to the Kabsch frames at its end; its
+//! `ω_z` is computed for every window vertex, so that with one sub-step (the usual case)
+//! the forces take it instead of computing it again.
 //!
 //! ## Failure
 //! [`Simulator::step`] works on the window's copy of the state and writes it back only
