@@ -27,6 +27,7 @@ from . import (
     presets,
     schedule,
     shading,
+    splash,
     stored,
     textures,
 )
@@ -241,12 +242,28 @@ class Stepper:
         return [np.ascontiguousarray(a[:, k]) for a in (vel, pos) for k in range(3)]
 
     def _spill(self, pos):
-        """The initial wetness: the Spill Group's weights × Amount of the object's liquid,
-        and its splash (outward from the weighted centroid of the wet area)."""
+        """The initial wetness: the Spill Group's weights × Amount of the object's liquid, or
+        with a Throw object a directed splash of Volume from the group's centre (`splash`);
+        and its Splash Speed (outward from the weighted centroid of the wet area)."""
         s = self.obj.madder
         if self.wet0 is None or not self.wet0.any():
             return
-        self.sim.add_liquid(pour.spilled(self.wet0, s.amount), s.concentration, tuple(s.stain_color))
+        throw = s.splash.throw
+        if throw is not None:
+            # a directed splash (`splash`): Volume thrown along the Throw object's Z axis from
+            # the Spill Group's centre, instead of the weights × Amount
+            axis = np.asarray(throw.matrix_world, dtype=np.float64)[:3, 2]
+            try:
+                laid = splash.lay_out(pos, self.faces, self.sim.vertex_area, pour.centroid(self.wet0, pos), axis,
+                                      s.splash.volume * 1e-6, seed=s.splash_seed,
+                                      height=s.splash.height * self.unit)
+            except splash.SplashError as e:
+                raise BakeError(f"'{self.obj.name}': its splash (Throw '{throw.name}'): {e}",
+                                object=self.obj.name) from e
+            liquid = splash.densities(laid.mass, self.sim.vertex_area)
+        else:
+            liquid = pour.spilled(self.wet0, s.amount)
+        self.sim.add_liquid(liquid, s.concentration, tuple(s.stain_color))
         if s.splash_speed > 0.0:
             self.sim.splash(pour.centroid(self.wet0, pos), s.splash_speed * self.unit, s.splash_seed, self.wet0)
 

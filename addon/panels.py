@@ -97,6 +97,9 @@ class MADDER_PT_stain_liquid(_StainSubPanel, bpy.types.Panel):
         col.active = bool(s.source_group)
         col.prop(s, "splash_speed", text="Speed")
         col.prop(s, "splash_seed", text="Seed")
+        col.prop(s.splash, "throw")
+        col.prop(s.splash, "volume")
+        col.prop(s.splash, "height")
 
 
 class MADDER_PT_stain_output(_StainSubPanel, bpy.types.Panel):

@@ -18,6 +18,7 @@ from bpy.props import (
 )
 
 from . import carrier, compat, handlers, presets, textures
+from .splash_props import MadderSplashSettings
 
 # The liquid presets (values and where they come from) and the bake references are plain
 # data and functions in `presets` (bpy-free); these names stay here for callers.
@@ -314,6 +315,8 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         "Initial outgoing speed of the spilled liquid, away from the centroid of the wet area"
     )
     splash_seed: _splash_seed()
+    # a directed splash (volume, throw) instead of the Spill Group's disc: off without a Throw object
+    splash: PointerProperty(type=MadderSplashSettings, name="Directed Splash")
 
     # -- Flow: spreading through the fabric and moving on it
     diffusion_rate: _rate(
