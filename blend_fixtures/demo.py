@@ -22,6 +22,7 @@ the
 picture shows the stain after it spread, ran and began to dry."""
 
 import argparse
+import math
 import os
 import sys
 import tempfile
@@ -127,7 +128,17 @@ def configure(image_size=None):
     s.enabled = True
     s.source_group = "stain_source"
     s.liquid = "RED_WINE"
-    s.amount = 1.2  # kg/m² where the group's weight is 1: a glass knocked over, 12× what linen holds
+    s.amount = 1.2  # kg/m² where the group's weight is 1 (what a spill without a Throw holds)
+    # the glass is knocked over toward the table's rim: a Single Arrow empty whose arrow
+    # (local Z) points along the throw, and the splash's volume
+    throw = bpy.data.objects.get("Throw")
+    if throw is None:
+        throw = bpy.data.objects.new("Throw", None)
+        throw.empty_display_type = "SINGLE_ARROW"
+        bpy.context.scene.collection.objects.link(throw)
+    throw.location = SPILL_CENTRE
+    throw.rotation_euler = (0.0, math.pi / 2, math.atan2(SPILL_CENTRE[1], SPILL_CENTRE[0]))
+    s.splash.throw, s.splash.volume = throw, 125.0  # a glass of wine
     if image_size is not None:
         s.image_size = str(image_size)
     return cloth
