@@ -158,6 +158,7 @@ def simulator_keywords(s, gravity, scene_gravity, unit, grain=None):
         carry_solute=bool(s.carry_solute),
         residual_saturation=s.residual_saturation,
         vapour_limited=bool(s.vapour_limited),
+        holdup=s.holdup,
         use_gravity=bool(s.use_gravity and scene_gravity),
         use_rectilinear=s.use_rectilinear,
         use_coriolis=s.use_coriolis,

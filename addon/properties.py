@@ -465,6 +465,17 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         max=0.95,
         update=_mark_custom,
     )
+    holdup: FloatProperty(
+        name="Run Holdup",
+        description="Free liquid (kg/m²) each point of the cloth keeps back from a run: a film the "
+        "running liquid fills before it moves on and leaves behind to soak into the fibres "
+        "(0 = off)",
+        default=0.0,
+        min=0.0,
+        soft_max=0.2,
+        precision=3,
+        update=_mark_custom,
+    )
     vapour_limited: BoolProperty(
         name="Vapour-Limited Drying",
         description="A wet patch dries fastest at its edge, as vapour diffusing into still air does "

@@ -20,7 +20,7 @@ use crate::threads::Pool;
 /// viscosity=..., friction=..., absorption=..., saturation=..., adsorption=...,
 /// capacity=..., evaporation=..., evaporation_boundary=1.2, wicking_exponent=0,
 /// wicking_density=0.1, irregularity=0, irregularity_length=0.003, irregularity_seed=0,
-/// carry_solute=False, residual_saturation=0, vapour_limited=False, substeps=1, use_gravity=True, use_rectilinear=True,
+/// carry_solute=False, residual_saturation=0, vapour_limited=False, holdup=0, substeps=1, use_gravity=True, use_rectilinear=True,
 /// use_coriolis=True, momentum_advection=True, detail=0, threads=None)`.
 ///
 /// `topology` is a `Topology` or an `(F, 3)` face array (any integer dtype); `rest` and
@@ -46,6 +46,8 @@ use crate::threads::Pool;
 /// into still air does (`J/J̄ = R/(2√(d(2R − d)))`, `d` the distance to the edge), in place
 /// of `evaporation_boundary` on the outermost vertices. With `carry_solute` the two
 /// draw the solute to the pinned edge as it dries: a tide line.
+/// `holdup` (kg/m², ≥ 0) is the free liquid each vertex keeps back from a run, filled
+/// before the run moves on and left behind to soak in (0, the default: off).
 /// Units are SI: densities in kg/m², rates in 1/s, evaporation in kg/(m²·s).
 /// `detail` (0–3) runs the simulation on the cloth's triangles each split into
 /// `4**detail` (the fine vertices placed on the cloth's triangles every frame): `step`,
@@ -101,7 +103,7 @@ impl Simulator {
         viscosity=None, friction=None, absorption=None, saturation=None, adsorption=None,
         capacity=None, evaporation=None, evaporation_boundary=None, wicking_exponent=None,
         wicking_density=None, irregularity=None, irregularity_length=None, irregularity_seed=0,
-        carry_solute=false, residual_saturation=None, vapour_limited=false, substeps=1,
+        carry_solute=false, residual_saturation=None, vapour_limited=false, holdup=None, substeps=1,
         use_gravity=true, use_rectilinear=true, use_coriolis=true, momentum_advection=true,
         detail=0, threads=None))]
     #[allow(clippy::too_many_arguments)]
@@ -132,6 +134,7 @@ impl Simulator {
         carry_solute: bool,
         residual_saturation: Option<f64>,
         vapour_limited: bool,
+        holdup: Option<f64>,
         substeps: u32,
         use_gravity: bool,
         use_rectilinear: bool,
@@ -216,6 +219,7 @@ impl Simulator {
         params.carry_solute = carry_solute;
         set(&mut params.residual_saturation, residual_saturation);
         params.vapour_limited = vapour_limited;
+        set(&mut params.holdup, holdup);
         let r = &mut params.interaction;
         set(&mut r.absorption, absorption);
         set(&mut r.saturation, saturation);

@@ -89,6 +89,7 @@ fn main() {
         carry_solute: tide,
         residual_saturation: if tide { 0.1 } else { 0.0 },
         vapour_limited: tide,
+        holdup: 0.0,
         ..Default::default()
     };
     let plain = ms_per_frame("coffee, seed's drying", coffee(false), frames);

@@ -40,6 +40,7 @@ fn ideal(forces: Forces, momentum_advection: bool) -> StainParams {
         carry_solute: false,
         residual_saturation: 0.0,
         vapour_limited: false,
+        holdup: 0.0,
         substeps: 1,
         active_region: true,
     }

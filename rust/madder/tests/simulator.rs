@@ -46,6 +46,7 @@ fn ideal(forces: Forces) -> StainParams {
         carry_solute: false,
         residual_saturation: 0.0,
         vapour_limited: false,
+        holdup: 0.0,
         substeps: 1,
         active_region: true,
     }
@@ -675,6 +676,7 @@ fn full_params(momentum_advection: bool, substeps: u32) -> StainParams {
         carry_solute: true,
         residual_saturation: 0.1,
         vapour_limited: true,
+        holdup: 0.0,
         substeps,
         active_region: true,
     }

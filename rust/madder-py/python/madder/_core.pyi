@@ -175,6 +175,7 @@ class Simulator:
         carry_solute: bool = False,
         residual_saturation: float | None = None,
         vapour_limited: bool = False,
+        holdup: float | None = None,
         substeps: int = 1,
         use_gravity: bool = True,
         use_rectilinear: bool = True,
