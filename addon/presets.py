@@ -121,6 +121,9 @@ def simulator_keywords(s, gravity, scene_gravity, unit):
         irregularity=s.irregularity,
         irregularity_length=s.irregularity_length * 1e-3,
         irregularity_seed=s.irregularity_seed,
+        irregularity_fine_length=(
+            s.irregularity_fine * 1e-3 if s.irregularity_fine < s.irregularity_length else 0.0
+        ),
         carry_solute=bool(s.carry_solute),
         residual_saturation=s.residual_saturation,
         vapour_limited=bool(s.vapour_limited),

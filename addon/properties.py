@@ -427,6 +427,16 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         min=0.01,
         soft_max=50.0,
     )
+    irregularity_fine: FloatProperty(
+        name="Fibre Scale (mm)",
+        description="Smallest size of the fabric's unevenness, in millimetres (about one thread "
+        "pitch): the variation is self-affine from this scale up to the Grain, so the outline "
+        "is rough at every scale in between, as real stains are; 0 gives patches of the Grain "
+        "size only, and a value at or above the Grain is ignored",
+        default=0.5,
+        min=0.0,
+        soft_max=5.0,
+    )
     irregularity_seed: IntProperty(
         name="Seed",
         description="Another seed gives another pattern of uneven patches",
