@@ -185,7 +185,11 @@ fn the_multiscale_field_is_self_affine_with_hurst_0_6() {
                     })
                     .collect();
                 let f1 = irr.field(&moved);
-                let d2 = f0.iter().zip(&f1).map(|(a, b)| (a - b).powi(2)).sum::<f64>()
+                let d2 = f0
+                    .iter()
+                    .zip(&f1)
+                    .map(|(a, b)| (a - b).powi(2))
+                    .sum::<f64>()
                     / f0.len() as f64;
                 (l, d2)
             })

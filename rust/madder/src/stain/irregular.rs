@@ -173,7 +173,11 @@ impl Irregularity {
                         break v.normalize();
                     }
                 };
-                (u * w, std::f64::consts::TAU * rng.unit(), w.powf(-2.0 * HURST))
+                (
+                    u * w,
+                    std::f64::consts::TAU * rng.unit(),
+                    w.powf(-2.0 * HURST),
+                )
             })
             .collect();
         let total: f64 = modes.iter().map(|m| m.2).sum();
