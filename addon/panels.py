@@ -184,6 +184,7 @@ class MADDER_PT_stain_look(_StainSubPanel, bpy.types.Panel):
         sub = col.column(align=True)
         sub.active = s.grain_from == "OBJECT" and s.irregularity > 0.0
         sub.prop(s, "irregularity_length")
+        sub.prop(s, "irregularity_fine")
         sub.prop(s, "irregularity_seed")
         col = layout.column(align=True)
         col.prop(s, "carry_solute")

@@ -155,6 +155,9 @@ def simulator_keywords(s, gravity, scene_gravity, unit, grain=None):
         irregularity=grain[0],
         irregularity_length=grain[1] * 1e-3,
         irregularity_seed=grain[2],
+        irregularity_fine_length=(
+            s.irregularity_fine * 1e-3 if 0.0 < s.irregularity_fine < grain[1] else 0.0
+        ),
         carry_solute=bool(s.carry_solute),
         residual_saturation=s.residual_saturation,
         vapour_limited=bool(s.vapour_limited),

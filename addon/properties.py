@@ -442,6 +442,17 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         min=0.01,
         soft_max=50.0,
     )
+    irregularity_fine: FloatProperty(
+        name="Fibre Scale (mm)",
+        description="Smallest size of the fabric's unevenness, in millimetres (about one thread "
+        "pitch): the variation is self-affine from this scale up to the Grain, so the outline "
+        "is rough at every scale in between, as real stains are; 0 gives patches of the Grain "
+        "size only (the default: the multi-scale field does not yet give the roughness exponent of "
+        "real stains, see ARCHITECTURE.md), and a value at or above the Grain is ignored",
+        default=0.0,
+        min=0.0,
+        soft_max=5.0,
+    )
     irregularity_seed: IntProperty(
         name="Seed",
         description="Another seed gives another pattern of uneven patches",

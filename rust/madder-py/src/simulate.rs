@@ -20,6 +20,7 @@ use crate::threads::Pool;
 /// viscosity=..., friction=..., absorption=..., saturation=..., adsorption=...,
 /// capacity=..., evaporation=..., evaporation_boundary=1.2, wicking_exponent=0,
 /// wicking_density=0.1, irregularity=0, irregularity_length=0.003, irregularity_seed=0,
+/// irregularity_fine_length=0,
 /// carry_solute=False, residual_saturation=0, vapour_limited=False, holdup=0, substeps=1, use_gravity=True, use_rectilinear=True,
 /// use_coriolis=True, momentum_advection=True, detail=0, threads=None)`.
 ///
@@ -38,6 +39,10 @@ use crate::threads::Pool;
 /// `irregularity` (0–1) makes the fabric uneven: its diffusion and absorption rates vary
 /// at random over the rest surface, correlated over `irregularity_length` metres, the
 /// same for the same `irregularity_seed` (0, the default: a uniform fabric).
+/// `irregularity_fine_length` > 0 (metres, below `irregularity_length`) makes that
+/// variation multi-scale, self-affine (Hurst exponent 0.6) from this fibre scale up to
+/// `irregularity_length`, so the outline is rough at every scale in between (0, the
+/// default: one correlation length).
 /// `carry_solute` moves the dissolved solute with the solvent's capillary flow (and the
 /// liquid in the fibres wicks too) instead of diffusing it at the solvent's rate.
 /// `residual_saturation` (0 to 1, exclusive) pins the wet edge: the fibres' liquid below
@@ -103,6 +108,7 @@ impl Simulator {
         viscosity=None, friction=None, absorption=None, saturation=None, adsorption=None,
         capacity=None, evaporation=None, evaporation_boundary=None, wicking_exponent=None,
         wicking_density=None, irregularity=None, irregularity_length=None, irregularity_seed=0,
+        irregularity_fine_length=None,
         carry_solute=false, residual_saturation=None, vapour_limited=false, holdup=None, substeps=1,
         use_gravity=true, use_rectilinear=true, use_coriolis=true, momentum_advection=true,
         detail=0, threads=None))]
@@ -131,6 +137,7 @@ impl Simulator {
         irregularity: Option<f64>,
         irregularity_length: Option<f64>,
         irregularity_seed: u64,
+        irregularity_fine_length: Option<f64>,
         carry_solute: bool,
         residual_saturation: Option<f64>,
         vapour_limited: bool,
@@ -216,6 +223,10 @@ impl Simulator {
             irregularity_length,
         );
         params.irregularity.seed = irregularity_seed;
+        set(
+            &mut params.irregularity.fine_length,
+            irregularity_fine_length,
+        );
         params.carry_solute = carry_solute;
         set(&mut params.residual_saturation, residual_saturation);
         params.vapour_limited = vapour_limited;

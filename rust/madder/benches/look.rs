@@ -68,6 +68,7 @@ fn main() {
                 amplitude: 0.5,
                 correlation_length: 0.01,
                 seed: 1,
+                fine_length: 0.0,
             },
             ..Default::default()
         },

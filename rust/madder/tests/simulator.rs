@@ -671,6 +671,7 @@ fn full_params(momentum_advection: bool, substeps: u32) -> StainParams {
             amplitude: 0.4,
             correlation_length: 0.05,
             seed: 7,
+            fine_length: 0.0,
         },
         // the solute carried by the solvent's flow, to a pinned edge drying fastest there
         carry_solute: true,

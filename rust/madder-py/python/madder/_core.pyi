@@ -172,6 +172,7 @@ class Simulator:
         irregularity: float | None = None,
         irregularity_length: float | None = None,
         irregularity_seed: int = 0,
+        irregularity_fine_length: float | None = None,
         carry_solute: bool = False,
         residual_saturation: float | None = None,
         vapour_limited: bool = False,
