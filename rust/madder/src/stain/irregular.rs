@@ -68,7 +68,7 @@ use crate::rng::SplitMix64;
 
 /// Hurst exponent of the multi-scale field (module doc): the roughness exponent of
 /// imbibition fronts in paper and cloth.
-pub const HURST: f64 = 0.6;
+pub(crate) const HURST: f64 = 0.6;
 
 /// Fourier modes of the field: its variance is exact for any `M`, and the sample
 /// covariance over a cloth many correlation lengths wide matches `C(r)` to a few percent.
