@@ -316,7 +316,12 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
     )
     splash_seed: _splash_seed()
     # a directed splash (volume, throw) instead of the Spill Group's disc: off without a Throw object
-    splash: PointerProperty(type=MadderSplashSettings, name="Directed Splash")
+    splash: PointerProperty(
+        type=MadderSplashSettings,
+        name="Directed Splash",
+        description="A knocked-over glass instead of the Spill Group's weights: a Volume thrown along a Throw "
+        "object's arrow (off without a Throw object)",
+    )
 
     # -- Flow: spreading through the fabric and moving on it
     diffusion_rate: _rate(

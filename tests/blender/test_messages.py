@@ -41,7 +41,8 @@ def test_every_setting_has_a_tooltip(addon):
             assert prop.description.strip(), f"{owner}.{prop.identifier} has no description"
     names = [owner for owner, _ in madder_rna_structs()]
     for expected in ("MadderObjectSettings", "MadderSourceSettings", "MadderFabric", "MadderMotionSettings",
-                     "MADDER_OT_bake", "MADDER_OT_compress_motion", "MADDER_OT_decompress_motion"):
+                     "MadderSplashSettings", "MADDER_OT_bake", "MADDER_OT_compress_motion",
+                     "MADDER_OT_decompress_motion"):
         assert expected in names  # the walk really found the settings
     assert checked > 40
 
