@@ -422,8 +422,9 @@ def place(material, obj, stain_node, prefix, x, y, kept_normal):
     map the images use (or the active one), threads per UV from the object's surface, its
     Yarn into the stain group's "Yarn" and its Normal into the BSDF's Normal (unless
     `kept_normal`, a node of the user's, feeds it). Returns the node or None."""
-    fab = material.madder_fabric
-    if obj is None or not fab.enabled or fab.thread_count <= 0.0 or not getattr(fab, "shader_weave", True):
+    # no owner, or a material without Madder's fabric (its classes not registered): no weave
+    fab = getattr(material, "madder_fabric", None) if obj is not None else None
+    if fab is None or not fab.enabled or fab.thread_count <= 0.0 or not getattr(fab, "shader_weave", True):
         return None
     uv_name = obj.madder.image_uv_map or ""
     s = metres_per_uv(obj, uv_name)

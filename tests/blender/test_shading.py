@@ -127,7 +127,8 @@ def _swatch_material(name, mode, base, colour, amount, wetness, yarn):
 
 
 def build_swatches():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+    # not read_factory_settings: that also resets the preferences, disabling the add-on
+    bpy.ops.wm.read_homefile(use_empty=True)
     scene = bpy.context.scene
     for name, (col, row, mode, base, colour, amount, wet, yarn, back) in SWATCHES.items():
         x, y = (col - (COLUMNS - 1) / 2) * CELL, ((ROWS - 1) / 2 - row) * CELL
