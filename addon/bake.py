@@ -175,7 +175,9 @@ class Stepper:
         self.auto_detail = presets.use_auto_detail(settings.detail_auto, settings.is_property_set("detail_auto"),
                                                    settings.is_property_set("detail"))
         if self.auto_detail:
-            self.detail = presets.auto_detail(self.mean_edge, len(mesh.vertices))
+            # a cloth collapsed by its scale has no mean edge: Detail 0, and the frame's
+            # transform check (placement.check_transform) names the object and frame
+            self.detail = presets.auto_detail(self.mean_edge, len(mesh.vertices)) if self.mean_edge > 0.0 else 0
         else:
             self.detail = settings.detail
         self.wet0 = bridge.vertex_group_weights(obj, settings.source_group) if settings.source_group else None
@@ -403,6 +405,10 @@ class BakeJob(Stepper):
                             "(add a UV map, or untick Image Sequence)", object=obj.name)
         why = textures.frames_problem(self.first, self.last)
         if why is not None:
+            if not settings.is_property_set("output_images") and settings.output_vertex_colors:
+                # on by default (issue 34): frames that cannot number images bake vertex colours only
+                self.warnings.append(f"{why}: baked without the Image Sequence (vertex colors only)")
+                return None
             raise BakeError(f"'{obj.name}': {why}", object=obj.name)
         if settings.image_size == "AUTO":
             size = auto_image_size(obj, uv, self.unit, self.mean_edge / 2**self.detail)
@@ -644,17 +650,24 @@ def auto_image_size(obj, uv, unit, refined_edge):
     """Image size (px) of Auto: a texel of half the refined mean edge (`presets.auto_image_size`),
     from the cloth's rest area (m²) and the area its faces cover in the UV square."""
     mesh = obj.data
-    n = len(mesh.polygons)
-    area = np.empty(n, dtype=np.float64)
-    mesh.polygons.foreach_get("area", area)
-    scale = abs(obj.matrix_world.to_3x3().determinant()) ** (2.0 / 3.0)
-    surface = float(area.sum()) * scale * unit * unit
+    mesh.calc_loop_triangles()
+    tri = np.empty(3 * len(mesh.loop_triangles), dtype=np.int64)
+    mesh.loop_triangles.foreach_get("vertices", tri)
+    # the rest area in world scale, triangle by triangle: a scale of 0 across a flat
+    # cloth (its own z) leaves its area whole
+    co = bridge.rest_positions(mesh).astype(np.float64)
+    co = co @ np.asarray(obj.matrix_world.to_3x3(), dtype=np.float64).T
+    a, b, c = (co[tri.reshape(-1, 3)[:, k]] for k in range(3))
+    surface = float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum()) * unit * unit
     uv = np.asarray(uv, dtype=np.float64).reshape(-1, 3, 2)
     e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
     uv_area = float(0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum())
     if uv_area <= 0.0:
         raise BakeError(f"'{obj.name}': its UV map covers no area: the Image Sequence cannot be laid out",
                         object=obj.name)
+    if not (surface > 0.0 and refined_edge > 0.0):
+        # collapsed by its scale: the frame's transform check names the object and frame
+        return textures.SIZES[0]
     return presets.auto_image_size(surface, uv_area, refined_edge, textures.SIZES)
 
 
