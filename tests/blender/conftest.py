@@ -129,3 +129,11 @@ def lumped_areas(mesh, co=None):
     for k in range(3):
         np.add.at(out, t[:, k], area / 3)
     return out
+
+
+def plain_look(s):
+    """The settings a test of something other than the look relies on: no Auto Detail (Detail 0), no image
+    sequence, no fabric grain (the default fabric's grain is the look's)."""
+    s.detail_auto, s.detail = False, 0
+    s.output_images = False
+    s.grain_from, s.irregularity = "OBJECT", 0.0
