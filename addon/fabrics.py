@@ -50,13 +50,17 @@ def _fabric_custom(self, context):
         self.preset = "CUSTOM"
 
 
+# Called with the material after a change of its fabric: the shader, which sits above this
+# module, registers its re-sync of the material's Madder Weave node here (shading.register)
+resync_hooks = []
+
+
 def _resync(fabric, context):
     """Re-wires the material's Madder Weave node (weave_shader) after a change of its fabric."""
-    from . import shading
-
     mat = fabric.id_data
-    if isinstance(mat, bpy.types.Material) and shading._group_node(mat) is not None:
-        shading.sync_material(mat, shading._owner(mat))
+    if isinstance(mat, bpy.types.Material):
+        for hook in resync_hooks:
+            hook(mat)
 
 
 def _edited(fabric, context):

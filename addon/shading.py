@@ -80,7 +80,7 @@ with the Transparent BSDF."""
 
 import bpy
 
-from . import compat, images, stored, weave_shader
+from . import compat, fabrics, images, stored, weave_shader
 from .bridge import DEPOSIT_ATTR, STAIN_ATTR, WETNESS_ATTR
 
 GROUP = "Madder Stain"
@@ -447,11 +447,20 @@ class MADDER_OT_add_stain_shader(bpy.types.Operator):
         return {"FINISHED"}
 
 
+def _resync_material(material):
+    """A fabric of `material` changed: its input nodes (the Madder Weave's) follow."""
+    if _group_node(material) is not None:
+        sync_material(material, _owner(material))
+
+
 def register():
     bpy.utils.register_class(MADDER_OT_add_stain_shader)
     weave_shader.register()
+    fabrics.resync_hooks.append(_resync_material)
 
 
 def unregister():
+    if _resync_material in fabrics.resync_hooks:
+        fabrics.resync_hooks.remove(_resync_material)
     weave_shader.unregister()
     bpy.utils.unregister_class(MADDER_OT_add_stain_shader)
