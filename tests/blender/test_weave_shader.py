@@ -204,9 +204,9 @@ def test_the_weave_node_is_placed_and_fed_from_the_surface(addon):
     assert node.inputs["Threads per UV"].default_value == pytest.approx(100 * THREADS, rel=1e-6)
     # a 50 mm lens on a 36 mm sensor over 64 px
     assert node.inputs["Pixel Angle"].default_value == pytest.approx(2 * math.atan(18 / 50) / SIZE, rel=1e-6)
-    # switched off: no node, the BSDF's normal free, the stain group's Yarn at 1
+    # switched off: no node, the BSDF's normal free, the stain group's Yarn at 1 (the
+    # setting's update re-syncs the material through the hook the shader registers)
     mat.madder_fabric.shader_weave = False
-    importlib.import_module(f"{addon}.shading").sync_material(mat, obj)
     assert not any(n.name.endswith("Weave") for n in mat.node_tree.nodes)
     assert not bsdf.inputs["Normal"].is_linked and stain.inputs["Yarn"].default_value == 1.0
 
