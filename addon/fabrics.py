@@ -28,25 +28,18 @@ PAIRS = ("gap_gap", "weft_weft", "warp_warp", "gap_weft", "gap_warp", "weft_warp
 # balanced warp and weft (presets.BALANCED: a balanced plain weave spreads isotropically;
 # before issue 34 warp_warp 500 vs weft_weft 100 made every weave 1.7–1.9× anisotropic)
 PAIR_DEFAULTS = dict(presets.BALANCED)
-_applying = False  # True while a fabric preset writes its values
+_writer = presets.PresetWriter()  # a fabric preset's writes must not switch it to Custom
 
 
 def _fabric_preset_update(self, context):
-    global _applying
     values = presets.fabric_preset(self.preset)
-    if values is None:
-        return
-    _applying = True
-    try:
-        for key, value in values.items():
-            setattr(self, key, value)
-    finally:
-        _applying = False
+    if values is not None:
+        _writer.write(self, values)
 
 
 def _fabric_custom(self, context):
     """A fabric preset's value was edited by hand: the fabric is no longer the preset."""
-    if not _applying and self.preset != "CUSTOM":
+    if not _writer.writing and self.preset != "CUSTOM":
         self.preset = "CUSTOM"
 
 

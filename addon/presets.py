@@ -98,6 +98,23 @@ LIQUID_ITEMS = [
 SOURCE_PRESET_KEYS = ("concentration", "stain_color")
 
 
+class PresetWriter:
+    """Writes a preset's values to a block of settings. While it writes, `writing` is True,
+    so the settings' update callbacks can tell a preset's write from a user's edit (which
+    switches the preset to Custom). One writer per kind of preset (liquid, fabric)."""
+
+    def __init__(self):
+        self.writing = False
+
+    def write(self, settings, values):
+        self.writing = True
+        try:
+            for key, value in values.items():
+                setattr(settings, key, value)
+        finally:
+            self.writing = False
+
+
 def object_preset(liquid):
     """The settings a cloth's preset `liquid` writes (None for CUSTOM: nothing)."""
     return None if liquid == "CUSTOM" else dict(LIQUIDS[liquid])

@@ -25,34 +25,24 @@ from .splash_props import MadderSplashSettings
 LIQUIDS, LIQUID_ITEMS, SOURCE_PRESET_KEYS = presets.LIQUIDS, presets.LIQUID_ITEMS, presets.SOURCE_PRESET_KEYS
 references = presets.references
 
-_applying = False  # True while a preset writes its values (they must not switch it to Custom)
-
-
-def _apply_preset(settings, values):
-    global _applying
-    _applying = True
-    try:
-        for key, value in values.items():
-            setattr(settings, key, value)
-    finally:
-        _applying = False
+_writer = presets.PresetWriter()  # a liquid preset's writes must not switch it to Custom
 
 
 def _liquid_update(self, context):
     values = presets.object_preset(self.liquid)
     if values is not None:
-        _apply_preset(self, values)
+        _writer.write(self, values)
 
 
 def _source_liquid_update(self, context):
     values = presets.source_preset(self.liquid)
     if values is not None:
-        _apply_preset(self, values)
+        _writer.write(self, values)
 
 
 def _mark_custom(self, context):
     """A preset's value was edited by hand: the liquid is no longer the preset."""
-    if not _applying and self.liquid != "CUSTOM":
+    if not _writer.writing and self.liquid != "CUSTOM":
         self.liquid = "CUSTOM"
 
 

@@ -89,6 +89,7 @@ def test_the_grain_is_the_fabric_covering_most_of_the_cloth():
 
 def test_simulator_keywords_take_the_grain_given():
     s = presets.object_preset("RED_WINE")
+    s.update(irregularity_fine=0.0, holdup=0.0)
     s.update(viscosity=1e-4, friction=50.0, saturation=0.1, substeps=1, irregularity=0.0, irregularity_length=3.0,
              irregularity_seed=0, use_gravity=True, use_rectilinear=True, use_coriolis=True,
              momentum_advection=True)
@@ -140,3 +141,20 @@ def test_auto_image_size_gives_a_texel_of_half_the_refined_edge():
     assert presets.auto_image_size(4.0, 1.0, 1e-3) == 4096  # the cap
     with pytest.raises(ValueError, match="areas"):
         presets.auto_image_size(1.0, 0.0, 1e-3)
+
+
+def test_a_preset_writer_is_writing_only_while_it_writes_and_after_a_failure_stops():
+    writer = presets.PresetWriter()
+    seen = []
+
+    class Settings:
+        def __setattr__(self, key, value):
+            if value == "bad":
+                raise ValueError(key)
+            seen.append((key, writer.writing))
+
+    writer.write(Settings(), {"wicking": 2.0, "carry_solute": True})
+    assert seen == [("wicking", True), ("carry_solute", True)] and not writer.writing
+    with pytest.raises(ValueError):
+        writer.write(Settings(), {"wicking": "bad"})
+    assert not writer.writing
