@@ -657,11 +657,8 @@ def auto_image_size(obj, uv, unit, refined_edge):
     # cloth (its own z) leaves its area whole
     co = bridge.rest_positions(mesh).astype(np.float64)
     co = co @ np.asarray(obj.matrix_world.to_3x3(), dtype=np.float64).T
-    a, b, c = (co[tri.reshape(-1, 3)[:, k]] for k in range(3))
-    surface = float(0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum()) * unit * unit
-    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 3, 2)
-    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
-    uv_area = float(0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum())
+    surface = float(textures.triangle_areas(co[tri.reshape(-1, 3)]).sum()) * unit * unit
+    uv_area = float(textures.uv_areas(np.asarray(uv, dtype=np.float64).reshape(-1, 3, 2)).sum())
     if uv_area <= 0.0:
         raise BakeError(f"'{obj.name}': its UV map covers no area: the Image Sequence cannot be laid out",
                         object=obj.name)

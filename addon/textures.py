@@ -220,6 +220,17 @@ UPTAKE = {"stain": (True, True, True, True), "wet": (False, True)}
 colour and coverage, the wet image's deposit) or only the corrector (wetness)."""
 
 
+def triangle_areas(p):
+    """Areas of the triangles `p` (F, 3, 3)."""
+    return 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+
+
+def uv_areas(t):
+    """Areas of the UV triangles `t` (F, 3, 2)."""
+    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+    return 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+
+
 def weave_maps(positions, faces, uv, threads_per_m, angle):
     """Per triangle, the (F, 2, 2) map from UV to threads along the fabric's weft (row 0)
     and warp (row 1), the `face_map` of `madder.WeaveDetail`:
@@ -229,9 +240,7 @@ def weave_maps(positions, faces, uv, threads_per_m, angle):
     triangle, or no threads, gets the zero map (no detail)."""
     p = np.asarray(positions, dtype=np.float64)[np.asarray(faces)]
     t = np.asarray(uv, dtype=np.float64)
-    world = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
-    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
-    area_uv = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    world, area_uv = triangle_areas(p), uv_areas(t)
     ok = (area_uv > 0) & (world > 0)
     s = np.zeros(len(p))
     s[ok] = np.sqrt(world[ok] / area_uv[ok])
