@@ -68,7 +68,7 @@ material by nodes that `sync_material` places (named "Madder Input: …"):
   nodes on the object's sequences (`images.sequence_image`: non-colour, channel-packed
   alpha, auto refresh, frame start/offset/length so that scene frame f shows file f),
   read through a UV Map node of the UV map they were baked for; the wet image's R and G
-  are the wetness and deposit.
+  are the wetness and deposit (B is written as 0).
 
 A bake, a re-export, Free Bake and switching the output re-run `sync_object`, so a
 material that has the group always reads what its object has. A group made by an older

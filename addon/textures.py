@@ -51,7 +51,9 @@ KINDS = ("stain", "wet")
 EXT = ".exr"
 DIGITS = 4
 STAIN_CHANNELS = ("R", "G", "B", "A")
-WET_CHANNELS = ("R", "G")
+# wetness, deposit, and a zero blue: Blender reads an EXR without B as garbage there
+# (−5e8, 1e15), which a material of the user's reading the image's colour would show
+WET_CHANNELS = ("R", "G", "B")
 
 
 # -- names
@@ -215,9 +217,9 @@ CLIP = {"stain": "premultiplied", "wet": "unit"}
 """How `madder.rasterize` clips each image kind when the values were read unclamped (with
 the weave's detail, core `texture::clip`)."""
 
-UPTAKE = {"stain": (True, True, True, True), "wet": (False, True)}
+UPTAKE = {"stain": (True, True, True, True), "wet": (False, True, False)}
 """Per image kind and channel, whether the threads' uptake applies (the deposit: the stain's
-colour and coverage, the wet image's deposit) or only the corrector (wetness)."""
+colour and coverage, the wet image's deposit) or only the corrector (wetness; the zero blue)."""
 
 
 def triangle_areas(p):
@@ -346,8 +348,8 @@ class Exporter:
         return range(self.first, self.last + 1)
 
     def values(self, frame):
-        """Frame `frame`'s per-vertex image values: (RGBA (N, 4), wet (N, 2): wetness and
-        deposit), exactly the playback attributes (without their clamp to 1 when the
+        """Frame `frame`'s per-vertex image values: (RGBA (N, 4), wet (N, 3): wetness,
+        deposit and 0), exactly the playback attributes (without their clamp to 1 when the
         weave's detail is added: `export` clips the finished texels instead)."""
         # with the weave's detail the fractions are read unclamped and each finished texel
         # is clipped (`export`): a saturated stain stays saturated on every thread

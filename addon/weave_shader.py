@@ -36,6 +36,15 @@ is anchored at UV (0, 0); cells are `c · t`. The bump's height is the same sum 
 darken the close-up on average (0.15 pitch: 7 % under a uniform white world, ΔE00 1.7
 against the wide shot; 0.05: ΔE00 0.25, tests/blender/test_weave_shader.py).
 
+Where the cloth is wet the bump fades, its strength `1 − w` (`w` the stain group's Wetness,
+fed to this node's Wetness input): the liquid fills the valleys between the yarns and its
+free surface is flat at the thread scale (surface tension levels a film over a relief far
+shorter than the capillary length, 2.7 mm for water, within a fraction of a second), so the
+smooth, wet gloss reflects off a level film. With the relief kept, the sharp wet highlight
+caught the crown of every yarn and a wet stain under the sun showed a regular grid of
+glints that the dry cloth beside it does not have (the gallery's wet squares, issue 35).
+The yarns' colour (Yarn) stays: they are still there, under the film.
+
 # With the image sequence
 
 With the fabric's "Weave in Shader" on (the default) the Image Sequence is baked smooth
@@ -92,6 +101,7 @@ SIGMA = 0.6  # the pixel filter's standard deviation, in pixel footprints
 RELIEF = 0.05  # the bump's height at Relief 1, in thread pitches
 MIN_COSINE = 0.25
 SAMPLES = 24  # midpoint rule, per cell and axis
+VERSION = 2  # of the group's layout: a group built by an older Madder is rebuilt (2: Wetness levels the bump)
 
 _INPUTS = (
     ("UV", "NodeSocketVector", (0.0, 0.0, 0.0)),
@@ -102,6 +112,7 @@ _INPUTS = (
     ("Pixel Size", "NodeSocketFloat", 0.0),
     ("Unit", "NodeSocketFloat", 1.0),
     ("Relief", "NodeSocketFloat", 1.0),
+    ("Wetness", "NodeSocketFloat", 0.0),
 )
 _OUTPUTS = (("Yarn", "NodeSocketFloat"), ("Normal", "NodeSocketVector"), ("Height", "NodeSocketFloat"))
 
@@ -237,6 +248,7 @@ def build(group, rows, cpt):
             group.interface.new_socket(name, in_out="OUTPUT", socket_type=kind)
     group["madder_rows"] = "/".join(rows)
     group["madder_cpt"] = cpt
+    group["madder_version"] = VERSION
     nodes, links = group.nodes, group.links
     nodes.clear()
     gin, gout = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
@@ -291,7 +303,10 @@ def build(group, rows, cpt):
     pitch = _math(nodes, "MULTIPLY", pitch, gin.outputs["Relief"], links, 1600, -300)
     bump = nodes.new("ShaderNodeBump")
     bump.location = (1600, -100)
-    bump.inputs["Strength"].default_value = 1.0
+    # the film levels the relief: strength 1 − clamp(Wetness)
+    level = _math(nodes, "SUBTRACT", 1.0, gin.outputs["Wetness"], links, 1400, -500)
+    level.node.use_clamp = True
+    links.new(level, bump.inputs["Strength"])
     links.new(pitch, bump.inputs["Distance"])
     links.new(height, bump.inputs["Height"])
     links.new(bump.outputs["Normal"], gout.inputs["Normal"])
@@ -307,7 +322,8 @@ def weave_group(fabric):
     cpt = cells_per_thread(fabric)
     name = group_name(fabric)
     group = bpy.data.node_groups.get(name)
-    if group is not None and group.get("madder_rows") == "/".join(rows) and group.get("madder_cpt") == cpt:
+    if (group is not None and group.get("madder_rows") == "/".join(rows) and group.get("madder_cpt") == cpt
+            and group.get("madder_version") == VERSION):
         return group
     if group is None:
         group = bpy.data.node_groups.new(name, "ShaderNodeTree")
@@ -458,6 +474,9 @@ def place(material, obj, stain_node, prefix, x, y, kept_normal):
     node.inputs["Unit"].default_value = scene.unit_settings.scale_length
     if "Yarn" in stain_node.inputs:
         nt.links.new(node.outputs["Yarn"], stain_node.inputs["Yarn"])
+    wet = stain_node.inputs.get("Wetness")
+    if wet is not None and wet.is_linked:
+        nt.links.new(wet.links[0].from_socket, node.inputs["Wetness"])
     bsdf = next((b for b in nt.nodes if b.type == "BSDF_PRINCIPLED"), None)
     if bsdf is not None and kept_normal is None:
         nt.links.new(node.outputs["Normal"], bsdf.inputs["Normal"])

@@ -82,6 +82,12 @@ def test_a_detail_bake_writes_the_fine_cache_and_an_image_pair_per_frame(open_fi
         # (interpolation rounds: −3e-7 where every vertex of a triangle is 0)
         assert stain[..., 3].min() > -1e-6 and wet[..., 0].max() == pytest.approx(buf[1].max(), rel=0.02)
         np.testing.assert_allclose(stain[..., :3], stain[..., 3:] * np.array(s.stain_color), atol=2e-3)
+    # Blender's own read of a wet image: wetness in R, and a blue it finds written (zeros), not garbage
+    blender_wet = bpy.data.images.load(image_file(flag, "wet", 12))
+    px = np.array(blender_wet.pixels[:], dtype=np.float32).reshape(512, 512, 4)
+    bpy.data.images.remove(blender_wet)
+    assert np.isfinite(px).all() and not px[..., 2].any()
+    assert px[..., 0].max() == pytest.approx(wet[..., 0].max(), rel=1e-3)
     # the vertex colours still play, from the cloth-resolution cache
     scene.frame_set(6)
     attr = shown(flag).attributes["madder_stain"]
@@ -341,7 +347,7 @@ def test_an_animation_render_shows_each_frames_image(open_fixture, tmp_path):
     full[...] = (0.3, 0.02, 0.07, 1.0)
     for f, stained in code.items():
         madder.write_exr(image_file(disk, "stain", f), full if stained else np.zeros_like(full))
-        madder.write_exr(image_file(disk, "wet", f), np.zeros((512, 512, 2), np.float32), ("R", "G"))
+        madder.write_exr(image_file(disk, "wet", f), np.zeros((512, 512, 3), np.float32), ("R", "G", "B"))
     setup_render(scene, (24, 24), samples=1)
     scene.render.image_settings.file_format = "PNG"
     scene.render.filepath = str(tmp_path / "f####")

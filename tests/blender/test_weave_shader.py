@@ -302,3 +302,43 @@ def test_one_weave_at_every_distance_in_eevee(addon, tmp_path):
     assert max(des) < 2.0
     assert variation(ws) < 0.02 and variation(wc) < 0.02
     assert vs > 0.02 and vc > 0.02 and 0.5 < vs / vc < 2.0
+
+
+def test_a_wet_stain_in_the_sun_shows_its_yarns_as_the_dry_cloth_does(addon, tmp_path):
+    """Wet, the stain's film is smooth (Wet Roughness) and its sheen catches the sun: the
+    yarns under it must modulate it no more than they do the dry cloth beside it (within a
+    factor of 2, close), and wide the stain must still be an even tone. With the film's
+    levelling cut (the weave node's Wetness unlinked) the relief's glints on every yarn
+    crown break that: the check can fail."""
+    scene, obj, mat = cloth_scene(addon)
+    mesh = obj.data
+    wet = np.zeros(len(mesh.loops))
+    wet[list(mesh.polygons[0].loop_indices)] = 1.0  # the stained quad, x < 0
+    mesh.attributes["madder_wetness"].data.foreach_set("value", wet)
+    bsdf = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
+    stain = next(n for n in mat.node_tree.nodes if n.type == "GROUP" and n.node_tree.name == "Madder Stain")
+    stain.inputs["Roughness"].default_value = 0.9
+    spec = "Specular IOR Level" if "Specular IOR Level" in bsdf.inputs else "Specular"
+    bsdf.inputs[spec].default_value = 0.5
+    # a dim sky and a sun 12° off the zenith (the gallery's light), the camera straight down
+    bg = next(n for n in scene.world.node_tree.nodes if n.type == "BACKGROUND")
+    bg.inputs["Strength"].default_value = 0.3
+    sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
+    sun.data.energy, sun.data.angle = 3.0, math.radians(1.0)
+    sun.rotation_euler = (0.0, math.radians(12.0), 0.0)
+    scene.collection.objects.link(sun)
+    scene.cycles.samples = 32
+    node = weave_node(mat, addon)
+    assert node.inputs["Wetness"].is_linked
+    ws, wc = halves(render(scene, tmp_path, "sun_wide", WIDE))
+    cs, cc = halves(render(scene, tmp_path, "sun_close", CLOSE))
+    vs, vc = variation(cs), variation(cc)
+    print(f"wet in the sun, wide: variation stain {variation(ws):.4f} clean {variation(wc):.4f}; "
+          f"close: stain {vs:.4f} clean {vc:.4f}")
+    assert variation(ws) < 0.02 and variation(wc) < 0.02
+    assert vc > 0.02 and 0.5 < vs / vc < 2.0, (vs, vc)
+    # the relief kept under the film: glints on the crowns
+    mat.node_tree.links.remove(node.inputs["Wetness"].links[0])
+    gs, gc = halves(render(scene, tmp_path, "sun_close_relief", CLOSE))
+    print(f"relief kept under the film, close: stain {variation(gs):.4f} clean {variation(gc):.4f}")
+    assert variation(gs) > 2.0 * variation(gc)
