@@ -1,8 +1,8 @@
 """The "Madder Stain" shader node group, the nodes that feed it, and the one-click
 operator that adds them to an object's materials.
 
-The group takes the material's Base Color and Roughness and returns them stained and
-wetted, per colour channel (the maths runs on scalar Math nodes, three times):
+The group takes the material's Base Color, Roughness and Specular IOR Level and returns
+them stained and wetted (and the film's coat, below), per colour channel (the maths runs on scalar Math nodes, three times):
 
 **Dye (Kubelka–Munk).** An opaque layer of absorption K and scattering S reflects
 R∞ = 1 + K/S − √((K/S)² + 2·K/S), the inverse of K/S = (1 − R)²/2R (Kubelka & Munk
@@ -40,13 +40,28 @@ three ways, each weighted by w so a dry cloth keeps R_dry exactly:
 
 Darker channels lose proportionally more (R_film/Rb = (1 − r_i)/(1 − r_i·Rb) is smallest
 for small Rb) and the neutral ρ is gone, so wet colours are darker *and* more saturated;
-the cloth's own colour and the stain's alike. Roughness goes to "Wet Roughness" (0.1)
-with w: the film is smooth, so its gloss is a tight glint near the mirror direction.
-(A broad wet lobe, 0.25 before, spread the sun's reflection over every direction near
-it: seen from above with the sun 12° off the zenith, as in the gallery, it added about
-0.17 of white to the wet wine, which read paler than the dry stain, the "darker as it
-dries" of issue 35; the attributes and images were right all along: coverage 1 at the
-spill's centre from the first minute.) Wet fabric also lets more light through (water fills the gaps
+the cloth's own colour and the stain's alike.
+
+**The film's gloss** is a layer of its own: the group's Film output (w) is the Principled
+BSDF's Coat Weight, with the film's roughness ("Wet Roughness", 0.1) as Coat Roughness
+and water's index (1.33) as Coat IOR; the Coat Normal is left to the surface's own
+(the film is level over the yarns, see `weave_shader`), while the fibres underneath keep
+their dry Roughness, and their own surface reflection (Specular IOR Level) fades as
+Specular · (1 − w): under the film a fibre's surface faces water, and what it reflects
+(an eighth of what it did in air, ((n_f − n_w)/(n_f + n_w))² over ((n_f − 1)/(n_f + 1))²
+for cellulose 1.55 and water 1.33) stays under the film, part of the body's light that
+Lekner & Dorf's R_film already counts, leaving through the level film as diffuse light.
+So the dry surface's neutral white (above) leaves the body and the fibres' sheen goes with
+it; the one gloss left is the film's. (With the fibres' rough sheen kept, a sun 30° off
+the view whitened the wet wine as much as the dry one: chroma wet ≤ dry in EEVEE.) A partly wet cloth is a patchwork of smooth film and rough fibres,
+so its gloss is two lobes in proportion, not one lobe of intermediate roughness: a
+roughness mixed from 0.9 to 0.1 with w passed through 0.4–0.6 halfway through drying, a
+lobe broad enough to send the sun's reflection 12° off the zenith straight up into the
+gallery's camera, and the wine at 15 minutes read as a pale pink-grey, paler than the
+dry stain an hour on (a stain must darken as it wets and lighten as it dries; the
+attributes were monotonic all along). The film on top also takes the tight glint off
+the cloth: a 0.25 roughness on the one lobe (before issue 35) added about 0.17 of white
+to the wet wine seen from above. Wet fabric also lets more light through (water fills the gaps
 between and inside the yarns and matches the fibres' index, so less is scattered back):
 the group's Translucency output, mix("Translucency", "Wet Translucency", w), is the
 factor of a Mix Shader that `add_to_material` puts after the Principled BSDF, whose
@@ -91,8 +106,10 @@ MIX = "Madder Wet Transmission"
 _INPUTS = (
     ("Base Color", "NodeSocketColor", (0.8, 0.8, 0.8, 1.0), None, "The clean, dry cloth's colour"),
     ("Roughness", "NodeSocketFloat", 0.5, (0.0, 1.0), "The dry cloth's roughness"),
+    ("Specular", "NodeSocketFloat", 0.5, (0.0, 1.0),
+     "The dry cloth's Specular IOR Level (its fibres' surface reflection, gone under the liquid's film)"),
     ("Wet Roughness", "NodeSocketFloat", 0.1, (0.0, 1.0),
-     "Roughness where the cloth is full of liquid (the water film is smooth)"),
+     "Roughness of the liquid's film (the BSDF's coat, weighted by the wetness): the film is smooth"),
     ("Surface White", "NodeSocketFloat", 0.06, (0.0, 0.5),
      "Neutral reflectance of the dry fibres' surfaces, sent to the specular direction once a water film covers them"),
     ("Wet Scattering", "NodeSocketFloat", 0.0, (0.0, 10.0),
@@ -110,7 +127,8 @@ _INPUTS = (
     ("Wetness", "NodeSocketFloat", 0.0, (0.0, 1.0), "Liquid in the fibres: 1 = full"),
     ("Deposit", "NodeSocketFloat", 0.0, (0.0, 1.0), "Bound dye (passed through as an output)"),
 )
-_OUTPUTS = (("Base Color", "NodeSocketColor"), ("Roughness", "NodeSocketFloat"),
+_OUTPUTS = (("Base Color", "NodeSocketColor"), ("Roughness", "NodeSocketFloat"), ("Specular", "NodeSocketFloat"),
+            ("Film", "NodeSocketFloat"), ("Film Roughness", "NodeSocketFloat"),
             ("Translucency", "NodeSocketFloat"), ("Deposit", "NodeSocketFloat"))
 # defaults of an older Madder's group that this one changed (an upgrade moves a material's
 # value still at the old default to the new one)
@@ -218,7 +236,12 @@ def _build(group):
         links.new(_channel(m, split_base.outputs[i], split_stain.outputs[i], gin), join.inputs[i])
     links.new(join.outputs[0], gout.inputs["Base Color"])
     wet = gin.outputs["Wetness"]
-    links.new(m.mix(gin.outputs["Roughness"], gin.outputs["Wet Roughness"], wet), gout.inputs["Roughness"])
+    links.new(gin.outputs["Roughness"], gout.inputs["Roughness"])  # the fibres under the film
+    # the fibres' surfaces under the film: Specular · (1 − w)
+    links.new(m.op("MULTIPLY", gin.outputs["Specular"], m.op("SUBTRACT", 1.0, wet, clamp=True)),
+              gout.inputs["Specular"])
+    links.new(m.op("MAXIMUM", m.op("MINIMUM", wet, 1.0), 0.0), gout.inputs["Film"])
+    links.new(gin.outputs["Wet Roughness"], gout.inputs["Film Roughness"])
     links.new(m.mix(gin.outputs["Translucency"], gin.outputs["Wet Translucency"], wet), gout.inputs["Translucency"])
     links.new(gin.outputs["Deposit"], gout.inputs["Deposit"])
     gin.location, split_base.location, split_stain.location = (-400, 0), (-200, 100), (-200, -100)
@@ -252,6 +275,7 @@ def stain_group():
             _ensure_transmission(mat)
             for name in added:  # a socket added to a group leaves its nodes' values at 0
                 node.inputs[name].default_value = defaults[name]
+            _ensure_film(mat)  # (after: it routes the BSDF's own specular through the group)
             for name, value in _OLD_DEFAULTS.items():  # values nobody changed take the new default
                 socket = node.inputs.get(name)
                 if socket is not None and not socket.is_linked and abs(socket.default_value - value) < 1e-6:
@@ -344,8 +368,8 @@ def sync_object(obj):
 
 
 def add_to_material(material, obj=None):
-    """Inserts the group in front of the material's Principled BSDF (Base Color and
-    Roughness), keeping whatever fed them, its input nodes for `obj`, and the wet cloth's
+    """Inserts the group in front of the material's Principled BSDF (Base Color, Roughness,
+    Specular IOR Level; `THROUGH`), keeping whatever fed them, its input nodes for `obj`, and the wet cloth's
     transmission behind it (`_ensure_transmission`). Returns False when the group was
     already there (its inputs are synced again) or the material has no Principled BSDF."""
     nt = material.node_tree
@@ -358,25 +382,63 @@ def add_to_material(material, obj=None):
     if _group_node(material) is not None:
         sync_material(material, obj)
         _ensure_transmission(material)
+        _ensure_film(material)
         return False
     node = nt.nodes.new("ShaderNodeGroup")
     node.node_tree = group
     node.name = node.label = GROUP
     node.location = (bsdf.location.x - 250, bsdf.location.y)
-    for name in ("Base Color", "Roughness"):
-        src = bsdf.inputs[name]
-        if src.is_linked:
-            nt.links.new(src.links[0].from_socket, node.inputs[name])
-        else:
-            node.inputs[name].default_value = src.default_value
-        nt.links.new(node.outputs[name], src)
+    for name, socket in THROUGH:
+        _route(nt, bsdf, node, name, socket)
     sync_material(material, obj)
     _ensure_transmission(material)
+    _ensure_film(material)
     return True
+
+
+# the BSDF's inputs the group sits in front of: (group socket, BSDF socket)
+THROUGH = (("Base Color", "Base Color"), ("Roughness", "Roughness"), ("Specular", "Specular IOR Level"))
+
+
+def _route(nt, bsdf, node, name, socket):
+    """Puts the group's `name` between the BSDF's input `socket` and whatever fed it (a
+    link, or its value), unless the group feeds it already."""
+    src = bsdf.inputs[socket]
+    if src.is_linked:
+        feed = src.links[0].from_socket
+        if feed.node == node:
+            return
+        nt.links.new(feed, node.inputs[name])
+    else:
+        node.inputs[name].default_value = src.default_value
+    nt.links.new(node.outputs[name], src)
 
 
 def _principled(material):
     return next((n for n in material.node_tree.nodes if n.type == "BSDF_PRINCIPLED"), None)
+
+
+WATER_IOR = 1.33
+
+
+def _ensure_film(material):
+    """Makes the group's Film and Film Roughness the Principled BSDF's Coat Weight and Coat
+    Roughness, with water's Coat IOR (the module doc: the liquid's film as a layer over
+    the fibres), and routes the BSDF's Specular IOR Level through the group. Leaves a coat the material's own nodes drive alone; does nothing when the
+    material has no group or no Principled BSDF. Returns True when it linked them."""
+    nt, node = material.node_tree, _group_node(material)
+    bsdf = _principled(material) if nt is not None else None
+    if node is None or bsdf is None or "Film" not in node.outputs:
+        return False
+    _route(nt, bsdf, node, "Specular", "Specular IOR Level")  # a group from before the film had none
+    weight = bsdf.inputs["Coat Weight"]
+    if weight.is_linked:
+        return False
+    nt.links.new(node.outputs["Film"], weight)
+    if not bsdf.inputs["Coat Roughness"].is_linked:
+        nt.links.new(node.outputs["Film Roughness"], bsdf.inputs["Coat Roughness"])
+    bsdf.inputs["Coat IOR"].default_value = WATER_IOR
+    return True
 
 
 def _ensure_transmission(material):

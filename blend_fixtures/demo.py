@@ -152,6 +152,8 @@ def main():
     ap.add_argument("--samples", type=int, default=32, help="Cycles samples (denoised; the committed pictures: 64)")
     ap.add_argument("--scale", type=int, default=100, help="render resolution percentage (of 1280x720)")
     ap.add_argument("--image-size", default=None, help="stain image size, px (default: Auto)")
+    ap.add_argument("--measure", action="store_true",
+                    help="then measure the shader's cost and the wide vs close colours (demo_measure.py)")
     args = ap.parse_args()
     out = os.path.abspath(args.out)
     work = os.path.join(os.path.dirname(out), "demo")
@@ -190,6 +192,7 @@ def main():
     # the close-up: from 70 cm in front of the table's rim, on the stain's edge on the table
     # top (where its outline shows) and the run over the rim below it
     closeup = os.path.splitext(out)[0] + "-closeup.png"
+    wide_pose = (scene.camera.matrix_world.copy(), scene.camera.data.lens)
     cx, cy, cz = SPILL_CENTRE
     kit.aim(scene.camera, (cx + 0.33, cy - 0.44, cz + 0.32), (cx - 0.03, cy + 0.04, cz - 0.05))
     scene.camera.data.lens = 40.0
@@ -197,6 +200,11 @@ def main():
     t0 = time.perf_counter()
     bpy.ops.render.render(write_still=True)
     print(f"demo: rendered the close-up in {time.perf_counter() - t0:.1f} s -> {closeup}")
+    if args.measure:
+        import demo_measure
+
+        close_pose = (scene.camera.matrix_world.copy(), scene.camera.data.lens)
+        demo_measure.run(scene, cloth, wide_pose, close_pose, out, TABLE_HEIGHT, SPILL_CENTRE)
 
 
 if __name__ == "__main__":
