@@ -19,7 +19,6 @@
 
 Prints the figures; asserts nothing (the checks with thresholds are the Blender tests)."""
 
-import importlib.util
 import os
 import time
 

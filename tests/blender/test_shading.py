@@ -209,7 +209,8 @@ def test_wet_is_darker_and_more_saturated(swatches):
     engine, means = swatches
     for a in (0.3, 1.0):
         dry, wet = lab(means[f"wine {a} 0.0"]), lab(means[f"wine {a} 1.0"])
-        print(f"{engine} wine {a}: dry L*a*b* {np.round(dry, 2)} C* {chroma(dry):.2f}, wet {np.round(wet, 2)} C* {chroma(wet):.2f}")
+        print(f"{engine} wine {a}: dry L*a*b* {np.round(dry, 2)} C* {chroma(dry):.2f}, "
+              f"wet {np.round(wet, 2)} C* {chroma(wet):.2f}")
         assert wet[0] < dry[0], (engine, a, dry, wet)
         assert chroma(wet) >= chroma(dry), (engine, a, dry, wet)
 
