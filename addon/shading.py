@@ -43,27 +43,21 @@ Darker channels lose proportionally more (R_film/Rb = (1 − r_i)/(1 − r_i·Rb
 for small Rb) and the neutral ρ is gone, so wet colours are darker *and* more saturated;
 the cloth's own colour and the stain's alike.
 
-**The film's gloss** is a layer of its own: the group's Film output (w) is the
-Principled BSDF's Coat Weight, with the film's roughness ("Wet Roughness", 0.1) as Coat
-Roughness and water's index (1.33) as Coat IOR; the Coat Normal is left to the surface's
-own (the film is level over the yarns, see `weave_shader`), while the fibres underneath
-keep their dry Roughness, and their own surface reflection (Specular IOR Level) fades as
-Specular · (1 − w): under the film a fibre's surface faces water, and what it reflects
-(an eighth of what it did in air, ((n_f − n_w)/(n_f + n_w))² over ((n_f − 1)/(n_f + 1))²
-for cellulose 1.55 and water 1.33) stays under the film, part of the body's light that
-Lekner & Dorf's R_film already counts, leaving through the level film as diffuse light.
-So the dry surface's neutral white (above) leaves the body and the fibres' sheen goes
-with it; the one gloss left is the film's. (With the fibres' rough sheen kept, a sun 30°
-off the view whitened the wet wine as much as the dry one: chroma wet ≤ dry in EEVEE.) A
-partly wet cloth is a patchwork of smooth film and rough fibres, so its gloss is two
-lobes in proportion, not one lobe of intermediate roughness: a roughness mixed from 0.9
-to 0.1 with w passed through 0.4–0.6 halfway through drying, a lobe broad enough to send
-the sun's reflection 12° off the zenith straight up into the gallery's camera, and the
-wine at 15 minutes read as a pale pink-grey, paler than the dry stain an hour on (a
-stain must darken as it wets and lighten as it dries; the attributes were monotonic all
-along). The film on top also takes the tight glint off the cloth: a 0.25 roughness on
-the one lobe (before issue 35) added about 0.17 of white to the wet wine seen from
-above. Wet fabric also lets more light through (water fills the gaps between and inside
+**The film's gloss** is a layer of its own: the group's Film output (w) is the Principled
+BSDF's Coat Weight, with the film's roughness ("Wet Roughness", 0.1) as Coat Roughness and
+water's index (1.33) as Coat IOR; the Coat Normal is the surface's own (the film is level
+over the yarns, see `weave_shader`). The fibres under it keep their dry Roughness, and
+their own surface reflection fades, Specular IOR Level · (1 − w): under the film a
+fibre's surface faces water, and what it still reflects (about an eighth of what it did
+in air: ((n_f − n_w)/(n_f + n_w))² over ((n_f − 1)/(n_f + 1))² for cellulose 1.55 and
+water 1.33) stays under the film, part of the body's light that R_film counts. So the dry
+surface's neutral white leaves with the fibres' sheen, and the one gloss left is the
+film's. A partly wet cloth is a patchwork of smooth film and rough fibres: its gloss is
+two lobes in proportion to w, not one lobe of intermediate roughness (which, halfway
+dry, is broad enough to catch a sun near the mirror direction and whiten the stain, so
+that a drying stain would look paler than the dry one).
+
+Wet fabric also lets more light through (water fills the gaps between and inside
 the yarns and matches the fibres' index, so less is scattered back): the group's
 Translucency output, mix("Translucency", "Wet Translucency", w), is the factor of a Mix
 Shader that `add_to_material` puts after the Principled BSDF, whose other shader is a

@@ -41,10 +41,9 @@ fed to this node's Wetness input): the liquid fills the valleys between the yarn
 free surface is level at the thread scale (surface tension flattens a film over a relief
 far shorter than the capillary length, 2.7 mm for water, in well under a second). The
 film's gloss is the BSDF's coat (`shading`), whose normal is the surface's own, not this
-bump: a film that followed the relief caught the sun on every yarn crown, a regular grid
-of glints in a wet stain that the dry cloth beside it does not have (the gallery's wet
-squares, issue 35; 1.07 relative variation against the clean cloth's 0.054 in
-tests/blender/test_weave_shader.py). The yarns' colour (Yarn) stays: they are still there, under the film.
+bump: a film that followed the relief would catch a sun on every yarn crown, a regular
+grid of glints in a wet stain that the dry cloth beside it does not have
+(tests/blender/test_weave_shader.py checks both against each other). The yarns' colour (Yarn) stays: they are still there, under the film.
 
 # With the image sequence
 
