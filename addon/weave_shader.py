@@ -43,7 +43,8 @@ far shorter than the capillary length, 2.7 mm for water, in well under a second)
 film's gloss is the BSDF's coat (`shading`), whose normal is the surface's own, not this
 bump: a film that followed the relief would catch a sun on every yarn crown, a regular
 grid of glints in a wet stain that the dry cloth beside it does not have
-(tests/blender/test_weave_shader.py checks both against each other). The yarns' colour (Yarn) stays: they are still there, under the film.
+(tests/blender/test_weave_shader.py checks both against each other). The yarns' colour
+(Yarn) stays: they are still there, under the film.
 
 # With the image sequence
 
