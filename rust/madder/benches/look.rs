@@ -55,6 +55,7 @@ fn main() {
             wicking: Wicking {
                 exponent: 2.0,
                 density: 0.1,
+                picard: 0,
             },
             ..Default::default()
         },

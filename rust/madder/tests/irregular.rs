@@ -101,6 +101,7 @@ fn spill(irregularity: Irregularity, threads: usize) -> (Vec<f64>, Simulator) {
         wicking: Wicking {
             exponent: 1.0,
             density: 0.1,
+            picard: 0,
         },
         irregularity,
         ..Default::default()

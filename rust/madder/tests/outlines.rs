@@ -11,7 +11,8 @@
 //!    `l` from 1 to 20 mm.
 //! 3. No facets along the mesh: on the uniform isotropic fabric on a structured grid
 //!    (0.5 mm edges, the triangulation of the flag and demo cloths) the 4- and 8-fold
-//!    Fourier terms of `r(θ)` are below 1 % of the mean radius.
+//!    Fourier terms of `r(θ)` are below 1 % of the mean radius, with two Picard
+//!    iterations of the wicking factor per step ([`Wicking::picard`]).
 
 use faer::Par;
 use glam::DVec3;
@@ -28,8 +29,13 @@ fn pitch() -> f64 {
     2.0 * HALF / N as f64
 }
 
-/// Wetness per vertex of a spot (radius `r0`) spread by wicking for 6 s.
+/// Wetness per vertex of a spot (radius `r0`) spread by wicking for 6 s in 60 steps.
 fn spill(irregularity: Irregularity, r0: f64) -> (Vec<f64>, Vec<DVec3>) {
+    spill_with(irregularity, r0, 0)
+}
+
+/// [`spill`] with `picard` Picard iterations of the wicking per step.
+fn spill_with(irregularity: Irregularity, r0: f64, picard: u32) -> (Vec<f64>, Vec<DVec3>) {
     let (topo, pos) = Grid::new(N, HALF).build();
     let params = StainParams {
         forces: Forces {
@@ -41,6 +47,7 @@ fn spill(irregularity: Irregularity, r0: f64) -> (Vec<f64>, Vec<DVec3>) {
         wicking: Wicking {
             exponent: 1.0,
             density: 0.1,
+            picard,
         },
         irregularity,
         ..Default::default()
@@ -225,17 +232,23 @@ fn a_multiscale_fabric_gives_a_self_affine_front() {
 }
 
 #[test]
-#[ignore = "open defect: 4-fold term 3.43 % of the radius (facets), 8-fold 0.02 %; cause not fixed"]
 fn a_uniform_fabric_on_a_structured_grid_has_no_facets() {
-    let (wet, _) = spill(Irregularity::default(), 0.008);
-    let r = front(&wet);
-    let (c4, c8) = (fourier(&r, 4), fourier(&r, 8));
-    println!(
-        "uniform fabric, structured grid (0.5 mm): mean radius {:.2} mm, 4-fold {:.3} %, 8-fold {:.3} %, 2-fold {:.3} %",
-        1e3 * mean(&r),
-        100.0 * c4,
-        100.0 * c8,
-        100.0 * fourier(&r, 2)
-    );
-    assert!(c4 < 0.01 && c8 < 0.01, "4-fold {c4}, 8-fold {c8}");
+    // the lagged wicking factor lets the front cross one ring of faces per step: at 60
+    // steps a rounded square (4-fold 3.43 %, module doc of `Wicking`); two Picard
+    // iterations per step let it move as far as it should
+    for picard in [0, 2] {
+        let (wet, _) = spill_with(Irregularity::default(), 0.008, picard);
+        let r = front(&wet);
+        let (c4, c8) = (fourier(&r, 4), fourier(&r, 8));
+        println!(
+            "uniform fabric, structured grid (0.5 mm), {picard} Picard iterations: mean radius {:.2} mm, 4-fold {:.3} %, 8-fold {:.3} %, 2-fold {:.3} %",
+            1e3 * mean(&r),
+            100.0 * c4,
+            100.0 * c8,
+            100.0 * fourier(&r, 2)
+        );
+        if picard > 0 {
+            assert!(c4 < 0.01 && c8 < 0.01, "4-fold {c4}, 8-fold {c8}");
+        }
+    }
 }

@@ -96,6 +96,7 @@ fn run(n: f64, exponent: f64) -> (Vec<(f64, f64, f64, f64)>, Barenblatt) {
         wicking: Wicking {
             exponent,
             density: SIGMA_W,
+            picard: 0,
         },
         ..Default::default()
     };
@@ -229,6 +230,7 @@ fn wicking_off_is_the_linear_diffusion_bit_for_bit() {
     let b = run(Wicking {
         exponent: 0.0,
         density: 3.0,
+        picard: 0,
     });
     assert!(a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()));
 }
@@ -237,7 +239,11 @@ fn wicking_off_is_the_linear_diffusion_bit_for_bit() {
 fn bad_wicking_parameters_are_refused() {
     for (exponent, density) in [(-1.0, 1.0), (9.0, 1.0), (f64::NAN, 1.0), (1.0, 0.0)] {
         let p = StainParams {
-            wicking: Wicking { exponent, density },
+            wicking: Wicking {
+                exponent,
+                density,
+                picard: 0,
+            },
             ..Default::default()
         };
         let e = p.validate().unwrap_err().to_string();

@@ -27,12 +27,27 @@ use crate::stain::check::check_range;
 /// within the test's 3 % at the simulator's steps (`tests/wicking.rs`). The system stays
 /// symmetric positive definite and conservative (`1ᵀK = 0` face by face, whatever the
 /// factors), so mass is exact and the negative-mass repair keeps every density ≥ 0.
+///
+/// **Picard iterations** ([`Wicking::picard`]). Lagged, a face conducts only once one of its
+/// corners is wet at the start of the solve, so the front advances at most one ring of
+/// faces per sub-step: where it should move further (a fast spread, long steps) it is held
+/// back, and it advances in graph distance, which on a structured grid is a rounded
+/// square. Measured on a spot spreading on a 0.5 mm grid for 6 s (`tests/outlines.rs`):
+/// 4-fold Fourier term of the front 10.2 % of the radius at 15 steps, 3.43 % at 60,
+/// 0.27 % at 240, 0.017 % at 960, the mean radius 17.0, 35.2, 38.2 and 38.5 mm. Each Picard
+/// iteration solves the step again from its start with the factors of the last solution,
+/// the fully implicit coefficient `g(θ^{k+1})` (Celia, Bouloutas & Zarba 1990, for
+/// Richards' equation), so the front may cross one more ring per iteration. 0 (the
+/// default) is the lagged scheme, bit for bit.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Wicking {
     /// `n ≥ 0`; 0 is a constant rate (wicking off: the linear diffusion, bit for bit).
     pub exponent: f64,
     /// `σ_w`, kg/m²: the liquid density at which the rate reaches the fabric's `D₀`.
     pub density: f64,
+    /// Picard iterations per sub-step (0 to 8): solves again with the factors of the
+    /// last solution (the doc above); 0 = lagged.
+    pub picard: u32,
 }
 
 impl Default for Wicking {
@@ -41,6 +56,7 @@ impl Default for Wicking {
             exponent: 0.0,
             // the default fibres' saturation ([`crate::stain::InteractionRates`])
             density: 0.1,
+            picard: 0,
         }
     }
 }
@@ -51,8 +67,15 @@ impl Wicking {
         self.exponent > 0.0
     }
 
-    /// Checks the exponent (finite, 0 to 8) and the density (finite, > 0).
+    /// Checks the exponent (finite, 0 to 8), the density (finite, > 0) and the Picard
+    /// iterations (at most 8).
     pub fn validate(&self) -> Result<(), ParamError> {
+        check_range(
+            "wicking Picard iterations",
+            self.picard as f64,
+            self.picard <= 8,
+            "from 0 to 8",
+        )?;
         check_range(
             "wicking exponent",
             self.exponent,

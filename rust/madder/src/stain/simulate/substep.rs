@@ -10,14 +10,15 @@ use super::profile::{Laps, Profile};
 use super::scratch::SubstepScratch;
 use super::{DRY_DENSITY, Simulator};
 use crate::error::Error;
+use crate::mesh::Geometry;
 use crate::stain::advect::{UpwindPlan, advect_velocity_in, dual_fluxes_in};
 use crate::stain::diffuse::{DensityWork, Ops, SoluteMotion, diffuse_densities, diffuse_velocity};
 use crate::stain::extend::{extend_velocity, wet_vertices};
 use crate::stain::forces::{VelocityStep, frame_angular_velocity, frame_body_acceleration};
 use crate::stain::interact::{exposure, interact_varied, vapour_exposure};
 use crate::stain::irregular::face_means;
-use crate::stain::state::{Local, merge_rgb, split_rgb};
-use crate::stain::window::{Window, pick};
+use crate::stain::state::{Fields, Local, merge_rgb, split_rgb};
+use crate::stain::window::{Cloth, Window, pick};
 
 impl Simulator {
     /// One sub-step `h` of the window to positions `q` (window order), whose vertex frames
@@ -294,7 +295,6 @@ impl Simulator {
         sub: &SubstepScratch,
     ) -> Result<(), Error> {
         let p = &self.params;
-        let n = w.vertices.len();
         let topo = &w.cloth.topology;
         let (geometry, transport) = (&sub.geometry, &sub.transport);
         // the densities and the velocity are independent systems, solved side by side
@@ -306,46 +306,17 @@ impl Simulator {
             region: &w.region,
         };
         // the wicking factor of every face, from the liquid before the solve (lagged),
-        // times the irregular fabric's
-        let wicking = p.wicking.is_on().then(|| {
-            let f = &loc.fields;
-            let liquid: Vec<f64> = (0..n)
-                .map(|j| {
-                    let a = geometry.vertex_area[j];
-                    let m = f.free_solvent[j] + f.absorbed_solvent[j];
-                    if a > 0.0 { m / a } else { 0.0 }
-                })
-                .collect();
-            p.wicking.face_factors(topo, &liquid)
-        });
-        let irregular = w.cloth.irregular.as_ref();
-        let face_scale = match (wicking, irregular.map(|m| face_means(topo, m))) {
-            (Some(g), Some(r)) => Some(g.iter().zip(&r).map(|(g, r)| g * r).collect()),
-            (g, r) => g.or(r),
+        // times the irregular fabric's; the mobile faces from the same liquid
+        let cloth = &w.cloth;
+        let face_scale = self.face_scale(cloth, &loc.fields, geometry);
+        let held_scale = self.held_scale(cloth, &loc.fields, geometry, face_scale.as_deref());
+        // Picard iterations (`Wicking::picard`) solve again from the step's start
+        let picard = if p.wicking.is_on() {
+            p.wicking.picard
+        } else {
+            0
         };
-        // the fibres' liquid moves only between vertices above the residual saturation
-        // (a pinned edge, "Tide lines" in `diffuse`)
-        let held_scale = (p.carry_solute && p.residual_saturation > 0.0).then(|| {
-            let floor = p.residual_saturation * p.interaction.saturation;
-            let f = &loc.fields;
-            let mobile: Vec<bool> = (0..n)
-                .map(|j| {
-                    let a = geometry.vertex_area[j];
-                    a > 0.0 && f.absorbed_solvent[j] > floor * a
-                })
-                .collect();
-            topo.faces()
-                .iter()
-                .enumerate()
-                .map(|(t, c)| {
-                    if c.iter().all(|&v| mobile[v as usize]) {
-                        face_scale.as_ref().map_or(1.0, |g| g[t])
-                    } else {
-                        0.0
-                    }
-                })
-                .collect::<Vec<f64>>()
-        });
+        let start = (picard > 0).then(|| loc.fields.clone());
         let (fields, velocity) = (&mut loc.fields, &mut loc.velocity);
         let (densities, viscous) = match w.cg.as_mut() {
             None => (
@@ -361,21 +332,36 @@ impl Simulator {
                 vector_cg.set_tolerance(self.tolerances[1]);
                 rayon::join(
                     || {
-                        diffuse_densities(
+                        let mut work = diffuse_densities(
                             &ops,
                             scalar_cg,
                             fields,
                             geometry,
                             h,
                             face_scale.as_deref(),
-                            if p.carry_solute {
-                                SoluteMotion::Carried {
-                                    held_scale: held_scale.as_deref(),
-                                }
-                            } else {
-                                SoluteMotion::Diffused
-                            },
-                        )
+                            solute_motion(p.carry_solute, held_scale.as_deref()),
+                        )?;
+                        if let Some(start) = &start {
+                            for _ in 0..picard {
+                                // the factors of the last solution, the step again from its start
+                                let g = self.face_scale(cloth, fields, geometry);
+                                *fields = start.clone();
+                                let held = self.held_scale(cloth, start, geometry, g.as_deref());
+                                let more = diffuse_densities(
+                                    &ops,
+                                    scalar_cg,
+                                    fields,
+                                    geometry,
+                                    h,
+                                    g.as_deref(),
+                                    solute_motion(p.carry_solute, held.as_deref()),
+                                )?;
+                                work.iterations += more.iterations;
+                                work.solves += more.solves;
+                                work.carried += more.carried;
+                            }
+                        }
+                        Ok::<_, Error>(work)
                     },
                     || {
                         if p.viscosity > 0.0 {
@@ -394,6 +380,65 @@ impl Simulator {
         prof.carried_fields += densities.carried;
         prof.velocity_iterations += viscous?;
         Ok(())
+    }
+
+    /// The per-face scale of the density diffusion: the wicking factor of every face from
+    /// the liquid of `fields` ([`crate::stain::Wicking`]), times the irregular fabric's; None
+    /// when neither is on.
+    fn face_scale(&self, cloth: &Cloth, fields: &Fields, geometry: &Geometry) -> Option<Vec<f64>> {
+        let p = &self.params;
+        let topo = &cloth.topology;
+        let wicking = p.wicking.is_on().then(|| {
+            let liquid: Vec<f64> = (0..cloth.topology.n_vertices())
+                .map(|j| {
+                    let a = geometry.vertex_area[j];
+                    let m = fields.free_solvent[j] + fields.absorbed_solvent[j];
+                    if a > 0.0 { m / a } else { 0.0 }
+                })
+                .collect();
+            p.wicking.face_factors(topo, &liquid)
+        });
+        let irregular = cloth.irregular.as_ref();
+        match (wicking, irregular.map(|m| face_means(topo, m))) {
+            (Some(g), Some(r)) => Some(g.iter().zip(&r).map(|(g, r)| g * r).collect()),
+            (g, r) => g.or(r),
+        }
+    }
+
+    /// The fibres' liquid moves only between vertices of `fields` above the residual
+    /// saturation (a pinned edge, "Tide lines" in `diffuse`): `face_scale` on the faces
+    /// whose corners all are, 0 elsewhere; None unless the solute is carried with a
+    /// residual saturation.
+    fn held_scale(
+        &self,
+        cloth: &Cloth,
+        fields: &Fields,
+        geometry: &Geometry,
+        face_scale: Option<&[f64]>,
+    ) -> Option<Vec<f64>> {
+        let p = &self.params;
+        (p.carry_solute && p.residual_saturation > 0.0).then(|| {
+            let floor = p.residual_saturation * p.interaction.saturation;
+            let mobile: Vec<bool> = (0..cloth.topology.n_vertices())
+                .map(|j| {
+                    let a = geometry.vertex_area[j];
+                    a > 0.0 && fields.absorbed_solvent[j] > floor * a
+                })
+                .collect();
+            cloth
+                .topology
+                .faces()
+                .iter()
+                .enumerate()
+                .map(|(t, c)| {
+                    if c.iter().all(|&v| mobile[v as usize]) {
+                        face_scale.map_or(1.0, |g| g[t])
+                    } else {
+                        0.0
+                    }
+                })
+                .collect()
+        })
     }
 
     /// Step 5 of the module doc: interactions (§4.5) on the active and held vertices, the
@@ -489,4 +534,14 @@ fn hold_back(
                 .collect()
         })
         .collect()
+}
+
+/// How the solute moves in the density diffusion: carried by the solvents' fluxes (the
+/// fibres' liquid through the faces of `held`), or diffused with them.
+fn solute_motion(carry: bool, held: Option<&[f64]>) -> SoluteMotion<'_> {
+    if carry {
+        SoluteMotion::Carried { held_scale: held }
+    } else {
+        SoluteMotion::Diffused
+    }
 }
