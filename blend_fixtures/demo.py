@@ -110,13 +110,14 @@ def build_scene(blend):
     bpy.ops.wm.save_as_mainfile(filepath=blend, check_existing=False)
 
 
-def configure(image_size=None):
+def configure(image_size=None, detail=None):
     """Sets up the spill on the open demo scene as a user would, and only that: the fabric
     (the Linen preset at a coarse 5 threads per centimetre), the Spill Group, the amount
     and the Liquid preset. The look (wicking, the fabric's grain, how the wine rings),
     the Detail (Auto from the cloth's edge) and the image sequence (on: the cloth has a
     UV map; its size Auto) are the defaults'. `image_size` (px) overrides the size, for
-    `tests/bench/bench_image_bake.py`, which bakes the same setting; returns the tablecloth."""
+    `tests/bench/bench_image_bake.py`, which bakes the same setting; `detail` sets the
+    Detail level by hand (CI's quick runs on the older Blenders); returns the tablecloth."""
     import bpy
 
     cloth = bpy.data.objects["Tablecloth"]
@@ -141,6 +142,8 @@ def configure(image_size=None):
     s.splash.throw, s.splash.volume = throw, 125.0  # a glass of wine
     if image_size is not None:
         s.image_size = str(image_size)
+    if detail is not None:
+        s.detail_auto, s.detail = False, detail
     return cloth
 
 
@@ -152,6 +155,7 @@ def main():
     ap.add_argument("--samples", type=int, default=32, help="Cycles samples (denoised; the committed pictures: 64)")
     ap.add_argument("--scale", type=int, default=100, help="render resolution percentage (of 1280x720)")
     ap.add_argument("--image-size", default=None, help="stain image size, px (default: Auto)")
+    ap.add_argument("--detail", type=int, default=None, help="Detail level (default: Auto)")
     ap.add_argument("--measure", action="store_true",
                     help="then measure the shader's cost and the wide vs close colours (demo_measure.py)")
     args = ap.parse_args()
@@ -170,7 +174,7 @@ def main():
     harness.install_extension(os.path.abspath(args.zip))
     bpy.ops.wm.open_mainfile(filepath=blend)
     scene = bpy.context.scene
-    cloth = configure(args.image_size)
+    cloth = configure(args.image_size, args.detail)
     s = cloth.madder
 
     t0 = time.perf_counter()
