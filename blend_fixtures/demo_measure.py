@@ -7,8 +7,7 @@
    uniform core (coverage above 90 % of its peak, seen in both shots) and on clean cloth
    around it (coverage below 0.1 %, within 25 cm of the spill), are projected into the
    wide picture and the close-up; the mean colour of each set, read from the pictures
-   (display sRGB → CIE L*a*b*, D65), compared by CIEDE2000 (the formulas are
-   tests/blender/test_weave_shader.py's, loaded from there).
+   (display sRGB → CIE L*a*b*, D65), compared by CIEDE2000 (`colour.py`).
 3. **No speckle far away.** In the wide shot a thread of the 5/cm linen spans less than a
    pixel; the ratio of the wide render with the weave to the one without it (the same
    seed) at the stain's points is the weave's own contribution there: its relative
@@ -23,18 +22,7 @@ import os
 import time
 
 import numpy as np
-
-HERE = os.path.dirname(os.path.abspath(__file__))
-
-
-def _colour_science():
-    path = os.path.join(HERE, "..", "tests", "blender", "test_weave_shader.py")
-    src = open(path).read()
-    # the pure-numpy half of the test module (its colour science), without its bpy imports
-    start, end = src.index("def srgb_encode"), src.index("# --- the scene")
-    ns = {"np": np, "math": __import__("math")}
-    exec(compile(src[start:end], path, "exec"), ns)
-    return ns["lab"], ns["ciede2000"]
+from colour import ciede2000, lab, srgb_decode
 
 
 def _load(bpy, path):
@@ -43,10 +31,6 @@ def _load(bpy, path):
     px = np.array(img.pixels[:], dtype=np.float64).reshape(h, w, 4)[..., :3]
     bpy.data.images.remove(img)
     return px
-
-
-def _decode(v):
-    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
 
 
 def _points(bpy, cloth, table_height, centre):
@@ -115,7 +99,6 @@ def run(scene, cloth, wide_pose, close_pose, out, table_height, centre):
     camera for the two shots; `out`: the wide picture's path (the close-up's beside it)."""
     import bpy
 
-    lab, ciede2000 = _colour_science()
     cam = scene.camera
     work = os.path.splitext(out)[0] + "-measure"
     os.makedirs(work, exist_ok=True)
@@ -147,7 +130,7 @@ def run(scene, cloth, wide_pose, close_pose, out, table_height, centre):
     close, _ = shot(close_pose, "close")
     close_noweave, _ = shot(close_pose, "close-no-weave", "no weave")
     print(f"demo measure: the wide frame renders in {t_full:.1f} s with the Madder shader, {t_plain:.1f} s with "
-          f"its nodes muted (+{100 * (t_full / t_plain - 1):.0f} %)")
+          f"plain Principled BSDFs (+{100 * (t_full / t_plain - 1):.0f} %)")
 
     cam.matrix_world, cam.data.lens = wide_pose
     wide_px = {k: _project(bpy, scene, pts, wide.shape) for k, pts in (("stain", core), ("clean", clean))}
@@ -158,8 +141,8 @@ def run(scene, cloth, wide_pose, close_pose, out, table_height, centre):
         if len(a) == 0 or len(b) == 0:
             print(f"demo measure: no {kind} points in view (wide {len(a)}, close {len(b)})")
             continue
-        far = _decode(wide[a[:, 0], a[:, 1]]).mean(axis=0)
-        near = _decode(close[b[:, 0], b[:, 1]]).mean(axis=0)
+        far = srgb_decode(wide[a[:, 0], a[:, 1]]).mean(axis=0)
+        near = srgb_decode(close[b[:, 0], b[:, 1]]).mean(axis=0)
         de = ciede2000(lab(far), lab(near))
         ratio_w = wide[a[:, 0], a[:, 1]].mean(axis=1) / np.maximum(wide_noweave[a[:, 0], a[:, 1]].mean(axis=1), 1e-6)
         ratio_c = close[b[:, 0], b[:, 1]].mean(axis=1) / np.maximum(close_noweave[b[:, 0], b[:, 1]].mean(axis=1), 1e-6)

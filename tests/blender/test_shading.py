@@ -1,7 +1,7 @@
 """The stain and wetness shading model (addon/shading.py, issue 35) measured on renders:
 calibrated swatches (flat squares whose "Madder Stain" group is fed known dye amounts,
 wetness and colours on its sockets) rendered in Cycles and in EEVEE with the Standard view
-transform, and measured in CIE L*a*b* (the conversion is written here from the CIE and
+transform, and measured in CIE L*a*b* (blend_fixtures/colour.py, from the CIE and
 IEC 61966-2-1 formulas). The expected colours are computed here, independently, with
 numpy from the Kubelka–Munk and Lekner–Dorf equations the module doc states."""
 
@@ -10,6 +10,7 @@ import sys
 import bpy
 import numpy as np
 import pytest
+from colour import lab as lab_linear, srgb_decode
 from conftest import ADDON, eevee_on_newest_only
 
 shading = sys.modules[ADDON + ".shading"]
@@ -25,22 +26,9 @@ CELL, SIDE = 0.12, 0.1  # swatch spacing and size (m)
 
 # --- colour science ------------------------------------------------------------------------
 
-D65 = np.array([0.95047, 1.0, 1.08883])
-SRGB_TO_XYZ = np.array([[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]])
-
-
-def srgb_decode(v):
-    """IEC 61966-2-1: display sRGB in [0, 1] → linear."""
-    v = np.asarray(v, dtype=np.float64)
-    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
-
-
 def lab(srgb):
     """CIE 1976 L*a*b* (D65) of display sRGB values (..., 3)."""
-    xyz = srgb_decode(srgb) @ SRGB_TO_XYZ.T / D65
-    eps, kappa = 216 / 24389, 24389 / 27
-    f = np.where(xyz > eps, np.cbrt(xyz), (kappa * xyz + 16) / 116)
-    return np.stack([116 * f[..., 1] - 16, 500 * (f[..., 0] - f[..., 1]), 200 * (f[..., 1] - f[..., 2])], -1)
+    return lab_linear(srgb_decode(srgb))
 
 
 def chroma(v):

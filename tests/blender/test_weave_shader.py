@@ -6,7 +6,8 @@ thread), lit by a uniform white world (a Lambertian cloth under it reflects its 
 a pixel's value is its albedo: the colours measured are the shader's own).
 
 Checked against the issue's figures, colours compared in CIE L*a*b* (sRGB/D65, IEC
-61966-2-1) by CIEDE2000 (Sharma, Wu & Dalal 2005, eqs. 1–20), written out here:
+61966-2-1) by CIEDE2000 (Sharma, Wu & Dalal 2005, eqs. 1–20; blend_fixtures/colour.py,
+checked here against their published pairs):
 the stain's and the clean cloth's mean colours wide and close within ΔE00 < 2; wide, the
 variation inside the uniform stain under 2 %; close, the weave's modulation in clean and
 stained cloth within a factor of 2 of each other; the group's Yarn, rendered as emission
@@ -19,6 +20,7 @@ import os
 import bpy
 import numpy as np
 import pytest
+from colour import ciede2000, lab
 from conftest import eevee_on_newest_only
 
 THREADS = 5.0  # per cm, the demo's
@@ -29,63 +31,7 @@ SIZE = 64  # pixels a side
 WIDE, CLOSE = 0.25, 0.02  # camera heights, metres
 
 
-# --- colour science, from the published formulas -----------------------------------------
-
-
-def srgb_encode(linear):
-    c = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
-    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
-
-
-def lab(linear_rgb):
-    """CIE L*a*b* (D65) of a linear sRGB colour (IEC 61966-2-1 matrix, CIE 1976 L*a*b*)."""
-    rgb = np.clip(np.asarray(linear_rgb, dtype=np.float64), 0.0, None)
-    m = np.array([[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]])
-    xyz = m @ rgb / np.array([0.95047, 1.0, 1.08883])
-    e = 216 / 24389
-    f = np.where(xyz > e, np.cbrt(xyz), (24389 / 27 * xyz + 16) / 116)
-    return np.array([116 * f[1] - 16, 500 * (f[0] - f[1]), 200 * (f[1] - f[2])])
-
-
-def ciede2000(lab1, lab2):
-    """ΔE00 (Sharma, Wu & Dalal 2005), k_L = k_C = k_H = 1."""
-    L1, a1, b1 = lab1
-    L2, a2, b2 = lab2
-    c1, c2 = math.hypot(a1, b1), math.hypot(a2, b2)
-    cbar = (c1 + c2) / 2
-    g = 0.5 * (1 - math.sqrt(cbar ** 7 / (cbar ** 7 + 25 ** 7)))
-    a1p, a2p = (1 + g) * a1, (1 + g) * a2
-    c1p, c2p = math.hypot(a1p, b1), math.hypot(a2p, b2)
-    h1p = math.degrees(math.atan2(b1, a1p)) % 360 if c1p else 0.0
-    h2p = math.degrees(math.atan2(b2, a2p)) % 360 if c2p else 0.0
-    dLp, dCp = L2 - L1, c2p - c1p
-    if c1p * c2p == 0:
-        dhp = 0.0
-    elif abs(h2p - h1p) <= 180:
-        dhp = h2p - h1p
-    elif h2p - h1p > 180:
-        dhp = h2p - h1p - 360
-    else:
-        dhp = h2p - h1p + 360
-    dHp = 2 * math.sqrt(c1p * c2p) * math.sin(math.radians(dhp / 2))
-    Lbar, cbarp = (L1 + L2) / 2, (c1p + c2p) / 2
-    if c1p * c2p == 0:
-        hbar = h1p + h2p
-    elif abs(h1p - h2p) <= 180:
-        hbar = (h1p + h2p) / 2
-    elif h1p + h2p < 360:
-        hbar = (h1p + h2p + 360) / 2
-    else:
-        hbar = (h1p + h2p - 360) / 2
-    t = (1 - 0.17 * math.cos(math.radians(hbar - 30)) + 0.24 * math.cos(math.radians(2 * hbar))
-         + 0.32 * math.cos(math.radians(3 * hbar + 6)) - 0.20 * math.cos(math.radians(4 * hbar - 63)))
-    dtheta = 30 * math.exp(-(((hbar - 275) / 25) ** 2))
-    rc = 2 * math.sqrt(cbarp ** 7 / (cbarp ** 7 + 25 ** 7))
-    sl = 1 + 0.015 * (Lbar - 50) ** 2 / math.sqrt(20 + (Lbar - 50) ** 2)
-    sc = 1 + 0.045 * cbarp
-    sh = 1 + 0.015 * cbarp * t
-    rt = -math.sin(math.radians(2 * dtheta)) * rc
-    return math.sqrt((dLp / sl) ** 2 + (dCp / sc) ** 2 + (dHp / sh) ** 2 + rt * (dCp / sc) * (dHp / sh))
+# --- colour science (blend_fixtures/colour.py), checked against the published pairs -----
 
 
 def test_ciede2000_matches_sharmas_published_pairs():

@@ -308,8 +308,13 @@ impl Simulator {
         // the wicking factor of every face, from the liquid before the solve (lagged),
         // times the irregular fabric's; the mobile faces from the same liquid
         let cloth = &w.cloth;
-        let face_scale = self.face_scale(cloth, &loc.fields, geometry);
-        let held_scale = self.held_scale(cloth, &loc.fields, geometry, face_scale.as_deref());
+        // (the irregular fabric's factors and the mobile faces stay over the sub-step)
+        let irregular = cloth.irregular.as_ref().map(|m| face_means(topo, m));
+        let mobile = self.mobile_faces(cloth, &loc.fields, geometry);
+        let face_scale = self.face_scale(cloth, &loc.fields, geometry, irregular.as_deref());
+        let held_scale = mobile
+            .as_deref()
+            .map(|m| held_faces(m, face_scale.as_deref()));
         // Picard iterations (`Wicking::picard`) solve again from the step's start
         let picard = if p.wicking.is_on() {
             p.wicking.picard
@@ -344,9 +349,10 @@ impl Simulator {
                         if let Some(start) = &start {
                             for _ in 0..picard {
                                 // the factors of the last solution, the step again from its start
-                                let g = self.face_scale(cloth, fields, geometry);
-                                *fields = start.clone();
-                                let held = self.held_scale(cloth, start, geometry, g.as_deref());
+                                let g =
+                                    self.face_scale(cloth, fields, geometry, irregular.as_deref());
+                                fields.clone_from(start);
+                                let held = mobile.as_deref().map(|m| held_faces(m, g.as_deref()));
                                 let more = diffuse_densities(
                                     &ops,
                                     scalar_cg,
@@ -383,11 +389,16 @@ impl Simulator {
     }
 
     /// The per-face scale of the density diffusion: the wicking factor of every face from
-    /// the liquid of `fields` ([`crate::stain::Wicking`]), times the irregular fabric's; None
-    /// when neither is on.
-    fn face_scale(&self, cloth: &Cloth, fields: &Fields, geometry: &Geometry) -> Option<Vec<f64>> {
+    /// the liquid of `fields` ([`crate::stain::Wicking`]), times the irregular fabric's
+    /// `irregular`; None when neither is on.
+    fn face_scale(
+        &self,
+        cloth: &Cloth,
+        fields: &Fields,
+        geometry: &Geometry,
+        irregular: Option<&[f64]>,
+    ) -> Option<Vec<f64>> {
         let p = &self.params;
-        let topo = &cloth.topology;
         let wicking = p.wicking.is_on().then(|| {
             let liquid: Vec<f64> = (0..cloth.topology.n_vertices())
                 .map(|j| {
@@ -396,26 +407,23 @@ impl Simulator {
                     if a > 0.0 { m / a } else { 0.0 }
                 })
                 .collect();
-            p.wicking.face_factors(topo, &liquid)
+            p.wicking.face_factors(&cloth.topology, &liquid)
         });
-        let irregular = cloth.irregular.as_ref();
-        match (wicking, irregular.map(|m| face_means(topo, m))) {
-            (Some(g), Some(r)) => Some(g.iter().zip(&r).map(|(g, r)| g * r).collect()),
-            (g, r) => g.or(r),
+        match (wicking, irregular) {
+            (Some(g), Some(r)) => Some(g.iter().zip(r).map(|(g, r)| g * r).collect()),
+            (g, r) => g.or_else(|| r.map(<[f64]>::to_vec)),
         }
     }
 
-    /// The fibres' liquid moves only between vertices of `fields` above the residual
-    /// saturation (a pinned edge, "Tide lines" in `diffuse`): `face_scale` on the faces
-    /// whose corners all are, 0 elsewhere; None unless the solute is carried with a
-    /// residual saturation.
-    fn held_scale(
+    /// The faces through which the fibres' liquid moves: those whose corners all hold it
+    /// above the residual saturation in `fields` (a pinned edge, "Tide lines" in
+    /// `diffuse`); None unless the solute is carried with a residual saturation.
+    fn mobile_faces(
         &self,
         cloth: &Cloth,
         fields: &Fields,
         geometry: &Geometry,
-        face_scale: Option<&[f64]>,
-    ) -> Option<Vec<f64>> {
+    ) -> Option<Vec<bool>> {
         let p = &self.params;
         (p.carry_solute && p.residual_saturation > 0.0).then(|| {
             let floor = p.residual_saturation * p.interaction.saturation;
@@ -429,14 +437,7 @@ impl Simulator {
                 .topology
                 .faces()
                 .iter()
-                .enumerate()
-                .map(|(t, c)| {
-                    if c.iter().all(|&v| mobile[v as usize]) {
-                        face_scale.map_or(1.0, |g| g[t])
-                    } else {
-                        0.0
-                    }
-                })
+                .map(|c| c.iter().all(|&v| mobile[v as usize]))
                 .collect()
         })
     }
@@ -532,6 +533,22 @@ fn hold_back(
                     k
                 })
                 .collect()
+        })
+        .collect()
+}
+
+/// The fibres' liquid's face scale: `face_scale` (1 without one) on the `mobile` faces, 0
+/// elsewhere.
+fn held_faces(mobile: &[bool], face_scale: Option<&[f64]>) -> Vec<f64> {
+    mobile
+        .iter()
+        .enumerate()
+        .map(|(t, &m)| {
+            if m {
+                face_scale.map_or(1.0, |g| g[t])
+            } else {
+                0.0
+            }
         })
         .collect()
 }
