@@ -165,7 +165,7 @@ mod wicking;
 
 pub use conductivity::{Conductivity, WovenFaces};
 pub(super) use solve::{
-    DensityWork, Ops, SoluteMotion, diffuse_densities, diffuse_velocity, solvers,
+    Carry, DensityWork, Ops, SoluteMotion, diffuse_densities, diffuse_velocity, solvers,
 };
 pub use stepper::DiffusionStepper;
 pub use wicking::Wicking;

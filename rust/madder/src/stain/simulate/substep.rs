@@ -11,7 +11,9 @@ use super::scratch::SubstepScratch;
 use super::{DRY_DENSITY, Simulator};
 use crate::error::Error;
 use crate::stain::advect::{UpwindPlan, advect_velocity_in, dual_fluxes_in};
-use crate::stain::diffuse::{DensityWork, Ops, SoluteMotion, diffuse_densities, diffuse_velocity};
+use crate::stain::diffuse::{
+    Carry, DensityWork, Ops, SoluteMotion, diffuse_densities, diffuse_velocity,
+};
 use crate::stain::extend::{extend_velocity, wet_vertices};
 use crate::stain::forces::{VelocityStep, frame_angular_velocity, frame_body_acceleration};
 use crate::stain::interact::{exposure, interact_varied, vapour_exposure};
@@ -353,6 +355,10 @@ impl Simulator {
                             if p.carry_solute {
                                 SoluteMotion::Carried {
                                     held_scale: held_scale.as_deref(),
+                                    carry: Carry {
+                                        fraction: p.carried_fraction,
+                                        dispersivity: p.dispersivity,
+                                    },
                                 }
                             } else {
                                 SoluteMotion::Diffused
