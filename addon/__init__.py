@@ -8,7 +8,7 @@ Blender."""
 
 import importlib
 
-_PARTS = ("properties", "fabrics", "operators", "shading", "panels", "handlers", "preview", "cli")
+_PARTS = ("splash_props", "properties", "fabrics", "operators", "shading", "panels", "handlers", "preview", "cli")
 
 
 def __getattr__(name):

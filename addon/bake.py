@@ -27,6 +27,7 @@ from . import (
     presets,
     schedule,
     shading,
+    splash,
     stored,
     textures,
 )
@@ -168,7 +169,17 @@ class Stepper:
         if len(faces) == 0:
             raise BakeError(f"'{obj.name}' has no faces", object=obj.name)
         settings = obj.madder
-        self.detail = settings.detail
+        self.unit = unit_scale(scene)
+        # Detail: the user's level, or chosen from the cloth's mean edge (issue 34)
+        self.mean_edge = mean_edge_length(obj, self.unit)
+        self.auto_detail = presets.use_auto_detail(settings.detail_auto, settings.is_property_set("detail_auto"),
+                                                   settings.is_property_set("detail"))
+        if self.auto_detail:
+            # a cloth collapsed by its scale has no mean edge: Detail 0, and the frame's
+            # transform check (placement.check_transform) names the object and frame
+            self.detail = presets.auto_detail(self.mean_edge, len(mesh.vertices)) if self.mean_edge > 0.0 else 0
+        else:
+            self.detail = settings.detail
         self.wet0 = bridge.vertex_group_weights(obj, settings.source_group) if settings.source_group else None
         # with sources, colours can differ: track them (three more fields)
         self.fields = FIELDS + (COLOR_FIELDS if self.sources else [])
@@ -187,7 +198,6 @@ class Stepper:
         )
         if self.references[0] == 0.0:
             self.warnings.append("its liquid has no solute (concentration 0): it wets the cloth but leaves no stain")
-        self.unit = unit_scale(scene)
         self.faces = faces.astype(np.int64)
         self.motion = MotionFile(self.madder, obj) if settings.motion_file else None
         self.sim = None
@@ -234,12 +244,28 @@ class Stepper:
         return [np.ascontiguousarray(a[:, k]) for a in (vel, pos) for k in range(3)]
 
     def _spill(self, pos):
-        """The initial wetness: the Spill Group's weights × Amount of the object's liquid,
-        and its splash (outward from the weighted centroid of the wet area)."""
+        """The initial wetness: the Spill Group's weights × Amount of the object's liquid, or
+        with a Throw object a directed splash of Volume from the group's centre (`splash`);
+        and its Splash Speed (outward from the weighted centroid of the wet area)."""
         s = self.obj.madder
         if self.wet0 is None or not self.wet0.any():
             return
-        self.sim.add_liquid(pour.spilled(self.wet0, s.amount), s.concentration, tuple(s.stain_color))
+        throw = s.splash.throw
+        if throw is not None:
+            # a directed splash (`splash`): Volume thrown along the Throw object's Z axis from
+            # the Spill Group's centre, instead of the weights × Amount
+            axis = np.asarray(throw.matrix_world, dtype=np.float64)[:3, 2]
+            try:
+                laid = splash.lay_out(pos, self.faces, self.sim.vertex_area, pour.centroid(self.wet0, pos), axis,
+                                      s.splash.volume * 1e-6, seed=s.splash_seed,
+                                      height=s.splash.height * self.unit)
+            except splash.SplashError as e:
+                raise BakeError(f"'{self.obj.name}': its splash (Throw '{throw.name}'): {e}",
+                                object=self.obj.name) from e
+            liquid = splash.densities(laid.mass, self.sim.vertex_area)
+        else:
+            liquid = pour.spilled(self.wet0, s.amount)
+        self.sim.add_liquid(liquid, s.concentration, tuple(s.stain_color))
         if s.splash_speed > 0.0:
             self.sim.splash(pour.centroid(self.wet0, pos), s.splash_speed * self.unit, s.splash_seed, self.wet0)
 
@@ -371,15 +397,26 @@ class BakeJob(Stepper):
             return None
         uv = bridge.corner_uvs(obj.data)
         if uv is None:
+            if not settings.is_property_set("output_images") and settings.output_vertex_colors:
+                # on by default (issue 34): a cloth without a UV map bakes vertex colours only
+                self.warnings.append("has no UV map: baked without the Image Sequence (vertex colors only)")
+                return None
             raise BakeError(f"'{obj.name}' has no UV map: its Image Sequence needs one to lay out the images "
                             "(add a UV map, or untick Image Sequence)", object=obj.name)
         why = textures.frames_problem(self.first, self.last)
         if why is not None:
+            if not settings.is_property_set("output_images") and settings.output_vertex_colors:
+                # on by default (issue 34): frames that cannot number images bake vertex colours only
+                self.warnings.append(f"{why}: baked without the Image Sequence (vertex colors only)")
+                return None
             raise BakeError(f"'{obj.name}': {why}", object=obj.name)
-        try:
-            size = textures.check_size(settings.image_size)
-        except ExportError as e:
-            raise BakeError(f"'{obj.name}': {e}", object=obj.name) from e
+        if settings.image_size == "AUTO":
+            size = auto_image_size(obj, uv, self.unit, self.mean_edge / 2**self.detail)
+        else:
+            try:
+                size = textures.check_size(settings.image_size)
+            except ExportError as e:
+                raise BakeError(f"'{obj.name}': {e}", object=obj.name) from e
         return size, uv, obj.data.uv_layers.active.name
 
     @property
@@ -578,9 +615,57 @@ class BakeJob(Stepper):
 def simulator_settings(scene, obj, unit=None):
     """Keyword arguments of `madder.Simulator` from the object's settings and the scene's
     gravity (`presets.simulator_keywords`), scaled by `unit` (metres per unit; default the
-    scene's Unit Scale) like the positions."""
+    scene's Unit Scale) like the positions. The grain (irregularity) is the fabric's
+    covering most of the cloth (`fabrics.cloth_grain`; plain cotton where no fabric is
+    assigned) unless Grain From is Object; a file saved before Grain From existed that
+    set the object's Irregularity keeps it."""
     unit = unit_scale(scene) if unit is None else unit
-    return presets.simulator_keywords(obj.madder, scene.gravity, scene.use_gravity, unit)
+    return presets.simulator_keywords(obj.madder, scene.gravity, scene.use_gravity, unit, grain=grain_of(obj))
+
+
+def grain_of(obj):
+    """`(irregularity, length mm, seed)` the bake uses for `obj`, or None for the object's own."""
+    s = obj.madder
+    legacy = not s.is_property_set("grain_from") and s.is_property_set("irregularity") and s.irregularity > 0.0
+    if s.grain_from == "OBJECT" or legacy:
+        return None
+    return fabrics.cloth_grain(obj)
+
+
+def mean_edge_length(obj, unit):
+    """Mean length (m) of the cloth's edges at rest, in world scale (the object's scale
+    and the scene's Unit Scale), what Auto Detail refines."""
+    mesh = obj.data
+    ev = np.empty(2 * len(mesh.edges), dtype=np.int64)
+    mesh.edges.foreach_get("vertices", ev)
+    if len(ev) == 0:
+        raise BakeError(f"'{obj.name}' has no edges", object=obj.name)
+    co = bridge.rest_positions(mesh).astype(np.float64)
+    co = co @ np.asarray(obj.matrix_world.to_3x3(), dtype=np.float64).T
+    ev = ev.reshape(-1, 2)
+    return float(np.linalg.norm(co[ev[:, 0]] - co[ev[:, 1]], axis=1).mean()) * unit
+
+
+def auto_image_size(obj, uv, unit, refined_edge):
+    """Image size (px) of Auto: a texel of half the refined mean edge (`presets.auto_image_size`),
+    from the cloth's rest area (m²) and the area its faces cover in the UV square."""
+    mesh = obj.data
+    mesh.calc_loop_triangles()
+    tri = np.empty(3 * len(mesh.loop_triangles), dtype=np.int64)
+    mesh.loop_triangles.foreach_get("vertices", tri)
+    # the rest area in world scale, triangle by triangle: a scale of 0 across a flat
+    # cloth (its own z) leaves its area whole
+    co = bridge.rest_positions(mesh).astype(np.float64)
+    co = co @ np.asarray(obj.matrix_world.to_3x3(), dtype=np.float64).T
+    surface = float(textures.triangle_areas(co[tri.reshape(-1, 3)]).sum()) * unit * unit
+    uv_area = float(textures.uv_areas(np.asarray(uv, dtype=np.float64).reshape(-1, 3, 2)).sum())
+    if uv_area <= 0.0:
+        raise BakeError(f"'{obj.name}': its UV map covers no area: the Image Sequence cannot be laid out",
+                        object=obj.name)
+    if not (surface > 0.0 and refined_edge > 0.0):
+        # collapsed by its scale: the frame's transform check names the object and frame
+        return textures.SIZES[0]
+    return presets.auto_image_size(surface, uv_area, refined_edge, textures.SIZES)
 
 
 def bake(scene, obj, progress=None, frames=None):

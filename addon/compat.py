@@ -142,3 +142,19 @@ def _supports_blend_relative():
 # Keyword arguments for a path property that holds `//`-relative paths (Blender 4.5+ warns
 # about one that does not say so; older Blenders have no such option)
 BLEND_RELATIVE = {"options": {"PATH_SUPPORTS_BLEND_RELATIVE"}} if _supports_blend_relative() else {}
+
+
+# --- Shading -------------------------------------------------------------------------------
+
+
+def eevee_engine():
+    """The EEVEE render engine's identifier: BLENDER_EEVEE_NEXT (4.2 to 4.5, where
+    BLENDER_EEVEE was the legacy engine's, gone) or BLENDER_EEVEE (5.0+, EEVEE Next under
+    its old name)."""
+    items = {e.identifier for e in bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items}
+    return "BLENDER_EEVEE_NEXT" if "BLENDER_EEVEE_NEXT" in items else "BLENDER_EEVEE"
+
+
+def shader_output(node):
+    """A shader node's BSDF output socket: its first output of type SHADER."""
+    return next(s for s in node.outputs if s.type == "SHADER")

@@ -11,8 +11,9 @@ import math
 
 import bpy
 import numpy as np
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, PointerProperty, StringProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
+from . import presets
 from .errors import FabricSettingsError
 
 WEAVES = [
@@ -24,7 +25,41 @@ WEAVES = [
     ("CUSTOM", "Custom", "Your own cell grid"),
 ]
 PAIRS = ("gap_gap", "weft_weft", "warp_warp", "gap_weft", "gap_warp", "weft_warp")
-PAIR_DEFAULTS = dict(gap_gap=1.0, weft_weft=100.0, warp_warp=500.0, gap_weft=10.0, gap_warp=50.0, weft_warp=200.0)
+# balanced warp and weft (presets.BALANCED: a balanced plain weave spreads isotropically;
+# before issue 34 warp_warp 500 vs weft_weft 100 made every weave 1.7–1.9× anisotropic)
+PAIR_DEFAULTS = dict(presets.BALANCED)
+_writer = presets.PresetWriter()  # a fabric preset's writes must not switch it to Custom
+
+
+def _fabric_preset_update(self, context):
+    values = presets.fabric_preset(self.preset)
+    if values is not None:
+        _writer.write(self, values)
+
+
+def _fabric_custom(self, context):
+    """A fabric preset's value was edited by hand: the fabric is no longer the preset."""
+    if not _writer.writing and self.preset != "CUSTOM":
+        self.preset = "CUSTOM"
+
+
+# Called with the material after a change of its fabric: the shader, which sits above this
+# module, registers its re-sync of the material's Madder Weave node here (shading.register)
+resync_hooks = []
+
+
+def _resync(fabric, context):
+    """Re-wires the material's Madder Weave node (weave_shader) after a change of its fabric."""
+    mat = fabric.id_data
+    if isinstance(mat, bpy.types.Material):
+        for hook in resync_hooks:
+            hook(mat)
+
+
+def _edited(fabric, context):
+    """A fabric value was edited: it leaves its preset, and the material re-syncs."""
+    _fabric_custom(fabric, context)
+    _resync(fabric, context)
 
 
 def _coefficient(pair):
@@ -35,6 +70,7 @@ def _coefficient(pair):
         default=PAIR_DEFAULTS[pair],
         min=0.0,
         soft_max=1000.0,
+        update=_fabric_custom,
     )
 
 
@@ -44,19 +80,30 @@ class MadderFabric(bpy.types.PropertyGroup):
         description="Faces with this material are woven: the stain spreads along the threads",
         default=False,
     )
+    preset: EnumProperty(
+        name="Fabric Preset",
+        description="A physical fabric: sets the weave, thread count, yarn coefficients, speed and "
+        "grain (any change to one of them switches to Custom)",
+        items=presets.FABRIC_PRESET_ITEMS,
+        default="CUSTOM",
+        update=_fabric_preset_update,
+    )
     weave: EnumProperty(
         name="Weave",
         description="How the warp and weft threads interlace in the fabric's repeating tile "
         "(it sets how much faster the stain spreads along one direction than across)",
         items=WEAVES,
         default="PLAIN",
+        update=_edited,
     )
     gaps: BoolProperty(
         name="Gaps",
         description="Leave gap cells between the yarns of a built-in weave (an open weave)",
         default=True,
+        update=_edited,
     )
     grid: StringProperty(
+        update=_edited,
         name="Grid",
         description="Custom tile, rows separated by '/', top row first: W/w warp up/down, "
         "F/f weft up/down, . gap (e.g. 'Wf/fW')",
@@ -74,12 +121,39 @@ class MadderFabric(bpy.types.PropertyGroup):
         default=1.0,
         min=0.0,
         soft_max=10.0,
+        update=_fabric_custom,
     )
     angle: FloatProperty(
+        update=_resync,
         name="Weft Angle",
         description="Rotates the weft away from the UV u axis (a fabric cut on the bias)",
         subtype="ANGLE",
         default=0.0,
+    )
+    irregularity: FloatProperty(
+        name="Irregularity",
+        description="How uneven the fabric is (0–1): its spreading and soaking rates vary at random "
+        "over the cloth, so a stain's outline is ragged instead of round",
+        default=0.5,
+        min=0.0,
+        max=1.0,
+        subtype="FACTOR",
+        update=_fabric_custom,
+    )
+    irregularity_length: FloatProperty(
+        name="Grain (mm)",
+        description="Size of the fabric's uneven patches, in millimetres (the distance over which "
+        "the rates vary together); below the Detail spacing it cannot be resolved",
+        default=3.0,
+        min=0.01,
+        soft_max=50.0,
+        update=_fabric_custom,
+    )
+    irregularity_seed: IntProperty(
+        name="Seed",
+        description="Another seed gives another pattern of uneven patches",
+        default=0,
+        min=0,
     )
     thread_count: FloatProperty(
         name="Thread Count",
@@ -91,6 +165,15 @@ class MadderFabric(bpy.types.PropertyGroup):
         min=0.0,
         soft_max=100.0,
         precision=1,
+        update=_edited,
+    )
+    shader_weave: BoolProperty(
+        update=_resync,
+        name="Weave in Shader",
+        description="Draw the weave in the material (a Madder Weave node: the yarns' light and bump on the "
+        "whole cloth, clean or stained, filtered to the pixel) and bake the Image Sequence smooth. Off: the "
+        "Image Sequence draws the weave into the stain at the Thread Count, as before",
+        default=True,
     )
 
 
@@ -144,8 +227,8 @@ def face_weave(obj, face_polygon):
     for s in obj.material_slots:
         m = s.material
         fab = m.madder_fabric if m is not None else None
-        if fab is None or not fab.enabled or fab.thread_count <= 0.0:
-            slots.append(None)
+        if fab is None or not fab.enabled or fab.thread_count <= 0.0 or fab.shader_weave:
+            slots.append(None)  # no weave, or the shader draws it (weave_shader)
         else:
             slots.append((m.name, fabric_key(fab), 100.0 * fab.thread_count, fab.angle))
     if not any(slots):
@@ -154,6 +237,25 @@ def face_weave(obj, face_polygon):
     mesh.polygons.foreach_get("material_index", poly_mat)
     slot = np.clip(poly_mat[face_polygon], 0, len(slots) - 1)
     return slots, slot
+
+
+def cloth_grain(obj):
+    """`(irregularity, length mm, seed)` of the fabric covering most of `obj`'s rest
+    surface (presets.dominant_grain; faces without a Madder fabric are the default
+    fabric, presets.DEFAULT_FABRIC). The core has one irregularity field per object."""
+    mesh = obj.data
+    slots = [s.material for s in obj.material_slots]
+    grains = [(m.madder_fabric.irregularity, m.madder_fabric.irregularity_length, m.madder_fabric.irregularity_seed)
+              if (m is not None and m.madder_fabric.enabled) else None for m in slots]
+    if not grains:
+        return presets.default_grain()
+    n = len(mesh.polygons)
+    poly_mat = np.empty(n, dtype=np.int64)
+    mesh.polygons.foreach_get("material_index", poly_mat)
+    area = np.empty(n, dtype=np.float64)
+    mesh.polygons.foreach_get("area", area)
+    areas = np.bincount(np.clip(poly_mat, 0, len(grains) - 1), weights=area, minlength=len(grains))
+    return presets.dominant_grain(grains, list(areas))
 
 
 def tile_rows(fabric):

@@ -97,6 +97,9 @@ class MADDER_PT_stain_liquid(_StainSubPanel, bpy.types.Panel):
         col.active = bool(s.source_group)
         col.prop(s, "splash_speed", text="Speed")
         col.prop(s, "splash_seed", text="Seed")
+        col.prop(s.splash, "throw")
+        col.prop(s.splash, "volume")
+        col.prop(s.splash, "height")
 
 
 class MADDER_PT_stain_output(_StainSubPanel, bpy.types.Panel):
@@ -105,7 +108,11 @@ class MADDER_PT_stain_output(_StainSubPanel, bpy.types.Panel):
     def draw(self, context):
         layout, s = self.layout_of(context)
         obj = context.object
-        layout.prop(s, "detail")
+        row = layout.row(heading="Detail")
+        row.prop(s, "detail_auto", text="Auto")
+        sub = row.row()
+        sub.active = not s.detail_auto
+        sub.prop(s, "detail", text="")
         col = layout.column(heading="Output", align=True)
         col.prop(s, "output_vertex_colors")
         col.prop(s, "output_images")
@@ -121,7 +128,7 @@ class MADDER_PT_stain_output(_StainSubPanel, bpy.types.Panel):
         if stored.uses_images(obj):
             first, last = s.image_frames
             col.label(text=f"Images: {s.image_baked_size} px, frames {first}–{last}", icon="IMAGE_DATA")
-            if s.image_baked_size != int(s.image_size):
+            if s.image_size != "AUTO" and s.image_baked_size != int(s.image_size):
                 col.label(text="Size changed: Re-export Textures to apply it", icon="INFO")
         else:
             col.label(text="Bake to write the image sequence", icon="INFO")
@@ -170,11 +177,14 @@ class MADDER_PT_stain_look(_StainSubPanel, bpy.types.Panel):
     def draw(self, context):
         layout, s = self.layout_of(context)
         layout.prop(s, "wicking")
+        layout.prop(s, "grain_from")
         col = layout.column(align=True)
+        col.active = s.grain_from == "OBJECT"
         col.prop(s, "irregularity")
         sub = col.column(align=True)
-        sub.active = s.irregularity > 0.0
+        sub.active = s.grain_from == "OBJECT" and s.irregularity > 0.0
         sub.prop(s, "irregularity_length")
+        sub.prop(s, "irregularity_fine")
         sub.prop(s, "irregularity_seed")
         col = layout.column(align=True)
         col.prop(s, "carry_solute")
@@ -297,6 +307,7 @@ class MADDER_PT_fabric(bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         layout.active = fab.enabled
+        layout.prop(fab, "preset")
         layout.prop(fab, "weave")
         if fab.weave == "CUSTOM":
             layout.prop(fab, "grid")
@@ -305,6 +316,11 @@ class MADDER_PT_fabric(bpy.types.Panel):
         layout.prop(fab, "speed")
         layout.prop(fab, "angle")
         layout.prop(fab, "thread_count")
+        layout.prop(fab, "shader_weave")
+        col = layout.column(heading="Grain", align=True)
+        col.prop(fab, "irregularity")
+        col.prop(fab, "irregularity_length")
+        col.prop(fab, "irregularity_seed")
         col = layout.column(heading="Permeability", align=True)
         for pair in fabrics.PAIRS:
             col.prop(fab, pair)

@@ -26,35 +26,65 @@ the fibres. The cloth's own properties (saturation, friction) and the flow
   (residual saturation 0.1: liquid below a tenth of the fibres' saturation stays put)
   and the patch dries fastest at its edge (vapour-limited), so the liquid flows outward
   and leaves its solute in a tide line (ARCHITECTURE.md, "Tide lines").
-- The tide-line physics is Coffee's only. Wine and ink bind their dyes within seconds
-  to a capacity at or above the solute of a saturated spot, so the dye is fixed where
-  the spill put it before the outward flow can move it (no ring to gain, and the drying
-  flow costs a second solve per step); water has no solute. They set it off, so that
-  switching from Coffee to another liquid switches it off.
+- The pinned, vapour-limited drying that makes a tide line is Coffee's only. Wine and
+  ink bind their dyes within seconds to a capacity at or above the solute of a saturated
+  spot, so the dye is fixed where the spill put it before the outward flow can move it;
+  water has no solute. Wine still carries its solids with the flowing liquid (Carry
+  Solute), so where it runs its colour goes along.
 - Ink: about 5 % dye, blue-black (0.04, 0.05, 0.15). Surfactants make it wick faster
   (K_p = 3 /s), dyes are made to bind: fast adsorption (K_d = 1 /s) and a high
-  capacity (5e-3 kg/m²); humectants (glycols) slow its drying (4e-5)."""
+  capacity (5e-3 kg/m²); humectants (glycols) slow its drying (4e-5).
+
+A preset carries the whole look of its liquid (issue 34), not only its solute:
+
+- Wicking 2 for every liquid: the fibres draw liquid in at the spreading rate times
+  saturation², so a spill has a sharp front that slows as it thins. Capillary imbibition
+  in a porous sheet is a nonlinear diffusion whose diffusivity rises steeply with the
+  saturation (Richards' equation with a power-law D(S), e.g. Brutsaert 1979: exponents of
+  2 to 8); 2 is the gentlest that gives the front (physics.md, "Wicking").
+- How it rings, kept together per liquid in `RINGS` (a rim model may tune them): Coffee
+  rings (see above); Red Wine carries its solids with the flow (its pigments bind within
+  seconds, so the ring stays modest); Water and Ink do not.
+- How it runs: the flow's viscosity and the fibres' friction are the cloth's and the
+  flow's (left alone), so all four liquids run alike.
+- Sub-steps: none of the four needs more than the automatic choice (the core adds steps
+  where the cloth turns fast), so a preset leaves Substeps alone.
+
+Fabric presets (`FABRICS`, what `fabrics.py`'s Fabric Preset writes) are in
+`FABRIC_PRESETS` below, with their sources."""
+
+import math
 
 # the drying that makes tide lines (issue 13 §2): Coffee's; the others set it off
 TIDE_LINES = dict(carry_solute=True, residual_saturation=0.1, vapour_limited=True)
 NO_TIDE_LINES = dict(carry_solute=False, residual_saturation=0.0, vapour_limited=False)
+# how each liquid rings, kept together so that a rim model can tune them per liquid
+RINGS = {
+    "WATER": NO_TIDE_LINES,
+    "RED_WINE": dict(carry_solute=True, residual_saturation=0.0, vapour_limited=False),
+    "COFFEE": TIDE_LINES,
+    "INK": NO_TIDE_LINES,
+}
+# the front: the fibres draw liquid in at the spreading rate × saturation^wicking
+WICKING = {"WATER": 2.0, "RED_WINE": 2.0, "COFFEE": 2.0, "INK": 2.0}
 
 LIQUIDS = {
     "WATER": dict(
         stain_color=(0.90, 0.93, 0.95), concentration=0.0, absorption=2.0, adsorption=0.0,
-        capacity=2e-3, evaporation=5e-5, evaporation_boundary=1.2, **NO_TIDE_LINES,
+        capacity=2e-3, evaporation=5e-5, evaporation_boundary=1.2, **RINGS["WATER"], wicking=WICKING["WATER"],
     ),
     "RED_WINE": dict(
         stain_color=(0.30, 0.02, 0.07), concentration=0.02, absorption=2.0, adsorption=0.5,
-        capacity=2e-3, evaporation=6e-5, evaporation_boundary=1.2, **NO_TIDE_LINES,
+        capacity=2e-3, evaporation=6e-5, evaporation_boundary=1.2, **RINGS["RED_WINE"],
+        wicking=WICKING["RED_WINE"],
     ),
     "COFFEE": dict(
         stain_color=(0.25, 0.13, 0.05), concentration=0.012, absorption=2.0, adsorption=0.05,
-        capacity=2e-4, evaporation=5e-5, evaporation_boundary=1.5, **TIDE_LINES,
+        capacity=2e-4, evaporation=5e-5, evaporation_boundary=1.5, **RINGS["COFFEE"], wicking=WICKING["COFFEE"],
     ),
     "INK": dict(
         stain_color=(0.04, 0.05, 0.15), concentration=0.05, absorption=3.0, adsorption=1.0,
-        capacity=5e-3, evaporation=4e-5, evaporation_boundary=1.2, **NO_TIDE_LINES,
+        capacity=5e-3, evaporation=4e-5, evaporation_boundary=1.2, **RINGS["INK"], wicking=WICKING["INK"],
     ),
 }
 LIQUID_ITEMS = [
@@ -66,6 +96,23 @@ LIQUID_ITEMS = [
 ]
 # what a source's preset sets (the rates belong to the cloth it pours on)
 SOURCE_PRESET_KEYS = ("concentration", "stain_color")
+
+
+class PresetWriter:
+    """Writes a preset's values to a block of settings. While it writes, `writing` is True,
+    so the settings' update callbacks can tell a preset's write from a user's edit (which
+    switches the preset to Custom). One writer per kind of preset (liquid, fabric)."""
+
+    def __init__(self):
+        self.writing = False
+
+    def write(self, settings, values):
+        self.writing = True
+        try:
+            for key, value in values.items():
+                setattr(settings, key, value)
+        finally:
+            self.writing = False
 
 
 def object_preset(liquid):
@@ -97,11 +144,15 @@ def references(settings, sources=(), spill=True):
     return (settings.saturation * c, settings.saturation, settings.capacity)
 
 
-def simulator_keywords(s, gravity, scene_gravity, unit):
+def simulator_keywords(s, gravity, scene_gravity, unit, grain=None):
     """Keyword arguments of `madder.Simulator` from an object's settings `s` (SI units),
     the scene's `gravity` vector (scene units per s², scaled by `unit`, metres per unit,
     like the positions) and whether the scene's gravity is on (`scene_gravity`: the
-    liquid feels gravity only when both it and the object's Gravity are on)."""
+    liquid feels gravity only when both it and the object's Gravity are on). `grain` is
+    `(irregularity, length in mm, seed)`, the cloth's fabric's (`dominant_grain`); None
+    takes the object's own Irregularity settings."""
+    if grain is None:
+        grain = (s.irregularity, s.irregularity_length, s.irregularity_seed)
     return dict(
         color=tuple(s.stain_color),
         gravity=tuple(g * unit for g in gravity),
@@ -118,14 +169,136 @@ def simulator_keywords(s, gravity, scene_gravity, unit):
         # in millimetres of the cloth's rest surface
         wicking_exponent=s.wicking,
         wicking_density=max(s.saturation, 1e-6),
-        irregularity=s.irregularity,
-        irregularity_length=s.irregularity_length * 1e-3,
-        irregularity_seed=s.irregularity_seed,
+        irregularity=grain[0],
+        irregularity_length=grain[1] * 1e-3,
+        irregularity_seed=grain[2],
+        irregularity_fine_length=(
+            s.irregularity_fine * 1e-3 if 0.0 < s.irregularity_fine < grain[1] else 0.0
+        ),
         carry_solute=bool(s.carry_solute),
         residual_saturation=s.residual_saturation,
         vapour_limited=bool(s.vapour_limited),
+        holdup=s.holdup,
         use_gravity=bool(s.use_gravity and scene_gravity),
         use_rectilinear=s.use_rectilinear,
         use_coriolis=s.use_coriolis,
         momentum_advection=s.momentum_advection,
     )
+
+
+# -- Fabric presets (issue 34): what a Fabric Preset writes on a material's Madder fabric.
+#
+# Thread counts are typical of the cloths named (ends and picks per centimetre: a cotton
+# percale/sheeting of 100–140 threads per inch summed over warp and weft, so about 25/cm
+# each way; a household linen of 12–20/cm; denim 3/1 twill about 25 ends × 18 picks/cm;
+# a 5-harness cotton sateen 40/cm; canvas duck about 10/cm of plied yarn) — Kadolph,
+# *Textiles* (11th ed., 2010), ch. 11–12 (weaves and their thread counts).
+#
+# Pair coefficients (the seed's ch. 2.2.1 relative permeabilities between cells): a
+# yarn conducts along itself best (its fibres lie along it: 300), liquid passes from a
+# warp yarn to a weft yarn only through their contact at a crossing (100, a third), and
+# a gap hardly conducts (30 next to a yarn, 1 between gaps). Warp and weft of the same
+# fibre are the same yarn, so every preset is balanced (warp_warp = weft_weft, gap_warp
+# = gap_weft): a balanced plain or basket weave is then isotropic (its tile is symmetric
+# under swapping warp and weft), and a twill or a satin is anisotropic through its
+# floats alone, the yarn runs that cross several yarns of the other set without an
+# interlacing (aspect 1.35 for twill 2/1, 1.58 for 3/1, 1.72 for the 5-harness satin,
+# nearly along the warp; tests/python/test_presets_look.py). In-plane wicking does differ
+# between warp and weft when their yarns differ in count, twist or packing (Kissa,
+# "Wetting and wicking", Textile Res. J. 66, 1996; Nyoni & Brook, J. Textile Inst. 97,
+# 2006: wicking falls as yarn twist rises), which a user can set per direction; the
+# presets have no measured ratio for it and leave warp and weft equal. The values are
+# relative (the fabric's tensor is normalized to mean eigenvalue 1 and scaled by the
+# cloth's Diffusion and the fabric's Speed).
+#
+# Grain: how uneven the fabric is (the random field of the core's irregularity: an
+# amplitude 0–1 and a correlation length), a few thread pitches to a few millimetres,
+# longer for linen's slubbed yarns, shorter for a smooth satin.
+BALANCED = dict(gap_gap=1.0, weft_weft=300.0, warp_warp=300.0, gap_weft=30.0, gap_warp=30.0, weft_warp=100.0)
+FABRIC_PRESETS = {
+    "COTTON_PLAIN": dict(weave="PLAIN", gaps=True, thread_count=25.0, speed=1.0, **BALANCED,
+                         irregularity=0.5, irregularity_length=3.0),
+    "LINEN_PLAIN": dict(weave="PLAIN", gaps=True, thread_count=15.0, speed=1.3, **BALANCED,
+                        irregularity=0.6, irregularity_length=6.0),
+    "DENIM_TWILL31": dict(weave="TWILL31", gaps=True, thread_count=25.0, speed=0.8, **BALANCED,
+                          irregularity=0.5, irregularity_length=4.0),
+    "SATIN": dict(weave="SATIN5", gaps=True, thread_count=40.0, speed=1.0, **BALANCED,
+                  irregularity=0.3, irregularity_length=2.0),
+    "CANVAS_BASKET": dict(weave="BASKET", gaps=True, thread_count=10.0, speed=0.9, **BALANCED,
+                          irregularity=0.5, irregularity_length=5.0),
+}
+FABRIC_PRESET_ITEMS = [
+    ("CUSTOM", "Custom", "Your own weave and values"),
+    ("COTTON_PLAIN", "Cotton (plain)", "Plain-weave cotton sheeting, 25 threads/cm, balanced"),
+    ("LINEN_PLAIN", "Linen (plain)", "Plain-weave linen, 15 threads/cm, balanced, slubby grain"),
+    ("DENIM_TWILL31", "Denim (twill 3/1)", "3/1 twill, 25 threads/cm: spreads faster along its floats"),
+    ("SATIN", "Satin (5-harness)", "5-harness satin, 40 threads/cm, smooth"),
+    ("CANVAS_BASKET", "Canvas (basket)", "2/2 basket weave, 10 threads/cm of plied yarn"),
+]
+# a cloth whose faces have no Madder fabric is this cloth (its grain; a balanced plain
+# weave spreads isotropically, so no tensor is needed)
+DEFAULT_FABRIC = "COTTON_PLAIN"
+
+
+def fabric_preset(name):
+    """The values a fabric preset `name` writes (None for CUSTOM)."""
+    return None if name == "CUSTOM" else dict(FABRIC_PRESETS[name])
+
+
+def default_grain():
+    """`(amplitude, length in mm, seed)` of the default fabric."""
+    f = FABRIC_PRESETS[DEFAULT_FABRIC]
+    return (f["irregularity"], f["irregularity_length"], 0)
+
+
+def dominant_grain(grains, areas):
+    """The grain of the fabric covering most of the cloth: `grains` a list of
+    `(amplitude, length mm, seed)` per material slot (None: no fabric there, the default
+    fabric's grain), `areas` the cloth's rest area per slot. The core has one
+    irregularity field per object, so a cloth of several fabrics takes the largest one's."""
+    if not grains:
+        return default_grain()
+    best = max(range(len(grains)), key=lambda i: (areas[i] if i < len(areas) else 0.0, -i))
+    return grains[best] if grains[best] is not None else default_grain()
+
+
+# -- Detail and image size chosen from the cloth (issue 34)
+DETAIL_TARGET = 2.5e-3  # m: the refined mean edge the stain should reach (millimetre features)
+DETAIL_BUDGET = 1_000_000  # refined vertices at most (about 0.5 GB of simulator state and cache buffers)
+MAX_DETAIL = 3
+
+
+def auto_detail(mean_edge, n_vertices, target=DETAIL_TARGET, budget=DETAIL_BUDGET, max_level=MAX_DETAIL):
+    """The smallest Detail level whose refined mean edge `mean_edge / 2^L` is ≤ `target`
+    (metres), lowered until the refined mesh's vertices (about `n_vertices · 4^L`) are
+    ≤ `budget`; within 0..`max_level`."""
+    if not (mean_edge > 0.0) or n_vertices <= 0:
+        raise ValueError(f"auto detail needs a positive mean edge and vertex count (got {mean_edge}, {n_vertices})")
+    level = 0
+    while level < max_level and mean_edge / 2**level > target:
+        level += 1
+    while level > 0 and n_vertices * 4**level > budget:
+        level -= 1
+    return level
+
+
+def use_auto_detail(detail_auto, auto_set, detail_set):
+    """Whether the bake chooses Detail itself: the Auto switch when the user set it,
+    else Auto unless the file set a Detail level by hand (files saved before Auto keep
+    their level)."""
+    return bool(detail_auto) if auto_set else not detail_set
+
+
+def auto_image_size(surface_area, uv_area, refined_edge, sizes=(512, 1024, 2048, 4096)):
+    """The image size (px) whose texel is at most half the refined mean edge on the cloth:
+    the cloth's `surface_area` (m²) covers `uv_area` of the unit UV square, so one UV
+    unit spans `sqrt(surface_area / uv_area)` metres; the smallest of `sizes` reaching
+    that texel, else the largest."""
+    if not (surface_area > 0.0 and uv_area > 0.0 and refined_edge > 0.0):
+        raise ValueError(f"auto image size needs positive areas and edge (got {surface_area}, {uv_area}, "
+                         f"{refined_edge})")
+    need = math.sqrt(surface_area / uv_area) / (0.5 * refined_edge)
+    for n in sizes:
+        if n >= need:
+            return n
+    return sizes[-1]

@@ -217,7 +217,8 @@ def bake_from_preview(scene, obj):
                         object=obj.name)
     if s.key != settings_key(scene, obj):
         raise BakeError(f"'{obj.name}': settings changed since the preview: play it again", object=obj.name)
-    if obj.madder.output_images:
+    # on by default (issue 34): kept without images unless the user ticked it
+    if obj.madder.output_images and obj.madder.is_property_set("output_images"):
         raise BakeError(f"'{obj.name}': Image Sequence needs the refined cloth's fields, which Live does not keep: "
                         "untick Image Sequence, or Bake", object=obj.name)
     held = s.store.frames()

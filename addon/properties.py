@@ -18,40 +18,31 @@ from bpy.props import (
 )
 
 from . import carrier, compat, handlers, presets, textures
+from .splash_props import MadderSplashSettings
 
 # The liquid presets (values and where they come from) and the bake references are plain
 # data and functions in `presets` (bpy-free); these names stay here for callers.
 LIQUIDS, LIQUID_ITEMS, SOURCE_PRESET_KEYS = presets.LIQUIDS, presets.LIQUID_ITEMS, presets.SOURCE_PRESET_KEYS
 references = presets.references
 
-_applying = False  # True while a preset writes its values (they must not switch it to Custom)
-
-
-def _apply_preset(settings, values):
-    global _applying
-    _applying = True
-    try:
-        for key, value in values.items():
-            setattr(settings, key, value)
-    finally:
-        _applying = False
+_writer = presets.PresetWriter()  # a liquid preset's writes must not switch it to Custom
 
 
 def _liquid_update(self, context):
     values = presets.object_preset(self.liquid)
     if values is not None:
-        _apply_preset(self, values)
+        _writer.write(self, values)
 
 
 def _source_liquid_update(self, context):
     values = presets.source_preset(self.liquid)
     if values is not None:
-        _apply_preset(self, values)
+        _writer.write(self, values)
 
 
 def _mark_custom(self, context):
     """A preset's value was edited by hand: the liquid is no longer the preset."""
-    if not _applying and self.liquid != "CUSTOM":
+    if not _writer.writing and self.liquid != "CUSTOM":
         self.liquid = "CUSTOM"
 
 
@@ -314,6 +305,13 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         "Initial outgoing speed of the spilled liquid, away from the centroid of the wet area"
     )
     splash_seed: _splash_seed()
+    # a directed splash (volume, throw) instead of the Spill Group's disc: off without a Throw object
+    splash: PointerProperty(
+        type=MadderSplashSettings,
+        name="Directed Splash",
+        description="A knocked-over glass instead of the Spill Group's weights: a Volume thrown along a Throw "
+        "object's arrow (off without a Throw object)",
+    )
 
     # -- Flow: spreading through the fabric and moving on it
     diffusion_rate: _rate(
@@ -399,7 +397,18 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         soft_max=3.0,
         update=_mark_custom,
     )
-    # -- The look of the stain (issue 13)
+    # -- The look of the stain (issue 13; the liquid's preset sets Wicking and how it
+    # rings, the fabric sets the grain, issue 34)
+    grain_from: EnumProperty(
+        name="Grain From",
+        description="Where the stain's uneven outline comes from",
+        items=[
+            ("FABRIC", "Fabric", "The Irregularity of the fabric covering most of the cloth (a cloth "
+             "without a Madder fabric is plain cotton)", 0),
+            ("OBJECT", "Object", "This object's own Irregularity, Grain and Seed below", 1),
+        ],
+        default="FABRIC",
+    )
     wicking: FloatProperty(
         name="Wicking",
         description="How much faster the fabric draws liquid in where it is wetter (the spreading "
@@ -409,6 +418,7 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         min=0.0,
         max=8.0,
         soft_max=4.0,
+        update=_mark_custom,
     )
     irregularity: FloatProperty(
         name="Irregularity",
@@ -426,6 +436,17 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         default=3.0,
         min=0.01,
         soft_max=50.0,
+    )
+    irregularity_fine: FloatProperty(
+        name="Fibre Scale (mm)",
+        description="Smallest size of the fabric's unevenness, in millimetres (about one thread "
+        "pitch): the variation is self-affine from this scale up to the Grain, so the outline "
+        "is rough at every scale in between, as real stains are; 0 gives patches of the Grain "
+        "size only (the default: the multi-scale field does not yet give the roughness exponent of "
+        "real stains, see ARCHITECTURE.md), and a value at or above the Grain is ignored",
+        default=0.0,
+        min=0.0,
+        soft_max=5.0,
     )
     irregularity_seed: IntProperty(
         name="Seed",
@@ -450,6 +471,17 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         max=0.95,
         update=_mark_custom,
     )
+    holdup: FloatProperty(
+        name="Run Holdup",
+        description="Free liquid (kg/m²) each point of the cloth keeps back from a run: a film the "
+        "running liquid fills before it moves on and leaves behind to soak into the fibres "
+        "(0 = off)",
+        default=0.0,
+        min=0.0,
+        soft_max=0.2,
+        precision=3,
+        update=_mark_custom,
+    )
     vapour_limited: BoolProperty(
         name="Vapour-Limited Drying",
         description="A wet patch dries fastest at its edge, as vapour diffusing into still air does "
@@ -468,6 +500,12 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
     )
 
     # -- Output: the simulation's resolution and what playback and renders read
+    detail_auto: BoolProperty(
+        name="Auto Detail",
+        description="Choose Detail from the cloth's mean edge at the bake: the smallest level whose "
+        "refined edge is at most 2.5 mm, kept to at most a million refined vertices",
+        default=True,
+    )
     detail: IntProperty(
         name="Detail",
         description="Simulate on a finer mesh than the cloth's: each of its triangles split into "
@@ -489,16 +527,19 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         name="Image Sequence",
         description="The bake also writes the stain as OpenEXR image sequences in UV space, at the "
         "Detail mesh's resolution, next to the cache; the stain shader reads them through the "
-        "active UV map. Needs a UV map",
-        default=False,
+        "active UV map. Needs a UV map (on by default: a cloth without one bakes vertex colors only)",
+        default=True,
         update=_output_update,
     )
     image_size: EnumProperty(
         name="Size",
         description="Width and height of the images, in pixels (Re-export Textures writes them "
         "again at another size without a bake)",
-        items=[(str(n), f"{n} px", f"{n} × {n} pixels") for n in textures.SIZES],
-        default=str(textures.DEFAULT_SIZE),
+        # numbered: files saved before Auto store the sizes' positions 0–3
+        items=[(str(n), f"{n} px", f"{n} × {n} pixels", i) for i, n in enumerate(textures.SIZES)]
+        + [("AUTO", "Auto", "A texel of half the refined mean edge on the cloth (from the UV map's "
+            "area and the cloth's), the smallest size reaching it", len(textures.SIZES))],
+        default="AUTO",
     )
     image_baked: BoolProperty(
         name="Images Baked",

@@ -28,7 +28,9 @@ class ReexportJob:
                               filename=fine, **where)
         if s.bake_topology and not stored.same_topology(obj.data, s.bake_topology):
             raise ExportError(f"'{obj.name}': the mesh's faces changed since the bake: bake again", **where)
-        size = textures.check_size(s.image_size)
+        # Auto: the size the bake chose (it depends on the bake's Detail)
+        auto = s.image_size == "AUTO"
+        size = textures.check_size(s.image_baked_size or textures.DEFAULT_SIZE if auto else s.image_size)
         faces, face_polygon, n_polygons = bridge.topology_arrays(obj.data)
         uv = bridge.corner_uvs(obj.data)
         if uv is None:

@@ -1,16 +1,82 @@
 """The "Madder Stain" shader node group, the nodes that feed it, and the one-click
 operator that adds them to an object's materials.
 
-The group takes the material's Base Color and Roughness and returns them stained:
+The group takes the material's Base Color, Roughness and Specular IOR Level and returns
+them stained and wetted (and the film's coat, below), per colour channel (the maths runs
+on scalar Math nodes, three times):
 
-    color  = base · (1 − coverage) + stain          (stain: RGB = color × coverage,
-                                                     premultiplied "over")
-    color *= 1 − darkening · wetness                (wet fabric looks darker)
-    color *= 1 − deposit darkening · deposit        (bound dye is a little darker still)
-    rough  = mix(roughness, wet roughness, wetness) (and shinier)
+**Dye (Kubelka–Munk).** An opaque layer of absorption K and scattering S reflects
+R∞ = 1 + K/S − √((K/S)² + 2·K/S), the inverse of K/S = (1 − R)²/2R (Kubelka & Munk
+1931; Kubelka 1948); K/S of a mixture is the sum of its parts' K/S. So
 
-`stain`, `coverage`, `wetness` and `deposit` (each in [0, 1]) are inputs of the group,
-fed in the material by nodes that `sync_material` places (named "Madder Input: …"):
+    q_cloth = (1 − B)² / 2B                 B: the clean cloth's colour (Base Color)
+    q_dye   = (1 − C)² / 2C                 C: the liquid's colour = Stain / Coverage
+    q       = q_cloth + a·q_dye             a: the dye amount (Coverage)
+    R_dry   = R∞(q)
+
+with reflectances clamped to [1e-3, 1]. The dye amount counts all the dye, dissolved in
+the liquid and bound to the fibres alike (the dye shows either way): it is the total
+solute over the solute of fibres saturated with the liquid (`bridge.write_stain`), so
+at a = 1 the cloth has the liquid's own colour (plus the cloth's), a thin stain is a
+pale tint of the same hue and colour depth grows as K/S does, linearly with the dye.
+
+**Water.** Wetness w (the liquid in the fibres over what they hold) changes the optics
+three ways, each weighted by w so a dry cloth keeps R_dry exactly:
+
+1. water replacing the air between the fibres lowers their scattering:
+   q → q·(1 + s·w), s = "Wet Scattering" (0 by default: the film alone already gives
+   the measured darkening);
+2. the dry fibres' rough surfaces reflect a neutral ρ ("Surface White", 0.06) in every
+   direction, which whitens every colour; a water film's smooth surface sends that
+   reflection to the specular direction instead (the Principled BSDF's own specular),
+   leaving the body's reflectance Rb = (R − ρ)/(1 − ρ);
+3. light scattered back by the body reaches the film's surface and, beyond the critical
+   angle, is totally internally reflected back to be absorbed again (Lekner & Dorf 1988,
+   "Why some things are darker when wet", Appl. Opt. 27, 1278):
+   R_film = Rb·(1 − r_i)/(1 − r_i·Rb), with r_i ("Film Reflection") = 1 − (1 − r_e)/n²
+   ≈ 0.47 for water (n = 1.33, r_e ≈ 0.066 the diffuse external reflectance).
+
+    R_wet = R + w·(R_film − R)              R = R∞(q·(1 + s·w))
+    Base Color = min(Yarn · R_wet, 1)
+
+Darker channels lose proportionally more (R_film/Rb = (1 − r_i)/(1 − r_i·Rb) is smallest
+for small Rb) and the neutral ρ is gone, so wet colours are darker *and* more saturated;
+the cloth's own colour and the stain's alike.
+
+**The film's gloss** is a layer of its own: the group's Film output (w) is the
+Principled BSDF's Coat Weight, with the film's roughness ("Wet Roughness", 0.1) as Coat
+Roughness and water's index (1.33) as Coat IOR; the Coat Normal is left to the surface's
+own (the film is level over the yarns, see `weave_shader`), while the fibres underneath
+keep their dry Roughness, and their own surface reflection (Specular IOR Level) fades as
+Specular · (1 − w): under the film a fibre's surface faces water, and what it reflects
+(an eighth of what it did in air, ((n_f − n_w)/(n_f + n_w))² over ((n_f − 1)/(n_f + 1))²
+for cellulose 1.55 and water 1.33) stays under the film, part of the body's light that
+Lekner & Dorf's R_film already counts, leaving through the level film as diffuse light.
+So the dry surface's neutral white (above) leaves the body and the fibres' sheen goes
+with it; the one gloss left is the film's. (With the fibres' rough sheen kept, a sun 30°
+off the view whitened the wet wine as much as the dry one: chroma wet ≤ dry in EEVEE.) A
+partly wet cloth is a patchwork of smooth film and rough fibres, so its gloss is two
+lobes in proportion, not one lobe of intermediate roughness: a roughness mixed from 0.9
+to 0.1 with w passed through 0.4–0.6 halfway through drying, a lobe broad enough to send
+the sun's reflection 12° off the zenith straight up into the gallery's camera, and the
+wine at 15 minutes read as a pale pink-grey, paler than the dry stain an hour on (a
+stain must darken as it wets and lighten as it dries; the attributes were monotonic all
+along). The film on top also takes the tight glint off the cloth: a 0.25 roughness on
+the one lobe (before issue 35) added about 0.17 of white to the wet wine seen from
+above. Wet fabric also lets more light through (water fills the gaps between and inside
+the yarns and matches the fibres' index, so less is scattered back): the group's
+Translucency output, mix("Translucency", "Wet Translucency", w), is the factor of a Mix
+Shader that `add_to_material` puts after the Principled BSDF, whose other shader is a
+Transparent BSDF tinted by the stained colour, so what lies behind a wet cloth shows
+through (Cycles and EEVEE alike; see `_ensure_transmission`).
+
+**Yarn** is the weave's local reflectance factor (mean 1; 1 = no weave): it multiplies
+the finished colour, clean cloth and stain alike, since the yarns carry both. The
+weave's own node group (`weave_shader`) feeds it. The Deposit input (bound dye) does
+not change the colour; it is passed through as an output for the material's own nodes.
+
+`Stain`, `Coverage`, `Wetness` and `Deposit` are inputs of the group, fed in the
+material by nodes that `sync_material` places (named "Madder Input: …"):
 
 - *Vertex Colors*: Attribute nodes reading `madder_stain` (Color, Alpha),
   `madder_wetness` and `madder_deposit` (0 where an object has none, so the group is
@@ -19,34 +85,60 @@ fed in the material by nodes that `sync_material` places (named "Madder Input: �
   nodes on the object's sequences (`images.sequence_image`: non-colour, channel-packed
   alpha, auto refresh, frame start/offset/length so that scene frame f shows file f),
   read through a UV Map node of the UV map they were baked for; the wet image's R and G
-  are the wetness and deposit.
+  are the wetness and deposit (B is written as 0).
 
 A bake, a re-export, Free Bake and switching the output re-run `sync_object`, so a
 material that has the group always reads what its object has. A group made by an older
-Madder (it read the attributes itself) is upgraded in place: its sockets keep their
-identifiers (the material's links stay), it gains the four inputs, and every material
-using it gets its input nodes."""
+Madder is rebuilt in place: its sockets keep their identifiers (the material's links
+stay), it gains the inputs it lacks and loses "Wet Darkening" and "Deposit Darkening"
+(the old neutral darkening `1 − 0.35·w` and the bound dye's extra darkening, replaced by
+the model above), and every material using it gets its input nodes and the Mix Shader
+with the Transparent BSDF."""
 
 import bpy
 
-from . import compat, images, stored
+from . import compat, fabrics, images, stored, weave_shader
 from .bridge import DEPOSIT_ATTR, STAIN_ATTR, WETNESS_ATTR
 
 GROUP = "Madder Stain"
 INPUT_PREFIX = "Madder Input: "
-# the group's inputs: name, socket type, default, range
+SEE_THROUGH = "Madder See-Through"  # the material's Transparent BSDF and its Mix Shader
+MIX = "Madder Wet Transmission"
+# the group's inputs: name, socket type, default, range, tooltip
 _INPUTS = (
-    ("Base Color", "NodeSocketColor", (0.8, 0.8, 0.8, 1.0), None),
-    ("Roughness", "NodeSocketFloat", 0.5, (0.0, 1.0)),
-    ("Wet Darkening", "NodeSocketFloat", 0.35, (0.0, 1.0)),
-    ("Wet Roughness", "NodeSocketFloat", 0.25, (0.0, 1.0)),
-    ("Deposit Darkening", "NodeSocketFloat", 0.15, (0.0, 1.0)),
-    ("Stain", "NodeSocketColor", (0.0, 0.0, 0.0, 1.0), None),
-    ("Coverage", "NodeSocketFloat", 0.0, (0.0, 1.0)),
-    ("Wetness", "NodeSocketFloat", 0.0, (0.0, 1.0)),
-    ("Deposit", "NodeSocketFloat", 0.0, (0.0, 1.0)),
+    ("Base Color", "NodeSocketColor", (0.8, 0.8, 0.8, 1.0), None, "The clean, dry cloth's colour"),
+    ("Roughness", "NodeSocketFloat", 0.5, (0.0, 1.0), "The dry cloth's roughness"),
+    ("Specular", "NodeSocketFloat", 0.5, (0.0, 1.0),
+     "The dry cloth's Specular IOR Level (its fibres' surface reflection, gone under the liquid's film)"),
+    ("Wet Roughness", "NodeSocketFloat", 0.1, (0.0, 1.0),
+     "Roughness of the liquid's film (the BSDF's coat, weighted by the wetness): the film is smooth"),
+    ("Surface White", "NodeSocketFloat", 0.06, (0.0, 0.5),
+     "Neutral reflectance of the dry fibres' surfaces, sent to the specular direction once a water film covers them"),
+    ("Wet Scattering", "NodeSocketFloat", 0.0, (0.0, 10.0),
+     "How much water in the fibres raises K/S (it replaces the air that scattered): K/S·(1 + this·wetness)"),
+    ("Film Reflection", "NodeSocketFloat", 0.47, (0.0, 0.95),
+     "Internal reflectance of the water film for diffuse light (Lekner & Dorf 1988; 0.47 for water)"),
+    ("Translucency", "NodeSocketFloat", 0.0, (0.0, 1.0),
+     "Fraction of the light the dry cloth lets through (0: opaque, and dry cloth costs no transparency rays)"),
+    ("Wet Translucency", "NodeSocketFloat", 0.3, (0.0, 1.0), "Fraction the cloth transmits full of liquid"),
+    ("Yarn", "NodeSocketFloat", 1.0, (0.0, 2.0),
+     "The weave's local reflectance factor, mean 1; 1 = no weave"),
+    ("Stain", "NodeSocketColor", (0.0, 0.0, 0.0, 1.0), None,
+     "The liquid's colour times the dye amount (premultiplied)"),
+    ("Coverage", "NodeSocketFloat", 0.0, (0.0, 1.0), "Dye amount: 1 = a spot saturated with the liquid"),
+    ("Wetness", "NodeSocketFloat", 0.0, (0.0, 1.0), "Liquid in the fibres: 1 = full"),
+    ("Deposit", "NodeSocketFloat", 0.0, (0.0, 1.0), "Bound dye (passed through as an output)"),
 )
-_OUTPUTS = (("Base Color", "NodeSocketColor"), ("Roughness", "NodeSocketFloat"))
+_OUTPUTS = (("Base Color", "NodeSocketColor"), ("Roughness", "NodeSocketFloat"), ("Specular", "NodeSocketFloat"),
+            ("Film", "NodeSocketFloat"), ("Film Roughness", "NodeSocketFloat"),
+            ("Translucency", "NodeSocketFloat"), ("Deposit", "NodeSocketFloat"))
+# defaults of an older Madder's group that this one changed (an upgrade moves a material's
+# value still at the old default to the new one)
+_OLD_DEFAULTS = {"Wet Roughness": 0.25}
+# smallest reflectance the K/S maths sees (K/S = (1 − R)²/2R is infinite at R = 0)
+R_MIN = 1e-3
+# smallest dye amount the liquid's colour is recovered from (Stain / Coverage)
+A_MIN = 1e-4
 
 
 def _sockets(group, in_out):
@@ -54,76 +146,116 @@ def _sockets(group, in_out):
 
 
 def _ensure_sockets(group):
-    """Adds the sockets `group` lacks (existing ones keep their identifiers)."""
-    have = _sockets(group, "INPUT")
-    for name, kind, default, bounds in _INPUTS:
-        if name not in have:
+    """Adds the sockets `group` lacks (existing ones keep their identifiers) and removes
+    those an older Madder made that this model no longer has ("Wet Darkening", "Deposit
+    Darkening"). Returns the names of the inputs it added."""
+    names = {name for name, *_ in _INPUTS}
+    for s in list(_sockets(group, "INPUT").values()):
+        if s.name not in names:
+            group.interface.remove(s)
+    have, added = _sockets(group, "INPUT"), []
+    for name, kind, default, bounds, tip in _INPUTS:
+        s = have.get(name)
+        if s is None:
             s = group.interface.new_socket(name, in_out="INPUT", socket_type=kind)
-            s.default_value = default
-            if bounds is not None:
-                s.min_value, s.max_value = bounds
+            added.append(name)
+        s.default_value = default
+        if bounds is not None:
+            s.min_value, s.max_value = bounds
+        s.description = tip
     have = _sockets(group, "OUTPUT")
     for name, kind in _OUTPUTS:
         if name not in have:
             group.interface.new_socket(name, in_out="OUTPUT", socket_type=kind)
+    return added
 
 
-def _mix(nodes, data_type, blend="MIX"):
-    n = nodes.new("ShaderNodeMix")
-    n.data_type = data_type
-    if data_type == "RGBA":
-        n.blend_type = blend
-    return n
+class _Maths:
+    """Scalar Math nodes in `nodes`, each call one node (inputs: sockets or numbers)."""
+
+    def __init__(self, nodes, links):
+        self.nodes, self.links, self.made = nodes, links, []
+
+    def op(self, operation, *args, clamp=False):
+        n = self.nodes.new("ShaderNodeMath")
+        n.operation = operation
+        n.use_clamp = clamp
+        for i, a in enumerate(args):
+            if isinstance(a, (int, float)):
+                n.inputs[i].default_value = a
+            else:
+                self.links.new(a, n.inputs[i])
+        self.made.append(n)
+        return n.outputs[0]
+
+    def ks(self, r):
+        """K/S = (1 − R)² / 2R (Kubelka–Munk), R clamped to [R_MIN, 1]."""
+        r = self.op("MINIMUM", self.op("MAXIMUM", r, R_MIN), 1.0)
+        one_minus = self.op("SUBTRACT", 1.0, r)
+        return self.op("DIVIDE", self.op("MULTIPLY", one_minus, one_minus), self.op("MULTIPLY", r, 2.0))
+
+    def reflectance(self, q):
+        """R∞ = 1 + K/S − √((K/S)² + 2·K/S), the inverse of `ks`."""
+        root = self.op("SQRT", self.op("MULTIPLY_ADD", q, self.op("ADD", q, 2.0), 0.0))
+        return self.op("SUBTRACT", self.op("ADD", q, 1.0), root)
+
+    def mix(self, a, b, t):
+        """a + t·(b − a)."""
+        return self.op("MULTIPLY_ADD", t, self.op("SUBTRACT", b, a), a)
+
+
+def _channel(m, base, stain, g):
+    """One colour channel of the group's maths (module doc): `base` and `stain` the
+    channel's sockets, `g` the group input node."""
+    amount = m.op("MAXIMUM", g.outputs["Coverage"], 0.0)
+    dye = m.op("DIVIDE", stain, m.op("MAXIMUM", amount, A_MIN))  # the liquid's colour
+    q = m.op("MULTIPLY_ADD", amount, m.ks(dye), m.ks(base))  # K/S, cloth + dye
+    wet = g.outputs["Wetness"]
+    q = m.op("MULTIPLY", q, m.op("MULTIPLY_ADD", g.outputs["Wet Scattering"], wet, 1.0))
+    r = m.reflectance(q)
+    white = g.outputs["Surface White"]  # the body under the dry surface's neutral reflection
+    body = m.op("DIVIDE", m.op("SUBTRACT", r, white), m.op("SUBTRACT", 1.0, white), clamp=True)
+    ri = g.outputs["Film Reflection"]  # Lekner & Dorf: B (1 − r_i) / (1 − r_i B)
+    film = m.op("DIVIDE", m.op("MULTIPLY", body, m.op("SUBTRACT", 1.0, ri)),
+                m.op("SUBTRACT", 1.0, m.op("MULTIPLY", ri, body)))
+    r = m.mix(r, film, wet)
+    return m.op("MINIMUM", m.op("MULTIPLY", r, g.outputs["Yarn"]), 1.0)
 
 
 def _build(group):
-    """The group's maths, from its inputs (see the module doc)."""
-    _ensure_sockets(group)
+    """The group's maths, from its inputs (see the module doc). Returns the names of the
+    inputs it added to an existing group."""
+    added = _ensure_sockets(group)
     nodes, links = group.nodes, group.links
     nodes.clear()
     gin, gout = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
-    # base · (1 − coverage) + stain
-    keep = _mix(nodes, "RGBA")
-    keep.inputs["B"].default_value = (0.0, 0.0, 0.0, 1.0)
-    links.new(gin.outputs["Coverage"], keep.inputs["Factor"])
-    links.new(gin.outputs["Base Color"], keep.inputs["A"])
-    over = _mix(nodes, "RGBA", "ADD")
-    over.inputs["Factor"].default_value = 1.0
-    links.new(keep.outputs["Result"], over.inputs["A"])
-    links.new(gin.outputs["Stain"], over.inputs["B"])
-    # darken with wetness: multiply by (1 − darkening · wetness)
-    amount = nodes.new("ShaderNodeMath")
-    amount.operation = "MULTIPLY"
-    amount.use_clamp = True
-    links.new(gin.outputs["Wet Darkening"], amount.inputs[0])
-    links.new(gin.outputs["Wetness"], amount.inputs[1])
-    dark = _mix(nodes, "RGBA")
-    dark.inputs["B"].default_value = (0.0, 0.0, 0.0, 1.0)
-    links.new(amount.outputs["Value"], dark.inputs["Factor"])
-    links.new(over.outputs["Result"], dark.inputs["A"])
-    # and with the deposit: multiply by (1 − deposit darkening · deposit)
-    mark = nodes.new("ShaderNodeMath")
-    mark.operation = "MULTIPLY"
-    mark.use_clamp = True
-    links.new(gin.outputs["Deposit Darkening"], mark.inputs[0])
-    links.new(gin.outputs["Deposit"], mark.inputs[1])
-    marked = _mix(nodes, "RGBA")
-    marked.inputs["B"].default_value = (0.0, 0.0, 0.0, 1.0)
-    links.new(mark.outputs["Value"], marked.inputs["Factor"])
-    links.new(dark.outputs["Result"], marked.inputs["A"])
-    links.new(marked.outputs["Result"], gout.inputs["Base Color"])
-    # roughness towards the wet roughness
-    rough = _mix(nodes, "FLOAT")
-    links.new(gin.outputs["Wetness"], rough.inputs["Factor"])
-    links.new(gin.outputs["Roughness"], rough.inputs["A"])
-    links.new(gin.outputs["Wet Roughness"], rough.inputs["B"])
-    links.new(rough.outputs["Result"], gout.inputs["Roughness"])
-    for i, n in enumerate((gin, keep, over, amount, dark, mark, marked, rough, gout)):
-        n.location = (200 * i, 0)
+    m = _Maths(nodes, links)
+    split_base, split_stain = nodes.new("ShaderNodeSeparateColor"), nodes.new("ShaderNodeSeparateColor")
+    links.new(gin.outputs["Base Color"], split_base.inputs[0])
+    links.new(gin.outputs["Stain"], split_stain.inputs[0])
+    join = nodes.new("ShaderNodeCombineColor")
+    for i in range(3):
+        links.new(_channel(m, split_base.outputs[i], split_stain.outputs[i], gin), join.inputs[i])
+    links.new(join.outputs[0], gout.inputs["Base Color"])
+    wet = gin.outputs["Wetness"]
+    links.new(gin.outputs["Roughness"], gout.inputs["Roughness"])  # the fibres under the film
+    # the fibres' surfaces under the film: Specular · (1 − w)
+    links.new(m.op("MULTIPLY", gin.outputs["Specular"], m.op("SUBTRACT", 1.0, wet, clamp=True)),
+              gout.inputs["Specular"])
+    links.new(m.op("MAXIMUM", m.op("MINIMUM", wet, 1.0), 0.0), gout.inputs["Film"])
+    links.new(gin.outputs["Wet Roughness"], gout.inputs["Film Roughness"])
+    links.new(m.mix(gin.outputs["Translucency"], gin.outputs["Wet Translucency"], wet), gout.inputs["Translucency"])
+    links.new(gin.outputs["Deposit"], gout.inputs["Deposit"])
+    gin.location, split_base.location, split_stain.location = (-400, 0), (-200, 100), (-200, -100)
+    for i, n in enumerate(m.made):
+        n.location, n.hide = (40 * (i % 40), -40 * (i // 40) - 300), True
+    join.location, gout.location = (1700, 0), (1900, 0)
+    return added
 
 
 def _current(group):
-    return set(_sockets(group, "INPUT")) >= {name for name, *_ in _INPUTS}
+    return (set(_sockets(group, "INPUT")) == {name for name, *_ in _INPUTS}
+            and set(_sockets(group, "OUTPUT")) >= {name for name, _ in _OUTPUTS})
 
 
 def stain_group():
@@ -136,10 +268,20 @@ def stain_group():
         group = bpy.data.node_groups.new(GROUP, "ShaderNodeTree")
         _build(group)
         return group
-    _build(group)
-    for mat in bpy.data.materials:  # the old group read the attributes itself: feed them now
-        if _group_node(mat) is not None:
+    added = _build(group)
+    defaults = {name: default for name, _kind, default, *_ in _INPUTS}
+    for mat in bpy.data.materials:  # an old group read the attributes itself, or had no transmission
+        node = _group_node(mat)
+        if node is not None:
             sync_material(mat, _owner(mat))
+            _ensure_transmission(mat)
+            for name in added:  # a socket added to a group leaves its nodes' values at 0
+                node.inputs[name].default_value = defaults[name]
+            _ensure_film(mat)  # (after: it routes the BSDF's own specular through the group)
+            for name, value in _OLD_DEFAULTS.items():  # values nobody changed take the new default
+                socket = node.inputs.get(name)
+                if socket is not None and not socket.is_linked and abs(socket.default_value - value) < 1e-6:
+                    socket.default_value = defaults[name]
     return group
 
 
@@ -164,6 +306,7 @@ def sync_material(material, obj):
     if node is None:
         return False
     nt = material.node_tree
+    kept_normal = weave_shader.user_normal(nt)
     for n in [n for n in nt.nodes if n.name.startswith(INPUT_PREFIX)]:
         nt.nodes.remove(n)
     x, y = node.location.x - 300, node.location.y
@@ -171,6 +314,7 @@ def sync_material(material, obj):
         _image_inputs(nt, node, obj, x, y)
     else:
         _attribute_inputs(nt, node, x, y)
+    weave_shader.place(material, obj, node, INPUT_PREFIX, x, y, kept_normal)
     return True
 
 
@@ -226,37 +370,113 @@ def sync_object(obj):
 
 
 def add_to_material(material, obj=None):
-    """Inserts the group in front of the material's Principled BSDF (Base Color and
-    Roughness), keeping whatever fed them, and its input nodes for `obj`. Returns False
-    when the group was already there (its inputs are synced again) or the material has
-    no Principled BSDF."""
+    """Inserts the group in front of the material's Principled BSDF (Base Color, Roughness,
+    Specular IOR Level; `THROUGH`), keeping whatever fed them, its input nodes for `obj`, and the wet cloth's
+    transmission behind it (`_ensure_transmission`). Returns False when the group was
+    already there (its inputs are synced again) or the material has no Principled BSDF."""
     nt = material.node_tree
     if nt is None:
         return False
-    bsdf = next((n for n in nt.nodes if n.type == "BSDF_PRINCIPLED"), None)
+    bsdf = _principled(material)
     if bsdf is None:
         return False
     group = stain_group()
     if _group_node(material) is not None:
         sync_material(material, obj)
+        _ensure_transmission(material)
+        _ensure_film(material)
         return False
     node = nt.nodes.new("ShaderNodeGroup")
     node.node_tree = group
     node.name = node.label = GROUP
     node.location = (bsdf.location.x - 250, bsdf.location.y)
-    for name in ("Base Color", "Roughness"):
-        src = bsdf.inputs[name]
-        if src.is_linked:
-            nt.links.new(src.links[0].from_socket, node.inputs[name])
-        else:
-            node.inputs[name].default_value = src.default_value
-        nt.links.new(node.outputs[name], src)
+    for name, socket in THROUGH:
+        _route(nt, bsdf, node, name, socket)
     sync_material(material, obj)
+    _ensure_transmission(material)
+    _ensure_film(material)
+    return True
+
+
+# the BSDF's inputs the group sits in front of: (group socket, BSDF socket)
+THROUGH = (("Base Color", "Base Color"), ("Roughness", "Roughness"), ("Specular", "Specular IOR Level"))
+
+
+def _route(nt, bsdf, node, name, socket):
+    """Puts the group's `name` between the BSDF's input `socket` and whatever fed it (a
+    link, or its value), unless the group feeds it already."""
+    src = bsdf.inputs[socket]
+    if src.is_linked:
+        feed = src.links[0].from_socket
+        if feed.node == node:
+            return
+        nt.links.new(feed, node.inputs[name])
+    else:
+        node.inputs[name].default_value = src.default_value
+    nt.links.new(node.outputs[name], src)
+
+
+def _principled(material):
+    return next((n for n in material.node_tree.nodes if n.type == "BSDF_PRINCIPLED"), None)
+
+
+WATER_IOR = 1.33
+
+
+def _ensure_film(material):
+    """Makes the group's Film and Film Roughness the Principled BSDF's Coat Weight and Coat
+    Roughness, with water's Coat IOR (the module doc: the liquid's film as a layer over
+    the fibres), and routes the BSDF's Specular IOR Level through the group. Leaves a
+    coat the material's own nodes drive alone; does nothing when the material has no
+    group or no Principled BSDF. Returns True when it linked them."""
+    nt, node = material.node_tree, _group_node(material)
+    bsdf = _principled(material) if nt is not None else None
+    if node is None or bsdf is None or "Film" not in node.outputs:
+        return False
+    _route(nt, bsdf, node, "Specular", "Specular IOR Level")  # a group from before the film had none
+    weight = bsdf.inputs["Coat Weight"]
+    if weight.is_linked:
+        return False
+    nt.links.new(node.outputs["Film"], weight)
+    if not bsdf.inputs["Coat Roughness"].is_linked:
+        nt.links.new(node.outputs["Film Roughness"], bsdf.inputs["Coat Roughness"])
+    bsdf.inputs["Coat IOR"].default_value = WATER_IOR
+    return True
+
+
+def _ensure_transmission(material):
+    """Makes the Principled BSDF's output pass through a Mix Shader (factor: the group's
+    Translucency) with a Transparent BSDF tinted by the group's colour, wherever the BSDF
+    fed (the Material Output, usually), so that a wet cloth shows what is behind it.
+    Transparent rather than Translucent: EEVEE's Translucent BSDF is lit by lights alone,
+    so a backing would not show through it; a Transparent BSDF shows it in Cycles and in
+    EEVEE (its default Dithered render method) alike, and the light that reaches the
+    backing through the cloth and comes back through it is Cycles' and EEVEE's own
+    (transparent shadows). Does nothing when the material has them already, or has no
+    Principled BSDF or group."""
+    nt, node = material.node_tree, _group_node(material)
+    bsdf = _principled(material) if nt is not None else None
+    if node is None or bsdf is None or nt.nodes.get(MIX) is not None:
+        return False
+    out = compat.shader_output(bsdf)
+    targets = [link.to_socket for link in out.links]
+    through = nt.nodes.new("ShaderNodeBsdfTransparent")
+    through.name = through.label = SEE_THROUGH
+    through.location = (bsdf.location.x, bsdf.location.y - 700)
+    nt.links.new(node.outputs["Base Color"], through.inputs["Color"])
+    mix = nt.nodes.new("ShaderNodeMixShader")
+    mix.name = mix.label = MIX
+    mix.location = (bsdf.location.x + 300, bsdf.location.y)
+    nt.links.new(node.outputs["Translucency"], mix.inputs[0])  # "Fac" (4.x) / "Factor" (5.x)
+    nt.links.new(out, mix.inputs[1])
+    nt.links.new(through.outputs[0], mix.inputs[2])
+    for target in targets:
+        nt.links.new(mix.outputs[0], target)
     return True
 
 
 class MADDER_OT_add_stain_shader(bpy.types.Operator):
-    """Add the Madder Stain node group to every material of the active object"""
+    """Add the Madder Stain node group (stained, wet and see-through cloth) to every material of the active object"""
 
     bl_idname = "madder.add_stain_shader"
     bl_label = "Add Stain Shader"
@@ -292,9 +512,20 @@ class MADDER_OT_add_stain_shader(bpy.types.Operator):
         return {"FINISHED"}
 
 
+def _resync_material(material):
+    """A fabric of `material` changed: its input nodes (the Madder Weave's) follow."""
+    if _group_node(material) is not None:
+        sync_material(material, _owner(material))
+
+
 def register():
     bpy.utils.register_class(MADDER_OT_add_stain_shader)
+    weave_shader.register()
+    fabrics.resync_hooks.append(_resync_material)
 
 
 def unregister():
+    if _resync_material in fabrics.resync_hooks:
+        fabrics.resync_hooks.remove(_resync_material)
+    weave_shader.unregister()
     bpy.utils.unregister_class(MADDER_OT_add_stain_shader)

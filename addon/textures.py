@@ -51,7 +51,9 @@ KINDS = ("stain", "wet")
 EXT = ".exr"
 DIGITS = 4
 STAIN_CHANNELS = ("R", "G", "B", "A")
-WET_CHANNELS = ("R", "G")
+# wetness, deposit, and a zero blue: Blender reads an EXR without B as garbage there
+# (−5e8, 1e15), which a material of the user's reading the image's colour would show
+WET_CHANNELS = ("R", "G", "B")
 
 
 # -- names
@@ -215,9 +217,20 @@ CLIP = {"stain": "premultiplied", "wet": "unit"}
 """How `madder.rasterize` clips each image kind when the values were read unclamped (with
 the weave's detail, core `texture::clip`)."""
 
-UPTAKE = {"stain": (True, True, True, True), "wet": (False, True)}
+UPTAKE = {"stain": (True, True, True, True), "wet": (False, True, False)}
 """Per image kind and channel, whether the threads' uptake applies (the deposit: the stain's
-colour and coverage, the wet image's deposit) or only the corrector (wetness)."""
+colour and coverage, the wet image's deposit) or only the corrector (wetness; the zero blue)."""
+
+
+def triangle_areas(p):
+    """Areas of the triangles `p` (F, 3, 3)."""
+    return 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+
+
+def uv_areas(t):
+    """Areas of the UV triangles `t` (F, 3, 2)."""
+    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+    return 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
 
 
 def weave_maps(positions, faces, uv, threads_per_m, angle):
@@ -229,9 +242,7 @@ def weave_maps(positions, faces, uv, threads_per_m, angle):
     triangle, or no threads, gets the zero map (no detail)."""
     p = np.asarray(positions, dtype=np.float64)[np.asarray(faces)]
     t = np.asarray(uv, dtype=np.float64)
-    world = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
-    e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
-    area_uv = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    world, area_uv = triangle_areas(p), uv_areas(t)
     ok = (area_uv > 0) & (world > 0)
     s = np.zeros(len(p))
     s[ok] = np.sqrt(world[ok] / area_uv[ok])
@@ -337,8 +348,8 @@ class Exporter:
         return range(self.first, self.last + 1)
 
     def values(self, frame):
-        """Frame `frame`'s per-vertex image values: (RGBA (N, 4), wet (N, 2): wetness and
-        deposit), exactly the playback attributes (without their clamp to 1 when the
+        """Frame `frame`'s per-vertex image values: (RGBA (N, 4), wet (N, 3): wetness,
+        deposit and 0), exactly the playback attributes (without their clamp to 1 when the
         weave's detail is added: `export` clips the finished texels instead)."""
         # with the weave's detail the fractions are read unclamped and each finished texel
         # is clipped (`export`): a saturated stain stays saturated on every thread

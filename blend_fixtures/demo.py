@@ -7,19 +7,22 @@ vertices, a few seconds) and then smoothed by a Catmull-Clark Subdivision (two l
 frozen into a still mesh of 145 × 145 = 21,025 vertices: the spill happens on a
 tablecloth at rest, the fine mesh gets smooth folds for the price of the coarse cloth,
 and the stain's simulator sees the cloth's own ≥ 20k vertices. The tablecloth's
-material is a plain-weave Madder fabric at 5 threads per centimetre, UV-mapped over the
+material is the Linen Madder fabric preset at 5 threads per centimetre, UV-mapped over the
 whole cloth.
 
 Then, as a user would, with the add-on installed from the built zip into a fresh user
-repository: red wine spilled near the table's edge (a soft `stain_source` group of 8 cm),
-the Liquid preset Red Wine with the look of issue 13 (wicking, an uneven fabric, solute
-carried by the flow), Detail 1, baked by `madder.bake` to a 2048 px OpenEXR image
-sequence, the "Madder Stain" shader added by `madder.add_stain_shader`, and Cycles
+repository: red wine spilled near the table's edge (a soft `stain_source` group of 8
+cm), the Liquid preset Red Wine and the Linen fabric preset, nothing else: the look
+(wicking, the fabric's grain, the wine's solids carried by the flow), the Detail (Auto)
+and the OpenEXR image sequence (on, Auto size) are the defaults (issue 34); baked by
+`madder.bake`, the "Madder Stain" shader added by `madder.add_stain_shader`, and Cycles
 renders of the last frame: the whole table (`--out`) and a close-up of the spill
-(`<out>-closeup`). The scene's clock runs at 45 s per frame (32 frames: 24 minutes), so the
+(`<out>-closeup`). The scene's clock runs at 45 s per frame (32 frames: 24 minutes), so
+the
 picture shows the stain after it spread, ran and began to dry."""
 
 import argparse
+import math
 import os
 import sys
 import tempfile
@@ -107,29 +110,37 @@ def build_scene(blend):
     bpy.ops.wm.save_as_mainfile(filepath=blend, check_existing=False)
 
 
-def configure(image_size):
-    """Sets up the spill on the open demo scene as a user would (the fabric, the Liquid and
-    its look, Detail 1, the image sequence at `image_size` px, no vertex colours); returns
-    the tablecloth. `tests/bench/bench_image_bake.py` bakes the same setting."""
+def configure(image_size=None):
+    """Sets up the spill on the open demo scene as a user would, and only that: the fabric
+    (the Linen preset at a coarse 5 threads per centimetre), the Spill Group, the amount
+    and the Liquid preset. The look (wicking, the fabric's grain, how the wine rings),
+    the Detail (Auto from the cloth's edge) and the image sequence (on: the cloth has a
+    UV map; its size Auto) are the defaults'. `image_size` (px) overrides the size, for
+    `tests/bench/bench_image_bake.py`, which bakes the same setting; returns the tablecloth."""
     import bpy
 
     cloth = bpy.data.objects["Tablecloth"]
-    fab = bpy.data.materials["Linen"].madder_fabric  # the fabric: plain weave, 5 threads/cm
-    fab.enabled, fab.weave, fab.thread_count = True, "PLAIN", 5.0
+    fab = bpy.data.materials["Linen"].madder_fabric
+    fab.enabled, fab.preset = True, "LINEN_PLAIN"
+    fab.thread_count = 5.0  # a coarse linen: the weave shows in the close-up
     bpy.context.view_layer.objects.active = cloth
     s = cloth.madder
     s.enabled = True
     s.source_group = "stain_source"
     s.liquid = "RED_WINE"
-    s.amount = 1.2  # kg/m² where the group's weight is 1: a glass knocked over, 12× what linen holds
-    s.wicking = 2.0  # a sharp front that slows as the spill thins
-    s.irregularity, s.irregularity_length, s.irregularity_seed = 0.5, 6.0, 3  # a ragged outline
-    s.carry_solute = True  # the flow carries the wine's solids to the drying rim
-    s.substeps = 4  # 11 s steps
-    s.detail = 1  # the stain on the cloth's triangles split 4 ways (84k vertices)
-    s.output_images = True
-    s.output_vertex_colors = False
-    s.image_size = image_size
+    s.amount = 1.2  # kg/m² where the group's weight is 1 (what a spill without a Throw holds)
+    # the glass is knocked over toward the table's rim: a Single Arrow empty whose arrow
+    # (local Z) points along the throw, and the splash's volume
+    throw = bpy.data.objects.get("Throw")
+    if throw is None:
+        throw = bpy.data.objects.new("Throw", None)
+        throw.empty_display_type = "SINGLE_ARROW"
+        bpy.context.scene.collection.objects.link(throw)
+    throw.location = SPILL_CENTRE
+    throw.rotation_euler = (0.0, math.pi / 2, math.atan2(SPILL_CENTRE[1], SPILL_CENTRE[0]))
+    s.splash.throw, s.splash.volume = throw, 125.0  # a glass of wine
+    if image_size is not None:
+        s.image_size = str(image_size)
     return cloth
 
 
@@ -140,7 +151,9 @@ def main():
     ap.add_argument("--frame", type=int, default=FRAMES, help="frame rendered (default: the last)")
     ap.add_argument("--samples", type=int, default=32, help="Cycles samples (denoised; the committed pictures: 64)")
     ap.add_argument("--scale", type=int, default=100, help="render resolution percentage (of 1280x720)")
-    ap.add_argument("--image-size", default="2048", help="stain image size, px")
+    ap.add_argument("--image-size", default=None, help="stain image size, px (default: Auto)")
+    ap.add_argument("--measure", action="store_true",
+                    help="then measure the shader's cost and the wide vs close colours (demo_measure.py)")
     args = ap.parse_args()
     out = os.path.abspath(args.out)
     work = os.path.join(os.path.dirname(out), "demo")
@@ -164,7 +177,7 @@ def main():
     if bpy.ops.madder.bake() != {"FINISHED"}:
         sys.exit("demo: the bake failed (see the message above)")
     print(f"demo: baked {FRAMES} frames ({FRAMES * SECONDS_PER_FRAME / 60:.0f} min) of '{cloth.name}' "
-          f"({len(cloth.data.vertices)} vertices, Detail {s.detail}, {args.image_size} px images) in "
+          f"({len(cloth.data.vertices)} vertices, Detail {s.bake_detail}, {s.image_baked_size} px images) in "
           f"{time.perf_counter() - t0:.1f} s -> {bpy.path.abspath(s.cache_file)}")
 
     bpy.ops.madder.add_stain_shader()
@@ -176,15 +189,22 @@ def main():
     bpy.ops.render.render(write_still=True)
     print(f"demo: rendered frame {args.frame} in {time.perf_counter() - t0:.1f} s -> {out}")
 
-    # the close-up: from 70 cm in front of the table's rim, on the spill and its run
+    # the close-up: from 70 cm in front of the table's rim, on the stain's edge on the table
+    # top (where its outline shows) and the run over the rim below it
     closeup = os.path.splitext(out)[0] + "-closeup.png"
+    wide_pose = (scene.camera.matrix_world.copy(), scene.camera.data.lens)
     cx, cy, cz = SPILL_CENTRE
-    kit.aim(scene.camera, (cx + 0.33, cy - 0.44, cz + 0.32), (cx + 0.015, cy - 0.02, cz - 0.07))
-    scene.camera.data.lens = 50.0
+    kit.aim(scene.camera, (cx + 0.33, cy - 0.44, cz + 0.32), (cx - 0.03, cy + 0.04, cz - 0.05))
+    scene.camera.data.lens = 40.0
     scene.render.filepath = closeup
     t0 = time.perf_counter()
     bpy.ops.render.render(write_still=True)
     print(f"demo: rendered the close-up in {time.perf_counter() - t0:.1f} s -> {closeup}")
+    if args.measure:
+        import demo_measure
+
+        close_pose = (scene.camera.matrix_world.copy(), scene.camera.data.lens)
+        demo_measure.run(scene, cloth, wide_pose, close_pose, out, TABLE_HEIGHT, SPILL_CENTRE)
 
 
 if __name__ == "__main__":

@@ -9,15 +9,20 @@ sheet's scale), and a 3 cm spill (0.8 kg/m² at its centre, eight times what the
 centre. Labels are Blender text objects.
 
 The add-on is used as a user would: installed from the built zip, each square's Liquid
-preset, Detail 1 and Image Sequence set in its properties, all baked by `madder.bake`
-(All Objects), the "Madder Stain" shader added by `madder.add_stain_shader`. Drying takes
-real time (a saturated cotton cloth dries in about half an hour), so the scene's clock
-runs at one minute per frame (fps 1, fps base 60) over an hour, each frame in
-`SUBSTEPS` simulation steps. Three frames are rendered from above with Cycles and
+preset, weave and thread count set in its properties and nothing of the look (the
+wicking, the grain, the rings, the Detail and the images are the defaults, issue 34),
+all baked by `madder.bake` (All Objects), the "Madder Stain" shader added by
+`madder.add_stain_shader`. Drying takes real time (a saturated cotton cloth dries in
+about half an hour), so the scene's clock runs at one minute per frame (fps 1, fps base
+60) over an hour, each frame in the default simulation steps (`--check-steps` measures
+their error against 30 steps). Three frames are rendered from above with Cycles and
 stitched side by side (numpy, saved by Blender's image API): wet (1 min after the
-spill), drying (15 min) and dry (60 min).
+spill), drying (15 min) and dry (60 min). Under them, a row of calibrated swatches (issue
+35) at the same scale: the plain cotton dry, full of water, full of red wine, and dried
+red wine at the same dye, its values written into the shader's attributes rather than
+baked, so the row shows what the stain shader makes of a known wetness and dye.
 
-`--check-steps` bakes one square (Coffee, plain) twice, with `SUBSTEPS` and with 30 steps per
+`--check-steps` bakes one square (Coffee, plain) twice, with `SUBSTEPS` (4) and with 30 steps per
 frame, and prints how far the two stains differ: the long steps' error."""
 
 import argparse
@@ -39,6 +44,11 @@ THREADS_PER_CM = 3.0
 SECONDS_PER_FRAME, FRAMES, SUBSTEPS = 60, 61, 4  # frame 1 is the spill, frame 61 one hour on
 MOMENTS = [(2, "wet: 1 min"), (16, "drying: 15 min"), (61, "dry: 60 min")]
 PANEL = (900, 1100)
+# the swatch row under the sheet (issue 35): uniform cloth at known wetness and dye, read by
+# the stain shader from attributes set here (not baked): (label, dye amount, wetness, bound dye)
+SWATCHES = [("dry cloth", 0.0, 0.0, 0.0), ("wet: water", 0.0, 1.0, 0.0),
+            ("wet: red wine", 1.0, 1.0, 0.0), ("dry: red wine", 1.0, 0.0, 1.0)]
+SWATCH_Y, SWATCH_PITCH, STRIP_HEIGHT = -1.0, 0.6, 300  # row centre and spacing (m), strip height (px)
 
 
 def square_name(preset, weave):
@@ -86,6 +96,41 @@ def build_scene(blend, only=None):
     bpy.ops.wm.save_as_mainfile(filepath=blend, check_existing=False)
 
 
+def add_swatches(scene, wine_color):
+    """The swatch row at `SWATCH_Y` (outside the sheet's view): four squares of the sheet's
+    cotton, plain weave at the sheet's thread count, each uniformly at one of `SWATCHES`,
+    written into the attributes the stain shader reads (the wine's colour as its preset
+    set it on the baked square), with the stain shader added by `madder.add_stain_shader`
+    as on the baked squares."""
+    import bpy
+    import numpy as np
+    import scene_kit as kit
+
+    ink = bpy.data.materials["Label"]
+    for i, (label, dye, wetness, bound) in enumerate(SWATCHES):
+        x = (i - (len(SWATCHES) - 1) / 2) * SWATCH_PITCH
+        bpy.ops.mesh.primitive_grid_add(x_subdivisions=8, y_subdivisions=8, size=SIZE,
+                                        location=(x, SWATCH_Y + 0.02, 0.0), calc_uvs=True)
+        sq = bpy.context.active_object
+        sq.name = sq.data.name = f"Swatch {label}"
+        mat = kit.material(f"Cotton swatch {i}", (0.86, 0.85, 0.82), 0.9)
+        fab = mat.madder_fabric
+        fab.enabled, fab.weave, fab.thread_count = True, "PLAIN", THREADS_PER_CM
+        sq.data.materials.append(mat)
+        mesh = sq.data
+        n = len(mesh.vertices)
+        mesh.color_attributes.new("madder_stain", "FLOAT_COLOR", "POINT")
+        mesh.attributes.new("madder_wetness", "FLOAT", "POINT")
+        mesh.attributes.new("madder_deposit", "FLOAT", "POINT")
+        rgba = np.tile([*(dye * c for c in wine_color), dye], n)
+        mesh.attributes["madder_stain"].data.foreach_set("color", rgba)
+        mesh.attributes["madder_wetness"].data.foreach_set("value", np.full(n, wetness))
+        mesh.attributes["madder_deposit"].data.foreach_set("value", np.full(n, bound))
+        bpy.context.view_layer.objects.active = sq
+        bpy.ops.madder.add_stain_shader()
+        text(scene, label, (x, SWATCH_Y - 0.095, 0.001), 0.026, "CENTER", ink)
+
+
 def text(scene, body, location, size, align, material):
     import bpy
 
@@ -100,8 +145,11 @@ def text(scene, body, location, size, align, material):
     return obj
 
 
-def configure(obj, preset, weave, substeps, image_size):
-    """The Madder settings a user would set on a square (its fabric on its material)."""
+def configure(obj, preset, weave, substeps=None, image_size=None):
+    """The Madder settings a user would set on a square, and only those: its fabric (on its
+    material: the weave and the thread count), the Spill Group, the amount and the Liquid
+    preset. The look, the Detail and the images are the defaults' (issue 34). `substeps`
+    and `image_size` override the defaults (for `--check-steps` and `--image-size`)."""
     fab = obj.material_slots[0].material.madder_fabric
     fab.enabled, fab.weave, fab.thread_count = True, weave, THREADS_PER_CM
     s = obj.madder
@@ -109,14 +157,10 @@ def configure(obj, preset, weave, substeps, image_size):
     s.source_group = "stain_source"
     s.liquid = preset
     s.amount = AMOUNT
-    s.wicking = 2.0
-    s.irregularity, s.irregularity_length, s.irregularity_seed = 0.5, 4.0, 7
-    s.carry_solute = True
-    s.substeps = substeps
-    s.detail = 1
-    s.output_images = True
-    s.output_vertex_colors = False
-    s.image_size = image_size
+    if substeps is not None:
+        s.substeps = substeps
+    if image_size is not None:
+        s.image_size = str(image_size)
 
 
 def bake_all(blend, zip_path, substeps, image_size, only=None):
@@ -136,8 +180,9 @@ def bake_all(blend, zip_path, substeps, image_size, only=None):
     t0 = time.perf_counter()
     if bpy.ops.madder.bake(all_objects=True) != {"FINISHED"}:
         sys.exit("gallery: the bake failed (see the message above)")
-    print(f"gallery: baked {len(squares)} squares ({len(squares[0].data.vertices)} vertices each, Detail 1, "
-          f"{FRAMES} frames of {SECONDS_PER_FRAME} s in {substeps} steps each) in {time.perf_counter() - t0:.1f} s")
+    print(f"gallery: baked {len(squares)} squares ({len(squares[0].data.vertices)} vertices each, Detail "
+          f"{squares[0].madder.bake_detail}, {squares[0].madder.image_baked_size} px images, {FRAMES} frames of "
+          f"{SECONDS_PER_FRAME} s in {squares[0].madder.substeps} steps each) in {time.perf_counter() - t0:.1f} s")
     return squares
 
 
@@ -170,8 +215,10 @@ def main():
     ap.add_argument("--out", default="docs/gallery.png")
     ap.add_argument("--samples", type=int, default=24)
     ap.add_argument("--scale", type=int, default=100, help="render resolution percentage")
-    ap.add_argument("--image-size", default="512", help="stain image size, px")
+    ap.add_argument("--image-size", default=None, help="stain image size, px (default: Auto)")
     ap.add_argument("--check-steps", action="store_true", help="measure the long steps' error instead")
+    ap.add_argument("--only", default=None, metavar="LIQUID:WEAVE",
+                    help="bake and render one square (e.g. RED_WINE:PLAIN), for a quick look at the layout")
     args = ap.parse_args()
     out = os.path.abspath(args.out)
     work = os.path.abspath(os.path.join("out", "gallery"))
@@ -184,7 +231,8 @@ def main():
     import bpy
     import numpy as np
 
-    bake_all(os.path.join(work, "gallery.blend"), args.zip, SUBSTEPS, args.image_size)
+    only = tuple(args.only.split(":")) if args.only else None
+    bake_all(os.path.join(work, "gallery.blend"), args.zip, None, args.image_size, only)
     scene = bpy.context.scene
     for obj in scene.objects:
         if obj.type == "MESH" and obj.madder.enabled:
@@ -208,6 +256,23 @@ def main():
     gutter = np.full((panels[0].shape[0], 8, 4), 0.4, dtype=np.float32)
     gutter[..., 3] = 1.0
     sheet = np.concatenate([p for panel in panels for p in (panel, gutter)][:-1], axis=1)
+    # the swatch row: rendered at the panels' scale (pixels per metre) across the sheet's width
+    add_swatches(scene, tuple(bpy.data.objects[square_name("RED_WINE", "PLAIN")].madder.stain_color))
+    cam, r = scene.camera, scene.render
+    per_metre = max(r.resolution_x, r.resolution_y) * r.resolution_percentage / 100 / cam.data.ortho_scale
+    r.resolution_x, r.resolution_y, r.resolution_percentage = sheet.shape[1], STRIP_HEIGHT * args.scale // 100, 100
+    cam.data.ortho_scale = r.resolution_x / per_metre
+    cam.location = (0.0, SWATCH_Y, cam.location.z)
+    path = os.path.join(work, "swatches.png")
+    scene.render.filepath = path
+    bpy.data.objects["Title"].hide_render = True
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(path)
+    strip = np.array(img.pixels[:], dtype=np.float32).reshape(r.resolution_y, r.resolution_x, 4)
+    bpy.data.images.remove(img)
+    rule = np.full((8, sheet.shape[1], 4), 0.4, dtype=np.float32)
+    rule[..., 3] = 1.0
+    sheet = np.concatenate([strip, rule, sheet], axis=0)  # rows from the bottom: the strip under
     h, w = sheet.shape[:2]
     img = bpy.data.images.new("gallery", w, h, alpha=False)
     img.pixels.foreach_set(sheet.ravel())

@@ -31,6 +31,21 @@ ZIP = harness.default_zip()
 ADDON = harness.install_extension(ZIP)
 
 
+# The newest Blender of the matrix (the first line of tests/bpy-versions.txt), what a new
+# user downloads
+with open(os.path.join(ROOT, "tests", "bpy-versions.txt")) as f:
+    NEWEST_BPY = next(v for v in (line.split("#")[0].strip() for line in f) if v)
+
+
+def eevee_on_newest_only():
+    """Skips an EEVEE render on every Blender but the newest: EEVEE compiles its shaders
+    for minutes on the CPU-only machines CI runs on, so the EEVEE cases run on the newest
+    Blender and the Cycles cases of the same checks on every Blender of the matrix."""
+    here = ".".join(str(v) for v in bpy.app.version)
+    if here != NEWEST_BPY:
+        pytest.skip(f"EEVEE runs on the newest Blender of the matrix ({NEWEST_BPY}); this is {here}")
+
+
 _status = [0]
 
 
@@ -114,3 +129,11 @@ def lumped_areas(mesh, co=None):
     for k in range(3):
         np.add.at(out, t[:, k], area / 3)
     return out
+
+
+def plain_look(s):
+    """The settings a test of something other than the look relies on: no Auto Detail (Detail 0), no image
+    sequence, no fabric grain (the default fabric's grain is the look's)."""
+    s.detail_auto, s.detail = False, 0
+    s.output_images = False
+    s.grain_from, s.irregularity = "OBJECT", 0.0

@@ -5,7 +5,7 @@ import os
 import bpy
 import numpy as np
 import pytest
-from conftest import lumped_areas, make_active, shown
+from conftest import lumped_areas, make_active, plain_look, shown
 
 import madder
 
@@ -14,6 +14,7 @@ def setup_flag(scene):
     flag = make_active(bpy.data.objects["Flag"])
     flag.madder.enabled = True
     flag.madder.source_group = "stain_source"
+    plain_look(flag.madder)  # these tests check the bake against the fields' definitions, not the look
     return flag
 
 
@@ -128,6 +129,9 @@ def test_diffusion_happens_in_world_space(open_fixture, tmp_path):
     disk = make_active(bpy.data.objects["Disk"])
     s = disk.madder
     s.source_group = "stain_source"
+    # the law holds for a uniform fabric at a fixed Detail: the grain is a length of its own,
+    # and Auto Detail would pick its level from each scale's edge
+    plain_look(s)
     s.use_rectilinear = s.use_coriolis = False
     disk.scale = (2.0, 2.0, 2.0)
     s.diffusion_rate = 0.04

@@ -10,6 +10,15 @@ import bpy
 import pytest
 from conftest import ADDON, FIXTURES, install_in_user_default, make_active, open_two_stained_objects
 
+try:
+    from conftest import plain_look
+except ImportError:  # before Part 1's helper lands: the same settings
+
+    def plain_look(s):
+        s.detail_auto, s.detail = False, 0
+        s.output_images = False
+        s.grain_from, s.irregularity = "OBJECT", 0.0
+
 import madder
 
 cli = sys.modules[ADDON + ".cli"]
@@ -23,6 +32,9 @@ def flag_file(tmp_path):
     flag = bpy.data.objects["Flag"]
     flag.madder.enabled = True
     flag.madder.source_group = "stain_source"
+    # the command line and the job, not the look: no image sequence (whose frames the
+    # progress would count a second time), Detail 0, no grain
+    plain_look(flag.madder)
     bpy.ops.wm.save_mainfile()
     return path
 
@@ -95,6 +107,8 @@ def test_cancelled_job_keeps_the_previous_bake_and_frame(tmp_path):
 
 def test_bake_all_bakes_every_enabled_object(tmp_path):
     open_two_stained_objects(tmp_path / "table.blend")
+    for name in ("Tablecloth", "Table"):
+        plain_look(bpy.data.objects[name].madder)
     assert bpy.ops.madder.bake(all_objects=True) == {"FINISHED"}
     assert sorted(os.listdir(tmp_path / "madder_cache")) == ["Table.madder", "Tablecloth.madder"]
 

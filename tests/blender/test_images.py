@@ -15,7 +15,7 @@ import madder
 FRAMES = (1, 12)  # a short bake keeps these tests cheap
 
 
-def bake_flag(open_fixture, detail=1, size="512", frames=FRAMES):
+def bake_flag(open_fixture, detail=1, size="512", frames=FRAMES, grain=True):
     scene = open_fixture("flag.blend")
     scene.frame_start, scene.frame_end = frames
     flag = make_active(bpy.data.objects["Flag"])
@@ -26,6 +26,8 @@ def bake_flag(open_fixture, detail=1, size="512", frames=FRAMES):
     s.detail = detail
     s.output_images = True
     s.image_size = size
+    if not grain:  # a uniform fabric: no detail below the coarse mesh's vertices
+        s.grain_from, s.irregularity = "OBJECT", 0.0
     assert bpy.ops.madder.bake() == {"FINISHED"}
     return scene, flag
 
@@ -80,6 +82,12 @@ def test_a_detail_bake_writes_the_fine_cache_and_an_image_pair_per_frame(open_fi
         # (interpolation rounds: −3e-7 where every vertex of a triangle is 0)
         assert stain[..., 3].min() > -1e-6 and wet[..., 0].max() == pytest.approx(buf[1].max(), rel=0.02)
         np.testing.assert_allclose(stain[..., :3], stain[..., 3:] * np.array(s.stain_color), atol=2e-3)
+    # Blender's own read of a wet image: wetness in R, and a blue it finds written (zeros), not garbage
+    blender_wet = bpy.data.images.load(image_file(flag, "wet", 12))
+    px = np.array(blender_wet.pixels[:], dtype=np.float32).reshape(512, 512, 4)
+    bpy.data.images.remove(blender_wet)
+    assert np.isfinite(px).all() and not px[..., 2].any()
+    assert px[..., 0].max() == pytest.approx(wet[..., 0].max(), rel=1e-3)
     # the vertex colours still play, from the cloth-resolution cache
     scene.frame_set(6)
     attr = shown(flag).attributes["madder_stain"]
@@ -270,19 +278,42 @@ def stain_measures(stained, bare):
     return int((d > 0.5 * d.max()).sum()), np.array([(xs * d).sum(), (ys * d).sum()]) / d.sum()
 
 
+def show_dye(material, group):
+    """Makes `material` emit the dye amount its group reads (its Coverage input's source),
+    whichever nodes feed it now: the stain's shading is not linear in the dye
+    (Kubelka–Munk, test_shading.py), so a half-peak contour of the shaded colour would sit
+    in the faint rim, which the vertex colours spread over one cloth cell."""
+    nt = material.node_tree
+    emit = nt.nodes.get("dye") or nt.nodes.new("ShaderNodeEmission")
+    emit.name = "dye"
+    for link in emit.inputs["Color"].links:
+        nt.links.remove(link)
+    emit.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+    if group.inputs["Coverage"].is_linked:
+        nt.links.new(group.inputs["Coverage"].links[0].from_socket, emit.inputs["Color"])
+    out = next(n for n in nt.nodes if n.type == "OUTPUT_MATERIAL")
+    nt.links.new(emit.outputs[0], out.inputs["Surface"])
+
+
 def test_renders_of_the_vertex_colours_and_of_the_images_agree(open_fixture, tmp_path):
-    scene, flag = bake_flag(open_fixture, detail=1)
+    # the two outputs of one smooth field: the default fabric's grain (3 mm) puts detail
+    # between the flag's 5 cm vertices that its vertex colours cannot show
+    scene, flag = bake_flag(open_fixture, detail=1, grain=False)
     bpy.ops.madder.add_stain_shader()
     setup_render(scene, (160, 96), samples=8)
     scene.frame_set(8)
-    group = next(n for n in flag.active_material.node_tree.nodes if n.type == "GROUP")
+    mat = flag.active_material
+    group = next(n for n in mat.node_tree.nodes if n.type == "GROUP")
+    show_dye(mat, group)
     images = render_still(scene, str(tmp_path / "images.exr"))
     flag.madder.output_images = False  # the same material, fed by the attributes
+    show_dye(mat, group)
     colours = render_still(scene, str(tmp_path / "colours.exr"))
-    nt = flag.active_material.node_tree
+    nt = mat.node_tree
     for name in ("Stain", "Coverage", "Wetness", "Deposit"):  # unfed, they are 0: the bare cloth
         for link in group.inputs[name].links:
             nt.links.remove(link)
+    show_dye(mat, group)
     bare = render_still(scene, str(tmp_path / "bare.exr"))
     area_c, centre_c = stain_measures(colours, bare)
     area_i, centre_i = stain_measures(images, bare)
@@ -316,7 +347,7 @@ def test_an_animation_render_shows_each_frames_image(open_fixture, tmp_path):
     full[...] = (0.3, 0.02, 0.07, 1.0)
     for f, stained in code.items():
         madder.write_exr(image_file(disk, "stain", f), full if stained else np.zeros_like(full))
-        madder.write_exr(image_file(disk, "wet", f), np.zeros((512, 512, 2), np.float32), ("R", "G"))
+        madder.write_exr(image_file(disk, "wet", f), np.zeros((512, 512, 3), np.float32), ("R", "G", "B"))
     setup_render(scene, (24, 24), samples=1)
     scene.render.image_settings.file_format = "PNG"
     scene.render.filepath = str(tmp_path / "f####")

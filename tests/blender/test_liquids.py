@@ -10,17 +10,19 @@ from conftest import ADDON, lumped_areas, make_active, shown
 
 import madder
 
-# the tide-line physics is Coffee's (issue 13 §2); the others switch it off
-NO_RING = dict(carry_solute=False, residual_saturation=0.0, vapour_limited=False)
+# the tide-line physics is Coffee's (issue 13 §2); Red Wine carries its solids with the
+# flow, the others switch it off; every preset sets a wicking front (issue 34)
+NO_RING = dict(carry_solute=False, residual_saturation=0.0, vapour_limited=False, wicking=2.0)
+WINE_RING = dict(NO_RING, carry_solute=True)
 # the documented preset values (addon/properties.py explains where they come from)
 PRESETS = {
     "WATER": dict(concentration=0.0, stain_color=(0.90, 0.93, 0.95), absorption=2.0, adsorption=0.0,
                   capacity=2e-3, evaporation=5e-5, evaporation_boundary=1.2, **NO_RING),
     "RED_WINE": dict(concentration=0.02, stain_color=(0.30, 0.02, 0.07), absorption=2.0, adsorption=0.5,
-                     capacity=2e-3, evaporation=6e-5, evaporation_boundary=1.2, **NO_RING),
+                     capacity=2e-3, evaporation=6e-5, evaporation_boundary=1.2, **WINE_RING),
     "COFFEE": dict(concentration=0.012, stain_color=(0.25, 0.13, 0.05), absorption=2.0, adsorption=0.05,
                    capacity=2e-4, evaporation=5e-5, evaporation_boundary=1.5, carry_solute=True,
-                   residual_saturation=0.1, vapour_limited=True),
+                   residual_saturation=0.1, vapour_limited=True, wicking=2.0),
     "INK": dict(concentration=0.05, stain_color=(0.04, 0.05, 0.15), absorption=3.0, adsorption=1.0,
                 capacity=5e-3, evaporation=4e-5, evaporation_boundary=1.2, **NO_RING),
 }
@@ -99,7 +101,13 @@ def test_defaults_are_the_cores_defaults(addon):
     kw = bake.simulator_settings(bpy.context.scene, obj)
     kw.pop("color")
     ours = madder.Simulator(faces, rest, rest, diffusion=s.diffusion_rate, **kw)
-    theirs = madder.Simulator(faces, rest, rest)
+    # the one setting that is not the core's default: the grain of the default fabric
+    # (plain cotton) that a cloth without a Madder Fabric is (issue 34)
+    cotton = bake.presets.FABRIC_PRESETS[bake.presets.DEFAULT_FABRIC]
+    assert (kw["irregularity"], kw["irregularity_length"], kw["irregularity_seed"]) == pytest.approx(
+        (cotton["irregularity"], cotton["irregularity_length"] * 1e-3, 0))
+    theirs = madder.Simulator(faces, rest, rest, irregularity=cotton["irregularity"],
+                              irregularity_length=cotton["irregularity_length"] * 1e-3)
     wet = (np.hypot(co[:, 0], co[:, 1]) < 0.2).astype(np.float32) * 0.5
     for sim in (ours, theirs):
         sim.add_liquid(wet, s.concentration)

@@ -9,7 +9,7 @@ import sys
 import bpy
 import numpy as np
 import pytest
-from conftest import make_active, shown
+from conftest import make_active, plain_look, shown
 
 import madder
 
@@ -21,6 +21,7 @@ def setup_flag(scene, last=LAST):
     flag = make_active(bpy.data.objects["Flag"])
     flag.madder.enabled = True
     flag.madder.source_group = "stain_source"
+    plain_look(flag.madder)  # Live against a bake of the same settings, not the look
     return flag
 
 
@@ -213,6 +214,7 @@ def test_live_with_a_moving_brush_and_bake_flow_gives_a_bakes_fields(addon, tmp_
     bpy.ops.mesh.primitive_grid_add(x_subdivisions=30, y_subdivisions=30, size=2.0)
     cloth = bpy.context.object
     cloth.madder.enabled = True
+    plain_look(cloth.madder)
     cloth.madder.cache_dir = str(tmp_path)
     cloth.madder.bake_flow = True
     bpy.ops.mesh.primitive_plane_add(size=0.3, location=(0.3, 0.0, 0.5))

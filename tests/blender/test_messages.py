@@ -41,7 +41,8 @@ def test_every_setting_has_a_tooltip(addon):
             assert prop.description.strip(), f"{owner}.{prop.identifier} has no description"
     names = [owner for owner, _ in madder_rna_structs()]
     for expected in ("MadderObjectSettings", "MadderSourceSettings", "MadderFabric", "MadderMotionSettings",
-                     "MADDER_OT_bake", "MADDER_OT_compress_motion", "MADDER_OT_decompress_motion"):
+                     "MadderSplashSettings", "MADDER_OT_bake", "MADDER_OT_compress_motion",
+                     "MADDER_OT_decompress_motion"):
         assert expected in names  # the walk really found the settings
     assert checked > 40
 
@@ -96,5 +97,9 @@ def test_command_bakes_negative_frames(tmp_path, capsys, argv, addon):
     bpy.data.objects["Flag"].madder.source_group = "stain_source"
     bpy.ops.wm.save_mainfile()
     assert cli.main(["bake", str(path), "--object", "Flag", "--no-save", *argv]) == 0, capsys.readouterr().err
+    captured = capsys.readouterr()
+    # the default (not ticked) Image Sequence cannot number frames before 0: skipped, with a warning
+    said = captured.out + captured.err
+    assert "starts before frame 0" in said and "vertex colors only" in said
     r = madder.CacheReader(str(tmp_path / "madder_cache" / "Flag.madder"))
     assert (r.first_frame, r.last_frame) == (-2, 3)

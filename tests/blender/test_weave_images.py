@@ -27,6 +27,7 @@ def bake(open_fixture, thread_count, size=str(SIZE)):
     fab.weave = "PLAIN"
     fab.gaps = True
     fab.thread_count = thread_count
+    fab.shader_weave = False  # the images' own weave (on: the shader draws it, test_weave_shader)
     flag.data.materials.clear()
     flag.data.materials.append(mat)
     s = flag.madder

@@ -173,6 +173,7 @@ def test_the_exporter_writes_the_playback_values_of_each_frame(tmp_path):
     np.testing.assert_array_equal(rgba, want[0].reshape(4, 4))
     np.testing.assert_array_equal(wet[:, 0], want[1])
     np.testing.assert_array_equal(wet[:, 1], want[2])
+    assert not wet[:, 2].any()  # the wet image's blue is written, as zeros
     for f in ex.frames():
         ex.export(f)
     assert ex.overlapping == 3
@@ -180,7 +181,7 @@ def test_the_exporter_writes_the_playback_values_of_each_frame(tmp_path):
     # every frame's two images, plus the lead copies of the first frame as file 0
     assert names == [f"Flag_{k}.{f:04d}.exr" for k in ("stain", "wet") for f in range(4)]
     assert ("write", "Flag_stain.0001.exr", (512, 512, 4), ("R", "G", "B", "A")) in core.calls
-    assert ("write", "Flag_wet.0003.exr", (512, 512, 2), ("R", "G")) in core.calls
+    assert ("write", "Flag_wet.0003.exr", (512, 512, 3), ("R", "G", "B")) in core.calls
     for kind in ("stain", "wet"):
         lead, first = (np.load(out / f"Flag_{kind}.{f:04d}.exr", allow_pickle=False) for f in (0, 1))
         np.testing.assert_array_equal(lead, first)
@@ -245,10 +246,11 @@ def test_real_images_hold_the_values_at_texel_centres(tmp_path):
         want = (1 - s) * v[0] + (s - t) * v[1] + t * v[2]
         np.testing.assert_allclose(image[y, x], want, rtol=1e-3, atol=1e-5)  # half float
     wet = madder.read_exr(str(out / "Flag_wet.0003.exr"))
-    assert wet.shape == (512, 512, 2)
+    assert wet.shape == (512, 512, 3)
     # wetness 0.15 kg/m² over the reference 0.1 reads as full; deposit 2e-4 / 2e-4 too
     np.testing.assert_allclose(wet[..., 0], 1.0)
     np.testing.assert_allclose(wet[..., 1], 1.0)
+    assert not wet[..., 2].any()
 
 
 def test_with_the_weave_a_saturated_stain_shows_every_thread_full_and_a_faint_one_the_weave(tmp_path):

@@ -20,7 +20,8 @@ use crate::threads::Pool;
 /// viscosity=..., friction=..., absorption=..., saturation=..., adsorption=...,
 /// capacity=..., evaporation=..., evaporation_boundary=1.2, wicking_exponent=0,
 /// wicking_density=0.1, irregularity=0, irregularity_length=0.003, irregularity_seed=0,
-/// carry_solute=False, residual_saturation=0, vapour_limited=False, substeps=1, use_gravity=True, use_rectilinear=True,
+/// irregularity_fine_length=0,
+/// carry_solute=False, residual_saturation=0, vapour_limited=False, holdup=0, substeps=1, use_gravity=True, use_rectilinear=True,
 /// use_coriolis=True, momentum_advection=True, detail=0, threads=None)`.
 ///
 /// `topology` is a `Topology` or an `(F, 3)` face array (any integer dtype); `rest` and
@@ -38,6 +39,10 @@ use crate::threads::Pool;
 /// `irregularity` (0–1) makes the fabric uneven: its diffusion and absorption rates vary
 /// at random over the rest surface, correlated over `irregularity_length` metres, the
 /// same for the same `irregularity_seed` (0, the default: a uniform fabric).
+/// `irregularity_fine_length` > 0 (metres, below `irregularity_length`) makes that
+/// variation multi-scale, self-affine (Hurst exponent 0.6) from this fibre scale up to
+/// `irregularity_length`, so the outline is rough at every scale in between (0, the
+/// default: one correlation length).
 /// `carry_solute` moves the dissolved solute with the solvent's capillary flow (and the
 /// liquid in the fibres wicks too) instead of diffusing it at the solvent's rate.
 /// `residual_saturation` (0 to 1, exclusive) pins the wet edge: the fibres' liquid below
@@ -46,6 +51,8 @@ use crate::threads::Pool;
 /// into still air does (`J/J̄ = R/(2√(d(2R − d)))`, `d` the distance to the edge), in place
 /// of `evaporation_boundary` on the outermost vertices. With `carry_solute` the two
 /// draw the solute to the pinned edge as it dries: a tide line.
+/// `holdup` (kg/m², ≥ 0) is the free liquid each vertex keeps back from a run, filled
+/// before the run moves on and left behind to soak in (0, the default: off).
 /// Units are SI: densities in kg/m², rates in 1/s, evaporation in kg/(m²·s).
 /// `detail` (0–3) runs the simulation on the cloth's triangles each split into
 /// `4**detail` (the fine vertices placed on the cloth's triangles every frame): `step`,
@@ -101,7 +108,8 @@ impl Simulator {
         viscosity=None, friction=None, absorption=None, saturation=None, adsorption=None,
         capacity=None, evaporation=None, evaporation_boundary=None, wicking_exponent=None,
         wicking_density=None, irregularity=None, irregularity_length=None, irregularity_seed=0,
-        carry_solute=false, residual_saturation=None, vapour_limited=false, substeps=1,
+        irregularity_fine_length=None,
+        carry_solute=false, residual_saturation=None, vapour_limited=false, holdup=None, substeps=1,
         use_gravity=true, use_rectilinear=true, use_coriolis=true, momentum_advection=true,
         detail=0, threads=None))]
     #[allow(clippy::too_many_arguments)]
@@ -129,9 +137,11 @@ impl Simulator {
         irregularity: Option<f64>,
         irregularity_length: Option<f64>,
         irregularity_seed: u64,
+        irregularity_fine_length: Option<f64>,
         carry_solute: bool,
         residual_saturation: Option<f64>,
         vapour_limited: bool,
+        holdup: Option<f64>,
         substeps: u32,
         use_gravity: bool,
         use_rectilinear: bool,
@@ -213,9 +223,14 @@ impl Simulator {
             irregularity_length,
         );
         params.irregularity.seed = irregularity_seed;
+        set(
+            &mut params.irregularity.fine_length,
+            irregularity_fine_length,
+        );
         params.carry_solute = carry_solute;
         set(&mut params.residual_saturation, residual_saturation);
         params.vapour_limited = vapour_limited;
+        set(&mut params.holdup, holdup);
         let r = &mut params.interaction;
         set(&mut r.absorption, absorption);
         set(&mut r.saturation, saturation);

@@ -68,6 +68,7 @@ fn main() {
                 amplitude: 0.5,
                 correlation_length: 0.01,
                 seed: 1,
+                fine_length: 0.0,
             },
             ..Default::default()
         },
@@ -91,6 +92,7 @@ fn main() {
         carried_fraction: 1.0,
         dispersivity: 0.0,
         vapour_limited: tide,
+        holdup: 0.0,
         ..Default::default()
     };
     let plain = ms_per_frame("coffee, seed's drying", coffee(false), frames);

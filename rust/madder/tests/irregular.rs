@@ -23,6 +23,7 @@ fn the_field_has_the_covariance_it_is_made_for() {
             amplitude: 0.5,
             correlation_length: ell,
             seed,
+            fine_length: 0.0,
         };
         // points on a plane 400 ℓ wide, and pairs at distance r in many directions
         let side = 400.0 * ell;
@@ -69,6 +70,7 @@ fn the_field_has_the_covariance_it_is_made_for() {
         amplitude: 1.0,
         correlation_length: 0.01,
         seed: 9,
+        fine_length: 0.0,
     };
     let p = DVec3::new(0.1234, -0.5, 0.25);
     let alone = irr.field(&[p])[0];
@@ -155,6 +157,7 @@ fn an_irregular_fabric_gives_a_ragged_front() {
             amplitude: 0.5,
             correlation_length: ell,
             seed: 3,
+            fine_length: 0.0,
         },
         2,
     );
@@ -177,6 +180,7 @@ fn amplitude_zero_is_the_uniform_fabric_and_threads_do_not_matter() {
         amplitude: 0.0,
         correlation_length: 0.01,
         seed,
+        fine_length: 0.0,
     };
     let bits = |s: &Simulator| {
         s.fields()
@@ -193,6 +197,7 @@ fn amplitude_zero_is_the_uniform_fabric_and_threads_do_not_matter() {
         amplitude: 0.7,
         correlation_length: 0.01,
         seed: 5,
+        fine_length: 0.0,
     };
     let (_, c) = spill(on, 1);
     let (_, d) = spill(on, 2);
@@ -209,6 +214,7 @@ fn bad_irregularity_is_refused_by_name() {
                 amplitude,
                 correlation_length,
                 seed: 0,
+                fine_length: 0.0,
             },
             ..Default::default()
         };

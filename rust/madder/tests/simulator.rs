@@ -48,6 +48,7 @@ fn ideal(forces: Forces) -> StainParams {
         carried_fraction: 1.0,
         dispersivity: 0.0,
         vapour_limited: false,
+        holdup: 0.0,
         substeps: 1,
         active_region: true,
     }
@@ -672,6 +673,7 @@ fn full_params(momentum_advection: bool, substeps: u32) -> StainParams {
             amplitude: 0.4,
             correlation_length: 0.05,
             seed: 7,
+            fine_length: 0.0,
         },
         // the solute carried by the solvent's flow, to a pinned edge drying fastest there
         carry_solute: true,
@@ -679,6 +681,7 @@ fn full_params(momentum_advection: bool, substeps: u32) -> StainParams {
         carried_fraction: 1.0,
         dispersivity: 0.0,
         vapour_limited: true,
+        holdup: 0.0,
         substeps,
         active_region: true,
     }

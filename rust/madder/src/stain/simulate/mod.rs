@@ -49,6 +49,30 @@
 //! `residual_saturation` the fibres' liquid has its own, pinned operator there (issue 13
 //! §2, tide lines: [`super::diffuse`]).
 //!
+//! ## Runs (issue 34 §1): the holdup
+//! Without it the free liquid is a blob that runs over the dry fibres in a few sub-steps:
+//! absorption (`ṗ = K_p (σ_sat A − p)`, time constant `1/K_p = 0.5 s`) sees it at a
+//! vertex for `Δx/u` (5 mm at the terminal 0.2 m/s: 25 ms), so the fibres take up 5 %
+//! of their saturation and the path stays clean, and the whole blob arrives below. A
+//! liquid running down a porous sheet wets it: the pores between the yarns and the
+//! roughness pin a film `h_r` at the contact line which the flow has to fill before it
+//! moves on and which stays behind (the holdup of trickle-bed and packed-column flow;
+//! for a vertical porous sheet, Kim et al., Phys. Fluids 27, 2015). With
+//! `holdup = h_r > 0`, in step 2 each vertex keeps `min(f, h_r A)` of its free solvent
+//! (and the same fraction of its dissolved solute and colour) out of the transport and
+//! adds it back after; the velocity is the moving part's. So
+//! - a run's front advances only as fast as the flux fills the holdup ahead of it, and
+//!   stops when the excess over `h_r` (and over what the fibres take) is used up: its
+//!   area is `(fed − absorbed) / h_r`;
+//! - the liquid left behind soaks into the fibres at `K_p` for as long as it stays,
+//!   and their solute is adsorbed at `K_d`: the path is stained in proportion to the time
+//!   liquid stood there, not to the time the front took to pass;
+//! - with the irregular fabric the holdup varies (the fabric's multiplier): the front
+//!   advances where it is smaller and lags where it is larger, fingers;
+//! - at a hem (the boundary below) the flux closes: what arrives gathers there.
+//!
+//! Mass is moved, never made: `f = (f − held) + held`, exact to the rounding.
+//!
 //! ## Which velocity (issue 10)
 //! The momentum form is the default because only it conserves momentum where streams of
 //! liquid meet. The semi-Lagrangian velocity is a Burgers equation for `u` alone: where
@@ -176,6 +200,12 @@ pub struct StainParams {
     /// ([`super::interact`], "Vapour-limited evaporation"), instead of eq. 4.8's factor on
     /// the outermost vertices. Off by default.
     pub vapour_limited: bool,
+    /// `h_r`, kg/m²: the free liquid a vertex holds back from the flow (the run's
+    /// holdup, module doc "Runs"): a film pinned in the weave's pores that the liquid
+    /// running over it must first fill, and which stays behind, soaking into the fibres
+    /// and dyeing them, when the run has passed. Scaled by the irregular fabric's
+    /// multiplier. 0 (the default) is off.
+    pub holdup: f64,
     /// Sub-steps per frame, at least: a frame whose vertex frames turn by more than
     /// [`MAX_TURN`] takes more on its own (module doc, "Fast rotation").
     pub substeps: u32,
@@ -200,6 +230,7 @@ impl Default for StainParams {
             carried_fraction: 1.0,
             dispersivity: 0.0,
             vapour_limited: false,
+            holdup: 0.0,
             substeps: 1,
             active_region: true,
         }
@@ -251,6 +282,7 @@ impl StainParams {
             self.dispersivity >= 0.0,
             "finite and ≥ 0",
         )?;
+        check_range("holdup", self.holdup, self.holdup >= 0.0, "finite and ≥ 0")?;
         self.wicking.validate()?;
         self.irregularity.validate()?;
         self.interaction.validate()

@@ -230,6 +230,17 @@ impl Simulator {
         if let Some(c) = color.as_mut() {
             fields.extend(c.iter_mut().map(|v| v.as_mut_slice()));
         }
+        // the run's holdup (module doc, "Runs"): the pinned film stays out of the transport
+        let held = (p.holdup > 0.0).then(|| {
+            let irregular = w.cloth.irregular.as_deref();
+            hold_back(
+                &mut fields,
+                &geometry.vertex_area,
+                active,
+                p.holdup,
+                irregular,
+            )
+        });
         prof.transport_passes += plan.substeps() * fields.len();
         if p.momentum_advection {
             plan.transport_with_momentum_into(
@@ -242,6 +253,13 @@ impl Simulator {
             );
         } else {
             plan.transport_all(topo, &mut fields);
+        }
+        if let Some(held) = held {
+            for (field, kept) in fields.iter_mut().zip(&held) {
+                for (m, k) in field.iter_mut().zip(kept) {
+                    *m += k;
+                }
+            }
         }
         if let (Some(c), Some(cf)) = (color, f.color_free.as_mut()) {
             merge_rgb(&c, cf);
@@ -438,4 +456,43 @@ impl Simulator {
         loc.fields.scatter(&w.whole, &part);
         Ok(())
     }
+}
+
+/// The run's holdup (module doc, "Runs"): on the active vertices, takes
+/// `min(f, h_r m_i A_i)` of the free solvent `fields[0]` (`m_i` the irregular fabric's
+/// multiplier, 1 without) and the same fraction of every other field out of `fields`,
+/// and returns what it took, per field, to be added back after the transport.
+fn hold_back(
+    fields: &mut [&mut [f64]],
+    area: &[f64],
+    active: &[bool],
+    holdup: f64,
+    irregular: Option<&[f64]>,
+) -> Vec<Vec<f64>> {
+    let n = area.len();
+    let fraction: Vec<f64> = (0..n)
+        .map(|j| {
+            let f = fields[0][j];
+            if !active[j] || f <= 0.0 {
+                return 0.0;
+            }
+            let cap = holdup * irregular.map_or(1.0, |m| m[j]) * area[j];
+            if f <= cap { 1.0 } else { cap / f }
+        })
+        .collect();
+    fields
+        .iter_mut()
+        .map(|field| {
+            field
+                .iter_mut()
+                .zip(&fraction)
+                .map(|(m, &r)| {
+                    // all of it where all is held, so nothing is left to round
+                    let k = if r >= 1.0 { *m } else { *m * r };
+                    *m -= k;
+                    k
+                })
+                .collect()
+        })
+        .collect()
 }

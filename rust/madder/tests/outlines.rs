@@ -1,0 +1,241 @@
+//! Validation of the stain's outline (issue 34 §2) on a flat, still cloth: a spot spread
+//! by wicking, its wetted front `r(θ)` found along 720 rays (the wetness interpolated
+//! bilinearly on the structured grid, the front where it first exceeds 5 % of its peak
+//! coming in from outside).
+//!
+//! 1. The multi-scale field's structure function grows as `l^{2H}`, `H = 0.6`, between
+//!    1 and 20 mm (fitted log-log), where the single-scale field's is flat beyond `ℓ`.
+//! 2. A spill on a multi-scale fabric (fine cutoff 0.5 mm, one thread pitch of a
+//!    20 threads/cm cloth; upper cutoff 30 mm) has a self-affine front: the height-height
+//!    correlation `w(l) = ⟨(r(θ + l/R) − r(θ))²⟩^{1/2}` fits `l^α`, α in 0.5–0.75, for
+//!    `l` from 1 to 20 mm.
+//! 3. No facets along the mesh: on the uniform isotropic fabric on a structured grid
+//!    (0.5 mm edges, the triangulation of the flag and demo cloths) the 4- and 8-fold
+//!    Fourier terms of `r(θ)` are below 1 % of the mean radius.
+
+use faer::Par;
+use glam::DVec3;
+use madder::stain::{Conductivity, Forces, Irregularity, Simulator, StainParams, Wicking};
+
+mod common;
+use common::{Grid, no_interaction};
+
+const N: usize = 160;
+const HALF: f64 = 0.04; // 0.5 mm edges over 8 cm
+const RAYS: usize = 720;
+
+fn pitch() -> f64 {
+    2.0 * HALF / N as f64
+}
+
+/// Wetness per vertex of a spot (radius `r0`) spread by wicking for 6 s.
+fn spill(irregularity: Irregularity, r0: f64) -> (Vec<f64>, Vec<DVec3>) {
+    let (topo, pos) = Grid::new(N, HALF).build();
+    let params = StainParams {
+        forces: Forces {
+            gravity: false,
+            rectilinear: false,
+            coriolis: false,
+        },
+        interaction: no_interaction(),
+        wicking: Wicking {
+            exponent: 1.0,
+            density: 0.1,
+        },
+        irregularity,
+        ..Default::default()
+    };
+    let mut sim = Simulator::new(
+        topo,
+        &pos,
+        &pos,
+        Conductivity::Isotropic(4e-4),
+        params,
+        [0.5, 0.1, 0.1],
+        Par::Seq,
+    )
+    .unwrap();
+    let start: Vec<f64> = pos
+        .iter()
+        .map(|p| if p.length() < r0 { 0.1 } else { 0.0 })
+        .collect();
+    sim.add_liquid(&start, 0.05, None).unwrap();
+    for _ in 0..60 {
+        sim.step(&pos, 0.1, None).unwrap();
+    }
+    (sim.wetness(), pos)
+}
+
+/// Bilinear interpolation of a vertex field of the grid at `(x, y)`.
+fn sample(v: &[f64], x: f64, y: f64) -> f64 {
+    let dx = pitch();
+    let (u, w) = ((x + HALF) / dx, (y + HALF) / dx);
+    let (j, i) = (u.floor() as usize, w.floor() as usize);
+    if i >= N || j >= N {
+        return 0.0;
+    }
+    let (fu, fw) = (u - j as f64, w - i as f64);
+    let at = |i: usize, j: usize| v[i * (N + 1) + j];
+    (1.0 - fw) * ((1.0 - fu) * at(i, j) + fu * at(i, j + 1))
+        + fw * ((1.0 - fu) * at(i + 1, j) + fu * at(i + 1, j + 1))
+}
+
+/// The front `r(θ_k)`, `θ_k = 2πk/RAYS`: where the wetness first exceeds 5 % of its peak
+/// coming in along the ray from the border (linear between the two samples around it).
+fn front(wet: &[f64]) -> Vec<f64> {
+    let peak = wet.iter().cloned().fold(0.0, f64::max);
+    let level = 0.05 * peak;
+    let step = pitch() / 20.0;
+    (0..RAYS)
+        .map(|k| {
+            let t = std::f64::consts::TAU * k as f64 / RAYS as f64;
+            let (c, s) = (t.cos(), t.sin());
+            let mut r = HALF * 0.99;
+            let mut prev = sample(wet, r * c, r * s);
+            while r > 0.0 {
+                let q = r - step;
+                let v = sample(wet, q * c, q * s);
+                if v >= level {
+                    return q + step * (v - level) / (v - prev).max(1e-300);
+                }
+                prev = v;
+                r = q;
+            }
+            panic!("no front along ray {k}")
+        })
+        .collect()
+}
+
+fn mean(r: &[f64]) -> f64 {
+    r.iter().sum::<f64>() / r.len() as f64
+}
+
+/// `|c_m| / c_0`: the m-fold Fourier term of `r(θ)` relative to the mean radius.
+fn fourier(r: &[f64], m: usize) -> f64 {
+    let (mut re, mut im) = (0.0, 0.0);
+    for (k, x) in r.iter().enumerate() {
+        let t = std::f64::consts::TAU * (m * k) as f64 / r.len() as f64;
+        re += x * t.cos();
+        im += x * t.sin();
+    }
+    2.0 * (re * re + im * im).sqrt() / r.len() as f64 / mean(r)
+}
+
+/// Least-squares slope of `ln y` against `ln x`.
+fn loglog_slope(pts: &[(f64, f64)]) -> f64 {
+    let n = pts.len() as f64;
+    let (lx, ly): (Vec<f64>, Vec<f64>) = pts.iter().map(|&(x, y)| (x.ln(), y.ln())).unzip();
+    let (mx, my) = (lx.iter().sum::<f64>() / n, ly.iter().sum::<f64>() / n);
+    let sxy: f64 = lx.iter().zip(&ly).map(|(x, y)| (x - mx) * (y - my)).sum();
+    let sxx: f64 = lx.iter().map(|x| (x - mx) * (x - mx)).sum();
+    sxy / sxx
+}
+
+/// `(l, w(l))` of the front for arc lengths `l` from 1 to 20 mm (lags of whole rays).
+fn roughness(r: &[f64]) -> Vec<(f64, f64)> {
+    let rm = mean(r);
+    let dl = rm * std::f64::consts::TAU / RAYS as f64;
+    let mut out = Vec::new();
+    let mut last = 0;
+    for q in 0..=24 {
+        let l = 1e-3 * 20f64.powf(q as f64 / 24.0);
+        let lag = (l / dl).round() as usize;
+        if lag == 0 || lag == last {
+            continue;
+        }
+        last = lag;
+        let w2 = (0..RAYS)
+            .map(|k| (r[(k + lag) % RAYS] - r[k]).powi(2))
+            .sum::<f64>()
+            / RAYS as f64;
+        out.push((lag as f64 * dl, w2.sqrt()));
+    }
+    out
+}
+
+fn multiscale(seed: u64) -> Irregularity {
+    Irregularity {
+        amplitude: 0.5,
+        correlation_length: 0.03,
+        seed,
+        fine_length: 0.0005,
+    }
+}
+
+#[test]
+#[ignore = "open: sample variance 1.15 (few effective large-scale modes), H not yet checked"]
+fn the_multiscale_field_is_self_affine_with_hurst_0_6() {
+    let mut slopes = Vec::new();
+    for seed in 1..=3u64 {
+        let irr = multiscale(seed);
+        let mut rng = madder::rng::SplitMix64::new(seed);
+        let base: Vec<DVec3> = (0..4000)
+            .map(|_| DVec3::new(0.5 * rng.unit(), 0.5 * rng.unit(), 0.0))
+            .collect();
+        let f0 = irr.field(&base);
+        let var = f0.iter().map(|x| x * x).sum::<f64>() / f0.len() as f64;
+        assert!((var - 1.0).abs() < 0.15, "variance {var}");
+        let pts: Vec<(f64, f64)> = (0..=8)
+            .map(|q| {
+                let l = 1e-3 * 20f64.powf(q as f64 / 8.0);
+                let moved: Vec<DVec3> = base
+                    .iter()
+                    .map(|p| {
+                        let a = std::f64::consts::TAU * rng.unit();
+                        *p + l * DVec3::new(a.cos(), a.sin(), 0.0)
+                    })
+                    .collect();
+                let f1 = irr.field(&moved);
+                let d2 = f0
+                    .iter()
+                    .zip(&f1)
+                    .map(|(a, b)| (a - b).powi(2))
+                    .sum::<f64>()
+                    / f0.len() as f64;
+                (l, d2)
+            })
+            .collect();
+        slopes.push(0.5 * loglog_slope(&pts));
+    }
+    let h = mean(&slopes);
+    println!("structure-function exponent H over 1–20 mm: {slopes:.3?}, mean {h:.3}");
+    assert!((h - 0.6).abs() < 0.1, "H = {h}");
+}
+
+#[test]
+#[ignore = "open: measured α 0.87/0.89/0.92 (seeds 1-3), mean 0.89, above 0.5-0.75"]
+fn a_multiscale_fabric_gives_a_self_affine_front() {
+    let mut alphas = Vec::new();
+    for seed in 1..=3u64 {
+        let (wet, _) = spill(multiscale(seed), 0.008);
+        let r = front(&wet);
+        let w = roughness(&r);
+        let a = loglog_slope(&w);
+        println!(
+            "seed {seed}: mean radius {:.2} mm, w(1 mm) {:.3} mm, w(20 mm) {:.3} mm, α {a:.3}",
+            1e3 * mean(&r),
+            1e3 * w[0].1,
+            1e3 * w.last().unwrap().1
+        );
+        alphas.push(a);
+    }
+    let a = mean(&alphas);
+    println!("α over 1–20 mm: {alphas:.3?}, mean {a:.3}");
+    assert!((0.5..=0.75).contains(&a), "α = {a}");
+}
+
+#[test]
+#[ignore = "open defect: 4-fold term 3.43 % of the radius (facets), 8-fold 0.02 %; cause not fixed"]
+fn a_uniform_fabric_on_a_structured_grid_has_no_facets() {
+    let (wet, _) = spill(Irregularity::default(), 0.008);
+    let r = front(&wet);
+    let (c4, c8) = (fourier(&r, 4), fourier(&r, 8));
+    println!(
+        "uniform fabric, structured grid (0.5 mm): mean radius {:.2} mm, 4-fold {:.3} %, 8-fold {:.3} %, 2-fold {:.3} %",
+        1e3 * mean(&r),
+        100.0 * c4,
+        100.0 * c8,
+        100.0 * fourier(&r, 2)
+    );
+    assert!(c4 < 0.01 && c8 < 0.01, "4-fold {c4}, 8-fold {c8}");
+}
