@@ -191,6 +191,8 @@ class MADDER_PT_stain_look(_StainSubPanel, bpy.types.Panel):
         sub = col.column(align=True)
         sub.active = s.carry_solute
         sub.prop(s, "residual_saturation")
+        sub.prop(s, "carried_fraction")
+        sub.prop(s, "dispersivity")
         col.prop(s, "vapour_limited")
 
 

@@ -55,13 +55,17 @@ Fabric presets (`FABRICS`, what `fabrics.py`'s Fabric Preset writes) are in
 
 import math
 
-# the drying that makes tide lines (issue 13 §2): Coffee's; the others set it off
-TIDE_LINES = dict(carry_solute=True, residual_saturation=0.1, vapour_limited=True)
-NO_TIDE_LINES = dict(carry_solute=False, residual_saturation=0.0, vapour_limited=False)
+# the drying that makes tide lines (issue 13 §2) and its rim (issue 34 §3): the solute
+# carried by the flow to a pinned edge that dries fastest, spread back against the flow
+# over the dispersivity (mm); every liquid with a solute that stays mobile rings
+TIDE_LINES = dict(carry_solute=True, residual_saturation=0.1, vapour_limited=True, carried_fraction=1.0,
+                  dispersivity=3.5)
+NO_TIDE_LINES = dict(carry_solute=False, residual_saturation=0.0, vapour_limited=False, carried_fraction=1.0,
+                     dispersivity=0.0)
 # how each liquid rings, kept together so that a rim model can tune them per liquid
 RINGS = {
-    "WATER": NO_TIDE_LINES,
-    "RED_WINE": dict(carry_solute=True, residual_saturation=0.0, vapour_limited=False),
+    "WATER": TIDE_LINES,
+    "RED_WINE": TIDE_LINES,
     "COFFEE": TIDE_LINES,
     "INK": NO_TIDE_LINES,
 }
@@ -70,12 +74,12 @@ WICKING = {"WATER": 2.0, "RED_WINE": 2.0, "COFFEE": 2.0, "INK": 2.0}
 
 LIQUIDS = {
     "WATER": dict(
-        stain_color=(0.90, 0.93, 0.95), concentration=0.0, absorption=2.0, adsorption=0.0,
+        stain_color=(0.95, 0.92, 0.85), concentration=1e-3, absorption=2.0, adsorption=0.0,
         capacity=2e-3, evaporation=5e-5, evaporation_boundary=1.2, **RINGS["WATER"], wicking=WICKING["WATER"],
     ),
     "RED_WINE": dict(
-        stain_color=(0.30, 0.02, 0.07), concentration=0.02, absorption=2.0, adsorption=0.5,
-        capacity=2e-3, evaporation=6e-5, evaporation_boundary=1.2, **RINGS["RED_WINE"],
+        stain_color=(0.30, 0.02, 0.07), concentration=0.02, absorption=2.0, adsorption=0.003,
+        capacity=1e-3, evaporation=6e-5, evaporation_boundary=1.2, **RINGS["RED_WINE"],
         wicking=WICKING["RED_WINE"],
     ),
     "COFFEE": dict(
@@ -89,8 +93,8 @@ LIQUIDS = {
 }
 LIQUID_ITEMS = [
     ("CUSTOM", "Custom", "Your own values (any change to a preset's value switches to Custom)"),
-    ("WATER", "Water", "No solute: wets the cloth, leaves no stain"),
-    ("RED_WINE", "Red Wine", "Deep red, binds strongly to the fibres"),
+    ("WATER", "Water", "Wets the cloth and dries to a faint brown tide line"),
+    ("RED_WINE", "Red Wine", "Deep red, binds to the fibres over minutes, a modest rim"),
     ("COFFEE", "Coffee", "Brown, binds weakly to the fibres, dries faster at the rim"),
     ("INK", "Ink", "Blue-black, concentrated, wicks and binds fast"),
 ]
@@ -178,6 +182,9 @@ def simulator_keywords(s, gravity, scene_gravity, unit, grain=None):
         carry_solute=bool(s.carry_solute),
         residual_saturation=s.residual_saturation,
         vapour_limited=bool(s.vapour_limited),
+        # the rim (issue 34 §3): the dispersivity is set in millimetres of cloth
+        carried_fraction=s.carried_fraction,
+        dispersivity=s.dispersivity * 1e-3,
         holdup=s.holdup,
         use_gravity=bool(s.use_gravity and scene_gravity),
         use_rectilinear=s.use_rectilinear,

@@ -471,6 +471,27 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         max=0.95,
         update=_mark_custom,
     )
+    carried_fraction: FloatProperty(
+        name="Carried Fraction",
+        description="Share of the dissolved stain the liquid's flow carries at each step (with Carry "
+        "Solute); the rest stays where it is, so the stain moves at this fraction of the liquid's "
+        "speed (1 = all of it)",
+        default=1.0,
+        min=0.01,
+        max=1.0,
+        update=_mark_custom,
+    )
+    dispersivity: FloatProperty(
+        name="Tide Line Width",
+        description="Dispersivity (mm of cloth): the carried stain spreads back against the flow that "
+        "brings it, so a tide line is about this wide whatever the mesh's Detail (with Carry "
+        "Solute; 0 = off, a ring one cell wide)",
+        default=0.0,
+        min=0.0,
+        soft_max=10.0,
+        precision=2,
+        update=_mark_custom,
+    )
     holdup: FloatProperty(
         name="Run Holdup",
         description="Free liquid (kg/m²) each point of the cloth keeps back from a run: a film the "

@@ -176,6 +176,8 @@ class Simulator:
         carry_solute: bool = False,
         residual_saturation: float | None = None,
         vapour_limited: bool = False,
+        carried_fraction: float | None = None,
+        dispersivity: float | None = None,
         holdup: float | None = None,
         substeps: int = 1,
         use_gravity: bool = True,

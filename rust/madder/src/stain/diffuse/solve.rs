@@ -260,6 +260,8 @@ pub(in crate::stain) struct DensityWork {
 
 /// Most Gauss–Seidel sweeps of the carried solute's concentrations ([`carry_with_solvent`]).
 const MAX_CARRY_SWEEPS: usize = 50;
+/// Most symmetric Gauss–Seidel sweeps (each direction counted) with a dispersivity.
+const MAX_DISPERSED_SWEEPS: usize = 400;
 
 /// Moves the solute (and its colour) with the solvent's diffusive fluxes of the solve
 /// just made (issue 13 §2, "Tide lines" in the module doc). Across every edge `a–b` of
@@ -297,7 +299,12 @@ const MAX_CARRY_SWEEPS: usize = 50;
 /// so the total is `α_L` on any mesh finer than `2 α_L`. A solute carried into a pinned
 /// edge then piles up as `c ∝ exp(−x/α_L)` behind it (the Péclet balance `u c = D c'`), a
 /// ring about `α_L` wide, not one cell. The weights stay non-negative and `c' = c` still
-/// solves it for a uniform solution; the system is solved by Gauss–Seidel sweeps.
+/// solves it for a uniform solution. The dispersion couples every vertex to its upstream
+/// neighbours, so one sweep down the density no longer solves it: symmetric Gauss–Seidel
+/// (down the density, then back up), started from the concentrations before the step,
+/// until the largest change is `10⁻¹³` of the largest concentration. (Plain sweeps down
+/// the density from zero, stopped after 50, left the solute behind the liquid on a mesh of
+/// 1/3 mm: wine's centre came out twice as dark as on 2/3 mm.)
 ///
 /// `before` and `after` are the solvent before the solve and now (window numbering; the
 /// solute ends at `c'` times the solvent now), `sigma` its solved densities (region
@@ -393,13 +400,30 @@ pub(super) fn carry_with_solvent(
             target[v as usize] -= mobile[v as usize];
         }
         // c'_a = (s_a + Σ_in F_ba c'_b) / (f_a + in_a): one sweep down the density when
-        // every flux runs downhill, Gauss–Seidel sweeps in that order otherwise
+        // every flux runs downhill, Gauss–Seidel sweeps in that order otherwise; with the
+        // dispersion, which couples each vertex to its upstream too, symmetric sweeps
+        // (down the density, then back up) from the concentrations before the step
         let mut conc = vec![0.0; n];
-        for sweep in 0..MAX_CARRY_SWEEPS {
-            let mut change: f64 = 0.0;
-            let mut size: f64 = 0.0;
+        let dispersing = !dispersion.is_empty();
+        if dispersing {
             for &v in &order {
                 let v = v as usize;
+                if before[v] > 0.0 {
+                    conc[v] = mobile[v] / before[v];
+                }
+            }
+        }
+        let most = if dispersing {
+            MAX_DISPERSED_SWEEPS
+        } else {
+            MAX_CARRY_SWEEPS
+        };
+        for sweep in 0..most {
+            let mut change: f64 = 0.0;
+            let mut size: f64 = 0.0;
+            let back = dispersing && sweep % 2 == 1;
+            for k in 0..order.len() {
+                let v = order[if back { order.len() - 1 - k } else { k }] as usize;
                 let mut gathered: f64 =
                     incoming[v].iter().map(|&(b, f)| f * conc[b as usize]).sum();
                 let mut held = before[v] + inflow[v];
@@ -419,7 +443,7 @@ pub(super) fn carry_with_solvent(
                 size = size.max(c);
                 conc[v] = c;
             }
-            if !uphill || (sweep > 0 && change <= 1e-13 * size) {
+            if !uphill || (sweep > usize::from(dispersing) && change <= 1e-13 * size) {
                 break;
             }
         }

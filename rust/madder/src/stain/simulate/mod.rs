@@ -184,10 +184,13 @@ pub struct StainParams {
     /// the fibres' liquid moves only with [`Self::carry_solute`]. 0 (the default) is off.
     pub residual_saturation: f64,
     /// `φ`, from 0 (exclusive) to 1: the share of the dissolved solute the solvent's flow
-    /// carries with [`Self::carry_solute`]; the rest stays where it is, as a Marangoni
-    /// recirculation (ethanol in wine) returns solute the outward flow brings to the edge
-    /// (Hu & Larson 2006). 1 (the default) carries it all, the coffee-ring flow of Deegan
-    /// et al. (1997).
+    /// carries at each transfer with [`Self::carry_solute`]; the rest stays where it is.
+    /// Applied at every transfer, the solute moves at `φ` times the liquid's speed: a
+    /// linear retardation `R = 1/φ` (a sorbing solute in a porous medium, Freeze & Cherry
+    /// 1979, ch. 9), in the spreading as in the drying. It does not model a Marangoni return
+    /// of the drying flow alone (Hu & Larson 2006): measured (`tests/rims.rs`'s liquids),
+    /// wine's rim/centre with `φ = 0.5` is 0.57, a dark centre, not a modest rim. 1 (the
+    /// default) carries it all, the coffee-ring flow of Deegan et al. (1997).
     pub carried_fraction: f64,
     /// `α_L`, m, ≥ 0: the longitudinal dispersivity of the carried solute in the fibres
     /// (mechanical dispersion `D = α_L |u|`, Bear 1972), so the solute spreads back against
