@@ -1,20 +1,24 @@
 //! Rims per liquid (issue 34 §3). A spill of each liquid preset's parameters dries on a
-//! still, flat disk of cloth, and the dry stain's rim is measured on two meshes (cells of
-//! 2/3 and 1/3 mm, as two Detail levels would make them).
+//! still, flat disk of cloth (3 cm, wider than the stain, so the cloth's border pins
+//! nothing), and the dry stain's rim is measured on two meshes (cells of 2/3 and 1/3 mm,
+//! as two Detail levels would make them).
 //!
 //! What is measured: the deposit's optical density taken as the **deposited solute per
-//! area** (kg/m², every solute pool together, area-weighted in radial bins of 0.25 mm),
-//! which is what the add-on's colour model darkens by (Beer–Lambert: the absorbance is
-//! proportional to the solute per area). The rim/centre ratio is the mean over the
-//! stain's outer 15 % of radius against its inner 30 % (as `tide_lines.rs`); the ring's
-//! width is its full width at half its height above the centre's level.
+//! area** (kg/m², every solute pool together), which is what the add-on's colour model
+//! darkens by (Kubelka–Munk: K/S grows linearly with the dye). The profile is the
+//! area-weighted mean over each ring of the disk's vertices (all at one radius). The
+//! stain's outline is the outermost ring at least half as dark as the centre (the faint
+//! halo of liquid that outran the solute, 5–10 % of the centre, is not the stain); the
+//! rim/centre ratio is the mean over its outer 15 % of radius against its inner 30 % (as
+//! `tide_lines.rs`); the ring's width is its full width at half its height above the
+//! centre's level, the crossings interpolated between rings.
 //!
 //! The pass criteria are issue 34's: Coffee 1.5–4 with a ring at least 0.5 mm and 3 cells
 //! wide, its width changing by less than 20 % between the meshes (the dispersivity sets
-//! it, a length, not the cell); Red Wine 1.1–1.6 (the Marangoni flow of its ethanol
-//! returns most of the solute the outward flow brings: Hu & Larson 2006); Water a faint
-//! tide line (Hutchins 1983: degradation products of the cellulose and soil carried to
-//! the edge), a ring of at least 1.5 at a tenth of coffee's solute or less. With the
+//! it, a length, not the cell); Red Wine 1.1–1.6 (its pigments bind over minutes, so
+//! part of them is fixed before the drying flow takes the rest to the edge); Water a
+//! faint tide line (Hutchins 1983: degradation products of the cellulose and soil carried
+//! to the edge), a ring of at least 1.5 at a tenth of coffee's solute or less. With the
 //! carried fraction 1 and no dispersivity the drying is today's, bit for bit
 //! (`tide_lines.rs` and the simulate bench).
 
@@ -25,7 +29,8 @@ use madder::stain::{Conductivity, Forces, InteractionRates, Simulator, StainPara
 mod common;
 use common::disk;
 
-/// One liquid preset's parameters (addon/presets.py, LIQUIDS).
+/// One liquid preset's parameters (addon/presets.py, LIQUIDS and RINGS; the dispersivity
+/// there in mm).
 #[derive(Clone, Copy, Debug)]
 struct Liquid {
     name: &'static str,
@@ -57,7 +62,7 @@ const RED_WINE: Liquid = Liquid {
     name: "Red Wine",
     concentration: 0.02,
     absorption: 2.0,
-    adsorption: 0.003,
+    adsorption: 0.005,
     capacity: 1e-3,
     evaporation: 6e-5,
     evaporation_boundary: 1.2,
