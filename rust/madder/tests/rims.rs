@@ -292,4 +292,3 @@ fn water_leaves_a_faint_tide_line() {
         assert!(r.ratio >= 1.5, "rim/centre {}", r.ratio);
     }
 }
-
