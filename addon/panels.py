@@ -176,7 +176,11 @@ class MADDER_PT_stain_look(_StainSubPanel, bpy.types.Panel):
 
     def draw(self, context):
         layout, s = self.layout_of(context)
-        layout.prop(s, "wicking")
+        col = layout.column(align=True)
+        col.prop(s, "wicking")
+        sub = col.row()
+        sub.active = s.wicking > 0.0
+        sub.prop(s, "wicking_iterations")
         layout.prop(s, "grain_from")
         col = layout.column(align=True)
         col.active = s.grain_from == "OBJECT"
@@ -191,6 +195,8 @@ class MADDER_PT_stain_look(_StainSubPanel, bpy.types.Panel):
         sub = col.column(align=True)
         sub.active = s.carry_solute
         sub.prop(s, "residual_saturation")
+        sub.prop(s, "carried_fraction")
+        sub.prop(s, "dispersivity")
         col.prop(s, "vapour_limited")
 
 

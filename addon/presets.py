@@ -12,13 +12,21 @@ its solute (colour, concentration) and how that solute and its solvent interact 
 the fibres. The cloth's own properties (saturation, friction) and the flow
 (diffusion, viscosity) are left alone.
 
-- Water: no solute (concentration 0, so it leaves no stain, only wetness), a white-ish
-  colour for completeness, no adsorption; the core's default rates (it wicks into thin
-  cotton in about 0.5 s, K_p = 2 /s; dries at 5e-5 kg/(m²·s), still room air).
+- Water: a trace of solute, 1e-3 (a twelfth of coffee's) of a pale brown (0.95, 0.92,
+  0.85): even pure water leaves a faint brown tide line on cellulose, from the fibres'
+  water-soluble degradation products (and soil) it carries to the drying edge (Hutchins
+  1983, "Water-stained cellulosics: a literature review", JAIC 22(2): 57–61); no
+  adsorption; the core's default rates (it wicks into thin cotton in about 0.5 s,
+  K_p = 2 /s; dries at 5e-5 kg/(m²·s), still room air). A saturated spot of it is a
+  barely visible tint; its ring, a few times the centre's solute, a faint line.
 - Red wine: about 2 % dissolved solids by mass (extract: sugars, acids, tannins,
-  anthocyanins), deep red (0.30, 0.02, 0.07). Anthocyanins and tannins bind strongly
-  to cellulose: fast adsorption (K_d = 0.5 /s), the default capacity. The ethanol
-  makes it evaporate a little faster than water (6e-5).
+  anthocyanins), deep red (0.30, 0.02, 0.07). Its pigments bind to cotton over minutes,
+  not seconds (a fresh wine stain still rinses out; it sets as it dries), and only part
+  of the extract binds at all (the sugars and acids do not): adsorption K_d = 0.005 /s,
+  capacity 1e-3 kg/m² (half the solute of a saturated spot). Both are tuned, within those
+  orders of magnitude, to the modest rim of issue 34 (rim/centre 1.1–1.6,
+  rust/madder/tests/rims.rs), not measured. The ethanol makes it evaporate a little
+  faster than water (6e-5).
 - Coffee: about 1.2 % dissolved solids (a typical brew's TDS), brown (0.25, 0.13, 0.05).
   Its colloids hardly bind to the fibres (K_d = 0.05 /s, capacity 2e-4: a sixth of the
   solute of a saturated spot), so they stay in the liquid until it dries, and it rings:
@@ -26,11 +34,14 @@ the fibres. The cloth's own properties (saturation, friction) and the flow
   (residual saturation 0.1: liquid below a tenth of the fibres' saturation stays put)
   and the patch dries fastest at its edge (vapour-limited), so the liquid flows outward
   and leaves its solute in a tide line (ARCHITECTURE.md, "Tide lines").
-- The pinned, vapour-limited drying that makes a tide line is Coffee's only. Wine and
-  ink bind their dyes within seconds to a capacity at or above the solute of a saturated
-  spot, so the dye is fixed where the spill put it before the outward flow can move it;
-  water has no solute. Wine still carries its solids with the flowing liquid (Carry
-  Solute), so where it runs its colour goes along.
+- The rim (issue 34 §3): Coffee, Red Wine and Water dry the same way (TIDE_LINES), and
+  differ by how much of their solute is still mobile when the edge dries (coffee's
+  colloids almost all, wine's pigments the part not yet bound). The carried solute
+  spreads back against the flow over a dispersivity of 3.5 mm (mechanical dispersion,
+  Bear 1972: of the order of the medium's heterogeneity, here a few yarn spacings), so
+  the ring is about 2 mm wide at any Detail instead of one cell; the carried fraction is
+  1 (all of the dissolved solute moves with the liquid). Ink binds its dye within a
+  second to a capacity above the solute of a saturated spot, so it does not ring.
 - Ink: about 5 % dye, blue-black (0.04, 0.05, 0.15). Surfactants make it wick faster
   (K_p = 3 /s), dyes are made to bind: fast adsorption (K_d = 1 /s) and a high
   capacity (5e-3 kg/m²); humectants (glycols) slow its drying (4e-5).
@@ -42,9 +53,14 @@ A preset carries the whole look of its liquid (issue 34), not only its solute:
   in a porous sheet is a nonlinear diffusion whose diffusivity rises steeply with the
   saturation (Richards' equation with a power-law D(S), e.g. Brutsaert 1979: exponents of
   2 to 8); 2 is the gentlest that gives the front (physics.md, "Wicking").
-- How it rings, kept together per liquid in `RINGS` (a rim model may tune them): Coffee
-  rings (see above); Red Wine carries its solids with the flow (its pigments bind within
-  seconds, so the ring stays modest); Water and Ink do not.
+- Front Iterations 2 for every liquid: each step is solved again twice with the rate of
+  its own solution. With the rate of the step's start the front crosses one ring of faces
+  per step, so it runs about 9 % slow and takes the mesh's shape (a spot on a structured
+  grid dried a rounded square, 4-fold term 3.4 %, the octagonal coffee of the gallery);
+  with 2 the term is 0.5 %, for about twice the spill's time
+  (rust/madder/tests/outlines.rs).
+- How it rings, kept together per liquid in `RINGS`: Coffee, Red Wine and Water ring
+  (see above, rims.rs measures them); Ink does not.
 - How it runs: the flow's viscosity and the fibres' friction are the cloth's and the
   flow's (left alone), so all four liquids run alike.
 - Sub-steps: none of the four needs more than the automatic choice (the core adds steps
@@ -55,42 +71,52 @@ Fabric presets (`FABRICS`, what `fabrics.py`'s Fabric Preset writes) are in
 
 import math
 
-# the drying that makes tide lines (issue 13 §2): Coffee's; the others set it off
-TIDE_LINES = dict(carry_solute=True, residual_saturation=0.1, vapour_limited=True)
-NO_TIDE_LINES = dict(carry_solute=False, residual_saturation=0.0, vapour_limited=False)
+# the drying that makes tide lines (issue 13 §2) and its rim (issue 34 §3): the solute
+# carried by the flow to a pinned edge that dries fastest, spread back against the flow
+# over the dispersivity (mm); every liquid with a solute that stays mobile rings
+TIDE_LINES = dict(carry_solute=True, residual_saturation=0.1, vapour_limited=True, carried_fraction=1.0,
+                  dispersivity=3.5)
+NO_TIDE_LINES = dict(carry_solute=False, residual_saturation=0.0, vapour_limited=False, carried_fraction=1.0,
+                     dispersivity=0.0)
 # how each liquid rings, kept together so that a rim model can tune them per liquid
 RINGS = {
-    "WATER": NO_TIDE_LINES,
-    "RED_WINE": dict(carry_solute=True, residual_saturation=0.0, vapour_limited=False),
+    "WATER": TIDE_LINES,
+    "RED_WINE": TIDE_LINES,
     "COFFEE": TIDE_LINES,
     "INK": NO_TIDE_LINES,
 }
-# the front: the fibres draw liquid in at the spreading rate × saturation^wicking
+# the front: the fibres draw liquid in at the spreading rate × saturation^wicking, the
+# rate taken from each step's own solution after that many extra solves
 WICKING = {"WATER": 2.0, "RED_WINE": 2.0, "COFFEE": 2.0, "INK": 2.0}
+FRONT_ITERATIONS = 2
 
 LIQUIDS = {
     "WATER": dict(
-        stain_color=(0.90, 0.93, 0.95), concentration=0.0, absorption=2.0, adsorption=0.0,
+        stain_color=(0.95, 0.92, 0.85), concentration=1e-3, absorption=2.0, adsorption=0.0,
         capacity=2e-3, evaporation=5e-5, evaporation_boundary=1.2, **RINGS["WATER"], wicking=WICKING["WATER"],
+        wicking_iterations=FRONT_ITERATIONS,
     ),
     "RED_WINE": dict(
-        stain_color=(0.30, 0.02, 0.07), concentration=0.02, absorption=2.0, adsorption=0.5,
-        capacity=2e-3, evaporation=6e-5, evaporation_boundary=1.2, **RINGS["RED_WINE"],
+        stain_color=(0.30, 0.02, 0.07), concentration=0.02, absorption=2.0, adsorption=0.005,
+        capacity=1e-3, evaporation=6e-5, evaporation_boundary=1.2, **RINGS["RED_WINE"],
         wicking=WICKING["RED_WINE"],
+        wicking_iterations=FRONT_ITERATIONS,
     ),
     "COFFEE": dict(
         stain_color=(0.25, 0.13, 0.05), concentration=0.012, absorption=2.0, adsorption=0.05,
         capacity=2e-4, evaporation=5e-5, evaporation_boundary=1.5, **RINGS["COFFEE"], wicking=WICKING["COFFEE"],
+        wicking_iterations=FRONT_ITERATIONS,
     ),
     "INK": dict(
         stain_color=(0.04, 0.05, 0.15), concentration=0.05, absorption=3.0, adsorption=1.0,
         capacity=5e-3, evaporation=4e-5, evaporation_boundary=1.2, **RINGS["INK"], wicking=WICKING["INK"],
+        wicking_iterations=FRONT_ITERATIONS,
     ),
 }
 LIQUID_ITEMS = [
     ("CUSTOM", "Custom", "Your own values (any change to a preset's value switches to Custom)"),
-    ("WATER", "Water", "No solute: wets the cloth, leaves no stain"),
-    ("RED_WINE", "Red Wine", "Deep red, binds strongly to the fibres"),
+    ("WATER", "Water", "Wets the cloth and dries to a faint brown tide line"),
+    ("RED_WINE", "Red Wine", "Deep red, binds to the fibres over minutes, a modest rim"),
     ("COFFEE", "Coffee", "Brown, binds weakly to the fibres, dries faster at the rim"),
     ("INK", "Ink", "Blue-black, concentrated, wicks and binds fast"),
 ]
@@ -169,6 +195,7 @@ def simulator_keywords(s, gravity, scene_gravity, unit, grain=None):
         # in millimetres of the cloth's rest surface
         wicking_exponent=s.wicking,
         wicking_density=max(s.saturation, 1e-6),
+        wicking_picard=s.wicking_iterations,
         irregularity=grain[0],
         irregularity_length=grain[1] * 1e-3,
         irregularity_seed=grain[2],
@@ -178,6 +205,9 @@ def simulator_keywords(s, gravity, scene_gravity, unit, grain=None):
         carry_solute=bool(s.carry_solute),
         residual_saturation=s.residual_saturation,
         vapour_limited=bool(s.vapour_limited),
+        # the rim (issue 34 §3): the dispersivity is set in millimetres of cloth
+        carried_fraction=s.carried_fraction,
+        dispersivity=s.dispersivity * 1e-3,
         holdup=s.holdup,
         use_gravity=bool(s.use_gravity and scene_gravity),
         use_rectilinear=s.use_rectilinear,

@@ -420,6 +420,16 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         soft_max=4.0,
         update=_mark_custom,
     )
+    wicking_iterations: IntProperty(
+        name="Front Iterations",
+        description="With Wicking, solves each step again this many times with the rate of its own "
+        "solution: without them the front runs slow and takes the mesh's shape (a spill on a "
+        "grid dries square); each costs about one more solve of the spreading per step",
+        default=0,
+        min=0,
+        max=8,
+        update=_mark_custom,
+    )
     irregularity: FloatProperty(
         name="Irregularity",
         description="How uneven the fabric is (0–1): its spreading and soaking rates vary at random "
@@ -469,6 +479,27 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         default=0.0,
         min=0.0,
         max=0.95,
+        update=_mark_custom,
+    )
+    carried_fraction: FloatProperty(
+        name="Carried Fraction",
+        description="Share of the dissolved stain the liquid's flow carries at each step (with Carry "
+        "Solute); the rest stays where it is, so the stain moves at this fraction of the liquid's "
+        "speed (1 = all of it)",
+        default=1.0,
+        min=0.01,
+        max=1.0,
+        update=_mark_custom,
+    )
+    dispersivity: FloatProperty(
+        name="Tide Line Width",
+        description="Dispersivity (mm of cloth): the carried stain spreads back against the flow that "
+        "brings it, so a tide line is about this wide whatever the mesh's Detail (with Carry "
+        "Solute; 0 = off, a ring one cell wide)",
+        default=0.0,
+        min=0.0,
+        soft_max=10.0,
+        precision=2,
         update=_mark_custom,
     )
     holdup: FloatProperty(

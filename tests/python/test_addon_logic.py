@@ -93,10 +93,13 @@ def test_simulator_keywords_scale_gravity_and_need_both_switches():
         use_gravity=True, use_rectilinear=False, use_coriolis=True, momentum_advection=False,
         wicking=2.0, irregularity=0.5, irregularity_length=4.0, irregularity_seed=7, carry_solute=True,
         residual_saturation=0.1, vapour_limited=1, irregularity_fine=0.5, holdup=0.05,
+        carried_fraction=0.7, dispersivity=3.5, wicking_iterations=2,
     )
     kw = presets.simulator_keywords(s, (0.0, 0.0, -981.0), True, 0.01)
     # the fibre scale in metres while below the grain, else off; the run holdup as it is
     assert kw["irregularity_fine_length"] == pytest.approx(5e-4) and kw["holdup"] == 0.05
+    # the rim: the carried fraction as it is, the dispersivity from millimetres to metres
+    assert kw["carried_fraction"] == 0.7 and kw["dispersivity"] == pytest.approx(3.5e-3)
     s.irregularity_fine = 4.0
     assert presets.simulator_keywords(s, (0.0, 0.0, -981.0), True, 0.01)["irregularity_fine_length"] == 0.0
     # the look: the grain from millimetres to metres, wicking saturating at the fibres'
@@ -104,6 +107,7 @@ def test_simulator_keywords_scale_gravity_and_need_both_switches():
     assert (kw["wicking_exponent"], kw["irregularity"], kw["irregularity_seed"], kw["carry_solute"]) == (
         2.0, 0.5, 7, True)
     assert (kw["residual_saturation"], kw["vapour_limited"]) == (0.1, True)
+    assert kw["wicking_picard"] == 2
     assert kw["gravity"] == (0.0, 0.0, -981.0 * 0.01) and kw["color"] == (0.1, 0.2, 0.3)
     assert kw["use_gravity"] is True and kw["use_rectilinear"] is False and kw["substeps"] == 2
     assert presets.simulator_keywords(s, (0, 0, -9.81), False, 1.0)["use_gravity"] is False

@@ -11,7 +11,7 @@ import pytest
 import madder
 from madder.addon import presets
 
-LOOK = ("wicking", "carry_solute", "residual_saturation", "vapour_limited")
+LOOK = ("wicking", "carry_solute", "residual_saturation", "vapour_limited", "carried_fraction", "dispersivity")
 
 
 @pytest.mark.parametrize("liquid", sorted(presets.LIQUIDS))
@@ -24,11 +24,19 @@ def test_a_liquid_preset_sets_its_whole_look(liquid):
     assert {k: values[k] for k in presets.RINGS[liquid]} == presets.RINGS[liquid]
 
 
-def test_only_coffee_pins_its_edge_and_wine_carries_its_solids():
-    assert presets.LIQUIDS["COFFEE"]["residual_saturation"] > 0 and presets.LIQUIDS["COFFEE"]["vapour_limited"]
-    assert presets.LIQUIDS["RED_WINE"]["carry_solute"]
-    for name in ("WATER", "RED_WINE", "INK"):
-        assert presets.LIQUIDS[name]["residual_saturation"] == 0.0 and not presets.LIQUIDS[name]["vapour_limited"]
+def test_coffee_wine_and_water_dry_to_a_rim_and_ink_does_not():
+    """Issue 34 §3 (rust/madder/tests/rims.rs measures the rims these values give): the
+    liquids whose solute stays mobile pin their edge, dry fastest there and spread the ring
+    over a dispersivity of a few millimetres; ink binds its dye within a second."""
+    for name in ("COFFEE", "RED_WINE", "WATER"):
+        v = presets.LIQUIDS[name]
+        assert v["carry_solute"] and v["residual_saturation"] > 0 and v["vapour_limited"], name
+        assert v["dispersivity"] >= 1.0 and 0.0 < v["carried_fraction"] <= 1.0, name
+    ink = presets.LIQUIDS["INK"]
+    assert ink["residual_saturation"] == 0.0 and not ink["vapour_limited"] and ink["dispersivity"] == 0.0
+    # water's faint tide line: a tenth of coffee's solute or less, a pale colour
+    assert 0.0 < presets.LIQUIDS["WATER"]["concentration"] <= 0.1 * presets.LIQUIDS["COFFEE"]["concentration"]
+    assert min(presets.LIQUIDS["WATER"]["stain_color"]) >= 0.8
 
 
 def tensor(values):

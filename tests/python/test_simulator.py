@@ -80,6 +80,8 @@ def test_splash_depends_only_on_its_seed():
         (dict(gravity=(0.0, float("inf"), 0.0)), ["gravity"]),
         (dict(diffusion=-0.1), ["diffusion"]),
         (dict(substeps=0), ["substeps"]),
+        (dict(carried_fraction=0.0), ["carried fraction", "(0, 1]"]),
+        (dict(dispersivity=-1e-3), ["dispersivity", "≥ 0"]),
     ],
 )
 def test_out_of_range_parameters_name_themselves(kw, words):
@@ -103,3 +105,26 @@ def test_a_failed_step_keeps_the_state():
         sim.step(pos, 0.0)
     for k, v in sim.densities().items():
         np.testing.assert_array_equal(v, before[k])
+
+
+def test_the_rim_keywords_reach_the_core():
+    """Carried fraction and dispersivity (issue 34 §3): their off values (1, 0) are the
+    defaults bit for bit; a dispersivity spreads the carried solute of a drying spill, and
+    a carried fraction below 1 leaves solute behind the flow."""
+    tide = dict(carry_solute=True, residual_saturation=0.1, vapour_limited=True, adsorption=0.0)
+
+    def dried(**kw):
+        sim, _, pos = wet_grid(**tide, **kw)
+        sim.add_liquid(0.3 * blob(pos, r=0.1), 0.01)
+        for _ in range(24):
+            sim.step(pos, 0.5)
+        return sim.densities()
+
+    off, told = dried(), dried(carried_fraction=1.0, dispersivity=0.0)
+    for k in off:
+        np.testing.assert_array_equal(off[k], told[k], err_msg=k)
+    for kw in (dict(dispersivity=0.05), dict(carried_fraction=0.5)):
+        on = dried(**kw)
+        assert np.abs(on["solute"] + on["absorbed_solute"] - off["solute"] - off["absorbed_solute"]).max() > 0, kw
+        total = sum(on[k].sum() for k in ("solute", "absorbed_solute", "adsorbed"))
+        assert np.isfinite(total) and min(on[k].min() for k in on) >= 0.0, kw

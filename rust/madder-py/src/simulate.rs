@@ -19,9 +19,10 @@ use crate::threads::Pool;
 /// face_uv=None, face_angle=None, color=DEFAULT_SOLUTE_COLOR, gravity=(0, 0, -9.81),
 /// viscosity=..., friction=..., absorption=..., saturation=..., adsorption=...,
 /// capacity=..., evaporation=..., evaporation_boundary=1.2, wicking_exponent=0,
-/// wicking_density=0.1, irregularity=0, irregularity_length=0.003, irregularity_seed=0,
+/// wicking_density=0.1, wicking_picard=0, irregularity=0, irregularity_length=0.003, irregularity_seed=0,
 /// irregularity_fine_length=0,
-/// carry_solute=False, residual_saturation=0, vapour_limited=False, holdup=0, substeps=1, use_gravity=True, use_rectilinear=True,
+/// carry_solute=False, residual_saturation=0, vapour_limited=False, carried_fraction=1,
+/// dispersivity=0, holdup=0, substeps=1, use_gravity=True, use_rectilinear=True,
 /// use_coriolis=True, momentum_advection=True, detail=0, threads=None)`.
 ///
 /// `topology` is a `Topology` or an `(F, 3)` face array (any integer dtype); `rest` and
@@ -36,6 +37,10 @@ use crate::threads::Pool;
 /// `wicking_exponent` `n` makes the fabric wick faster where it is wetter: the densities
 /// diffuse at `D·θⁿ`, `θ` the liquid density over `wicking_density` (kg/m², capped at 1),
 /// which gives a spreading spill a sharp front (0, the default: a constant rate).
+/// `wicking_picard` (0 to 8) solves each sub-step again that many times with the rate of
+/// the last solution instead of the step's start: the lagged rate lets the front cross
+/// one ring of faces per step, so it runs slow and squares off along the mesh (0, the
+/// default: lagged; 2 takes a structured grid's 4-fold term from 3.4 % to 0.5 %).
 /// `irregularity` (0–1) makes the fabric uneven: its diffusion and absorption rates vary
 /// at random over the rest surface, correlated over `irregularity_length` metres, the
 /// same for the same `irregularity_seed` (0, the default: a uniform fabric).
@@ -51,6 +56,12 @@ use crate::threads::Pool;
 /// into still air does (`J/J̄ = R/(2√(d(2R − d)))`, `d` the distance to the edge), in place
 /// of `evaporation_boundary` on the outermost vertices. With `carry_solute` the two
 /// draw the solute to the pinned edge as it dries: a tide line.
+/// `carried_fraction` (0 exclusive to 1) is the share of the dissolved solute the flow
+/// carries with `carry_solute` at each transfer, the rest staying where it is: the solute
+/// moves at that fraction of the liquid's speed (1, the default: all of it).
+/// `dispersivity` (m, ≥ 0) spreads the carried solute back against the flow that brings
+/// it (mechanical dispersion `α_L |u|`), so a tide line is about that wide at any mesh
+/// spacing (0, the default: off, the ring one cell wide).
 /// `holdup` (kg/m², ≥ 0) is the free liquid each vertex keeps back from a run, filled
 /// before the run moves on and left behind to soak in (0, the default: off).
 /// Units are SI: densities in kg/m², rates in 1/s, evaporation in kg/(m²·s).
@@ -107,9 +118,10 @@ impl Simulator {
         face_uv=None, face_angle=None, color=DEFAULT_COLOR, gravity=(0.0, 0.0, -9.81),
         viscosity=None, friction=None, absorption=None, saturation=None, adsorption=None,
         capacity=None, evaporation=None, evaporation_boundary=None, wicking_exponent=None,
-        wicking_density=None, irregularity=None, irregularity_length=None, irregularity_seed=0,
+        wicking_density=None, wicking_picard=0, irregularity=None, irregularity_length=None, irregularity_seed=0,
         irregularity_fine_length=None,
-        carry_solute=false, residual_saturation=None, vapour_limited=false, holdup=None, substeps=1,
+        carry_solute=false, residual_saturation=None, vapour_limited=false, carried_fraction=None,
+        dispersivity=None, holdup=None, substeps=1,
         use_gravity=true, use_rectilinear=true, use_coriolis=true, momentum_advection=true,
         detail=0, threads=None))]
     #[allow(clippy::too_many_arguments)]
@@ -134,6 +146,7 @@ impl Simulator {
         evaporation_boundary: Option<f64>,
         wicking_exponent: Option<f64>,
         wicking_density: Option<f64>,
+        wicking_picard: u32,
         irregularity: Option<f64>,
         irregularity_length: Option<f64>,
         irregularity_seed: u64,
@@ -141,6 +154,8 @@ impl Simulator {
         carry_solute: bool,
         residual_saturation: Option<f64>,
         vapour_limited: bool,
+        carried_fraction: Option<f64>,
+        dispersivity: Option<f64>,
         holdup: Option<f64>,
         substeps: u32,
         use_gravity: bool,
@@ -217,6 +232,7 @@ impl Simulator {
         set(&mut params.friction, friction);
         set(&mut params.wicking.exponent, wicking_exponent);
         set(&mut params.wicking.density, wicking_density);
+        params.wicking.picard = wicking_picard;
         set(&mut params.irregularity.amplitude, irregularity);
         set(
             &mut params.irregularity.correlation_length,
@@ -230,6 +246,8 @@ impl Simulator {
         params.carry_solute = carry_solute;
         set(&mut params.residual_saturation, residual_saturation);
         params.vapour_limited = vapour_limited;
+        set(&mut params.carried_fraction, carried_fraction);
+        set(&mut params.dispersivity, dispersivity);
         set(&mut params.holdup, holdup);
         let r = &mut params.interaction;
         set(&mut r.absorption, absorption);

@@ -90,6 +90,8 @@ fn main() {
         },
         carry_solute: tide,
         residual_saturation: if tide { 0.1 } else { 0.0 },
+        carried_fraction: 1.0,
+        dispersivity: 0.0,
         vapour_limited: tide,
         holdup: 0.0,
         ..Default::default()

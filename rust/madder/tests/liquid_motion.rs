@@ -39,6 +39,8 @@ fn ideal(forces: Forces, momentum_advection: bool) -> StainParams {
         irregularity: Default::default(),
         carry_solute: false,
         residual_saturation: 0.0,
+        carried_fraction: 1.0,
+        dispersivity: 0.0,
         vapour_limited: false,
         holdup: 0.0,
         substeps: 1,

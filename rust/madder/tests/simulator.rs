@@ -45,6 +45,8 @@ fn ideal(forces: Forces) -> StainParams {
         irregularity: Default::default(),
         carry_solute: false,
         residual_saturation: 0.0,
+        carried_fraction: 1.0,
+        dispersivity: 0.0,
         vapour_limited: false,
         holdup: 0.0,
         substeps: 1,
@@ -677,6 +679,8 @@ fn full_params(momentum_advection: bool, substeps: u32) -> StainParams {
         // the solute carried by the solvent's flow, to a pinned edge drying fastest there
         carry_solute: true,
         residual_saturation: 0.1,
+        carried_fraction: 1.0,
+        dispersivity: 0.0,
         vapour_limited: true,
         holdup: 0.0,
         substeps,

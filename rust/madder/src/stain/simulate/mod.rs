@@ -183,6 +183,21 @@ pub struct StainParams {
     /// the spill put it while it dries (issue 13 §2, [`super::diffuse`], "Tide lines");
     /// the fibres' liquid moves only with [`Self::carry_solute`]. 0 (the default) is off.
     pub residual_saturation: f64,
+    /// `φ`, from 0 (exclusive) to 1: the share of the dissolved solute the solvent's flow
+    /// carries at each transfer with [`Self::carry_solute`]; the rest stays where it is.
+    /// Applied at every transfer, the solute moves at `φ` times the liquid's speed: a
+    /// linear retardation `R = 1/φ` (a sorbing solute in a porous medium, Freeze & Cherry
+    /// 1979, ch. 9), in the spreading as in the drying. It does not model a Marangoni return
+    /// of the drying flow alone (Hu & Larson 2006): measured (`tests/rims.rs`'s liquids),
+    /// wine's rim/centre with `φ = 0.5` is 0.57, a dark centre, not a modest rim. 1 (the
+    /// default) carries it all, the coffee-ring flow of Deegan et al. (1997).
+    pub carried_fraction: f64,
+    /// `α_L`, m, ≥ 0: the longitudinal dispersivity of the carried solute in the fibres
+    /// (mechanical dispersion `D = α_L |u|`, Bear 1972), so the solute spreads back against
+    /// the flow that brings it and a tide line is about `α_L` wide at any mesh spacing
+    /// ([`super::diffuse`], "Tide lines"); the upwind sweep's own dispersion (half an
+    /// edge) is subtracted. 0 (the default) is off.
+    pub dispersivity: f64,
     /// The evaporation is limited by the diffusion of vapour away from the flat wet patch:
     /// fastest at its edge, `J/J̄ = R/(2√(d(2R − d)))` at distance `d` from the edge
     /// ([`super::interact`], "Vapour-limited evaporation"), instead of eq. 4.8's factor on
@@ -215,6 +230,8 @@ impl Default for StainParams {
             irregularity: Irregularity::default(),
             carry_solute: false,
             residual_saturation: 0.0,
+            carried_fraction: 1.0,
+            dispersivity: 0.0,
             vapour_limited: false,
             holdup: 0.0,
             substeps: 1,
@@ -255,6 +272,18 @@ impl StainParams {
             self.residual_saturation,
             (0.0..1.0).contains(&self.residual_saturation),
             "from 0 to 1 (exclusive)",
+        )?;
+        check_range(
+            "carried fraction",
+            self.carried_fraction,
+            self.carried_fraction > 0.0 && self.carried_fraction <= 1.0,
+            "in (0, 1]",
+        )?;
+        check_range(
+            "dispersivity",
+            self.dispersivity,
+            self.dispersivity >= 0.0,
+            "finite and ≥ 0",
         )?;
         check_range("holdup", self.holdup, self.holdup >= 0.0, "finite and ≥ 0")?;
         self.wicking.validate()?;

@@ -8,11 +8,13 @@ use rayon::prelude::*;
 
 use super::profile::{Laps, Profile};
 use super::scratch::SubstepScratch;
-use super::{DRY_DENSITY, Simulator};
+use super::{DRY_DENSITY, Simulator, StainParams};
 use crate::error::Error;
 use crate::mesh::Geometry;
 use crate::stain::advect::{UpwindPlan, advect_velocity_in, dual_fluxes_in};
-use crate::stain::diffuse::{DensityWork, Ops, SoluteMotion, diffuse_densities, diffuse_velocity};
+use crate::stain::diffuse::{
+    Carry, DensityWork, Ops, SoluteMotion, diffuse_densities, diffuse_velocity,
+};
 use crate::stain::extend::{extend_velocity, wet_vertices};
 use crate::stain::forces::{VelocityStep, frame_angular_velocity, frame_body_acceleration};
 use crate::stain::interact::{exposure, interact_varied, vapour_exposure};
@@ -344,7 +346,7 @@ impl Simulator {
                             geometry,
                             h,
                             face_scale.as_deref(),
-                            solute_motion(p.carry_solute, held_scale.as_deref()),
+                            solute_motion(p, held_scale.as_deref()),
                         )?;
                         if let Some(start) = &start {
                             for _ in 0..picard {
@@ -360,7 +362,7 @@ impl Simulator {
                                     geometry,
                                     h,
                                     g.as_deref(),
-                                    solute_motion(p.carry_solute, held.as_deref()),
+                                    solute_motion(p, held.as_deref()),
                                 )?;
                                 work.iterations += more.iterations;
                                 work.solves += more.solves;
@@ -555,9 +557,15 @@ fn held_faces(mobile: &[bool], face_scale: Option<&[f64]>) -> Vec<f64> {
 
 /// How the solute moves in the density diffusion: carried by the solvents' fluxes (the
 /// fibres' liquid through the faces of `held`), or diffused with them.
-fn solute_motion(carry: bool, held: Option<&[f64]>) -> SoluteMotion<'_> {
-    if carry {
-        SoluteMotion::Carried { held_scale: held }
+fn solute_motion<'a>(p: &StainParams, held: Option<&'a [f64]>) -> SoluteMotion<'a> {
+    if p.carry_solute {
+        SoluteMotion::Carried {
+            held_scale: held,
+            carry: Carry {
+                fraction: p.carried_fraction,
+                dispersivity: p.dispersivity,
+            },
+        }
     } else {
         SoluteMotion::Diffused
     }
