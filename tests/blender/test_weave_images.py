@@ -14,7 +14,11 @@ from conftest import make_active
 import madder
 
 FRAMES = (1, 6)
-SIZE = 512
+# 1024 px: 13 texels a tile. At 512 (6.6) the wine's stain (issue 34's presets: carried to a
+# rim, bound over minutes) put the tile's harmonic below the low-frequency part of the
+# detail: the woven coverage is ~1 % above the smooth one (1.02 % at 512 px, 0.87 % at
+# 1024, the same share in every channel), a bias of the uptake's sampling not found yet
+SIZE = 1024
 
 
 def bake(open_fixture, thread_count, size=str(SIZE)):
@@ -67,7 +71,7 @@ def metres_per_uv(flag):
 def test_the_weave_shows_in_the_images_at_its_thread_count(open_fixture, capsys):
     smooth = stain_image(bake(open_fixture, 0.0), FRAMES[1])
     capsys.readouterr()
-    flag = bake(open_fixture, 1.0)  # 1 thread/cm: a few texels a thread at 512 px
+    flag = bake(open_fixture, 1.0)  # 1 thread/cm: 6.6 texels a thread at 1024 px
     assert "cannot be resolved" not in capsys.readouterr().out
     woven = stain_image(flag, FRAMES[1])
     d = (woven - smooth)[..., 3].astype(np.float64)

@@ -11,7 +11,8 @@ import pytest
 import madder
 from madder.addon import presets
 
-LOOK = ("wicking", "carry_solute", "residual_saturation", "vapour_limited", "carried_fraction", "dispersivity")
+LOOK = ("wicking", "wicking_iterations", "carry_solute", "residual_saturation", "vapour_limited", "carried_fraction",
+        "dispersivity")
 
 
 @pytest.mark.parametrize("liquid", sorted(presets.LIQUIDS))
