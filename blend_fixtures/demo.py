@@ -152,7 +152,7 @@ def main():
     ap.add_argument("--zip", default=os.environ.get("MADDER_ZIP"), help="extension zip (make addon)")
     ap.add_argument("--out", default="out/demo.png")
     ap.add_argument("--frame", type=int, default=FRAMES, help="frame rendered (default: the last)")
-    ap.add_argument("--samples", type=int, default=32, help="Cycles samples (denoised; the committed pictures: 64)")
+    ap.add_argument("--samples", type=int, default=32, help="Cycles samples (denoised; the committed pictures: 32)")
     ap.add_argument("--scale", type=int, default=100, help="render resolution percentage (of 1280x720)")
     ap.add_argument("--image-size", default=None, help="stain image size, px (default: Auto)")
     ap.add_argument("--detail", type=int, default=None, help="Detail level (default: Auto)")

@@ -79,6 +79,11 @@ pub(in crate::stain) struct Carry {
 /// `(M + h K_A) σ' = m` for every flowing field on the active vertices, Neumann at the
 /// region's edge ([`crate::ops::restrict`]), then the exact mass restoration and the non-negativity
 /// repair; the masses outside are not touched. Returns the work done.
+///
+/// `solvent_only` solves the solvent alone and leaves the solute (and its colour) as it
+/// is: a Picard iteration's trial solve ([`super::Wicking::picard`]), whose solute the
+/// next iteration throws away (the wicking rate depends on the liquid alone).
+#[allow(clippy::too_many_arguments)]
 pub(in crate::stain) fn diffuse_densities(
     ops: &Ops<'_>,
     cg: &mut WarmCg,
@@ -87,6 +92,7 @@ pub(in crate::stain) fn diffuse_densities(
     h: f64,
     wicking: Option<&[f64]>,
     solute: SoluteMotion<'_>,
+    solvent_only: bool,
 ) -> Result<DensityWork, Error> {
     let (carry, held_scale, how) = match solute {
         SoluteMotion::Diffused => (false, None, None),
@@ -124,12 +130,17 @@ pub(in crate::stain) fn diffuse_densities(
     // with the solute carried (issue 13 §2) the two solvents, free and in the fibres,
     // are solved, and the solute moves with their fluxes; otherwise the free solvent, the
     // dissolved solute and its colour diffuse alike
-    let before = carry.then(|| (f.free_solvent.clone(), f.absorbed_solvent.clone()));
-    let mut color = f.color_free.as_ref().map(|c| split_rgb(c));
+    let before =
+        (carry && !solvent_only).then(|| (f.free_solvent.clone(), f.absorbed_solvent.clone()));
+    let mut color = if solvent_only {
+        None
+    } else {
+        f.color_free.as_ref().map(|c| split_rgb(c))
+    };
     let mut fields: Vec<&mut Vec<f64>> = vec![&mut f.free_solvent];
     if carry {
         fields.push(&mut f.absorbed_solvent);
-    } else {
+    } else if !solvent_only {
         fields.push(&mut f.solute);
         if let Some(c) = color.as_mut() {
             fields.extend(c.iter_mut());
@@ -382,6 +393,17 @@ pub(super) fn carry_with_solvent(
         }
         uphill = true;
     }
+    // the vertices the sweep can change: those that hold or receive solvent, or take part
+    // in the dispersion (any other comes out 0, as its concentration starts)
+    let swept: Vec<u32> = order
+        .iter()
+        .copied()
+        .filter(|&v| {
+            let v = v as usize;
+            before[v] + inflow[v] + dispersion.get(v).copied().unwrap_or(0.0) > 0.0
+        })
+        .collect();
+    let dispersing = !dispersion.is_empty();
     for (target, movable) in moves.iter_mut() {
         // what cannot move stays: a vertex without solvent holds its solute in place
         let mut mobile: Vec<f64> = (0..n)
@@ -404,7 +426,6 @@ pub(super) fn carry_with_solvent(
         // dispersion, which couples each vertex to its upstream too, symmetric sweeps
         // (down the density, then back up) from the concentrations before the step
         let mut conc = vec![0.0; n];
-        let dispersing = !dispersion.is_empty();
         if dispersing {
             for &v in &order {
                 let v = v as usize;
@@ -422,8 +443,8 @@ pub(super) fn carry_with_solvent(
             let mut change: f64 = 0.0;
             let mut size: f64 = 0.0;
             let back = dispersing && sweep % 2 == 1;
-            for k in 0..order.len() {
-                let v = order[if back { order.len() - 1 - k } else { k }] as usize;
+            for k in 0..swept.len() {
+                let v = swept[if back { swept.len() - 1 - k } else { k }] as usize;
                 let mut gathered: f64 =
                     incoming[v].iter().map(|&(b, f)| f * conc[b as usize]).sum();
                 let mut held = before[v] + inflow[v];

@@ -37,7 +37,9 @@ use crate::stain::check::check_range;
 /// 0.27 % at 240, 0.017 % at 960, the mean radius 17.0, 35.2, 38.2 and 38.5 mm. Each Picard
 /// iteration solves the step again from its start with the factors of the last solution,
 /// the fully implicit coefficient `g(θ^{k+1})` (Celia, Bouloutas & Zarba 1990, for
-/// Richards' equation), so the front may cross one more ring per iteration. 0 (the
+/// Richards' equation), so the front may cross one more ring per iteration. The factors
+/// depend on the liquid alone, so the trial solves leave the solute be and only the last
+/// one moves it (with a carried solute, its sweeps cost more than the solve). 0 (the
 /// default) is the lagged scheme, bit for bit.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Wicking {

@@ -347,9 +347,10 @@ impl Simulator {
                             h,
                             face_scale.as_deref(),
                             solute_motion(p, held_scale.as_deref()),
+                            picard > 0,
                         )?;
                         if let Some(start) = &start {
-                            for _ in 0..picard {
+                            for i in 0..picard {
                                 // the factors of the last solution, the step again from its start
                                 let g =
                                     self.face_scale(cloth, fields, geometry, irregular.as_deref());
@@ -363,6 +364,8 @@ impl Simulator {
                                     h,
                                     g.as_deref(),
                                     solute_motion(p, held.as_deref()),
+                                    // the solute moves once, with the last solve's fluxes
+                                    i + 1 < picard,
                                 )?;
                                 work.iterations += more.iterations;
                                 work.solves += more.solves;
