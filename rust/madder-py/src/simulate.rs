@@ -483,6 +483,7 @@ impl Simulator {
             ("active_vertices", p.active_vertices),
             ("window_vertices", p.window_vertices),
             ("window_rebuilds", p.window_rebuilds),
+            ("window_retries", p.window_retries),
             ("window_edges", p.window_edges),
             ("window_faces", p.window_faces),
             ("transport_passes", p.transport_passes),

@@ -1486,3 +1486,53 @@ fn splash_is_outgoing_and_reproducible_from_its_seed() {
     println!("splash: second moment {r_splash:.4} m² vs {r_still:.4} m² without");
     assert!(r_splash > 1.5 * r_still);
 }
+
+/// A cloth at rest that is jerked sideways: the liquid, still for two frames, crosses
+/// more rings in the jerk's frame than the window planned from the still frame before
+/// (one transport sub-cycle) reaches. The frame is tried again on a window that counts
+/// its own sub-cycles, so the stain is the whole mesh's; without the retry the liquid
+/// would pile up along the window's edge, a straight line of the grid.
+#[test]
+fn liquid_kicked_farther_than_the_window_reaches_is_the_whole_meshs() {
+    let (topo, rest) = Grid::new(60, 1.0).build();
+    let dt = 0.04;
+    // still for 2 frames, then jerked along −x by 1.2 m in the third (the liquid slides
+    // along +x)
+    let at = |k: usize| -> Vec<DVec3> {
+        let shift = DVec3::new(if k >= 3 { -1.2 } else { 0.0 }, 0.0, 0.0);
+        rest.iter().map(|&p| p + shift).collect()
+    };
+    let run = |active_region: bool| {
+        let params = StainParams {
+            active_region,
+            interaction: no_interaction(),
+            ..ideal(ALL_FORCES)
+        };
+        let mut sim = simulator(&topo, &rest, &rest, Conductivity::Isotropic(1e-4), params);
+        let blob = gaussian(&rest, DVec2::new(-0.6, 0.0), 0.003, 1.0);
+        sim.add_liquid(&blob, 0.05, None).unwrap();
+        for k in 1..=3 {
+            sim.step(&at(k), dt, None).unwrap();
+        }
+        sim
+    };
+    let (whole, active) = (run(false), run(true));
+    let moved = centroid(&active.wetness(), &rest).x + 0.6;
+    let (diff, peak) = max_difference(&active.wetness(), &whole.wetness());
+    let retries = active.profile().window_retries;
+    eprintln!(
+        "kicked liquid: moved {moved:.3} m (grid spacing {:.3} m), window vs whole mesh {:.1e} \
+         of the peak, {retries} retries",
+        2.0 / 60.0,
+        diff / peak
+    );
+    assert!(
+        moved > 12.0 * 2.0 / 60.0,
+        "the kick moved the liquid {moved} m only"
+    );
+    assert!(retries >= 1, "no frame was tried again");
+    assert!(
+        diff <= 1e-9 * peak,
+        "max difference {diff:e} of peak {peak:e}"
+    );
+}

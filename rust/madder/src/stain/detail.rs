@@ -476,10 +476,16 @@ impl Detailed {
         // growth, a window build and the placement then start from a worker
         let sim = &mut self.sim;
         rayon::scope(|_| {
-            fine.prepare(sim)?;
-            let r = &fine.partial;
-            let after = after.map(|a| r.prolong(a));
-            sim.step(&r.prolong(positions), dt, after.as_deref())?;
+            // a frame whose liquid outran its window is tried again on a wider one,
+            // which may need more of the refined cloth
+            loop {
+                fine.prepare(sim)?;
+                let r = &fine.partial;
+                let after = after.map(|a| r.prolong(a));
+                if sim.try_frame(&r.prolong(positions), dt, after.as_deref())? {
+                    break;
+                }
+            }
             fine.previous = Some(std::mem::replace(&mut fine.current, positions.to_vec()));
             let p = &fine.partial;
             fine.area = vertex_areas_par(p.coarse(), positions, |v| p.faces_around(v));

@@ -8,7 +8,9 @@
 //!   solute density above [`ACTIVE_THRESHOLD`] (1e-12) of that field's peak — grown by
 //!   [`ACTIVE_RINGS`] (3) rings plus one ring per transport sub-cycle of the frame's
 //!   sub-steps (liquid moves at most one ring per sub-cycle, so it cannot reach the
-//!   region's edge within the frame). Every phase runs on them. (A threshold of exactly
+//!   region's edge within the frame; the count is the last frame's, and a frame that
+//!   needed more is run again on a wider window: [`super::simulate`], "Window reach").
+//!   Every phase runs on them. (A threshold of exactly
 //!   zero would not do: implicit diffusion gives every vertex of the region a positive,
 //!   if 1e-30-level, mass, so the region would grow every step until it covered the
 //!   cloth.)

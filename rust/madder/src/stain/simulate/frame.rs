@@ -48,29 +48,55 @@ impl Simulator {
         if let Some(a) = after {
             check_positions(&self.cloth.topology, a)?;
         }
+        while !self.try_frame(positions, dt, after)? {}
+        Ok(())
+    }
+
+    /// One try at a frame on checked input: prepares the window (unless
+    /// [`super::detail`] did) and runs the frame on it. Returns whether the frame was
+    /// committed; `false` when its liquid outran the window (module doc, "Window
+    /// reach"): nothing was written, the reach now counts the frame's own transport
+    /// sub-cycles, and the caller prepares a wider window and tries again.
+    pub(in crate::stain) fn try_frame(
+        &mut self,
+        positions: &[DVec3],
+        dt: f64,
+        after: Option<&[DVec3]>,
+    ) -> Result<bool, Error> {
         let mut laps = Laps::start();
         let rebuilt = !std::mem::take(&mut self.prepared) && self.prepare_window()?;
-        let mut prof = self.profile;
-        prof.window_rebuilds += usize::from(rebuilt);
-        prof.frames += 1;
-        laps.lap(&mut prof.window);
+        self.profile.window_rebuilds += usize::from(rebuilt);
+        laps.lap(&mut self.profile.window);
         let t_end = self.state.time + dt;
-        let mut window = self.window.take();
-        let mut scratch = std::mem::take(&mut self.scratch);
-        let result = match window.as_mut() {
-            Some(w) => self
-                .run_frame(w, positions, dt, after, &mut prof, &mut scratch)
-                .map(|local| {
-                    self.commit(w, &local, t_end);
-                    scratch.local = Some(local);
-                }),
-            None => Ok(()),
-        };
-        self.window = window;
-        self.scratch = scratch;
-        self.profile = prof;
-        // nothing is written before the whole frame succeeded (module doc, "Failure")
-        result?;
+        if let Some(mut w) = self.window.take() {
+            let mut scratch = std::mem::take(&mut self.scratch);
+            let mut prof = self.profile;
+            let result = self.run_frame(&mut w, positions, dt, after, &mut prof, &mut scratch);
+            self.window = Some(w);
+            self.profile = prof;
+            // nothing is written before the whole frame succeeded (module doc, "Failure"),
+            // nor when its liquid outran the window
+            let local = match result {
+                Ok(local) => local,
+                Err(e) => {
+                    self.scratch = scratch;
+                    return Err(e);
+                }
+            };
+            let fits = !self.outran(local.cycles);
+            if fits {
+                let w = self.window.take().expect("the frame's window");
+                self.commit(&w, &local, t_end);
+                self.window = Some(w);
+            }
+            scratch.local = Some(local);
+            self.scratch = scratch;
+            if !fits {
+                self.profile.window_retries += 1;
+                return Ok(false);
+            }
+        }
+        self.profile.frames += 1;
         let st = &mut self.state;
         st.time = t_end;
         let mut buffer = st.previous.take().unwrap_or_default();
@@ -78,7 +104,7 @@ impl Simulator {
         buffer.extend_from_slice(positions);
         st.previous = Some(std::mem::replace(&mut st.positions, buffer));
         self.refresh_areas();
-        Ok(())
+        Ok(true)
     }
 
     /// One frame on the window `w`, on copies of its state: nothing in `self` changes

@@ -29,7 +29,7 @@ pub struct Profile {
     pub interaction: f64,
     /// Frames stepped.
     pub frames: usize,
-    /// Sub-steps taken.
+    /// Sub-steps taken (with those of the frames tried again).
     pub substeps: usize,
     /// CG iterations of the density solves (all fields).
     pub density_iterations: usize,
@@ -44,6 +44,9 @@ pub struct Profile {
     pub window_vertices: usize,
     /// Times the window was rebuilt.
     pub window_rebuilds: usize,
+    /// Frames run again on a wider window because their liquid outran the one planned
+    /// for them (module doc of `simulate`, "Window reach").
+    pub window_retries: usize,
     /// Window edges, summed over the sub-steps (for the work model of
     /// `Profile::least_work`, the `roofline` feature).
     pub window_edges: usize,

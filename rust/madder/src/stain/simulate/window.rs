@@ -105,6 +105,22 @@ impl Simulator {
         }
     }
 
+    /// Whether a frame that took `cycles` transport sub-cycles outran the window it ran
+    /// on (module doc, "Window reach"): its reach counted
+    /// [`Simulator::last_frame_cycles`], and the liquid it found, grown by `cycles`
+    /// instead, no longer fits. The reach then counts `cycles` from now on, so that the
+    /// next try plans for them; each try widens it, so the tries end.
+    pub(in crate::stain) fn outran(&mut self, cycles: usize) -> bool {
+        if !self.params.active_region || cycles <= self.last_frame_cycles {
+            return false;
+        }
+        self.last_frame_cycles = cycles;
+        let rescan = std::mem::replace(&mut self.rescan, false);
+        let outran = !matches!(self.plan_window(), WindowPlan::Keep);
+        self.rescan = rescan;
+        outran
+    }
+
     /// The velocity and frame of vertex `v` at the start of the frame: a vertex that was
     /// outside the window is brought from its last step to now by the exact solution of
     /// its force equation ([`integrate_velocity`]) over the time between, with the body
