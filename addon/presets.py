@@ -61,8 +61,14 @@ A preset carries the whole look of its liquid (issue 34), not only its solute:
   (rust/madder/tests/outlines.rs).
 - How it rings, kept together per liquid in `RINGS`: Coffee, Red Wine and Water ring
   (see above, rims.rs measures them); Ink does not.
-- How it runs: the flow's viscosity and the fibres' friction are the cloth's and the
-  flow's (left alone), so all four liquids run alike.
+- How it runs (issue 34 §1): a Run Holdup of 0.05 kg/m² for every liquid, a film of
+  50 µm pinned in the weave's pores that a run fills before it moves on and leaves
+  behind to soak in and stain the path, so a run stops when its excess over the film
+  (and over what the fibres take) is used up instead of trickling on forever (the
+  static holdup of packed and trickle-bed flow, a few per cent of the pore volume;
+  rust/madder/tests/runs.rs measures a fed run with it). The flow's viscosity and the
+  fibres' friction are the cloth's and the flow's (left alone), so the four liquids run
+  alike.
 - Sub-steps: none of the four needs more than the automatic choice (the core adds steps
   where the cloth turns fast), so a preset leaves Substeps alone.
 
@@ -89,28 +95,30 @@ RINGS = {
 # rate taken from each step's own solution after that many extra solves
 WICKING = {"WATER": 2.0, "RED_WINE": 2.0, "COFFEE": 2.0, "INK": 2.0}
 FRONT_ITERATIONS = 2
+# how it runs: the film (kg/m²) a run leaves behind in the weave's pores
+HOLDUP = {"WATER": 0.05, "RED_WINE": 0.05, "COFFEE": 0.05, "INK": 0.05}
 
 LIQUIDS = {
     "WATER": dict(
         stain_color=(0.95, 0.92, 0.85), concentration=1e-3, absorption=2.0, adsorption=0.0,
         capacity=2e-3, evaporation=5e-5, evaporation_boundary=1.2, **RINGS["WATER"], wicking=WICKING["WATER"],
-        wicking_iterations=FRONT_ITERATIONS,
+        wicking_iterations=FRONT_ITERATIONS, holdup=HOLDUP["WATER"],
     ),
     "RED_WINE": dict(
         stain_color=(0.30, 0.02, 0.07), concentration=0.02, absorption=2.0, adsorption=0.005,
         capacity=1e-3, evaporation=6e-5, evaporation_boundary=1.2, **RINGS["RED_WINE"],
         wicking=WICKING["RED_WINE"],
-        wicking_iterations=FRONT_ITERATIONS,
+        wicking_iterations=FRONT_ITERATIONS, holdup=HOLDUP["RED_WINE"],
     ),
     "COFFEE": dict(
         stain_color=(0.25, 0.13, 0.05), concentration=0.012, absorption=2.0, adsorption=0.05,
         capacity=2e-4, evaporation=5e-5, evaporation_boundary=1.5, **RINGS["COFFEE"], wicking=WICKING["COFFEE"],
-        wicking_iterations=FRONT_ITERATIONS,
+        wicking_iterations=FRONT_ITERATIONS, holdup=HOLDUP["COFFEE"],
     ),
     "INK": dict(
         stain_color=(0.04, 0.05, 0.15), concentration=0.05, absorption=3.0, adsorption=1.0,
         capacity=5e-3, evaporation=4e-5, evaporation_boundary=1.2, **RINGS["INK"], wicking=WICKING["INK"],
-        wicking_iterations=FRONT_ITERATIONS,
+        wicking_iterations=FRONT_ITERATIONS, holdup=HOLDUP["INK"],
     ),
 }
 LIQUID_ITEMS = [
