@@ -181,6 +181,7 @@ class MADDER_PT_stain_look(_StainSubPanel, bpy.types.Panel):
         sub = col.row()
         sub.active = s.wicking > 0.0
         sub.prop(s, "wicking_iterations")
+        sub.prop(s, "front_settles")
         layout.prop(s, "grain_from")
         col = layout.column(align=True)
         col.active = s.grain_from == "OBJECT"

@@ -53,19 +53,22 @@ A preset carries the whole look of its liquid (issue 34), not only its solute:
   in a porous sheet is a nonlinear diffusion whose diffusivity rises steeply with the
   saturation (Richards' equation with a power-law D(S), e.g. Brutsaert 1979: exponents of
   2 to 8); 2 is the gentlest that gives the front (physics.md, "Wicking").
-- Front Iterations 2 for every liquid: each step is solved again twice with the rate of
-  its own solution. With the rate of the step's start the front crosses one ring of faces
-  per step, so it runs about 9 % slow and takes the mesh's shape (a spot on a structured
-  grid dried a rounded square, 4-fold term 3.4 %, the octagonal coffee of the gallery);
-  with 2 the term is 0.5 %, for about twice the spill's time
-  (rust/madder/tests/outlines.rs).
+- Front Iterations 2 for every liquid, Until Settled: each step is solved again with the
+  rate of its own solution, at least twice and on until the front stops moving. With the
+  rate of the step's start the front crosses one ring of faces per step, so it runs about
+  9 % slow and takes the mesh's shape (a spot on a structured grid dried a rounded
+  square, 4-fold term 3.4 %); with 2 the term is 0.5 % at short steps, but a long step
+  still held the front to three rings (the demo's 45-s frames: the table-top patch
+  stopped at a straight edge); iterated until settled it spreads as far as the step
+  takes it (rust/madder/tests/outlines.rs, docs/physics.md "Wicking"), for about 1.8
+  times the demo's bake.
 - How it rings, kept together per liquid in `RINGS`: Coffee, Red Wine and Water ring
   (see above, rims.rs measures them); Ink does not.
 - How it runs (issue 34 §1): a Run Holdup of 0.05 kg/m² for every liquid, a film of
   50 µm pinned in the weave's pores that a run fills before it moves on and leaves
   behind to soak in and stain the path, so a run stops when its excess over the film
   (and over what the fibres take) is used up instead of trickling on forever (the
-  static holdup of packed and trickle-bed flow, a few per cent of the pore volume;
+  static holdup of packed and trickle-bed flow; the value is an estimate, not measured;
   rust/madder/tests/runs.rs measures a fed run with it). The flow's viscosity and the
   fibres' friction are the cloth's and the flow's (left alone), so the four liquids run
   alike.
@@ -95,6 +98,10 @@ RINGS = {
 # rate taken from each step's own solution after that many extra solves
 WICKING = {"WATER": 2.0, "RED_WINE": 2.0, "COFFEE": 2.0, "INK": 2.0}
 FRONT_ITERATIONS = 2
+# ... and on until the front settles: no face's rate changes by more than this share of
+# the largest between two solves (the core's `Wicking::tolerance`)
+FRONT_SETTLES = True
+FRONT_TOLERANCE = 1e-3
 # how it runs: the film (kg/m²) a run leaves behind in the weave's pores
 HOLDUP = {"WATER": 0.05, "RED_WINE": 0.05, "COFFEE": 0.05, "INK": 0.05}
 
@@ -102,23 +109,27 @@ LIQUIDS = {
     "WATER": dict(
         stain_color=(0.95, 0.92, 0.85), concentration=1e-3, absorption=2.0, adsorption=0.0,
         capacity=2e-3, evaporation=5e-5, evaporation_boundary=1.2, **RINGS["WATER"], wicking=WICKING["WATER"],
-        wicking_iterations=FRONT_ITERATIONS, holdup=HOLDUP["WATER"],
+        wicking_iterations=FRONT_ITERATIONS,
+        front_settles=FRONT_SETTLES, holdup=HOLDUP["WATER"],
     ),
     "RED_WINE": dict(
         stain_color=(0.30, 0.02, 0.07), concentration=0.02, absorption=2.0, adsorption=0.005,
         capacity=1e-3, evaporation=6e-5, evaporation_boundary=1.2, **RINGS["RED_WINE"],
         wicking=WICKING["RED_WINE"],
-        wicking_iterations=FRONT_ITERATIONS, holdup=HOLDUP["RED_WINE"],
+        wicking_iterations=FRONT_ITERATIONS,
+        front_settles=FRONT_SETTLES, holdup=HOLDUP["RED_WINE"],
     ),
     "COFFEE": dict(
         stain_color=(0.25, 0.13, 0.05), concentration=0.012, absorption=2.0, adsorption=0.05,
         capacity=2e-4, evaporation=5e-5, evaporation_boundary=1.5, **RINGS["COFFEE"], wicking=WICKING["COFFEE"],
-        wicking_iterations=FRONT_ITERATIONS, holdup=HOLDUP["COFFEE"],
+        wicking_iterations=FRONT_ITERATIONS,
+        front_settles=FRONT_SETTLES, holdup=HOLDUP["COFFEE"],
     ),
     "INK": dict(
         stain_color=(0.04, 0.05, 0.15), concentration=0.05, absorption=3.0, adsorption=1.0,
         capacity=5e-3, evaporation=4e-5, evaporation_boundary=1.2, **RINGS["INK"], wicking=WICKING["INK"],
-        wicking_iterations=FRONT_ITERATIONS, holdup=HOLDUP["INK"],
+        wicking_iterations=FRONT_ITERATIONS,
+        front_settles=FRONT_SETTLES, holdup=HOLDUP["INK"],
     ),
 }
 LIQUID_ITEMS = [
@@ -204,6 +215,7 @@ def simulator_keywords(s, gravity, scene_gravity, unit, grain=None):
         wicking_exponent=s.wicking,
         wicking_density=max(s.saturation, 1e-6),
         wicking_picard=s.wicking_iterations,
+        wicking_tolerance=FRONT_TOLERANCE if s.front_settles else 0.0,
         irregularity=grain[0],
         irregularity_length=grain[1] * 1e-3,
         irregularity_seed=grain[2],

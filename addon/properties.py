@@ -427,7 +427,15 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         "grid dries square); each costs about one more solve of the spreading per step",
         default=0,
         min=0,
-        max=8,
+        max=64,
+        update=_mark_custom,
+    )
+    front_settles: BoolProperty(
+        name="Until Settled",
+        description="With Wicking, goes on solving each step until its front stops moving (at most 64 "
+        "solves; Front Iterations is then the least number): a long step spreads a round stain "
+        "instead of one ring of the mesh per solve, at the price of more solves while it spreads",
+        default=False,
         update=_mark_custom,
     )
     irregularity: FloatProperty(

@@ -11,8 +11,8 @@ import pytest
 import madder
 from madder.addon import presets
 
-LOOK = ("wicking", "wicking_iterations", "carry_solute", "residual_saturation", "vapour_limited", "carried_fraction",
-        "dispersivity")
+LOOK = ("wicking", "wicking_iterations", "front_settles", "carry_solute", "residual_saturation", "vapour_limited",
+        "carried_fraction", "dispersivity", "holdup")
 
 
 @pytest.mark.parametrize("liquid", sorted(presets.LIQUIDS))
@@ -20,8 +20,10 @@ def test_a_liquid_preset_sets_its_whole_look(liquid):
     values = presets.object_preset(liquid)
     for key in LOOK:
         assert key in values, key
-    # a sharp front: imbibition's diffusivity rises with saturation
-    assert values["wicking"] >= 1.0
+    # a sharp front: imbibition's diffusivity rises with saturation, iterated until it settles
+    assert values["wicking"] >= 1.0 and values["front_settles"] is True
+    # runs leave a film behind
+    assert values["holdup"] > 0.0
     assert {k: values[k] for k in presets.RINGS[liquid]} == presets.RINGS[liquid]
 
 

@@ -62,7 +62,9 @@ def test_front_iterations_let_the_front_keep_up_and_keep_the_mass():
 
 @pytest.mark.parametrize("kw", [dict(wicking_exponent=-1.0), dict(wicking_exponent=9.0),
                                 dict(wicking_exponent=1.0, wicking_density=0.0),
-                                dict(wicking_exponent=2.0, wicking_picard=9)])
+                                dict(wicking_exponent=2.0, wicking_picard=65),
+                                dict(wicking_exponent=2.0, wicking_tolerance=-1e-3),
+                                dict(wicking_exponent=2.0, wicking_tolerance=float("nan"))])
 def test_bad_wicking_is_refused_by_name(kw):
     faces, pos = grid(4)
     with pytest.raises(madder.ParameterError, match="wicking"):

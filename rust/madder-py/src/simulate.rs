@@ -19,7 +19,8 @@ use crate::threads::Pool;
 /// face_uv=None, face_angle=None, color=DEFAULT_SOLUTE_COLOR, gravity=(0, 0, -9.81),
 /// viscosity=..., friction=..., absorption=..., saturation=..., adsorption=...,
 /// capacity=..., evaporation=..., evaporation_boundary=1.2, wicking_exponent=0,
-/// wicking_density=0.1, wicking_picard=0, irregularity=0, irregularity_length=0.003, irregularity_seed=0,
+/// wicking_density=0.1, wicking_picard=0, wicking_tolerance=0, irregularity=0, irregularity_length=0.003,
+/// irregularity_seed=0,
 /// irregularity_fine_length=0,
 /// carry_solute=False, residual_saturation=0, vapour_limited=False, carried_fraction=1,
 /// dispersivity=0, holdup=0, substeps=1, use_gravity=True, use_rectilinear=True,
@@ -40,7 +41,10 @@ use crate::threads::Pool;
 /// `wicking_picard` (0 to 8) solves each sub-step again that many times with the rate of
 /// the last solution instead of the step's start: the lagged rate lets the front cross
 /// one ring of faces per step, so it runs slow and squares off along the mesh (0, the
-/// default: lagged; 2 takes a structured grid's 4-fold term from 3.4 % to 0.5 %).
+/// default: lagged; 2 takes a structured grid's 4-fold term from 3.4 % to 0.5 %; at most
+/// 64). `wicking_tolerance` ε > 0 goes on solving (up to 64 times) until no face's rate
+/// changes by more than ε times the largest, so that a long step's front is not held to
+/// a ring per solve; `wicking_picard` is then the least number (0, the default: off).
 /// `irregularity` (0–1) makes the fabric uneven: its diffusion and absorption rates vary
 /// at random over the rest surface, correlated over `irregularity_length` metres, the
 /// same for the same `irregularity_seed` (0, the default: a uniform fabric).
@@ -118,7 +122,7 @@ impl Simulator {
         face_uv=None, face_angle=None, color=DEFAULT_COLOR, gravity=(0.0, 0.0, -9.81),
         viscosity=None, friction=None, absorption=None, saturation=None, adsorption=None,
         capacity=None, evaporation=None, evaporation_boundary=None, wicking_exponent=None,
-        wicking_density=None, wicking_picard=0, irregularity=None, irregularity_length=None, irregularity_seed=0,
+        wicking_density=None, wicking_picard=0, wicking_tolerance=0.0, irregularity=None, irregularity_length=None, irregularity_seed=0,
         irregularity_fine_length=None,
         carry_solute=false, residual_saturation=None, vapour_limited=false, carried_fraction=None,
         dispersivity=None, holdup=None, substeps=1,
@@ -147,6 +151,7 @@ impl Simulator {
         wicking_exponent: Option<f64>,
         wicking_density: Option<f64>,
         wicking_picard: u32,
+        wicking_tolerance: f64,
         irregularity: Option<f64>,
         irregularity_length: Option<f64>,
         irregularity_seed: u64,
@@ -233,6 +238,7 @@ impl Simulator {
         set(&mut params.wicking.exponent, wicking_exponent);
         set(&mut params.wicking.density, wicking_density);
         params.wicking.picard = wicking_picard;
+        params.wicking.tolerance = wicking_tolerance;
         set(&mut params.irregularity.amplitude, irregularity);
         set(
             &mut params.irregularity.correlation_length,

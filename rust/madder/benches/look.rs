@@ -56,6 +56,7 @@ fn main() {
                 exponent: 2.0,
                 density: 0.1,
                 picard: 0,
+                tolerance: 0.0,
             },
             ..Default::default()
         },

@@ -102,6 +102,7 @@ fn spill(irregularity: Irregularity, threads: usize) -> (Vec<f64>, Simulator) {
             exponent: 1.0,
             density: 0.1,
             picard: 0,
+            tolerance: 0.0,
         },
         irregularity,
         ..Default::default()

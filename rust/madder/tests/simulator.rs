@@ -668,6 +668,7 @@ fn full_params(momentum_advection: bool, substeps: u32) -> StainParams {
             exponent: 2.0,
             density: 0.1,
             picard: 0,
+            tolerance: 0.0,
         },
         // and an irregular fabric
         irregularity: madder::stain::Irregularity {

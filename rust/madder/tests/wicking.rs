@@ -97,6 +97,7 @@ fn run(n: f64, exponent: f64) -> (Vec<(f64, f64, f64, f64)>, Barenblatt) {
             exponent,
             density: SIGMA_W,
             picard: 0,
+            tolerance: 0.0,
         },
         ..Default::default()
     };
@@ -231,6 +232,7 @@ fn wicking_off_is_the_linear_diffusion_bit_for_bit() {
         exponent: 0.0,
         density: 3.0,
         picard: 0,
+        tolerance: 0.0,
     });
     assert!(a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()));
 }
@@ -243,6 +245,7 @@ fn bad_wicking_parameters_are_refused() {
                 exponent,
                 density,
                 picard: 0,
+                tolerance: 0.0,
             },
             ..Default::default()
         };

@@ -170,6 +170,7 @@ class Simulator:
         wicking_exponent: float | None = None,
         wicking_density: float | None = None,
         wicking_picard: int = 0,
+        wicking_tolerance: float = 0.0,
         irregularity: float | None = None,
         irregularity_length: float | None = None,
         irregularity_seed: int = 0,

@@ -28,7 +28,9 @@ pub(crate) mod window;
 pub(crate) mod work;
 
 pub use detail::Detailed;
-pub use diffuse::{Conductivity, DEFAULT_DIFFUSION, DiffusionStepper, Wicking, WovenFaces};
+pub use diffuse::{
+    Conductivity, DEFAULT_DIFFUSION, DiffusionStepper, MAX_PICARD, Wicking, WovenFaces,
+};
 pub use forces::Forces;
 pub use interact::InteractionRates;
 pub use irregular::Irregularity;

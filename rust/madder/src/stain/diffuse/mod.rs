@@ -185,7 +185,7 @@ pub(super) use solve::{
     Carry, DensityWork, Ops, SoluteMotion, diffuse_densities, diffuse_velocity, solvers,
 };
 pub use stepper::DiffusionStepper;
-pub use wicking::Wicking;
+pub use wicking::{MAX_PICARD, Wicking};
 
 /// Relative residual `‖m − (M + hK)σ‖ / ‖m‖` at which the density solves stop (module doc,
 /// "Tolerances"). The total is restored exactly after each solve, so this only sets the

@@ -13,7 +13,7 @@ use crate::error::Error;
 use crate::mesh::Geometry;
 use crate::stain::advect::{UpwindPlan, advect_velocity_in, dual_fluxes_in};
 use crate::stain::diffuse::{
-    Carry, DensityWork, Ops, SoluteMotion, diffuse_densities, diffuse_velocity,
+    Carry, DensityWork, MAX_PICARD, Ops, SoluteMotion, diffuse_densities, diffuse_velocity,
 };
 use crate::stain::extend::{extend_velocity, wet_vertices};
 use crate::stain::forces::{VelocityStep, frame_angular_velocity, frame_body_acceleration};
@@ -323,7 +323,9 @@ impl Simulator {
         } else {
             0
         };
-        let start = (picard > 0).then(|| loc.fields.clone());
+        // a tolerance iterates until the front stops, `picard` rounds at least
+        let converge = p.wicking.is_on() && p.wicking.tolerance > 0.0;
+        let start = (picard > 0 || converge).then(|| loc.fields.clone());
         let (fields, velocity) = (&mut loc.fields, &mut loc.velocity);
         let (densities, viscous) = match w.cg.as_mut() {
             None => (
@@ -347,29 +349,50 @@ impl Simulator {
                             h,
                             face_scale.as_deref(),
                             solute_motion(p, held_scale.as_deref()),
-                            picard > 0,
+                            start.is_some(),
                         )?;
                         if let Some(start) = &start {
-                            for i in 0..picard {
-                                // the factors of the last solution, the step again from its start
-                                let g =
-                                    self.face_scale(cloth, fields, geometry, irregular.as_deref());
+                            // the step again from its start with the factors `g` (the solute
+                            // moves once, with the last solve's fluxes)
+                            let mut again = |fields: &mut Fields, g: Option<&[f64]>, trial| {
                                 fields.clone_from(start);
-                                let held = mobile.as_deref().map(|m| held_faces(m, g.as_deref()));
-                                let more = diffuse_densities(
+                                let held = mobile.as_deref().map(|m| held_faces(m, g));
+                                diffuse_densities(
                                     &ops,
                                     scalar_cg,
                                     fields,
                                     geometry,
                                     h,
-                                    g.as_deref(),
+                                    g,
                                     solute_motion(p, held.as_deref()),
-                                    // the solute moves once, with the last solve's fluxes
-                                    i + 1 < picard,
-                                )?;
+                                    trial,
+                                )
+                            };
+                            let mut last = face_scale.clone();
+                            for round in 1.. {
+                                // the factors of the last solution; with a tolerance on
+                                // until they settle (`Wicking::tolerance`)
+                                let g =
+                                    self.face_scale(cloth, fields, geometry, irregular.as_deref());
+                                let done = if converge {
+                                    round >= MAX_PICARD
+                                        || round >= picard
+                                            && factors_settled(
+                                                last.as_deref(),
+                                                g.as_deref(),
+                                                p.wicking.tolerance,
+                                            )
+                                } else {
+                                    round >= picard
+                                };
+                                let more = again(fields, g.as_deref(), !done)?;
                                 work.iterations += more.iterations;
                                 work.solves += more.solves;
                                 work.carried += more.carried;
+                                if done {
+                                    break;
+                                }
+                                last = g;
                             }
                         }
                         Ok::<_, Error>(work)
@@ -540,6 +563,22 @@ fn hold_back(
                 .collect()
         })
         .collect()
+}
+
+/// Whether the wicking factors `g` of a Picard round are those of the round before,
+/// `last`, to `tolerance` times their largest on every face (`Wicking::tolerance`);
+/// without factors there is nothing to iterate.
+fn factors_settled(last: Option<&[f64]>, g: Option<&[f64]>, tolerance: f64) -> bool {
+    let (Some(last), Some(g)) = (last, g) else {
+        return true;
+    };
+    let top = g.par_iter().copied().reduce(|| 0.0, f64::max);
+    let change = g
+        .par_iter()
+        .zip(last)
+        .map(|(a, b)| (a - b).abs())
+        .reduce(|| 0.0, f64::max);
+    change <= tolerance * top
 }
 
 /// The fibres' liquid's face scale: `face_scale` (1 without one) on the `mobile` faces, 0
