@@ -43,9 +43,9 @@ use crate::stain::check::check_range;
 /// default) is the lagged scheme, bit for bit.
 ///
 /// **Until the front stops** ([`Wicking::tolerance`]). A fixed count still caps the front
-/// at `picard + 1` rings a sub-step: a spill that should spread 15 rings in one long step
-/// (a minute a frame, `blend_fixtures/gallery.py`) comes out as a graph-distance octagon
-/// however many rounds are asked, and the liquid piles up at the truncated front. With a
+/// at `picard + 1` rings a sub-step: where a long step should carry it further (the
+/// demo's 45-s frames) it stops at a graph-distance line of the mesh, and the liquid piles
+/// up at the truncated front. With a
 /// tolerance `ε > 0` the iterations go on (up to [`MAX_PICARD`]) until the factors of two
 /// successive solutions differ by at most `ε` times their largest on every face, the
 /// fixed point of the implicit step (a ring reached only by a film whose factor is below
