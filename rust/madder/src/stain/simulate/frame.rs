@@ -83,7 +83,7 @@ impl Simulator {
                     return Err(e);
                 }
             };
-            let fits = !self.outran(local.cycles);
+            let fits = !self.outran(local.cycles) && !self.spread_past(&local);
             if fits {
                 let w = self.window.take().expect("the frame's window");
                 self.commit(&w, &local, t_end);

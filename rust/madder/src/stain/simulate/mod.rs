@@ -108,6 +108,15 @@
 //! cloth by 1.2 m in a frame: without the retry the window's result is off by 1.7 times
 //! the peak, with it by 3e-20).
 //!
+//! Diffusion is not bound to a ring per sub-cycle: a wicking front iterated until it
+//! settles ([`crate::stain::Wicking::tolerance`]) crosses as many rings in one long step
+//! as the physics asks. Where it reaches the region's edge the no-flux wall stops it along
+//! a line of graph distance, a hexagon on a grid of one-way diagonals, an octagon on
+//! alternating ones (the gallery's squared-off coffee). So after the frame, flowing
+//! liquid above [`WALL_THRESHOLD`] of its peak on a vertex of the region's edge also
+//! sends the frame back: the reach gains rings ([`Simulator::spread_rings`], doubled
+//! until the window changes) and the frame runs again.
+//!
 //! ## Failure
 //! [`Simulator::step`] works on the window's copy of the state and writes it back only
 //! when the whole frame succeeded: an error (bad positions naming the vertex, a solver
@@ -323,6 +332,10 @@ pub struct Simulator {
     /// Transport sub-cycles of the last frame, all its sub-steps together (widens the
     /// next region: liquid moves at most one ring per sub-cycle).
     pub(super) last_frame_cycles: usize,
+    /// Rings the reach adds for a spread the transport's sub-cycles do not count: a
+    /// wicking front that crossed more rings in a frame than planned reached the
+    /// region's no-flux edge (module doc, "Window reach"). It only grows.
+    pub(super) spread_rings: usize,
     /// The window for the next frame was already prepared (by [`super::detail`], which
     /// checks it against the part of the refined cloth built so far).
     pub(super) prepared: bool,
@@ -407,6 +420,7 @@ impl Simulator {
             window: None,
             rescan: true,
             last_frame_cycles: 1,
+            spread_rings: 0,
             prepared: false,
             spare: None,
             tolerances: [DENSITY_TOLERANCE, VELOCITY_TOLERANCE],

@@ -17,8 +17,8 @@ use crate::runs;
 use crate::stain::forces::{frame_angular_velocity, frame_body_acceleration, integrate_velocity};
 use crate::stain::state::Local;
 use crate::stain::window::{
-    ACTIVE_RINGS, ACTIVE_THRESHOLD, WINDOW_SLACK_RINGS, WINDOW_SLACK_VERTICES, Window, WindowPlan,
-    find_liquid, grow, grow_on,
+    ACTIVE_RINGS, ACTIVE_THRESHOLD, WALL_THRESHOLD, WINDOW_SLACK_RINGS, WINDOW_SLACK_VERTICES,
+    Window, WindowPlan, find_liquid, grow, grow_on,
 };
 
 impl Simulator {
@@ -75,7 +75,7 @@ impl Simulator {
         let (flowing, held) =
             find_liquid(&scan, &self.loose, &st.fields, &st.vertex_area, mobile_held);
         // liquid moves at most one ring per transport sub-cycle
-        let reach = ACTIVE_RINGS + self.last_frame_cycles;
+        let reach = ACTIVE_RINGS + self.last_frame_cycles + self.spread_rings;
         let (mut mask, mut needed, front) =
             grow(&self.cloth.adjacency, &self.loose, &flowing, reach);
         let fits = self.window.as_ref().is_some_and(|w| {
@@ -119,6 +119,29 @@ impl Simulator {
         let outran = !matches!(self.plan_window(), WindowPlan::Keep);
         self.rescan = rescan;
         outran
+    }
+
+    /// Whether the frame's flowing liquid (`local`, on the current window) reached the edge
+    /// of its active region, where the no-flux wall held it (module doc of
+    /// [`super`], "Window reach"). If so the reach gains rings, doubled until the
+    /// window planned for the frame changes, and the frame must run again; never without
+    /// an active region, nor once the reach spans the cloth.
+    pub(in crate::stain) fn spread_past(&mut self, local: &Local) -> bool {
+        let touched = self.window.as_ref().is_some_and(|w| touches_wall(w, local));
+        if !self.params.active_region || !touched {
+            return false;
+        }
+        let n = self.cloth.topology.n_vertices();
+        while self.spread_rings < n {
+            self.spread_rings = (2 * self.spread_rings).max(ACTIVE_RINGS);
+            let rescan = std::mem::replace(&mut self.rescan, false);
+            let keep = matches!(self.plan_window(), WindowPlan::Keep);
+            self.rescan = rescan;
+            if !keep {
+                return true;
+            }
+        }
+        false
     }
 
     /// The velocity and frame of vertex `v` at the start of the frame: a vertex that was
@@ -273,4 +296,35 @@ impl Simulator {
             st.vertex_area[v as usize] = a;
         }
     }
+}
+
+/// Whether a vertex at the edge of `w`'s active region (one with a neighbour outside it)
+/// holds free solvent or dissolved solute above [`WALL_THRESHOLD`] of that field's peak
+/// over the region, in the frame's `local` fields.
+fn touches_wall(w: &Window, local: &Local) -> bool {
+    let (mask, f, area) = (&w.region.mask, &local.fields, &local.area);
+    let fields = [&f.free_solvent, &f.solute];
+    let density = |k: usize, v: usize| {
+        if area[v] > 0.0 {
+            fields[k][v] / area[v]
+        } else {
+            0.0
+        }
+    };
+    let vertices = &w.region.vertices;
+    let peak: [f64; 2] = std::array::from_fn(|k| {
+        vertices
+            .par_iter()
+            .map(|&v| density(k, v as usize))
+            .reduce(|| 0.0, f64::max)
+    });
+    vertices.par_iter().any(|&v| {
+        let v = v as usize;
+        (0..2).any(|k| peak[k] > 0.0 && density(k, v) > WALL_THRESHOLD * peak[k])
+            && w.cloth
+                .adjacency
+                .neighbours(v)
+                .iter()
+                .any(|&j| !mask[j as usize])
+    })
 }
