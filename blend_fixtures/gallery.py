@@ -232,7 +232,7 @@ def main():
     import numpy as np
 
     only = tuple(args.only.split(":")) if args.only else None
-    bake_all(os.path.join(work, "gallery.blend"), args.zip, None, args.image_size, only)
+    squares = bake_all(os.path.join(work, "gallery.blend"), args.zip, None, args.image_size, only)
     scene = bpy.context.scene
     for obj in scene.objects:
         if obj.type == "MESH" and obj.madder.enabled:
@@ -257,7 +257,9 @@ def main():
     gutter[..., 3] = 1.0
     sheet = np.concatenate([p for panel in panels for p in (panel, gutter)][:-1], axis=1)
     # the swatch row: rendered at the panels' scale (pixels per metre) across the sheet's width
-    add_swatches(scene, tuple(bpy.data.objects[square_name("RED_WINE", "PLAIN")].madder.stain_color))
+    # (the wine's colour; with --only, the one square's)
+    wine = bpy.data.objects.get(square_name("RED_WINE", "PLAIN")) or squares[0]
+    add_swatches(scene, tuple(wine.madder.stain_color))
     cam, r = scene.camera, scene.render
     per_metre = max(r.resolution_x, r.resolution_y) * r.resolution_percentage / 100 / cam.data.ortho_scale
     r.resolution_x, r.resolution_y, r.resolution_percentage = sheet.shape[1], STRIP_HEIGHT * args.scale // 100, 100

@@ -110,8 +110,8 @@ pub(crate) const ACTIVE_RINGS: usize = 3;
 /// above this fraction of that field's largest density (module doc).
 pub(crate) const ACTIVE_THRESHOLD: f64 = 1e-12;
 
-/// Flowing liquid above this fraction of its peak on a vertex at the active region's
-/// edge means the region's no-flux wall held it back: the frame runs again on a wider
+/// Liquid or dissolved solute above this fraction of its peak on a vertex at the active
+/// region's edge means the region's no-flux wall held it back: the frame runs again on a wider
 /// window ([`super::simulate`], "Window reach"). Far above the implicit diffusion's
 /// truncated tail ([`ACTIVE_THRESHOLD`]), far below any front.
 pub(crate) const WALL_THRESHOLD: f64 = 1e-6;

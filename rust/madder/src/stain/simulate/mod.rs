@@ -112,9 +112,10 @@
 //! settles ([`crate::stain::Wicking::tolerance`]) crosses as many rings in one long step
 //! as the physics asks. Where it reaches the region's edge the no-flux wall stops it along
 //! a line of graph distance, a hexagon on a grid of one-way diagonals, an octagon on
-//! alternating ones (the gallery's squared-off coffee). So after the frame, flowing
-//! liquid above [`WALL_THRESHOLD`] of its peak on a vertex of the region's edge also
-//! sends the frame back: the reach gains rings ([`Simulator::spread_rings`], doubled
+//! alternating ones; the gallery's coffee, whose fibres take the liquid up as it arrives,
+//! dried as such a hexagon. So after the frame, liquid (free or absorbed solvent) or
+//! dissolved solute above [`WALL_THRESHOLD`] of its peak on a vertex of the region's edge
+//! also sends the frame back: the reach gains rings ([`Simulator::spread_rings`], doubled
 //! until the window changes) and the frame runs again.
 //!
 //! ## Failure

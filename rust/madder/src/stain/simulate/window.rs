@@ -299,17 +299,17 @@ impl Simulator {
 }
 
 /// Whether a vertex at the edge of `w`'s active region (one with a neighbour outside it)
-/// holds free solvent or dissolved solute above [`WALL_THRESHOLD`] of that field's peak
-/// over the region, in the frame's `local` fields.
+/// holds liquid (free and absorbed solvent: the wicking moves the one by the other's
+/// saturation, and the fibres take up what arrives) or dissolved solute above
+/// [`WALL_THRESHOLD`] of its peak over the region, in the frame's `local` fields.
 fn touches_wall(w: &Window, local: &Local) -> bool {
     let (mask, f, area) = (&w.region.mask, &local.fields, &local.area);
-    let fields = [&f.free_solvent, &f.solute];
     let density = |k: usize, v: usize| {
-        if area[v] > 0.0 {
-            fields[k][v] / area[v]
-        } else {
-            0.0
-        }
+        let m = match k {
+            0 => f.free_solvent[v] + f.absorbed_solvent[v],
+            _ => f.solute[v],
+        };
+        if area[v] > 0.0 { m / area[v] } else { 0.0 }
     };
     let vertices = &w.region.vertices;
     let peak: [f64; 2] = std::array::from_fn(|k| {
