@@ -121,7 +121,7 @@ impl Simulator {
         outran
     }
 
-    /// Whether the frame's flowing liquid (`local`, on the current window) reached the edge
+    /// Whether the frame's liquid (`local`, on the current window) reached the edge
     /// of its active region, where the no-flux wall held it (module doc of
     /// [`super`], "Window reach"). If so the reach gains rings, doubled until the
     /// window planned for the frame changes, and the frame must run again; never without
