@@ -70,6 +70,7 @@ fn spill_in(
 
 /// [`spill_in`] on a grid whose quads are split as `split` says, on a window around the
 /// liquid (`active_region`) or on the whole mesh, with the fibres' `interaction`.
+#[allow(clippy::too_many_arguments)]
 fn spill_on(
     split: Split,
     active_region: bool,
