@@ -260,6 +260,7 @@ pub(in crate::stain) fn diffuse_densities(
 }
 
 /// What one density diffusion did (counted for [`crate::stain::Profile`]).
+#[derive(Default)]
 pub(in crate::stain) struct DensityWork {
     /// CG iterations over all solved fields.
     pub iterations: usize,

@@ -325,7 +325,7 @@ impl Simulator {
         };
         // a tolerance iterates until the front stops, `picard` rounds at least
         let converge = p.wicking.is_on() && p.wicking.tolerance > 0.0;
-        let start = (picard > 0 || converge).then(|| loc.fields.clone());
+        let iterate = picard > 0 || converge;
         let (fields, velocity) = (&mut loc.fields, &mut loc.velocity);
         let (densities, viscous) = match w.cg.as_mut() {
             None => (
@@ -341,59 +341,108 @@ impl Simulator {
                 vector_cg.set_tolerance(self.tolerances[1]);
                 rayon::join(
                     || {
-                        let mut work = diffuse_densities(
-                            &ops,
-                            scalar_cg,
-                            fields,
-                            geometry,
-                            h,
-                            face_scale.as_deref(),
-                            solute_motion(p, held_scale.as_deref()),
-                            start.is_some(),
-                        )?;
-                        if let Some(start) = &start {
-                            // the step again from its start with the factors `g` (the solute
-                            // moves once, with the last solve's fluxes)
-                            let mut again = |fields: &mut Fields, g: Option<&[f64]>, trial| {
-                                fields.clone_from(start);
-                                let held = mobile.as_deref().map(|m| held_faces(m, g));
-                                diffuse_densities(
+                        // one piece of the step: the lagged solve (a trial when Picard
+                        // rounds follow), then the rounds; whether its factors settled
+                        let mut piece =
+                            |fields: &mut Fields,
+                             hp: f64,
+                             g0: Option<&[f64]>,
+                             held0: Option<&[f64]>|
+                             -> Result<(DensityWork, bool), Error> {
+                                let start = iterate.then(|| fields.clone());
+                                let mut work = diffuse_densities(
                                     &ops,
                                     scalar_cg,
                                     fields,
                                     geometry,
-                                    h,
-                                    g,
-                                    solute_motion(p, held.as_deref()),
-                                    trial,
-                                )
-                            };
-                            let mut last = face_scale.clone();
-                            for round in 1.. {
-                                // the factors of the last solution; with a tolerance on
-                                // until they settle (`Wicking::tolerance`)
-                                let g =
-                                    self.face_scale(cloth, fields, geometry, irregular.as_deref());
-                                let done = if converge {
-                                    round >= MAX_PICARD
-                                        || round >= picard
+                                    hp,
+                                    g0,
+                                    solute_motion(p, held0),
+                                    start.is_some(),
+                                )?;
+                                let Some(start) = &start else {
+                                    return Ok((work, true));
+                                };
+                                // the piece again from its start with the factors `g` (the
+                                // solute moves once, with the last solve's fluxes)
+                                let mut again = |fields: &mut Fields, g: Option<&[f64]>, trial| {
+                                    fields.clone_from(start);
+                                    let held = mobile.as_deref().map(|m| held_faces(m, g));
+                                    diffuse_densities(
+                                        &ops,
+                                        scalar_cg,
+                                        fields,
+                                        geometry,
+                                        hp,
+                                        g,
+                                        solute_motion(p, held.as_deref()),
+                                        trial,
+                                    )
+                                };
+                                let mut last = g0.map(<[f64]>::to_vec);
+                                let mut settled = true;
+                                for round in 1.. {
+                                    // the factors of the last solution; with a tolerance on
+                                    // until they settle (`Wicking::tolerance`)
+                                    let g = self.face_scale(
+                                        cloth,
+                                        fields,
+                                        geometry,
+                                        irregular.as_deref(),
+                                    );
+                                    let done = if converge {
+                                        let stops = round >= picard
                                             && factors_settled(
                                                 last.as_deref(),
                                                 g.as_deref(),
                                                 p.wicking.tolerance,
-                                            )
-                                } else {
-                                    round >= picard
-                                };
-                                let more = again(fields, g.as_deref(), !done)?;
-                                work.iterations += more.iterations;
-                                work.solves += more.solves;
-                                work.carried += more.carried;
-                                if done {
-                                    break;
+                                            );
+                                        settled = stops;
+                                        stops || round >= MAX_PICARD
+                                    } else {
+                                        round >= picard
+                                    };
+                                    let more = again(fields, g.as_deref(), !done)?;
+                                    work.iterations += more.iterations;
+                                    work.solves += more.solves;
+                                    work.carried += more.carried;
+                                    if done {
+                                        break;
+                                    }
+                                    last = g;
                                 }
-                                last = g;
+                                Ok((work, settled))
+                            };
+                        // the step, cut in halves where a piece's front does not settle in
+                        // MAX_PICARD rounds ("Long steps" in `Wicking`'s doc): a stack of
+                        // pieces, each (length, halvings), the next at the top
+                        let mut work = DensityWork::default();
+                        let mut pieces = vec![(h, 0u32)];
+                        let mut first = true;
+                        while let Some((hp, halvings)) = pieces.pop() {
+                            let keep =
+                                (converge && halvings < MAX_HALVINGS).then(|| fields.clone());
+                            let (more, settled) = if first {
+                                piece(fields, hp, face_scale.as_deref(), held_scale.as_deref())?
+                            } else {
+                                let g =
+                                    self.face_scale(cloth, fields, geometry, irregular.as_deref());
+                                let held = mobile.as_deref().map(|m| held_faces(m, g.as_deref()));
+                                piece(fields, hp, g.as_deref(), held.as_deref())?
+                            };
+                            work.iterations += more.iterations;
+                            work.solves += more.solves;
+                            work.carried += more.carried;
+                            match keep {
+                                Some(keep) if !settled => {
+                                    // the piece again, as two halves from its start
+                                    fields.clone_from(&keep);
+                                    pieces.push((0.5 * hp, halvings + 1));
+                                    pieces.push((0.5 * hp, halvings + 1));
+                                }
+                                _ => {}
                             }
+                            first = false;
                         }
                         Ok::<_, Error>(work)
                     },
@@ -564,6 +613,11 @@ fn hold_back(
         })
         .collect()
 }
+
+/// Most halvings of a sub-step's density diffusion whose wicking front does not settle
+/// within [`MAX_PICARD`] rounds (`Wicking`'s "Long steps"): up to 8 pieces, a front of
+/// 8 · 64 rings a sub-step.
+const MAX_HALVINGS: u32 = 3;
 
 /// Whether the wicking factors `g` of a Picard round are those of the round before,
 /// `last`, to `tolerance` times their largest on every face (`Wicking::tolerance`);
