@@ -270,6 +270,14 @@ pub(in crate::stain) struct DensityWork {
     pub carried: usize,
 }
 
+impl std::ops::AddAssign for DensityWork {
+    fn add_assign(&mut self, more: Self) {
+        self.iterations += more.iterations;
+        self.solves += more.solves;
+        self.carried += more.carried;
+    }
+}
+
 /// Most Gauss–Seidel sweeps of the carried solute's concentrations ([`carry_with_solvent`]).
 const MAX_CARRY_SWEEPS: usize = 50;
 /// Most symmetric Gauss–Seidel sweeps (each direction counted) with a dispersivity.

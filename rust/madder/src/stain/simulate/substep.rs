@@ -342,13 +342,15 @@ impl Simulator {
                 rayon::join(
                     || {
                         // one piece of the step: the lagged solve (a trial when Picard
-                        // rounds follow), then the rounds; whether its factors settled
+                        // rounds follow), then the rounds; whether its factors settled,
+                        // and the fields it started from (kept for the rounds anyway, so
+                        // a piece cut in halves needs no copy of its own)
                         let mut piece =
                             |fields: &mut Fields,
                              hp: f64,
                              g0: Option<&[f64]>,
                              held0: Option<&[f64]>|
-                             -> Result<(DensityWork, bool), Error> {
+                             -> Result<(DensityWork, bool, Option<Fields>), Error> {
                                 let start = iterate.then(|| fields.clone());
                                 let mut work = diffuse_densities(
                                     &ops,
@@ -360,13 +362,13 @@ impl Simulator {
                                     solute_motion(p, held0),
                                     start.is_some(),
                                 )?;
-                                let Some(start) = &start else {
-                                    return Ok((work, true));
+                                let Some(start) = start else {
+                                    return Ok((work, true, None));
                                 };
                                 // the piece again from its start with the factors `g` (the
                                 // solute moves once, with the last solve's fluxes)
                                 let mut again = |fields: &mut Fields, g: Option<&[f64]>, trial| {
-                                    fields.clone_from(start);
+                                    fields.clone_from(&start);
                                     let held = mobile.as_deref().map(|m| held_faces(m, g));
                                     diffuse_densities(
                                         &ops,
@@ -402,16 +404,13 @@ impl Simulator {
                                     } else {
                                         round >= picard
                                     };
-                                    let more = again(fields, g.as_deref(), !done)?;
-                                    work.iterations += more.iterations;
-                                    work.solves += more.solves;
-                                    work.carried += more.carried;
+                                    work += again(fields, g.as_deref(), !done)?;
                                     if done {
                                         break;
                                     }
                                     last = g;
                                 }
-                                Ok((work, settled))
+                                Ok((work, settled, Some(start)))
                             };
                         // the step, cut in halves where a piece's front does not settle in
                         // MAX_PICARD rounds ("Long steps" in `Wicking`'s doc): a stack of
@@ -420,9 +419,7 @@ impl Simulator {
                         let mut pieces = vec![(h, 0u32)];
                         let mut first = true;
                         while let Some((hp, halvings)) = pieces.pop() {
-                            let keep =
-                                (converge && halvings < MAX_HALVINGS).then(|| fields.clone());
-                            let (more, settled) = if first {
+                            let (more, settled, start) = if first {
                                 piece(fields, hp, face_scale.as_deref(), held_scale.as_deref())?
                             } else {
                                 let g =
@@ -430,13 +427,11 @@ impl Simulator {
                                 let held = mobile.as_deref().map(|m| held_faces(m, g.as_deref()));
                                 piece(fields, hp, g.as_deref(), held.as_deref())?
                             };
-                            work.iterations += more.iterations;
-                            work.solves += more.solves;
-                            work.carried += more.carried;
-                            match keep {
-                                Some(keep) if !settled => {
+                            work += more;
+                            match start {
+                                Some(start) if converge && !settled && halvings < MAX_HALVINGS => {
                                     // the piece again, as two halves from its start
-                                    fields.clone_from(&keep);
+                                    *fields = start;
                                     pieces.push((0.5 * hp, halvings + 1));
                                     pieces.push((0.5 * hp, halvings + 1));
                                 }
