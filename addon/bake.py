@@ -244,9 +244,10 @@ class Stepper:
         return [np.ascontiguousarray(a[:, k]) for a in (vel, pos) for k in range(3)]
 
     def _spill(self, pos):
-        """The initial wetness: the Spill Group's weights × Amount of the object's liquid, or
-        with a Throw object a directed splash of Volume from the group's centre (`splash`);
-        and its Splash Speed (outward from the weighted centroid of the wet area)."""
+        """The initial wetness: what the Spill Group's weights hold at Amount, as a pool or as
+        weights × Amount (Spill Shape, `pour`), of the object's liquid, or with a Throw
+        object a directed splash of Volume from the group's centre (`splash`); and its
+        Splash Speed (outward from the weighted centroid of the wet area)."""
         s = self.obj.madder
         if self.wet0 is None or not self.wet0.any():
             return
@@ -263,6 +264,8 @@ class Stepper:
                 raise BakeError(f"'{self.obj.name}': its splash (Throw '{throw.name}'): {e}",
                                 object=self.obj.name) from e
             liquid = splash.densities(laid.mass, self.sim.vertex_area)
+        elif s.spill_shape == "POOL":
+            liquid = pour.pooled(self.wet0, s.amount, self.sim.vertex_area)
         else:
             liquid = pour.spilled(self.wet0, s.amount)
         self.sim.add_liquid(liquid, s.concentration, tuple(s.stain_color))

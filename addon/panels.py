@@ -90,6 +90,7 @@ class MADDER_PT_stain_liquid(_StainSubPanel, bpy.types.Panel):
         col = layout.column()
         col.active = bool(s.source_group)
         col.prop(s, "amount")
+        col.prop(s, "spill_shape")
         layout.prop(s, "stain_color")
         layout.prop(s, "concentration")
         layout.prop(s, "diffusion_rate")

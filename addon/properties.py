@@ -273,14 +273,27 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
     # calls it the Spill Group so it is not confused with a Madder Source object
     source_group: StringProperty(
         name="Spill Group",
-        description="Vertex group whose weights give the initial wetness (weight × Amount); "
+        description="Vertex group whose weights give where the liquid is spilled (a pool "
+        "Amount deep where they are highest, or weight × Amount: Spill Shape); "
         "optional when Madder Source objects pour liquid on the cloth",
         default="",
     )
+    spill_shape: EnumProperty(
+        name="Spill Shape",
+        description="How the Spill Group's weights lay the liquid (the same mass either way)",
+        items=[
+            ("POOL", "Pool", "The liquid the weights hold, laid Amount deep where the weights are "
+             "highest: a spill with a sharp edge, as liquid lands"),
+            ("WEIGHTS", "Weights", "Weight × Amount on every vertex: a film graded like the "
+             "weights, which stains as a soft disc where a soft brush painted them"),
+        ],
+        default="POOL",
+    )
     amount: FloatProperty(
         name="Amount (kg/m²)",
-        description="Liquid spilled per unit area where the Spill Group's weight is 1, kg/m² "
-        "(the fibres hold Saturation; the rest is free liquid that flows and spreads)",
+        description="Liquid spilled per unit area: the pool's depth, or with Spill Shape Weights "
+        "where the Spill Group's weight is 1, kg/m² (the fibres hold Saturation; the rest is "
+        "free liquid that flows and spreads)",
         default=0.5,
         min=0.0,
         soft_max=5.0,

@@ -129,7 +129,7 @@ def configure(image_size=None, detail=None):
     s.enabled = True
     s.source_group = "stain_source"
     s.liquid = "RED_WINE"
-    s.amount = 1.2  # kg/m² where the group's weight is 1 (what a spill without a Throw holds)
+    s.amount = 1.2  # kg/m²: the pool's depth (what a spill without a Throw lays)
     # the glass is knocked over toward the table's rim: a Single Arrow empty whose arrow
     # (local Z) points along the throw, and the splash's volume
     throw = bpy.data.objects.get("Throw")

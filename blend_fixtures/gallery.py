@@ -5,8 +5,9 @@ One scene, built from nothing with `bpy`: twelve flat squares of white cotton (1
 49 × 49 vertices, UV-mapped), one per liquid preset (rows: Water, Red Wine, Coffee, Ink)
 and weave (columns: Plain, Twill 2/1, Satin 5), each with its own material carrying the
 Madder fabric at 3 threads per centimetre (a coarse weave, so that it shows at the
-sheet's scale), and a 3 cm spill (0.8 kg/m² at its centre, eight times what the fibres hold) at its
-centre. Labels are Blender text objects.
+sheet's scale), and a spill at its centre: a soft Spill Group of 3 cm radius at 0.8 kg/m²,
+eight times what the fibres hold, which lands as a pool (the default Spill Shape) of 1.6 cm
+radius. Labels are Blender text objects.
 
 The add-on is used as a user would: installed from the built zip, each square's Liquid
 preset, weave and thread count set in its properties and nothing of the look (the

@@ -133,7 +133,9 @@ def lumped_areas(mesh, co=None):
 
 def plain_look(s):
     """The settings a test of something other than the look relies on: no Auto Detail (Detail 0), no image
-    sequence, no fabric grain (the default fabric's grain is the look's)."""
+    sequence, no fabric grain (the default fabric's grain is the look's), the spill as weight × Amount
+    (the default pool is the look's)."""
     s.detail_auto, s.detail = False, 0
+    s.spill_shape = "WEIGHTS"
     s.output_images = False
     s.grain_from, s.irregularity = "OBJECT", 0.0

@@ -34,6 +34,33 @@ def world_lumped_areas(obj_eval):
     return lumped_areas(me, co.reshape(-1, 3) @ m[:3, :3].T + m[:3, 3])
 
 
+def test_a_spill_lands_as_a_pool_by_default(open_fixture):
+    """Spill Shape Pool, the default: frame 1 holds the mass the Spill Group's weights hold at
+    Amount (independent lumped areas of the evaluated flag), laid Amount deep on the group's
+    highest weights, one vertex at most in part; Weights lays weight × Amount."""
+    scene = open_fixture("flag.blend")
+    flag = setup_flag(scene)
+    s = flag.madder
+    assert s.bl_rna.properties["spill_shape"].default == "POOL"
+    s.spill_shape = "POOL"  # (plain_look lays the weights)
+    scene.frame_end = scene.frame_start + 1
+    assert bpy.ops.madder.bake() == {"FINISHED"}
+    wet = cache(flag).read(1, "wetness")
+    weights = np.zeros(len(flag.data.vertices), dtype=np.float64)
+    gi = flag.vertex_groups["stain_source"].index
+    for v in flag.data.vertices:
+        for g in v.groups:
+            if g.group == gi:
+                weights[v.index] = g.weight
+    scene.frame_set(1)
+    area = world_lumped_areas(flag.evaluated_get(bpy.context.evaluated_depsgraph_get()))
+    assert float(wet @ area) == pytest.approx(s.amount * float(weights @ area), rel=1e-4)
+    full = np.isclose(wet, s.amount, rtol=1e-6)
+    assert ((wet > 0) & ~full).sum() <= 1
+    assert 0 < full.sum() < (weights > 0).sum()  # a pool inside the soft group, not all of it
+    assert weights[wet > 0].min() >= weights[(wet == 0) & (weights > 0)].max()
+
+
 def test_extension_is_installed_with_its_own_wheel(addon):
     assert addon in bpy.context.preferences.addons
     # the native module is the one Blender unpacked from the extension's wheel into this

@@ -26,8 +26,9 @@ def bake_flag(open_fixture, detail=1, size="512", frames=FRAMES, grain=True):
     s.detail = detail
     s.output_images = True
     s.image_size = size
-    if not grain:  # a uniform fabric: no detail below the coarse mesh's vertices
+    if not grain:  # a uniform fabric and a graded spill: no detail below the coarse mesh's vertices
         s.grain_from, s.irregularity = "OBJECT", 0.0
+        s.spill_shape = "WEIGHTS"  # a pool's sharp edge is such detail too
     assert bpy.ops.madder.bake() == {"FINISHED"}
     return scene, flag
 
