@@ -102,6 +102,7 @@ def test_only_a_preset_gives_a_sharp_stain(open_fixture):
     assert s.bake_detail > 0
     assert s.image_baked and s.image_baked_size > 0
     assert s.wicking == presets.WICKING["RED_WINE"] > 0
+    assert s.spill_shape == "POOL"  # the soft group's liquid lands as a pool
     cotton = presets.FABRIC_PRESETS[presets.DEFAULT_FABRIC]
     kw = bake.simulator_settings(scene, flag)
     assert kw["irregularity"] == cotton["irregularity"] > 0
