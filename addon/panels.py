@@ -209,6 +209,7 @@ class MADDER_PT_stain_cache(_StainSubPanel, bpy.types.Panel):
     def draw(self, context):
         layout, s = self.layout_of(context)
         layout.prop(s, "substeps")
+        layout.prop(s, "first_substep")
         layout.prop(s, "motion_file")
         layout.prop(s, "cache_dir")
 

@@ -210,6 +210,7 @@ def simulator_keywords(s, gravity, scene_gravity, unit, grain=None):
         evaporation=s.evaporation,
         evaporation_boundary=s.evaporation_boundary,
         substeps=s.substeps,
+        first_substep=s.first_substep,
         # the look (issue 13): wicking saturates at the fibres' saturation; the grain is set
         # in millimetres of the cloth's rest surface
         wicking_exponent=s.wicking,

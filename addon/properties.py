@@ -550,6 +550,16 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         min=1,
         soft_max=8,
     )
+    first_substep: FloatProperty(
+        name="First Step (s)",
+        description="After liquid is poured, the simulation's steps start this long and double "
+        "until they reach the frame's: a fresh spill spreads in steps shorter than the fibres' "
+        "uptake even where a frame lasts a minute (0: off, every frame in Substeps equal steps)",
+        default=0.25,
+        min=0.0,
+        soft_max=5.0,
+        precision=3,
+    )
 
     # -- Output: the simulation's resolution and what playback and renders read
     detail_auto: BoolProperty(

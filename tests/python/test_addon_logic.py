@@ -93,9 +93,11 @@ def test_simulator_keywords_scale_gravity_and_need_both_switches():
         use_gravity=True, use_rectilinear=False, use_coriolis=True, momentum_advection=False,
         wicking=2.0, irregularity=0.5, irregularity_length=4.0, irregularity_seed=7, carry_solute=True,
         residual_saturation=0.1, vapour_limited=1, irregularity_fine=0.5, holdup=0.05,
-        carried_fraction=0.7, dispersivity=3.5, wicking_iterations=2, front_settles=True,
+        carried_fraction=0.7, dispersivity=3.5, wicking_iterations=2, front_settles=True, first_substep=0.25,
     )
     kw = presets.simulator_keywords(s, (0.0, 0.0, -981.0), True, 0.01)
+    # the ramp after a pour in seconds (time is not scaled by the Unit Scale)
+    assert kw["first_substep"] == 0.25
     # the fibre scale in metres while below the grain, else off; the run holdup as it is
     assert kw["irregularity_fine_length"] == pytest.approx(5e-4) and kw["holdup"] == 0.05
     # the front iterated until it settles: the core's tolerance, 0 (a fixed count) when off

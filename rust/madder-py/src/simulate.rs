@@ -23,7 +23,7 @@ use crate::threads::Pool;
 /// irregularity_seed=0,
 /// irregularity_fine_length=0,
 /// carry_solute=False, residual_saturation=0, vapour_limited=False, carried_fraction=1,
-/// dispersivity=0, holdup=0, substeps=1, use_gravity=True, use_rectilinear=True,
+/// dispersivity=0, holdup=0, substeps=1, first_substep=0, use_gravity=True, use_rectilinear=True,
 /// use_coriolis=True, momentum_advection=True, detail=0, threads=None)`.
 ///
 /// `topology` is a `Topology` or an `(F, 3)` face array (any integer dtype); `rest` and
@@ -68,6 +68,9 @@ use crate::threads::Pool;
 /// spacing (0, the default: off, the ring one cell wide).
 /// `holdup` (kg/m², ≥ 0) is the free liquid each vertex keeps back from a run, filled
 /// before the run moves on and left behind to soak in (0, the default: off).
+/// `first_substep` (s, ≥ 0): after liquid is poured, the sub-steps start this long and
+/// double until they reach the frame's own, so a fresh spill spreads in short steps in a
+/// scene whose frames are long (0, the default: off).
 /// Units are SI: densities in kg/m², rates in 1/s, evaporation in kg/(m²·s).
 /// `detail` (0–3) runs the simulation on the cloth's triangles each split into
 /// `4**detail` (the fine vertices placed on the cloth's triangles every frame): `step`,
@@ -125,7 +128,7 @@ impl Simulator {
         wicking_density=None, wicking_picard=0, wicking_tolerance=0.0, irregularity=None, irregularity_length=None, irregularity_seed=0,
         irregularity_fine_length=None,
         carry_solute=false, residual_saturation=None, vapour_limited=false, carried_fraction=None,
-        dispersivity=None, holdup=None, substeps=1,
+        dispersivity=None, holdup=None, substeps=1, first_substep=0.0,
         use_gravity=true, use_rectilinear=true, use_coriolis=true, momentum_advection=true,
         detail=0, threads=None))]
     #[allow(clippy::too_many_arguments)]
@@ -163,6 +166,7 @@ impl Simulator {
         dispersivity: Option<f64>,
         holdup: Option<f64>,
         substeps: u32,
+        first_substep: f64,
         use_gravity: bool,
         use_rectilinear: bool,
         use_coriolis: bool,
@@ -226,6 +230,7 @@ impl Simulator {
             },
             momentum_advection,
             substeps,
+            first_substep,
             ..Default::default()
         };
         let set = |slot: &mut f64, v: Option<f64>| {

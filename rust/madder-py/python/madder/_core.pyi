@@ -182,6 +182,7 @@ class Simulator:
         dispersivity: float | None = None,
         holdup: float | None = None,
         substeps: int = 1,
+        first_substep: float = 0.0,
         use_gravity: bool = True,
         use_rectilinear: bool = True,
         use_coriolis: bool = True,

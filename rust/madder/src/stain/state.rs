@@ -155,6 +155,9 @@ pub(super) struct State {
     pub(super) fields: Fields,
     pub(super) evaporated: f64,
     pub(super) time: f64,
+    /// The next sub-step's length while a ramp after a pour runs (`simulate`'s module
+    /// doc, "Sub-steps after a pour"); 0 when none does.
+    pub(super) ramp: f64,
     /// Vertices that have ever held liquid or solute (their areas are kept current).
     pub(super) stained: Vec<u32>,
     pub(super) is_stained: Vec<bool>,
@@ -189,8 +192,10 @@ pub(super) struct Local {
     pub(super) fields: Fields,
     pub(super) area: Vec<f64>,
     pub(super) evaporated: f64,
-    /// Transport sub-cycles of the last sub-step.
+    /// Transport sub-cycles of the frame's sub-steps, all together.
     pub(super) cycles: usize,
+    /// What the ramp after a pour is after the frame ([`State::ramp`]).
+    pub(super) ramp: f64,
 }
 
 /// The colour masses `[r, g, b]` per vertex as three fields (what the solves take).

@@ -171,7 +171,11 @@ impl Simulator {
         // the frames at the frame's end: the sub-step count reads them, and the last
         // sub-step's frames are these (the same formula at the same positions)
         w.corotating_frames_into(next, &mut sub.frames);
-        let (s_count, omega) = self.substeps(w, &sub.frames, &local.frames, dt, omega);
+        let (turn_count, omega) = self.substeps(w, &sub.frames, &local.frames, dt, omega);
+        // the sub-steps' lengths and the fractions of the frame at their ends
+        let (schedule, ramp) = substep_schedule(turn_count, st.ramp, dt);
+        local.ramp = ramp;
+        let s_count = schedule.len();
         // several sub-steps: the end's frames wait for the last one
         if s_count > 1 {
             std::mem::swap(&mut sub.frames, end_frames);
@@ -179,13 +183,11 @@ impl Simulator {
         // one sub-step: its turn is the frame's, just computed
         let omega = omega.filter(|_| s_count == 1);
         laps.lap(&mut prof.geometry);
-        let h = dt / s_count as f64;
-        for s in 1..=s_count {
-            let last = s == s_count;
+        for (s, &(h, t)) in schedule.iter().enumerate() {
+            let last = s + 1 == s_count;
             if last && s_count > 1 {
                 std::mem::swap(&mut sub.frames, end_frames);
             } else if !last {
-                let t = s as f64 / s_count as f64;
                 between.clear();
                 between.extend(cur.iter().zip(&*next).map(|(a, b)| a.lerp(*b, t)));
             }
@@ -236,5 +238,71 @@ impl Simulator {
             asked
         };
         (count, Some(omega))
+    }
+}
+
+/// The sub-steps of a frame of `dt`: `(length, fraction of the frame at its end)` each,
+/// and the ramp after the frame (module doc of `simulate`, "Sub-steps after a pour").
+/// Without a ramp shorter than the frame, `count` equal sub-steps (the turn's count) and
+/// no ramp after. With one, the ramp's pieces `h, 2h, 4h, …` while they fit, the rest of
+/// the frame last, each piece cut into equal parts no longer than `dt / count`; the ramp
+/// after is the first piece that did not fit.
+fn substep_schedule(count: usize, ramp: f64, dt: f64) -> (Vec<(f64, f64)>, f64) {
+    if !(ramp > 0.0 && ramp < dt) {
+        let h = dt / count as f64;
+        let equal = (1..=count).map(|s| (h, s as f64 / count as f64)).collect();
+        return (equal, 0.0);
+    }
+    let longest = dt / count as f64;
+    let mut out = Vec::new();
+    // the piece `[start, start + piece]` in equal parts no longer than the turn's
+    let cut = |start: f64, piece: f64, out: &mut Vec<(f64, f64)>| {
+        let parts = (piece / longest).ceil().max(1.0) as usize;
+        for k in 1..=parts {
+            let end = start + piece * k as f64 / parts as f64;
+            out.push((piece / parts as f64, end / dt));
+        }
+    };
+    let (mut t, mut h) = (0.0, ramp);
+    while t + h < dt {
+        cut(t, h, &mut out);
+        t += h;
+        h *= 2.0;
+    }
+    cut(t, dt - t, &mut out);
+    // the last sub-step ends on the frame's positions exactly
+    if let Some(last) = out.last_mut() {
+        last.1 = 1.0;
+    }
+    (out, h)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::substep_schedule;
+
+    #[test]
+    fn a_ramp_doubles_its_sub_steps_until_the_frame_and_covers_it_exactly() {
+        // no ramp, or one as long as the frame: the turn's equal sub-steps, as before
+        for ramp in [0.0, 60.0, 100.0] {
+            let (s, after) = substep_schedule(3, ramp, 60.0);
+            assert_eq!(s, vec![(20.0, 1.0 / 3.0), (20.0, 2.0 / 3.0), (20.0, 1.0)]);
+            assert_eq!(after, 0.0);
+        }
+        // 0.25 s doubling in a minute: 0.25 … 16 (31.75 s; with 32 more it would pass 60),
+        // then the rest, 28.25 s; the ramp goes on at 32 s
+        let (s, after) = substep_schedule(1, 0.25, 60.0);
+        let lengths: Vec<f64> = s.iter().map(|x| x.0).collect();
+        assert_eq!(lengths, vec![0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 28.25]);
+        assert_eq!(after, 32.0);
+        assert_eq!(s.last().unwrap().1, 1.0);
+        assert!((lengths.iter().sum::<f64>() - 60.0).abs() < 1e-12);
+        // the ramp carries on into the next frame, and a turn splits the long pieces
+        let (s, after) = substep_schedule(4, 2.0, 10.0);
+        let lengths: Vec<f64> = s.iter().map(|x| x.0).collect();
+        assert_eq!(lengths, vec![2.0, 2.0, 2.0, 2.0, 2.0]); // 2, 4 = 2 + 2, rest 4 = 2 + 2
+        assert_eq!(after, 8.0);
+        let ends: Vec<f64> = s.iter().map(|x| x.1).collect();
+        assert_eq!(ends, vec![0.2, 0.4, 0.6, 0.8, 1.0]);
     }
 }

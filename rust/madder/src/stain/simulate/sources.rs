@@ -84,6 +84,10 @@ impl Simulator {
                 self.state.mark_stained(i);
             }
         }
+        if self.params.first_substep > 0.0 && solvent.iter().any(|&d| d > 0.0) {
+            // short sub-steps while it spreads (module doc, "Sub-steps after a pour")
+            self.state.ramp = self.params.first_substep;
+        }
         let area = &self.state.vertex_area;
         let f = &mut self.state.fields;
         for (i, &d) in solvent.iter().enumerate() {

@@ -181,6 +181,7 @@ impl Simulator {
         let st = &mut self.state;
         st.fields.scatter(&w.vertices, &local.fields);
         st.evaporated += local.evaporated;
+        st.ramp = local.ramp;
         // the active and held vertices' cloth numbers, increasing as `whole` is: each
         // array written in parallel
         let whole: Vec<u32> = w
