@@ -183,7 +183,8 @@ def bake_all(blend, zip_path, substeps, image_size, only=None):
         sys.exit("gallery: the bake failed (see the message above)")
     print(f"gallery: baked {len(squares)} squares ({len(squares[0].data.vertices)} vertices each, Detail "
           f"{squares[0].madder.bake_detail}, {squares[0].madder.image_baked_size} px images, {FRAMES} frames of "
-          f"{SECONDS_PER_FRAME} s in {squares[0].madder.substeps} steps each) in {time.perf_counter() - t0:.1f} s")
+          f"{SECONDS_PER_FRAME} s in {squares[0].madder.substeps} steps each, the first ones after the spill from "
+          f"{squares[0].madder.first_substep} s up) in {time.perf_counter() - t0:.1f} s")
     return squares
 
 
