@@ -25,6 +25,17 @@ def point_attr(mesh, name, prop, width):
     return attr, out.reshape(-1, width) if width > 1 else out
 
 
+def group_weights(obj, name="stain_source"):
+    """Per vertex, its weight in the vertex group `name` (0 outside it), float32."""
+    weights = np.zeros(len(obj.data.vertices), dtype=np.float32)
+    gi = obj.vertex_groups[name].index
+    for v in obj.data.vertices:
+        for g in v.groups:
+            if g.group == gi:
+                weights[v.index] = g.weight
+    return weights
+
+
 def world_lumped_areas(obj_eval):
     """Independent numpy lumped vertex areas of an evaluated mesh, world space."""
     me = obj_eval.data
@@ -46,12 +57,7 @@ def test_a_spill_lands_as_a_pool_by_default(open_fixture):
     scene.frame_end = scene.frame_start + 1
     assert bpy.ops.madder.bake() == {"FINISHED"}
     wet = cache(flag).read(1, "wetness")
-    weights = np.zeros(len(flag.data.vertices), dtype=np.float64)
-    gi = flag.vertex_groups["stain_source"].index
-    for v in flag.data.vertices:
-        for g in v.groups:
-            if g.group == gi:
-                weights[v.index] = g.weight
+    weights = group_weights(flag).astype(np.float64)
     scene.frame_set(1)
     area = world_lumped_areas(flag.evaluated_get(bpy.context.evaluated_depsgraph_get()))
     assert float(wet @ area) == pytest.approx(s.amount * float(weights @ area), rel=1e-4)
@@ -105,12 +111,7 @@ def test_bake_writes_point_attributes_that_change_between_frames(open_fixture):
         np.testing.assert_allclose(deposit, np.clip(raw["deposit"] / s.capacity, 0, 1), atol=1e-6)
         solute[f] = raw
     # frame 1 is the spill itself: Amount × weight of liquid carrying its solute, nothing bound yet
-    weights = np.zeros(len(flag.data.vertices), dtype=np.float32)
-    gi = flag.vertex_groups["stain_source"].index
-    for v in flag.data.vertices:
-        for g in v.groups:
-            if g.group == gi:
-                weights[v.index] = g.weight
+    weights = group_weights(flag)
     np.testing.assert_allclose(solute[1]["wetness"], s.amount * weights, rtol=1e-6)
     np.testing.assert_allclose(solute[1]["solute"], s.amount * s.concentration * weights, rtol=1e-6)
     assert not solute[1]["deposit"].any()

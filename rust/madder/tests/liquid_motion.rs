@@ -44,6 +44,7 @@ fn ideal(forces: Forces, momentum_advection: bool) -> StainParams {
         vapour_limited: false,
         holdup: 0.0,
         substeps: 1,
+        first_substep: 0.0,
         active_region: true,
     }
 }

@@ -18,6 +18,7 @@
 
 use faer::Par;
 use glam::DVec3;
+use madder::mesh::Topology;
 use madder::stain::{Conductivity, InteractionRates, Simulator, StainParams, Wicking};
 
 mod common;
@@ -53,27 +54,33 @@ fn coffee(first_substep: f64) -> StainParams {
     }
 }
 
-/// The dry stain after an hour in steps `dt` (`first_substep` the ramp's start, 0 off):
-/// the deposited solute per area, the vertices' distances from the centre, the sub-steps
-/// taken and the relative solute defect.
-fn dry(dt: f64, first_substep: f64) -> (Vec<f64>, Vec<f64>, usize, f64) {
-    let (topo, pos) = Grid::new(CELLS, HALF).build();
+/// A still, flat cloth of `topo` at `pos` with a pool of coffee of radius `pool`, m.
+fn pool_of_coffee(topo: Topology, pos: &[DVec3], pool: f64, first_substep: f64) -> Simulator {
     let mut sim = Simulator::new(
         topo,
-        &pos,
-        &pos,
+        pos,
+        pos,
         Conductivity::Isotropic(2e-4),
         coffee(first_substep),
         [0.25, 0.13, 0.05],
         Par::Seq,
     )
     .unwrap();
-    let r: Vec<f64> = pos.iter().map(|p| p.truncate().length()).collect();
-    let pool: Vec<f64> = r
+    let liquid: Vec<f64> = pos
         .iter()
-        .map(|&x| if x < POOL { 0.8 } else { 0.0 })
+        .map(|p| if p.length() < pool { 0.8 } else { 0.0 })
         .collect();
-    sim.add_liquid(&pool, 0.012, None).unwrap();
+    sim.add_liquid(&liquid, 0.012, None).unwrap();
+    sim
+}
+
+/// The dry stain after an hour in steps `dt` (`first_substep` the ramp's start, 0 off):
+/// the deposited solute per area, the vertices' distances from the centre, the sub-steps
+/// taken and the relative solute defect.
+fn dry(dt: f64, first_substep: f64) -> (Vec<f64>, Vec<f64>, usize, f64) {
+    let (topo, pos) = Grid::new(CELLS, HALF).build();
+    let mut sim = pool_of_coffee(topo, &pos, POOL, first_substep);
+    let r: Vec<f64> = pos.iter().map(|p| p.length()).collect();
     let poured = sim.totals().solute;
     for _ in 0..(3600.0 / dt).round() as usize {
         sim.step(&pos, dt, Some(&pos)).unwrap();
@@ -160,21 +167,7 @@ fn a_pool_dried_in_minute_frames_after_a_ramp_matches_short_steps() {
 fn a_ramp_as_long_as_the_frame_is_the_single_sub_step_bit_for_bit() {
     let (topo, pos) = Grid::new(16, 0.02).build();
     let run = |first_substep: f64| {
-        let mut sim = Simulator::new(
-            topo.clone(),
-            &pos,
-            &pos,
-            Conductivity::Isotropic(2e-4),
-            coffee(first_substep),
-            [0.25, 0.13, 0.05],
-            Par::Seq,
-        )
-        .unwrap();
-        let pool: Vec<f64> = pos
-            .iter()
-            .map(|p| if p.length() < 0.008 { 0.8 } else { 0.0 })
-            .collect();
-        sim.add_liquid(&pool, 0.012, None).unwrap();
+        let mut sim = pool_of_coffee(topo.clone(), &pos, 0.008, first_substep);
         // the cloth slides along x, faster and faster (no turn: one sub-step a frame)
         for k in 1..=6 {
             let at: Vec<DVec3> = pos

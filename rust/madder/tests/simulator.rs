@@ -50,6 +50,7 @@ fn ideal(forces: Forces) -> StainParams {
         vapour_limited: false,
         holdup: 0.0,
         substeps: 1,
+        first_substep: 0.0,
         active_region: true,
     }
 }
@@ -685,6 +686,7 @@ fn full_params(momentum_advection: bool, substeps: u32) -> StainParams {
         vapour_limited: true,
         holdup: 0.0,
         substeps,
+        first_substep: 0.0,
         active_region: true,
     }
 }
