@@ -101,17 +101,18 @@
 //! minute (a scene whose clock runs at a minute a frame) a fresh spill spreads for the
 //! whole minute before the fibres hold any of it, and dries too wide and too even: a pool
 //! of coffee (0.8 kg/m², 1.6 cm; `tests/long_frames.rs`) dried to an outline of 76.5 mm
-//! radius with a rim/centre of 0.88 in 60-s steps, 51.5 mm and 3.41 in 2-s steps. What needs the short steps is the first
-//! seconds, while the spill spreads; the drying that follows is slow. So with
+//! radius with a rim/centre of 0.88 in 60-s steps, 51.5 mm and 3.41 in 2-s steps. What
+//! needs the short steps is the first seconds, while the spill spreads; the drying that
+//! follows is slow. So with
 //! [`StainParams::first_substep`] `h₀ > 0`, liquid poured ([`Simulator::add_liquid`])
 //! starts a ramp: the next sub-steps are `h₀, 2h₀, 4h₀, …`, carried on from frame to
 //! frame, the last one of a frame cut to end on it, until a sub-step would be as long as
 //! the frame; then frames are stepped as before (bit for bit). Each piece of the ramp is
 //! split further where the turn asks more sub-steps (equal parts of at most the turn's
 //! length). With `h₀ = 0.25 s` the same pool dried to 48.5 mm and 2.85 in 60-s frames,
-//! in 76 sub-steps over the hour (the 2-s steps took 1800): a frame
-//! of `H` after a pour costs about `log₂(H/h₀)` more sub-steps, and frames shorter than
-//! `h₀` (a scene at 24 fps with the presets' 0.25 s) none.
+//! in 76 sub-steps over the hour (the 2-s steps took 1800): a frame of `H` after a pour
+//! costs about `log₂(H/h₀)` more sub-steps, and frames shorter than `h₀` (a scene at
+//! 24 fps with the add-on's 0.25 s) none.
 //!
 //! ## Window reach
 //! A frame's window is planned before the frame, when its transport sub-cycles are not
