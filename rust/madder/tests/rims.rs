@@ -21,10 +21,13 @@
 //! to the edge), a ring of at least 1.5 at a tenth of coffee's solute or less. With the
 //! carried fraction 1 and no dispersivity the drying is today's, bit for bit
 //! (`tide_lines.rs` and the simulate bench).
+//!
+//! The same spills as the add-on makes them (its Wicking and run holdup, in frames of a
+//! minute with its short sub-steps after the pour) must ring within the same ranges.
 
 use faer::Par;
 use glam::DVec3;
-use madder::stain::{Conductivity, Forces, InteractionRates, Simulator, StainParams};
+use madder::stain::{Conductivity, Forces, InteractionRates, Simulator, StainParams, Wicking};
 
 mod common;
 use common::disk;
@@ -102,10 +105,40 @@ struct Rim {
     lowest: f64,
 }
 
+/// How a spill is stepped and what of the add-on's look it has besides its rim.
+#[derive(Clone, Copy)]
+enum Run {
+    /// Steps of 0.1 s while it spreads (the first 20 s), then 4 s; no wicking, no holdup.
+    Short,
+    /// The add-on's look (Wicking 2 iterated until settled, the run holdup of 0.05 kg/m²)
+    /// in frames of a minute, with its sub-steps after the pour starting at
+    /// `first_substep` (0: one sub-step a frame).
+    AsTheAddOn { first_substep: f64 },
+}
+
 /// Dries 0.3 kg/m² of `liquid` poured within 1 cm on a disk of `rings` rings (steps of
 /// 0.1 s while it spreads, the first 20 s, then 4 s) and measures the rim.
 fn dry(liquid: Liquid, rings: usize) -> Rim {
+    dry_as(liquid, rings, Run::Short)
+}
+
+/// [`dry`], stepped as `run` says.
+fn dry_as(liquid: Liquid, rings: usize, run: Run) -> Rim {
     let (topo, pos) = disk(rings, DISK);
+    let look = match run {
+        Run::Short => StainParams::default(),
+        Run::AsTheAddOn { first_substep } => StainParams {
+            wicking: Wicking {
+                exponent: 2.0,
+                density: 0.1,
+                picard: 2,
+                tolerance: 1e-3,
+            },
+            holdup: 0.05,
+            first_substep,
+            ..Default::default()
+        },
+    };
     let params = StainParams {
         forces: Forces {
             gravity: false,
@@ -125,7 +158,7 @@ fn dry(liquid: Liquid, rings: usize) -> Rim {
         vapour_limited: true,
         carried_fraction: liquid.carried_fraction,
         dispersivity: liquid.dispersivity,
-        ..Default::default()
+        ..look
     };
     let mut sim = Simulator::new(
         topo,
@@ -145,7 +178,11 @@ fn dry(liquid: Liquid, rings: usize) -> Rim {
     let solute0 = sim.totals().solute;
     let mut steps = 0;
     while sim.totals().solvent > 1e-10 && steps < 5000 {
-        let dt = if sim.time() < 20.0 { 0.1 } else { 4.0 };
+        let dt = match run {
+            Run::Short if sim.time() < 20.0 => 0.1,
+            Run::Short => 4.0,
+            Run::AsTheAddOn { .. } => 60.0,
+        };
         sim.step(&pos, dt, None).unwrap();
         steps += 1;
     }
@@ -291,4 +328,63 @@ fn water_leaves_a_faint_tide_line() {
     for r in both(WATER) {
         assert!(r.ratio >= 1.5, "rim/centre {}", r.ratio);
     }
+}
+
+/// The same spills as a user gets them: the add-on's look (its Wicking, the run holdup)
+/// in a scene whose frames last a minute, on the 2/3 mm disk. With the sub-steps after the
+/// pour starting at the add-on's 0.25 s (its First Step) each liquid rings within the
+/// ranges above; in one sub-step a frame the spill spreads for the whole first minute
+/// before the fibres hold it, and coffee's ring fades. Measured: coffee 2.55 (ring
+/// 2.68 mm), wine 1.45, water 3.73; coffee in one sub-step a frame 1.46.
+#[test]
+fn the_presets_ring_in_minute_frames_as_a_user_gets_them() {
+    let run = Run::AsTheAddOn {
+        first_substep: 0.25,
+    };
+    let ranges = [
+        (COFFEE, 1.5, 4.0),
+        (RED_WINE, 1.1, 1.6),
+        (WATER, 1.5, f64::INFINITY),
+    ];
+    let mut coffee = 0.0;
+    for (liquid, lo, hi) in ranges {
+        let r = dry_as(liquid, 45, run);
+        println!(
+            "{} as the add-on makes it, minute frames: rim/centre {:.2}, ring {:.2} mm",
+            liquid.name,
+            r.ratio,
+            1e3 * r.width
+        );
+        assert!(
+            r.defect < 1e-12,
+            "{}: solute defect {:e}",
+            liquid.name,
+            r.defect
+        );
+        assert!(r.lowest >= 0.0, "{}: negative density", liquid.name);
+        assert!(
+            (lo..=hi).contains(&r.ratio),
+            "{}: rim/centre {}",
+            liquid.name,
+            r.ratio
+        );
+        if liquid.name == COFFEE.name {
+            coffee = r.ratio;
+            assert!(
+                r.width >= 5e-4 && r.width >= 3.0 * r.spacing,
+                "ring {} m",
+                r.width
+            );
+        }
+    }
+    let plain = dry_as(COFFEE, 45, Run::AsTheAddOn { first_substep: 0.0 });
+    println!(
+        "Coffee in one sub-step a minute: rim/centre {:.2}",
+        plain.ratio
+    );
+    assert!(
+        plain.ratio < 0.7 * coffee,
+        "one sub-step a minute: rim/centre {} against {coffee}",
+        plain.ratio
+    );
 }
