@@ -26,7 +26,9 @@ def point_attr(mesh, name, prop, width):
 
 
 def group_weights(obj, name="stain_source"):
-    """Per vertex, its weight in the vertex group `name` (0 outside it), float32."""
+    """Per vertex, its weight in the vertex group `name` (0 outside it), float32: read from
+    bpy here, not by the add-on's `bridge.vertex_group_weights`, so that the checks on the
+    spill do not rest on the code they check."""
     weights = np.zeros(len(obj.data.vertices), dtype=np.float32)
     gi = obj.vertex_groups[name].index
     for v in obj.data.vertices:
@@ -48,7 +50,8 @@ def world_lumped_areas(obj_eval):
 def test_a_spill_lands_as_a_pool_by_default(open_fixture):
     """Spill Shape Pool, the default: frame 1 holds the mass the Spill Group's weights hold at
     Amount (independent lumped areas of the evaluated flag), laid Amount deep on the group's
-    highest weights, one vertex at most in part; Weights lays weight × Amount."""
+    highest weights, one vertex at most in part (Weights, weight × Amount, is the test below's,
+    through `plain_look`)."""
     scene = open_fixture("flag.blend")
     flag = setup_flag(scene)
     s = flag.madder

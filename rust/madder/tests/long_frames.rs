@@ -19,38 +19,24 @@
 use faer::Par;
 use glam::DVec3;
 use madder::mesh::Topology;
-use madder::stain::{Conductivity, InteractionRates, Simulator, StainParams, Wicking};
+use madder::stain::{Conductivity, Simulator, StainParams};
 
 mod common;
-use common::Grid;
+use common::{Grid, addon_look, coffee_rates};
 
 const HALF: f64 = 0.08;
 const CELLS: usize = 40;
 const POOL: f64 = 0.0163;
 
+/// The Coffee preset as the add-on makes it: its rates, its rim, the presets' look.
 fn coffee(first_substep: f64) -> StainParams {
     StainParams {
-        interaction: InteractionRates {
-            absorption: 2.0,
-            saturation: 0.1,
-            adsorption: 0.05,
-            capacity: 2e-4,
-            evaporation: 5e-5,
-            evaporation_boundary: 1.5,
-        },
-        wicking: Wicking {
-            exponent: 2.0,
-            density: 0.1,
-            picard: 2,
-            tolerance: 1e-3,
-        },
+        interaction: coffee_rates(),
         carry_solute: true,
         residual_saturation: 0.1,
         vapour_limited: true,
         dispersivity: 3.5e-3,
-        holdup: 0.05,
-        first_substep,
-        ..Default::default()
+        ..addon_look(first_substep)
     }
 }
 

@@ -27,10 +27,10 @@
 
 use faer::Par;
 use glam::DVec3;
-use madder::stain::{Conductivity, Forces, InteractionRates, Simulator, StainParams, Wicking};
+use madder::stain::{Conductivity, Forces, InteractionRates, Simulator, StainParams};
 
 mod common;
-use common::disk;
+use common::{addon_look, disk};
 
 /// One liquid preset's parameters (addon/presets.py, LIQUIDS and RINGS; the dispersivity
 /// there in mm).
@@ -127,17 +127,7 @@ fn dry_as(liquid: Liquid, rings: usize, run: Run) -> Rim {
     let (topo, pos) = disk(rings, DISK);
     let look = match run {
         Run::Short => StainParams::default(),
-        Run::AsTheAddOn { first_substep } => StainParams {
-            wicking: Wicking {
-                exponent: 2.0,
-                density: 0.1,
-                picard: 2,
-                tolerance: 1e-3,
-            },
-            holdup: 0.05,
-            first_substep,
-            ..Default::default()
-        },
+        Run::AsTheAddOn { first_substep } => addon_look(first_substep),
     };
     let params = StainParams {
         forces: Forces {
@@ -271,6 +261,7 @@ fn measure(pos: &[DVec3], s: &[f64], area: &[f64], rings: usize) -> (f64, f64) {
     );
     (rim / centre, width)
 }
+
 /// Dries `liquid` on both meshes, checks mass and positivity, prints and returns the rims.
 fn both(liquid: Liquid) -> [Rim; 2] {
     let rims = [dry(liquid, 45), dry(liquid, 90)];
@@ -283,20 +274,25 @@ fn both(liquid: Liquid) -> [Rim; 2] {
             r.width / r.spacing,
             1e3 * r.spacing
         );
-        assert!(
-            r.defect < 1e-12,
-            "{}: solute defect {:e}",
-            liquid.name,
-            r.defect
-        );
-        assert!(
-            r.lowest >= 0.0,
-            "{}: negative density {:e}",
-            liquid.name,
-            r.lowest
-        );
+        conserved(liquid, r);
     }
     rims
+}
+
+/// The dried stain kept its solute (to 10⁻¹²) and no density went negative.
+fn conserved(liquid: Liquid, r: &Rim) {
+    assert!(
+        r.defect < 1e-12,
+        "{}: solute defect {:e}",
+        liquid.name,
+        r.defect
+    );
+    assert!(
+        r.lowest >= 0.0,
+        "{}: negative density {:e}",
+        liquid.name,
+        r.lowest
+    );
 }
 
 #[test]
@@ -355,13 +351,7 @@ fn the_presets_ring_in_minute_frames_as_a_user_gets_them() {
             r.ratio,
             1e3 * r.width
         );
-        assert!(
-            r.defect < 1e-12,
-            "{}: solute defect {:e}",
-            liquid.name,
-            r.defect
-        );
-        assert!(r.lowest >= 0.0, "{}: negative density", liquid.name);
+        conserved(liquid, &r);
         assert!(
             (lo..=hi).contains(&r.ratio),
             "{}: rim/centre {}",

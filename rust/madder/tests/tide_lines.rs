@@ -14,19 +14,7 @@ use glam::DVec3;
 use madder::stain::{Conductivity, Forces, InteractionRates, Simulator, StainParams};
 
 mod common;
-use common::disk;
-
-/// The Coffee preset's rates (addon/presets.py).
-fn coffee() -> InteractionRates {
-    InteractionRates {
-        absorption: 2.0,
-        saturation: 0.1,
-        adsorption: 0.05,
-        capacity: 2e-4,
-        evaporation: 5e-5,
-        evaporation_boundary: 1.5,
-    }
-}
+use common::{coffee_rates as coffee, disk};
 
 /// A still, flat disk of cloth (radius 0.1 m, `rings` rings) with no body forces, drying
 /// as asked, and `amount` kg/m² of coffee-strength liquid poured within 3 cm of its

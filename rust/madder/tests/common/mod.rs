@@ -12,6 +12,8 @@
 //! - [`Built`]: one-rings, geometry, vertex frames and transport of a mesh.
 //! - [`gaussian`], [`centroid`], [`covariance`]: a blob at every vertex and the mass-weighted
 //!   moments of a field.
+//! - [`no_interaction`], [`coffee_rates`], [`addon_look`]: parameters several tests share
+//!   (the Coffee preset's rates, the look the add-on's presets give).
 
 #![allow(dead_code)]
 
@@ -19,7 +21,7 @@ use std::f64::consts::PI;
 
 use glam::{DVec2, DVec3};
 use madder::mesh::{Geometry, OneRings, Topology, Transport, VertexFrames};
-use madder::stain::InteractionRates;
+use madder::stain::{InteractionRates, StainParams, Wicking};
 
 /// Deterministic pseudo-random number in [−½, ½) for key `k` and stream `salt`.
 pub fn hash(k: usize, salt: u64) -> f64 {
@@ -275,5 +277,34 @@ pub fn no_interaction() -> InteractionRates {
         capacity: 0.0,
         evaporation: 0.0,
         evaporation_boundary: 1.0,
+    }
+}
+
+/// The Coffee preset's rates (addon/presets.py).
+pub fn coffee_rates() -> InteractionRates {
+    InteractionRates {
+        absorption: 2.0,
+        saturation: 0.1,
+        adsorption: 0.05,
+        capacity: 2e-4,
+        evaporation: 5e-5,
+        evaporation_boundary: 1.5,
+    }
+}
+
+/// What the add-on's liquid presets give beside a liquid's rates and rim
+/// (addon/presets.py): Wicking 2 with two Picard rounds and on until the front settles
+/// (10⁻³), the run holdup of 0.05 kg/m², and its First Step, `first_substep` (0: off).
+pub fn addon_look(first_substep: f64) -> StainParams {
+    StainParams {
+        wicking: Wicking {
+            exponent: 2.0,
+            density: 0.1,
+            picard: 2,
+            tolerance: 1e-3,
+        },
+        holdup: 0.05,
+        first_substep,
+        ..Default::default()
     }
 }
