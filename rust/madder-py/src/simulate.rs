@@ -289,19 +289,23 @@ impl Simulator {
 
     /// Advances one frame: the cloth moves to `positions` ((N, 3), any float dtype) over `dt`
     /// seconds. `after`, the positions one frame later when known, makes the cloth's
-    /// acceleration second-order accurate (and right at the first frame). Releases the
-    /// GIL. On error the simulator stays at the previous frame.
-    #[pyo3(signature = (positions, dt, after=None))]
+    /// acceleration second-order accurate (and right at the first frame); they come
+    /// `after_dt` seconds later (default `dt`). Frames may differ in length (a Frame Time
+    /// that changes): the accelerations are then divided differences over the uneven
+    /// frames. Releases the GIL. On error the simulator stays at the previous frame.
+    #[pyo3(signature = (positions, dt, after=None, after_dt=None))]
     fn step(
         &mut self,
         py: Python<'_>,
         positions: &Bound<'_, PyAny>,
         dt: f64,
         after: Option<&Bound<'_, PyAny>>,
+        after_dt: Option<f64>,
     ) -> PyResult<()> {
         let pos = dpoints("positions", positions)?;
         let after = after.map(|a| dpoints("after", a)).transpose()?;
-        self.run(py, |s| s.step(&pos, dt, after.as_deref()))
+        let h = after_dt.unwrap_or(dt);
+        self.run(py, |s| s.step_until(&pos, dt, after.as_deref().map(|a| (a, h))))
             .map_err(to_py)
     }
 

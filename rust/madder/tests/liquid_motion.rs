@@ -15,6 +15,9 @@
 //! 4. **Fast rotation**: on a disk spinning at 2 rad/s at 25 fps (one sub-step asked) a
 //!    blob goes straight in the inertial frame within 5 %, near the axis and crossing the
 //!    cloth away from it.
+//! 5. **Uneven frames**: a flat cloth sliding with a uniform acceleration `A`, stepped in
+//!    frames of 1/24 s and then of 1/4 s (a Frame Time keyed up), leaves a liquid at rest
+//!    in the world: it moves `−½ A t²` over the cloth.
 
 use faer::Par;
 use glam::{DVec2, DVec3};
@@ -454,6 +457,63 @@ fn liquid_crossing_a_spinning_disk_away_from_the_axis_goes_straight() {
         // the frames' turn alone sets the sub-steps (0.08 rad a frame: one)
         assert_eq!(per_frame, 1.0, "from {c0}");
     }
+}
+
+// ---------------------------------------------------------------------------------------
+// 5. uneven frames
+
+/// Where a blob at rest in the world ends up on a flat cloth sliding along x with a uniform
+/// acceleration `a` from rest, after 12 frames of 1/24 s and 6 of 1/4 s, told of the next
+/// frame's true time (`told_uneven`) or as if it came one more of this frame's `dt` later:
+/// the blob's move over the cloth against `−½ a t²`, relative.
+fn sliding_cloth_error(a: f64, told_uneven: bool) -> f64 {
+    let forces = Forces {
+        gravity: false,
+        rectilinear: true,
+        coriolis: false,
+    };
+    let (topo, rest) = Grid::new(80, 1.0).build();
+    let mut sim = simulator(&topo, &rest, ideal(forces, true));
+    let center = DVec2::new(0.15, 0.1);
+    sim.add_liquid(&bump(&rest, 0.08, |p| (p.truncate() - center).length()), 0.0, None)
+        .unwrap();
+    let c0 = centroid(&sim.fields().free_solvent, &rest);
+    let frames: Vec<f64> = [vec![1.0 / 24.0; 12], vec![0.25; 6]].concat();
+    let times: Vec<f64> = frames
+        .iter()
+        .scan(0.0, |t, dt| {
+            *t += dt;
+            Some(*t)
+        })
+        .collect();
+    let at = |t: f64| -> Vec<DVec3> {
+        rest.iter()
+            .map(|p| *p + DVec3::X * (0.5 * a * t * t))
+            .collect()
+    };
+    for (k, (&dt, &t)) in frames.iter().zip(&times).enumerate() {
+        let next = frames.get(k + 1).map(|&h| (at(t + h), h));
+        let after = next
+            .as_ref()
+            .map(|(p, h)| (&p[..], if told_uneven { *h } else { dt }));
+        sim.step_until(&at(t), dt, after).unwrap();
+    }
+    let t = times[times.len() - 1];
+    let moved = centroid(&sim.fields().free_solvent, &rest) - c0;
+    let expected = DVec3::X * (-0.5 * a * t * t);
+    let error = (moved - expected).length() / expected.length();
+    println!(
+        "sliding cloth (told uneven {told_uneven}): the blob moved {moved:.4} over the cloth in {t:.2} s, expected {expected:.4} ({:.2}% off)",
+        100.0 * error
+    );
+    error
+}
+
+#[test]
+fn liquid_stays_put_in_the_world_under_a_sliding_cloth_whose_frames_change_length() {
+    assert!(sliding_cloth_error(0.15, true) <= 0.01);
+    // the step into the longer frames, told the next frame comes 1/24 s later, is off
+    assert!(sliding_cloth_error(0.15, false) > 0.1);
 }
 
 // ---------------------------------------------------------------------------------------

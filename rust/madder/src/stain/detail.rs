@@ -464,11 +464,23 @@ impl Detailed {
         dt: f64,
         after: Option<&[DVec3]>,
     ) -> Result<(), Error> {
+        self.step_until(positions, dt, after.map(|a| (a, dt)))
+    }
+
+    /// [`Simulator::step_until`] to the cloth's `positions` (and `after`, that many
+    /// seconds later).
+    pub fn step_until(
+        &mut self,
+        positions: &[DVec3],
+        dt: f64,
+        after: Option<(&[DVec3], f64)>,
+    ) -> Result<(), Error> {
         let Some(fine) = &mut self.fine else {
-            return self.sim.step(positions, dt, after);
+            return self.sim.step_until(positions, dt, after);
         };
         check_positions(fine.partial.coarse(), positions)?;
-        if let Some(a) = after {
+        if let Some((a, h)) = after {
+            super::check::check_range("time step after", h, h > 0.0, "finite and > 0")?;
             check_positions(fine.partial.coarse(), a)?;
         }
         super::check::check_range("time step", dt, dt > 0.0, "finite and > 0")?;
@@ -481,8 +493,8 @@ impl Detailed {
             loop {
                 fine.prepare(sim)?;
                 let r = &fine.partial;
-                let after = after.map(|a| r.prolong(a));
-                if sim.try_frame(&r.prolong(positions), dt, after.as_deref())? {
+                let after = after.map(|(a, h)| (r.prolong(a), h));
+                if sim.try_frame(&r.prolong(positions), dt, after.as_ref().map(|(a, h)| (&a[..], *h)))? {
                     break;
                 }
             }

@@ -21,7 +21,9 @@
 //! ([`Forces`]), as the seed's Figs. 4.1/4.2 do.
 //!
 //! - **Rectilinear.** `p̈_i` is the centred second difference of the vertex positions
-//!   over frames, `(p^{t+H} − 2p^t + p^{t−H})/H²` ([`second_difference`]). Over the frame
+//!   over frames, `(p^{t+H} − 2p^t + p^{t−H})/H²` ([`second_difference`]; the divided
+//!   difference `2/(h₋+h₊)·((p^{t+h₊} − p^t)/h₊ − (p^t − p^{t−h₋})/h₋)` when the frames
+//!   before and after last `h₋ ≠ h₊`, a Frame Time that changes). Over the frame
 //!   interval `[t_k, t_{k+1}]` the simulator applies `½(p̈_k + p̈_{k+1})` when it is given
 //!   the frame after (second order; a rotating disk's centripetal acceleration is then
 //!   right from the first frame), else `p̈_k`, and `p̈_0` is the forward difference, or
@@ -256,9 +258,15 @@ fn phi(r: f64, z: c64) -> (c64, c64, c64) {
     (e, horner(1), horner(2))
 }
 
-/// Centred second difference `(next − 2 cur + prev) / H²` of one vertex (world coordinates).
-pub(crate) fn second_difference(prev: DVec3, cur: DVec3, next: DVec3, dt: f64) -> DVec3 {
-    (next - 2.0 * cur + prev) * (1.0 / (dt * dt))
+/// Second difference of one vertex (world coordinates) at `cur`, `before` s after `prev`
+/// and `after` s before `next`: the centred `(next − 2 cur + prev) / H²` when both are `H`,
+/// else the divided difference `2/(h₋ + h₊) · ((next − cur)/h₊ − (cur − prev)/h₋)`, exact
+/// for a uniform acceleration either way (a scene whose Frame Time changes).
+pub(crate) fn second_difference(prev: DVec3, cur: DVec3, next: DVec3, before: f64, after: f64) -> DVec3 {
+    if before == after {
+        return (next - 2.0 * cur + prev) * (1.0 / (after * after));
+    }
+    ((next - cur) / after - (cur - prev) / before) * (2.0 / (before + after))
 }
 
 /// The tangential body acceleration: the `(x, y)` components of `fᵀ (g − a)` for frame
@@ -408,7 +416,20 @@ mod tests {
         let acc = DVec3::new(0.3, -1.0, 2.0);
         let p = |t: f64| DVec3::new(1.0, 2.0, 3.0) + DVec3::X * t + 0.5 * acc * t * t;
         let dt = 0.04;
-        let a = second_difference(p(1.0 - dt), p(1.0), p(1.0 + dt), dt);
+        let a = second_difference(p(1.0 - dt), p(1.0), p(1.0 + dt), dt, dt);
         assert!((a - acc).length() < 1e-9, "{a}");
+    }
+
+    #[test]
+    fn uneven_difference_is_exact_for_uniform_acceleration() {
+        // a frame of 1/24 s before and of a minute after (a Frame Time keyed up)
+        let acc = DVec3::new(0.3, -1.0, 2.0);
+        let p = |t: f64| DVec3::new(1.0, 2.0, 3.0) + DVec3::X * t + 0.5 * acc * t * t;
+        let (before, after) = (1.0 / 24.0, 60.0);
+        let a = second_difference(p(1.0 - before), p(1.0), p(1.0 + after), before, after);
+        assert!((a - acc).length() < 1e-6, "{a}");
+        // and not what the centred formula with either length gives
+        let centred = second_difference(p(1.0 - before), p(1.0), p(1.0 + after), after, after);
+        assert!((centred - acc).length() > 0.1, "{centred}");
     }
 }

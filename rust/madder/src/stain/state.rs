@@ -144,6 +144,8 @@ impl Fields {
 pub(super) struct State {
     pub(super) positions: Vec<DVec3>,
     pub(super) previous: Option<Vec<DVec3>>,
+    /// How long the frame from `previous` to `positions` lasted, s (0 before the first).
+    pub(super) previous_dt: f64,
     /// The frame of every vertex at `stamp`, the time its velocity was last stepped
     /// (vertices outside the window are not stepped: [`super::window`]).
     pub(super) frames: VertexFrames,

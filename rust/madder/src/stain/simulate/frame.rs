@@ -31,6 +31,19 @@ impl Simulator {
         dt: f64,
         after: Option<&[DVec3]>,
     ) -> Result<(), Error> {
+        self.step_until(positions, dt, after.map(|a| (a, dt)))
+    }
+
+    /// [`Self::step`] where the frame after comes `after.1` seconds after `positions`, and
+    /// this frame's `dt` may differ from the one before it (a Frame Time that changes):
+    /// the accelerations are then the divided differences over the uneven frames
+    /// ([`crate::stain::forces`]). With even frames it is [`Self::step`], bit for bit.
+    pub fn step_until(
+        &mut self,
+        positions: &[DVec3],
+        dt: f64,
+        after: Option<(&[DVec3], f64)>,
+    ) -> Result<(), Error> {
         // run the frame on a thread of the rayon pool: the many short parallel loops of a
         // step then start from a worker (work stealing) instead of each handing its work
         // over from outside the pool and blocking the caller until it is done
@@ -41,11 +54,12 @@ impl Simulator {
         &mut self,
         positions: &[DVec3],
         dt: f64,
-        after: Option<&[DVec3]>,
+        after: Option<(&[DVec3], f64)>,
     ) -> Result<(), Error> {
         check_range("time step", dt, dt > 0.0, "finite and > 0")?;
         check_positions(&self.cloth.topology, positions)?;
-        if let Some(a) = after {
+        if let Some((a, h)) = after {
+            check_range("time step after", h, h > 0.0, "finite and > 0")?;
             check_positions(&self.cloth.topology, a)?;
         }
         while !self.try_frame(positions, dt, after)? {}
@@ -61,7 +75,7 @@ impl Simulator {
         &mut self,
         positions: &[DVec3],
         dt: f64,
-        after: Option<&[DVec3]>,
+        after: Option<(&[DVec3], f64)>,
     ) -> Result<bool, Error> {
         let mut laps = Laps::start();
         let rebuilt = !std::mem::take(&mut self.prepared) && self.prepare_window()?;
@@ -103,6 +117,7 @@ impl Simulator {
         buffer.clear();
         buffer.extend_from_slice(positions);
         st.previous = Some(std::mem::replace(&mut st.positions, buffer));
+        st.previous_dt = dt;
         self.refresh_areas();
         Ok(true)
     }
@@ -114,7 +129,7 @@ impl Simulator {
         w: &mut Window,
         positions: &[DVec3],
         dt: f64,
-        after: Option<&[DVec3]>,
+        after: Option<(&[DVec3], f64)>,
         prof: &mut Profile,
         scratch: &mut StepScratch,
     ) -> Result<Local, Error> {
@@ -143,12 +158,12 @@ impl Simulator {
                     let v = v as usize;
                     let (c, x) = (st.positions[v], positions[v]);
                     let start = match (&st.previous, after) {
-                        (Some(prev), _) => second_difference(prev[v], c, x, dt),
-                        (None, Some(a)) => second_difference(c, x, a[v], dt),
+                        (Some(prev), _) => second_difference(prev[v], c, x, st.previous_dt, dt),
+                        (None, Some((a, h))) => second_difference(c, x, a[v], dt, h),
                         (None, None) => DVec3::ZERO,
                     };
                     match after {
-                        Some(a) => 0.5 * (start + second_difference(c, x, a[v], dt)),
+                        Some((a, h)) => 0.5 * (start + second_difference(c, x, a[v], dt, h)),
                         None => start,
                     }
                 })

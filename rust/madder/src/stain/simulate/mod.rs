@@ -437,6 +437,7 @@ impl Simulator {
             state: State {
                 positions: positions.to_vec(),
                 previous: None,
+                previous_dt: 0.0,
                 frames,
                 stamp: vec![0.0; n],
                 vertex_area: geometry.vertex_area,
