@@ -9,6 +9,7 @@ Scale, world placement, the collapsed-transform check), `motion` (motion-file sa
 the Mesh Cache modifier's timing), `pour` (spills, pours and their fall-off),
 `schedule` (the one-frame lookahead) and `errors`."""
 
+import math
 import os
 
 import bpy
@@ -150,18 +151,20 @@ class Stepper:
 
     `Stepper(scene, obj)` checks the input and prepares the topology, the fabric and the
     references; `start(pos)` builds the simulator at the first frame and spills the Spill
-    Group; `advance(pos, contacts, after)` steps to the next frame's positions (`after`:
-    the positions one frame later, `schedule`'s lookahead, or None at the last frame) and
-    pours what the sources brought; `frame_fields()` is the frame's cache fields
-    (`cache_fields`, in order). The frame's positions come from `positions(frame)` and
-    the sources' pours from `contacts(frame, pos)` (both on the scene as it is now)."""
+    Group; `advance(pos, contacts, dt, after, after_dt)` steps `dt` seconds to the next
+    frame's positions (`after`: the positions `after_dt` later, `schedule`'s lookahead, or
+    None at the last frame) and pours what the sources brought; `frame_fields()` is the
+    frame's cache fields (`cache_fields`, in order). The frame's positions come from
+    `positions(frame)`, the sources' pours from `contacts(frame, pos)` and its length from
+    `seconds(frame)` (all on the scene as it is now, at that frame)."""
 
     def __init__(self, scene, obj):
         self.madder = core()
         self.sources = source_objects(scene, obj) if obj is not None else []
         check_object(obj, self.sources)
         self.scene, self.obj = scene, obj
-        self.dt = scene.render.fps_base / scene.render.fps
+        self.scene_dt = scene.render.fps_base / scene.render.fps
+        self.clocked = obj.madder.clock == "FRAME_TIME"
         mesh = obj.data
         faces, face_polygon, n_polygons = bridge.topology_arrays(mesh)
         self.face_polygon = face_polygon
@@ -213,12 +216,32 @@ class Stepper:
         self._spill(pos)
         self._pos = pos
 
-    def advance(self, pos, contacts, after):
-        """Steps to the next frame (positions `pos`, `after` one frame later or None) and
-        pours the `contacts` of that frame."""
-        self.sim.step(pos, self.dt, after=after)
-        self._pour(contacts)
+    def advance(self, pos, contacts, dt, after, after_dt):
+        """Steps `dt` seconds to the next frame (positions `pos`; `after` the frame after it,
+        `after_dt` later, or None) and pours the `contacts` of that frame."""
+        self.sim.step(pos, dt, after=after, after_dt=after_dt)
+        self._pour(contacts, dt)
         self._pos = pos
+
+    def seconds(self, frame):
+        """How long the step into `frame` lasts (s): the scene's 1/Frame Rate, or with the
+        Frame Time clock the object's Frame Time as the scene evaluates it now (the caller
+        has moved the scene to `frame`: keyframes and drivers give that frame's value)."""
+        if not self.clocked:
+            return self.scene_dt
+        t = float(self.obj.madder.frame_time)
+        if not (math.isfinite(t) and t > 0.0):
+            raise BakeError(f"'{self.obj.name}' at frame {frame}: its Frame Time is {t:g} s; it must be > 0",
+                            object=self.obj.name, frame=frame)
+        return t
+
+    @property
+    def recorded_frame_time(self):
+        """The frame time a cache records (what Coherent Structures integrates by): the
+        scene's, or a Frame Time that nothing animates; 0 (none) where it may vary."""
+        if not self.clocked:
+            return self.scene_dt
+        return 0.0 if self.obj.animation_data is not None else float(self.obj.madder.frame_time)
 
     def frame_fields(self):
         """This frame's cache fields, in the order of `cache_fields`."""
@@ -294,13 +317,13 @@ class Stepper:
                 out.append((src, weight, tuple(np.asarray(src_eval.matrix_world.translation) * self.unit)))
         return out
 
-    def _pour(self, contacts):
-        """Adds the liquid each source brought during the frame that just ended: `flow × dt`
-        per unit area times its weights. The first time a source pours, its splash starts
-        from the source's origin."""
+    def _pour(self, contacts, dt):
+        """Adds the liquid each source brought during the frame of `dt` s that just ended:
+        `flow × dt` per unit area times its weights. The first time a source pours, its
+        splash starts from the source's origin."""
         for src, weight, origin in contacts:
             s = src.madder_source
-            self.sim.add_liquid(pour.poured(s.amount, self.dt, weight), s.concentration, tuple(s.color))
+            self.sim.add_liquid(pour.poured(s.amount, dt, weight), s.concentration, tuple(s.color))
             if s.splash_speed > 0.0 and src.name not in self.splashed:
                 self.splashed.add(src.name)
                 self.sim.splash(origin, s.splash_speed * self.unit, s.splash_seed, weight)
@@ -457,19 +480,19 @@ class BakeJob(Stepper):
                 self._goto(frame)
                 self.start(self._positions(frame))
                 self.writer = madder.CacheWriter(self.path, self.n_vertices, self.cache_fields, self.first,
-                                                 self.frames, self.dt)
+                                                 self.frames, self.recorded_frame_time)
                 if self.images:
                     self._begin_images()
             else:
                 frame = self.frame + 1
                 self._evaluating = frame
-                pos, contacts = self._walk.take(frame)
+                pos, contacts, dt = self._walk.take(frame)
                 # one frame ahead, so the cloth's acceleration over [frame − 1, frame] is
                 # centred (and right at the first frame); every frame is still evaluated
                 # once, in order
-                after = self._walk.peek(frame + 1)[0] if frame < self.last else None
+                after, _, after_dt = self._walk.peek(frame + 1) if frame < self.last else (None, None, None)
                 self._evaluating = frame
-                self.advance(pos, contacts, after)
+                self.advance(pos, contacts, dt, after, after_dt)
             self.writer.push_frame(self.frame_fields())
             if self.fine_writer is not None:
                 self.fine_writer.push_frame(self._outputs(fine=True))
@@ -498,7 +521,7 @@ class BakeJob(Stepper):
         self.staging.begin()
         self.fine_staged = os.path.join(self.staging.path, os.path.basename(fine))
         self.fine_writer = self.madder.CacheWriter(self.fine_staged, self.sim.n_fine_vertices, self.fields,
-                                                   self.first, self.frames, self.dt)
+                                                   self.first, self.frames, self.recorded_frame_time)
 
     def _start_export(self):
         """Every frame is simulated: the fine cache is complete (in the staging folder);
@@ -523,17 +546,17 @@ class BakeJob(Stepper):
             raise
 
     def _visit(self, frame):
-        """Positions at `frame` and what the sources bring there (`self._walk` calls it
-        once per frame, in order)."""
+        """Positions at `frame`, what the sources bring there and how long the step into it
+        lasts (`self._walk` calls it once per frame, in order)."""
         self._evaluating = frame
         self._goto(frame)
         pos = self._positions(frame)
-        return pos, self._contacts(frame, pos)
+        return pos, self._contacts(frame, pos), self.seconds(frame)
 
     def _goto(self, frame):
-        """Moves the scene to `frame` unless nothing needs the scene (motion from a file and
-        no sources): then the bake never evaluates it."""
-        if self.motion is None or self.sources:
+        """Moves the scene to `frame` unless nothing needs the scene (motion from a file, no
+        sources and the scene's clock): then the bake never evaluates it."""
+        if self.motion is None or self.sources or self.clocked:
             self.scene.frame_set(frame)
 
     def finish(self):

@@ -44,7 +44,9 @@ def check(name, path, reader, frame, span, direction):
         raise fail(f"the cache {path} has no velocity: it was baked without Bake Flow{older}; "
                    "rebake with velocity (tick Bake Flow in the Coherent Structures panel, then Bake)")
     if not reader.frame_time:
-        raise fail(f"the cache {path} records no frame time: rebake it")
+        raise fail(f"the cache {path} records no single frame time: it was baked with an animated Frame Time "
+                   "(Coherent Structures needs frames of one length: bake it with the Scene Rate clock) or by an "
+                   "older Madder (rebake it)")
     if span <= 0:
         raise fail("the time span is 0 frames: FTLE needs a span of at least one frame")
     if direction not in (FORWARD, BACKWARD):

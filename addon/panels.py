@@ -208,6 +208,9 @@ class MADDER_PT_stain_cache(_StainSubPanel, bpy.types.Panel):
 
     def draw(self, context):
         layout, s = self.layout_of(context)
+        layout.prop(s, "clock")
+        if s.clock == "FRAME_TIME":
+            layout.prop(s, "frame_time")
         layout.prop(s, "substeps")
         layout.prop(s, "first_substep")
         layout.prop(s, "motion_file")

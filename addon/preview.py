@@ -57,7 +57,9 @@ def settings_key(scene, obj):
     sources = tuple((o.name, _values(o.madder_source)) for o in scene.objects
                     if o.madder_source.is_source and o != obj)
     units = scene.unit_settings
-    return (_values(obj.madder, _NOT_SIMULATED), sources, scene.frame_start, scene.frame_end, scene.render.fps,
+    # an animated Frame Time changes from frame to frame: the clock's keys are not a setting
+    skip = _NOT_SIMULATED | ({"frame_time"} if obj.animation_data is not None else set())
+    return (_values(obj.madder, skip), sources, scene.frame_start, scene.frame_end, scene.render.fps,
             scene.render.fps_base, tuple(scene.gravity), scene.use_gravity, units.system, units.scale_length,
             len(obj.data.vertices), len(obj.data.polygons))
 
@@ -73,7 +75,7 @@ class Session:
         self.key = settings_key(scene, obj)
         self.store = live.FrameStore(obj.madder.live_memory * 2**20)
         self.expected = None
-        self.pending = None  # (frame, positions, contacts)
+        self.pending = None  # (frame, positions, contacts, seconds)
 
     @property
     def complete(self):
@@ -90,13 +92,14 @@ class Session:
         st = self.stepper
         pos = st._positions(frame, depsgraph)
         contacts = st._contacts(frame, pos, depsgraph)
+        dt = st.seconds(frame)
         if self.pending is not None:
-            f0, pos0, contacts0 = self.pending
-            st.advance(pos0, contacts0, after=pos)
+            f0, pos0, contacts0, dt0 = self.pending
+            st.advance(pos0, contacts0, dt0, pos, dt)
             self.store.put(f0, st.frame_fields())
-        self.pending = (frame, pos, contacts)
+        self.pending = (frame, pos, contacts, dt)
         if frame == self.last:  # a bake's last frame has no lookahead either
-            st.advance(pos, contacts, after=None)
+            st.advance(pos, contacts, dt, None, None)
             self.store.put(frame, st.frame_fields())
             self.pending = None
         self.expected = frame + 1
@@ -236,7 +239,7 @@ def bake_from_preview(scene, obj):
                         object=obj.name, filename=os.path.dirname(path)) from e
     madder = st.madder
     try:
-        writer = madder.CacheWriter(path, st.n_vertices, st.cache_fields, s.first, len(held), st.dt)
+        writer = madder.CacheWriter(path, st.n_vertices, st.cache_fields, s.first, len(held), st.recorded_frame_time)
         try:
             for f in held:
                 writer.push_frame(s.store.get(f))

@@ -550,6 +550,26 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         min=1,
         soft_max=8,
     )
+    clock: EnumProperty(
+        name="Clock",
+        description="How long each frame lasts in the stain's time",
+        items=[
+            ("SCENE", "Scene Rate", "Every frame lasts the scene's 1/Frame Rate (Frame Rate and Base)"),
+            ("FRAME_TIME", "Frame Time", "Each frame lasts the Frame Time at that frame: keyframe it for "
+             "real time while the cloth moves and minutes a frame while the stain dries"),
+        ],
+        default="SCENE",
+    )
+    frame_time: FloatProperty(
+        name="Frame Time",
+        description="With the Frame Time clock: how long the step into this frame lasts, in the stain's "
+        "time (animatable: the value at each frame is that frame's)",
+        default=1.0 / 24.0,
+        min=1e-4,
+        soft_max=600.0,
+        unit="TIME_ABSOLUTE",
+        precision=4,
+    )
     first_substep: FloatProperty(
         name="First Step (s)",
         description="After liquid is poured, the simulation's steps start this long and double "

@@ -72,6 +72,45 @@ def test_pour_adds_exactly_its_flow_during_its_frame_range():
         assert m[0] == 0.0
 
 
+@pytest.mark.parametrize("keyed", [True, False])
+def test_a_frame_time_clock_sets_how_long_each_frame_pours(keyed):
+    """With the Frame Time clock, the step into frame f lasts the Frame Time at f: keyed
+    from 1/24 s (to frame 8) to 0.5 s (from frame 9), a source's pour over frames 5–12
+    brings flow·T(f)·ΣA(1 − d/reach) a frame, so 12 times more once the clock runs slow;
+    the cache records no single frame time then. Unkeyed, every frame lasts the Frame
+    Time, and the cache records it."""
+    cloth, co = cloth_plane()
+    s = cloth.madder
+    s.evaporation = 0.0
+    s.clock = "FRAME_TIME"
+    if keyed:
+        for frame, seconds in ((8, 1 / FPS), (9, 0.5)):
+            s.frame_time = seconds
+            cloth.keyframe_insert("madder.frame_time", frame=frame)
+        expected_time = np.where(np.arange(2, 21) <= 8, 1 / FPS, 0.5)
+    else:
+        s.frame_time = 0.2
+        expected_time = np.full(19, 0.2)
+    centre, half, height, flow, reach = (0.3, -0.2), 0.25, 0.05, 0.3, 0.1
+    brush = square_brush(centre, half, height, flow, reach)
+    b = brush.madder_source
+    b.use_frame_range, b.frame_start, b.frame_end = True, 5, 12
+    make_active(cloth)
+    assert bpy.ops.madder.bake() == {"FINISHED"}
+    dx = np.maximum(np.abs(co[:, 0] - centre[0]) - half, 0)
+    dy = np.maximum(np.abs(co[:, 1] - centre[1]) - half, 0)
+    d = np.sqrt(dx**2 + dy**2 + height**2)
+    areas = lumped_areas(cloth.data, co)
+    per_second = flow * (areas @ np.clip(1 - d / reach, 0, 1))
+    frames = np.arange(2, 21)
+    active = (frames >= 5) & (frames <= 12)
+    added = np.diff(masses(cloth, areas, "wetness"))
+    np.testing.assert_allclose(added[active], per_second * expected_time[active], rtol=1e-5)
+    np.testing.assert_allclose(added[~active], 0.0, atol=1e-6 * per_second / FPS)
+    recorded = madder.CacheReader(bpy.path.abspath(s.cache_file)).frame_time
+    assert recorded == (None if keyed else pytest.approx(0.2))
+
+
 def test_brush_stains_only_where_it_comes_near_and_colors_mix():
     cloth, co = cloth_plane(frames=(1, 24))
     # red liquid from a vertex group on the left, a blue brush dabbing on the right

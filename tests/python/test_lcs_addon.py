@@ -88,7 +88,7 @@ def test_a_cache_without_velocity_says_rebake_with_velocity(tmp_path):
         lcs.check("Cloth", str(path), r, FIRST, 2, lcs.FORWARD)
     assert e.value.filename == str(path) and str(path) in str(e.value)
     flow_cache(path, frame_time=0.0)
-    with pytest.raises(LcsError, match="records no frame time"):
+    with pytest.raises(LcsError, match="records no single frame time"):
         lcs.check("Cloth", str(path), madder.CacheReader(str(path)), FIRST, 2, lcs.FORWARD)
 
 
