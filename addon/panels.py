@@ -200,6 +200,9 @@ class MADDER_PT_stain_look(_StainSubPanel, bpy.types.Panel):
         sub.prop(s, "carried_fraction")
         sub.prop(s, "dispersivity")
         col.prop(s, "vapour_limited")
+        col = layout.column(align=True)
+        col.prop(s, "holdup")
+        col.prop(s, "drip_hold")
 
 
 class MADDER_PT_stain_cache(_StainSubPanel, bpy.types.Panel):

@@ -69,7 +69,11 @@ A preset carries the whole look of its liquid (issue 34), not only its solute:
   behind to soak in and stain the path, so a run stops when its excess over the film
   (and over what the fibres take) is used up instead of trickling on forever (the
   static holdup of packed and trickle-bed flow; the value is an estimate, not measured;
-  rust/madder/tests/runs.rs measures a fed run with it). The flow's viscosity and the
+  rust/madder/tests/runs.rs measures a fed run with it); and a hanging hem that holds
+  5 g of free liquid per metre before it drips (Hem Holds; what drips leaves the cloth),
+  about a pendant drop's 46 mg (Tate's law, `2π r γ / g` at r = 1 mm, γ = 0.072 N/m) per
+  centimetre of hem (an estimate): without it a hem gathers all that runs down to it, and
+  that pile wicks back up the cloth while it dries. The flow's viscosity and the
   fibres' friction are the cloth's and the flow's (left alone), so the four liquids run
   alike.
 - Sub-steps: none of the four needs more than the automatic choice (the core adds steps
@@ -104,32 +108,34 @@ FRONT_SETTLES = True
 FRONT_TOLERANCE = 1e-3
 # how it runs: the film (kg/m²) a run leaves behind in the weave's pores
 HOLDUP = {"WATER": 0.05, "RED_WINE": 0.05, "COFFEE": 0.05, "INK": 0.05}
+# ... and what a hanging hem holds before it drips, g/m
+DRIP = {"WATER": 5.0, "RED_WINE": 5.0, "COFFEE": 5.0, "INK": 5.0}
 
 LIQUIDS = {
     "WATER": dict(
         stain_color=(0.95, 0.92, 0.85), concentration=1e-3, absorption=2.0, adsorption=0.0,
         capacity=2e-3, evaporation=5e-5, evaporation_boundary=1.2, **RINGS["WATER"], wicking=WICKING["WATER"],
         wicking_iterations=FRONT_ITERATIONS,
-        front_settles=FRONT_SETTLES, holdup=HOLDUP["WATER"],
+        front_settles=FRONT_SETTLES, holdup=HOLDUP["WATER"], drip_hold=DRIP["WATER"],
     ),
     "RED_WINE": dict(
         stain_color=(0.30, 0.02, 0.07), concentration=0.02, absorption=2.0, adsorption=0.005,
         capacity=1e-3, evaporation=6e-5, evaporation_boundary=1.2, **RINGS["RED_WINE"],
         wicking=WICKING["RED_WINE"],
         wicking_iterations=FRONT_ITERATIONS,
-        front_settles=FRONT_SETTLES, holdup=HOLDUP["RED_WINE"],
+        front_settles=FRONT_SETTLES, holdup=HOLDUP["RED_WINE"], drip_hold=DRIP["RED_WINE"],
     ),
     "COFFEE": dict(
         stain_color=(0.25, 0.13, 0.05), concentration=0.012, absorption=2.0, adsorption=0.05,
         capacity=2e-4, evaporation=5e-5, evaporation_boundary=1.5, **RINGS["COFFEE"], wicking=WICKING["COFFEE"],
         wicking_iterations=FRONT_ITERATIONS,
-        front_settles=FRONT_SETTLES, holdup=HOLDUP["COFFEE"],
+        front_settles=FRONT_SETTLES, holdup=HOLDUP["COFFEE"], drip_hold=DRIP["COFFEE"],
     ),
     "INK": dict(
         stain_color=(0.04, 0.05, 0.15), concentration=0.05, absorption=3.0, adsorption=1.0,
         capacity=5e-3, evaporation=4e-5, evaporation_boundary=1.2, **RINGS["INK"], wicking=WICKING["INK"],
         wicking_iterations=FRONT_ITERATIONS,
-        front_settles=FRONT_SETTLES, holdup=HOLDUP["INK"],
+        front_settles=FRONT_SETTLES, holdup=HOLDUP["INK"], drip_hold=DRIP["INK"],
     ),
 }
 LIQUID_ITEMS = [
@@ -230,6 +236,8 @@ def simulator_keywords(s, gravity, scene_gravity, unit, grain=None):
         carried_fraction=s.carried_fraction,
         dispersivity=s.dispersivity * 1e-3,
         holdup=s.holdup,
+        # the hem (issue 34 §1): from grams to kilograms per metre of cloth
+        drip_hold=s.drip_hold * 1e-3,
         use_gravity=bool(s.use_gravity and scene_gravity),
         use_rectilinear=s.use_rectilinear,
         use_coriolis=s.use_coriolis,

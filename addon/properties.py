@@ -534,6 +534,16 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         precision=3,
         update=_mark_custom,
     )
+    drip_hold: FloatProperty(
+        name="Hem Holds (g/m)",
+        description="Free liquid a hanging hem holds per metre of the cloth's edge before it drips "
+        "off (what drips leaves the cloth; 0 = off: the edge gathers everything that reaches it)",
+        default=0.0,
+        min=0.0,
+        soft_max=20.0,
+        precision=1,
+        update=_mark_custom,
+    )
     vapour_limited: BoolProperty(
         name="Vapour-Limited Drying",
         description="A wet patch dries fastest at its edge, as vapour diffusing into still air does "

@@ -15,9 +15,11 @@ import madder
 # a step and until it settles, so that it keeps up and takes no shape from the mesh, and a
 # run holdup (issue 34)
 NO_RING = dict(carry_solute=False, residual_saturation=0.0, vapour_limited=False, carried_fraction=1.0,
-               dispersivity=0.0, wicking=2.0, wicking_iterations=2, front_settles=True, holdup=0.05)
+               dispersivity=0.0, wicking=2.0, wicking_iterations=2, front_settles=True, holdup=0.05,
+               drip_hold=5.0)
 RING = dict(carry_solute=True, residual_saturation=0.1, vapour_limited=True, carried_fraction=1.0,
-            dispersivity=3.5, wicking=2.0, wicking_iterations=2, front_settles=True, holdup=0.05)
+            dispersivity=3.5, wicking=2.0, wicking_iterations=2, front_settles=True, holdup=0.05,
+               drip_hold=5.0)
 # the documented preset values (addon/presets.py explains where they come from)
 PRESETS = {
     "WATER": dict(concentration=1e-3, stain_color=(0.95, 0.92, 0.85), absorption=2.0, adsorption=0.0,

@@ -12,7 +12,7 @@ import madder
 from madder.addon import presets
 
 LOOK = ("wicking", "wicking_iterations", "front_settles", "carry_solute", "residual_saturation", "vapour_limited",
-        "carried_fraction", "dispersivity", "holdup")
+        "carried_fraction", "dispersivity", "holdup", "drip_hold")
 
 
 @pytest.mark.parametrize("liquid", sorted(presets.LIQUIDS))
@@ -24,6 +24,8 @@ def test_a_liquid_preset_sets_its_whole_look(liquid):
     assert values["wicking"] >= 1.0 and values["front_settles"] is True
     # runs leave a film behind
     assert values["holdup"] > 0.0
+    # and a hanging hem drips what it cannot hold
+    assert values["drip_hold"] > 0.0
     assert {k: values[k] for k in presets.RINGS[liquid]} == presets.RINGS[liquid]
 
 

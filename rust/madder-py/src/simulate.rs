@@ -23,7 +23,7 @@ use crate::threads::Pool;
 /// irregularity_seed=0,
 /// irregularity_fine_length=0,
 /// carry_solute=False, residual_saturation=0, vapour_limited=False, carried_fraction=1,
-/// dispersivity=0, holdup=0, substeps=1, first_substep=0, use_gravity=True, use_rectilinear=True,
+/// dispersivity=0, holdup=0, drip_hold=0, substeps=1, first_substep=0, use_gravity=True, use_rectilinear=True,
 /// use_coriolis=True, momentum_advection=True, detail=0, threads=None)`.
 ///
 /// `topology` is a `Topology` or an `(F, 3)` face array (any integer dtype); `rest` and
@@ -68,6 +68,8 @@ use crate::threads::Pool;
 /// spacing (0, the default: off, the ring one cell wide).
 /// `holdup` (kg/m², ≥ 0) is the free liquid each vertex keeps back from a run, filled
 /// before the run moves on and left behind to soak in (0, the default: off).
+/// `drip_hold` (kg/m, ≥ 0): the free liquid a hanging hem holds per metre of the cloth's
+/// border; the rest drips off, counted in `totals()` (0, the default: off).
 /// `first_substep` (s, ≥ 0): after liquid is poured, the sub-steps start this long and
 /// double until they reach the frame's own, so a fresh spill spreads in short steps in a
 /// scene whose frames are long (0, the default: off).
@@ -128,7 +130,7 @@ impl Simulator {
         wicking_density=None, wicking_picard=0, wicking_tolerance=0.0, irregularity=None, irregularity_length=None, irregularity_seed=0,
         irregularity_fine_length=None,
         carry_solute=false, residual_saturation=None, vapour_limited=false, carried_fraction=None,
-        dispersivity=None, holdup=None, substeps=1, first_substep=0.0,
+        dispersivity=None, holdup=None, drip_hold=0.0, substeps=1, first_substep=0.0,
         use_gravity=true, use_rectilinear=true, use_coriolis=true, momentum_advection=true,
         detail=0, threads=None))]
     #[allow(clippy::too_many_arguments)]
@@ -165,6 +167,7 @@ impl Simulator {
         carried_fraction: Option<f64>,
         dispersivity: Option<f64>,
         holdup: Option<f64>,
+        drip_hold: f64,
         substeps: u32,
         first_substep: f64,
         use_gravity: bool,
@@ -231,6 +234,7 @@ impl Simulator {
             momentum_advection,
             substeps,
             first_substep,
+            drip_hold,
             ..Default::default()
         };
         let set = |slot: &mut f64, v: Option<f64>| {
@@ -305,8 +309,10 @@ impl Simulator {
         let pos = dpoints("positions", positions)?;
         let after = after.map(|a| dpoints("after", a)).transpose()?;
         let h = after_dt.unwrap_or(dt);
-        self.run(py, |s| s.step_until(&pos, dt, after.as_deref().map(|a| (a, h))))
-            .map_err(to_py)
+        self.run(py, |s| {
+            s.step_until(&pos, dt, after.as_deref().map(|a| (a, h)))
+        })
+        .map_err(to_py)
     }
 
     /// Pours `solvent` ((N,) floats, kg/m², ≥ 0) at every vertex, with `concentration`
@@ -431,13 +437,15 @@ impl Simulator {
     }
 
     /// Totals over the mesh, kg (float64): `solvent` (free + absorbed), `solute` (all
-    /// three kinds), `evaporated` (since the start).
+    /// three kinds), `evaporated`, `dripped` and `dripped_solute` (since the start).
     fn totals<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let t = self.inner.totals();
         let d = PyDict::new(py);
         d.set_item("solvent", t.solvent)?;
         d.set_item("solute", t.solute)?;
         d.set_item("evaporated", t.evaporated)?;
+        d.set_item("dripped", t.dripped)?;
+        d.set_item("dripped_solute", t.dripped_solute)?;
         Ok(d)
     }
 

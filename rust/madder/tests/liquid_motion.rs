@@ -48,6 +48,7 @@ fn ideal(forces: Forces, momentum_advection: bool) -> StainParams {
         holdup: 0.0,
         substeps: 1,
         first_substep: 0.0,
+        drip_hold: 0.0,
         active_region: true,
     }
 }
@@ -475,8 +476,12 @@ fn sliding_cloth_error(a: f64, told_uneven: bool) -> f64 {
     let (topo, rest) = Grid::new(80, 1.0).build();
     let mut sim = simulator(&topo, &rest, ideal(forces, true));
     let center = DVec2::new(0.15, 0.1);
-    sim.add_liquid(&bump(&rest, 0.08, |p| (p.truncate() - center).length()), 0.0, None)
-        .unwrap();
+    sim.add_liquid(
+        &bump(&rest, 0.08, |p| (p.truncate() - center).length()),
+        0.0,
+        None,
+    )
+    .unwrap();
     let c0 = centroid(&sim.fields().free_solvent, &rest);
     let frames: Vec<f64> = [vec![1.0 / 24.0; 12], vec![0.25; 6]].concat();
     let times: Vec<f64> = frames

@@ -51,6 +51,7 @@ fn ideal(forces: Forces) -> StainParams {
         holdup: 0.0,
         substeps: 1,
         first_substep: 0.0,
+        drip_hold: 0.0,
         active_region: true,
     }
 }
@@ -687,6 +688,7 @@ fn full_params(momentum_advection: bool, substeps: u32) -> StainParams {
         holdup: 0.0,
         substeps,
         first_substep: 0.0,
+        drip_hold: 0.0,
         active_region: true,
     }
 }

@@ -181,6 +181,7 @@ class Simulator:
         carried_fraction: float | None = None,
         dispersivity: float | None = None,
         holdup: float | None = None,
+        drip_hold: float = 0.0,
         substeps: int = 1,
         first_substep: float = 0.0,
         use_gravity: bool = True,

@@ -494,7 +494,11 @@ impl Detailed {
                 fine.prepare(sim)?;
                 let r = &fine.partial;
                 let after = after.map(|(a, h)| (r.prolong(a), h));
-                if sim.try_frame(&r.prolong(positions), dt, after.as_ref().map(|(a, h)| (&a[..], *h)))? {
+                if sim.try_frame(
+                    &r.prolong(positions),
+                    dt,
+                    after.as_ref().map(|(a, h)| (&a[..], *h)),
+                )? {
                     break;
                 }
             }

@@ -262,7 +262,13 @@ fn phi(r: f64, z: c64) -> (c64, c64, c64) {
 /// and `after` s before `next`: the centred `(next − 2 cur + prev) / H²` when both are `H`,
 /// else the divided difference `2/(h₋ + h₊) · ((next − cur)/h₊ − (cur − prev)/h₋)`, exact
 /// for a uniform acceleration either way (a scene whose Frame Time changes).
-pub(crate) fn second_difference(prev: DVec3, cur: DVec3, next: DVec3, before: f64, after: f64) -> DVec3 {
+pub(crate) fn second_difference(
+    prev: DVec3,
+    cur: DVec3,
+    next: DVec3,
+    before: f64,
+    after: f64,
+) -> DVec3 {
     if before == after {
         return (next - 2.0 * cur + prev) * (1.0 / (after * after));
     }

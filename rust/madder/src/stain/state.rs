@@ -156,10 +156,15 @@ pub(super) struct State {
     pub(super) velocity: Vec<DVec2>,
     pub(super) fields: Fields,
     pub(super) evaporated: f64,
+    /// Solvent and solute dripped off the hems since the start.
+    pub(super) dripped: (f64, f64),
     pub(super) time: f64,
     /// The next sub-step's length while a ramp after a pour runs (`simulate`'s module
     /// doc, "Sub-steps after a pour"); 0 when none does.
     pub(super) ramp: f64,
+    /// The last frame's longest sub-step, s (0 before the first): where a ramp starts
+    /// when the frames lengthen (`simulate`'s module doc, "Sub-steps after a pour").
+    pub(super) longest_substep: f64,
     /// Vertices that have ever held liquid or solute (their areas are kept current).
     pub(super) stained: Vec<u32>,
     pub(super) is_stained: Vec<bool>,
@@ -184,6 +189,11 @@ pub struct Totals {
     pub solute: f64,
     /// Solvent evaporated since the start.
     pub evaporated: f64,
+    /// Solvent dripped off the cloth's hems since the start
+    /// ([`super::StainParams::drip_hold`]).
+    pub dripped: f64,
+    /// Solute dripped off with it.
+    pub dripped_solute: f64,
 }
 
 /// One frame's work on a window, committed when the whole frame succeeded.
@@ -194,10 +204,14 @@ pub(super) struct Local {
     pub(super) fields: Fields,
     pub(super) area: Vec<f64>,
     pub(super) evaporated: f64,
+    /// Solvent and solute dripped during the frame.
+    pub(super) dripped: (f64, f64),
     /// Transport sub-cycles of the frame's sub-steps, all together.
     pub(super) cycles: usize,
     /// What the ramp after a pour is after the frame ([`State::ramp`]).
     pub(super) ramp: f64,
+    /// The frame's longest sub-step, s ([`State::longest_substep`]).
+    pub(super) longest_substep: f64,
 }
 
 /// The colour masses `[r, g, b]` per vertex as three fields (what the solves take).

@@ -181,6 +181,7 @@ impl Simulator {
         st.fields.gather_into(&w.vertices, &mut local.fields);
         pick_into(&w.vertices, &st.vertex_area, &mut local.area);
         local.evaporated = 0.0;
+        local.dripped = (0.0, 0.0);
         local.cycles = 0;
         laps.lap(&mut prof.forces);
         // the frames at the frame's end: the sub-step count reads them, and the last
@@ -188,8 +189,18 @@ impl Simulator {
         w.corotating_frames_into(next, &mut sub.frames);
         let (turn_count, omega) = self.substeps(w, &sub.frames, &local.frames, dt, omega);
         // the sub-steps' lengths and the fractions of the frame at their ends
-        let (schedule, ramp) = substep_schedule(turn_count, st.ramp, dt);
+        // a ramp after a pour, or one because the frames lengthened (module doc, "Sub-steps
+        // after a pour")
+        let lengthened =
+            p.first_substep > 0.0 && st.previous.is_some() && dt > 2.0 * st.previous_dt;
+        let ramp_in = if st.ramp == 0.0 && lengthened {
+            2.0 * st.longest_substep
+        } else {
+            st.ramp
+        };
+        let (schedule, ramp) = substep_schedule(turn_count, ramp_in, dt);
         local.ramp = ramp;
+        local.longest_substep = schedule.iter().map(|x| x.0).fold(0.0, f64::max);
         let s_count = schedule.len();
         // several sub-steps: the end's frames wait for the last one
         if s_count > 1 {

@@ -69,7 +69,9 @@
 //!   liquid stood there, not to the time the front took to pass;
 //! - with the irregular fabric the holdup varies (the fabric's multiplier): the front
 //!   advances where it is smaller and lags where it is larger, fingers;
-//! - at a hem (the boundary below) the flux closes: what arrives gathers there.
+//! - at a hem (the boundary below) the flux closes: what arrives gathers there, up to
+//!   what a hem holds, and with [`StainParams::drip_hold`] the rest drips off
+//!   ([`crate::stain::drip`], after the transport of each sub-step).
 //!
 //! Mass is moved, never made: `f = (f − held) + held`, exact to the rounding.
 //!
@@ -113,6 +115,12 @@
 //! in 76 sub-steps over the hour (the 2-s steps took 1800): a frame of `H` after a pour
 //! costs about `log₂(H/h₀)` more sub-steps, and frames shorter than `h₀` (a scene at
 //! 24 fps with the add-on's 0.25 s) none.
+//!
+//! The same holds when the frames themselves lengthen (a Frame Time keyed from 1/24 s
+//! while the cloth falls to minutes while the stain dries): with `h₀ > 0`, a frame more
+//! than twice as long as the one before starts a ramp at twice the last frame's longest
+//! sub-step, so the liquid still running at the change is not stepped over minutes at
+//! once. With frames of one length this never happens.
 //!
 //! ## Window reach
 //! A frame's window is planned before the frame, when its transport sub-cycles are not
@@ -251,6 +259,10 @@ pub struct StainParams {
     /// and dyeing them, when the run has passed. Scaled by the irregular fabric's
     /// multiplier. 0 (the default) is off.
     pub holdup: f64,
+    /// `λ`, kg/m: the free liquid a hanging hem holds per metre of the cloth's border
+    /// before it drips off ([`crate::stain::drip`]); what drips is counted in
+    /// [`super::Totals`]. 0 (the default) is off: the border holds everything.
+    pub drip_hold: f64,
     /// Sub-steps per frame, at least: a frame whose vertex frames turn by more than
     /// [`MAX_TURN`] takes more on its own (module doc, "Fast rotation").
     pub substeps: u32,
@@ -280,6 +292,7 @@ impl Default for StainParams {
             dispersivity: 0.0,
             vapour_limited: false,
             holdup: 0.0,
+            drip_hold: 0.0,
             substeps: 1,
             first_substep: 0.0,
             active_region: true,
@@ -339,6 +352,12 @@ impl StainParams {
             "finite and ≥ 0",
         )?;
         check_range("holdup", self.holdup, self.holdup >= 0.0, "finite and ≥ 0")?;
+        check_range(
+            "drip hold",
+            self.drip_hold,
+            self.drip_hold >= 0.0,
+            "finite and ≥ 0",
+        )?;
         self.wicking.validate()?;
         self.irregularity.validate()?;
         self.interaction.validate()
@@ -444,8 +463,10 @@ impl Simulator {
                 velocity: vec![DVec2::ZERO; n],
                 fields: Fields::zeros(n),
                 evaporated: 0.0,
+                dripped: (0.0, 0.0),
                 time: 0.0,
                 ramp: 0.0,
+                longest_substep: 0.0,
                 stained: Vec::new(),
                 is_stained: vec![false; n],
             },

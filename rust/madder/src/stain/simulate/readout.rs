@@ -89,6 +89,8 @@ impl Simulator {
             solvent: f.total_solvent(),
             solute: f.total_solute(),
             evaporated: self.state.evaporated,
+            dripped: self.state.dripped.0,
+            dripped_solute: self.state.dripped.1,
         }
     }
 }

@@ -15,6 +15,7 @@ use crate::stain::advect::{UpwindPlan, advect_velocity_in, dual_fluxes_in};
 use crate::stain::diffuse::{
     Carry, DensityWork, MAX_PICARD, Ops, SoluteMotion, diffuse_densities, diffuse_velocity,
 };
+use crate::stain::drip;
 use crate::stain::extend::{extend_velocity, wet_vertices};
 use crate::stain::forces::{VelocityStep, frame_angular_velocity, frame_body_acceleration};
 use crate::stain::interact::{exposure, interact_varied, vapour_exposure};
@@ -52,6 +53,7 @@ impl Simulator {
         laps.lap(&mut prof.forces);
 
         self.advection_phase(w, loc, q, h, prof, sub)?;
+        self.drip_phase(w, loc, q, acceleration);
         laps.lap(&mut prof.advection);
 
         self.second_half_kick(loc, sub);
@@ -267,6 +269,41 @@ impl Simulator {
         }
         part.lap(&mut prof.advection_apply);
         Ok(())
+    }
+
+    /// After the transport: what reached a hanging hem beyond what it holds drips off
+    /// ([`crate::stain::drip`]), at the window's whole vertices on the cloth's border.
+    fn drip_phase(&self, w: &Window, loc: &mut Local, q: &[DVec3], acceleration: &[DVec3]) {
+        let p = &self.params;
+        if p.drip_hold <= 0.0 {
+            return;
+        }
+        let on: Vec<u32> = w
+            .whole
+            .iter()
+            .copied()
+            .filter(|&j| w.cloth.boundary[j as usize])
+            .collect();
+        if on.is_empty() {
+            return;
+        }
+        let (length, outward) = drip::border_normals(&w.cloth.topology, q);
+        let gravity = if p.forces.gravity {
+            p.gravity
+        } else {
+            DVec3::ZERO
+        };
+        let (solvent, solute) = drip::drip(
+            &mut loc.fields,
+            &on,
+            &length,
+            &outward,
+            acceleration,
+            gravity,
+            p.drip_hold,
+        );
+        loc.dripped.0 += solvent;
+        loc.dripped.1 += solute;
     }
 
     /// Step 3 of the module doc: forces, the second half kick, at the vertex the liquid

@@ -181,7 +181,10 @@ impl Simulator {
         let st = &mut self.state;
         st.fields.scatter(&w.vertices, &local.fields);
         st.evaporated += local.evaporated;
+        st.dripped.0 += local.dripped.0;
+        st.dripped.1 += local.dripped.1;
         st.ramp = local.ramp;
+        st.longest_substep = local.longest_substep;
         // the active and held vertices' cloth numbers, increasing as `whole` is: each
         // array written in parallel
         let whole: Vec<u32> = w
