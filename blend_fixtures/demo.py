@@ -50,7 +50,9 @@ SPILL_RADIUS = 0.08
 
 
 def write_pc2(path, frames, start, rate):
-    """A PC2 point cache of `frames` ((F, N, 3) float32), as Blender's Mesh Cache reads it."""
+    """A PC2 point cache of `frames` ((F, N, 3) float32), as Blender's Mesh Cache reads it
+    (written here, not by `madder.write_pc2`: the scene is built before the add-on that
+    carries the madder module is installed)."""
     import numpy as np
 
     frames = np.ascontiguousarray(frames, dtype="<f4")

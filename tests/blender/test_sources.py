@@ -37,6 +37,15 @@ def square_brush(centre, half, height, flow, reach, color=(0.0, 0.0, 1.0)):
     return brush
 
 
+def brush_falloff(co, centre, half, height, reach):
+    """The independent expectation of a square brush's pour weights at the points `co`: the
+    point-to-rectangle distance, a linear fall-off to 0 at the reach."""
+    dx = np.maximum(np.abs(co[:, 0] - centre[0]) - half, 0)
+    dy = np.maximum(np.abs(co[:, 1] - centre[1]) - half, 0)
+    d = np.sqrt(dx**2 + dy**2 + height**2)
+    return np.clip(1 - d / reach, 0, 1)
+
+
 def masses(cloth, areas, field):
     """Mass (kg) of a cache field at every frame: Σ A_i σ_i (the cloth is still and flat)."""
     r = madder.CacheReader(bpy.path.abspath(cloth.madder.cache_file))
@@ -56,12 +65,8 @@ def test_pour_adds_exactly_its_flow_during_its_frame_range():
     s.concentration = 0.03
     make_active(cloth)
     assert bpy.ops.madder.bake() == {"FINISHED"}
-    # independent expectation: point-to-rectangle distance, linear fall-off over the reach
-    dx = np.maximum(np.abs(co[:, 0] - centre[0]) - half, 0)
-    dy = np.maximum(np.abs(co[:, 1] - centre[1]) - half, 0)
-    d = np.sqrt(dx**2 + dy**2 + height**2)
     areas = lumped_areas(cloth.data, co)
-    per_frame = flow / FPS * (areas @ np.clip(1 - d / reach, 0, 1))
+    per_frame = flow / FPS * (areas @ brush_falloff(co, centre, half, height, reach))
     frames = np.arange(2, 21)
     active = (frames >= 5) & (frames <= 12)
     for field, scale in (("wetness", 1.0), ("solute", 0.03)):
@@ -97,11 +102,8 @@ def test_a_frame_time_clock_sets_how_long_each_frame_pours(keyed):
     b.use_frame_range, b.frame_start, b.frame_end = True, 5, 12
     make_active(cloth)
     assert bpy.ops.madder.bake() == {"FINISHED"}
-    dx = np.maximum(np.abs(co[:, 0] - centre[0]) - half, 0)
-    dy = np.maximum(np.abs(co[:, 1] - centre[1]) - half, 0)
-    d = np.sqrt(dx**2 + dy**2 + height**2)
     areas = lumped_areas(cloth.data, co)
-    per_second = flow * (areas @ np.clip(1 - d / reach, 0, 1))
+    per_second = flow * (areas @ brush_falloff(co, centre, half, height, reach))
     frames = np.arange(2, 21)
     active = (frames >= 5) & (frames <= 12)
     added = np.diff(masses(cloth, areas, "wetness"))
