@@ -131,11 +131,13 @@ def stain_buffers(n):
 
 
 def write_stain(mesh, rgba, wetness, deposit):
-    """Writes one frame's playback attributes on the POINT domain (all in [0, 1]; computed
-    from the cache's densities by `CacheReader.read_stain`, core `io::attributes`):
+    """Writes one frame's playback attributes on the POINT domain (computed from the
+    cache's densities by `CacheReader.read_stain`, core `io::attributes`):
 
-    - `madder_stain` (FLOAT_COLOR): RGB = solute colour × coverage, alpha = coverage, with
-      coverage = solute / (concentration × saturation) (premultiplied, for an "over" mix).
+    - `madder_stain` (FLOAT_COLOR): RGB = solute colour × dye amount, alpha = the dye
+      amount = solute / (concentration × saturation) (premultiplied, for an "over" mix),
+      in [0, 1 + madder.DYE_EXCESS_RANGE]: a tide line holds several times the dye of a
+      saturated spot (1), and the shader darkens by all of it.
     - `madder_wetness` (FLOAT): liquid / saturation (1: the fibres are full; free liquid
       pooled on top reads 1 as well).
     - `madder_deposit` (FLOAT): adsorbed solute / capacity.

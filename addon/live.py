@@ -94,18 +94,20 @@ class FrameStore:
 
 
 def stain_attributes(solute, liquid, deposit, references, color):
-    """The playback attributes (RGBA premultiplied, wetness, deposit: each in [0, 1]) of
-    one frame's densities: what `CacheReader.read_stain` computes from a cache (core
-    `io::attributes`), here from fields held in memory. `color` is one RGB or per-vertex
-    (3, N) colours. A reference ≤ 0 makes its attribute 0."""
+    """The playback attributes (RGBA premultiplied with the dye amount in
+    [0, 1 + madder.DYE_EXCESS_RANGE]; wetness and deposit in [0, 1]) of one frame's
+    densities: what `CacheReader.read_stain` computes from a cache (core `io::attributes`),
+    here from fields held in memory. `color` is one RGB or per-vertex (3, N) colours. A
+    reference ≤ 0 makes its attribute 0."""
+    import madder
 
-    def fraction(x, ref):
+    def fraction(x, ref, upper=1.0):
         if ref <= 0.0:
             return np.zeros_like(x, dtype=np.float32)
-        return np.clip(np.asarray(x, dtype=np.float32) / np.float32(ref), 0.0, 1.0).astype(np.float32)
+        return np.clip(np.asarray(x, dtype=np.float32) / np.float32(ref), 0.0, upper).astype(np.float32)
 
     rs, rl, rd = (float(r) for r in references)
-    c = fraction(solute, rs)
+    c = fraction(solute, rs, 1.0 + madder.DYE_EXCESS_RANGE)
     rgba = np.empty((len(c), 4), dtype=np.float32)
     col = np.asarray(color, dtype=np.float32)
     for k in range(3):

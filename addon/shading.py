@@ -11,14 +11,19 @@ R∞ = 1 + K/S − √((K/S)² + 2·K/S), the inverse of K/S = (1 − R)²/2R (K
 
     q_cloth = (1 − B)² / 2B                 B: the clean cloth's colour (Base Color)
     q_dye   = (1 − C)² / 2C                 C: the liquid's colour = Stain / Coverage
-    q       = q_cloth + a·q_dye             a: the dye amount (Coverage)
+    q       = q_cloth + a·q_dye             a: the dye amount (Coverage + Excess)
     R_dry   = R∞(q)
 
 with reflectances clamped to [1e-3, 1]. The dye amount counts all the dye, dissolved in
 the liquid and bound to the fibres alike (the dye shows either way): it is the total
 solute over the solute of fibres saturated with the liquid (`bridge.write_stain`), so
 at a = 1 the cloth has the liquid's own colour (plus the cloth's), a thin stain is a
-pale tint of the same hue and colour depth grows as K/S does, linearly with the dye.
+pale tint of the same hue and colour depth grows as K/S does, linearly with the dye. It
+is not limited to 1: a tide line, where the drying flow carried the solute, holds two
+to six times the dye of a saturated spot and is that much darker. The vertex attributes
+carry the whole amount in Coverage; the images carry it up to 1 there (the weave's
+detail is clipped at 1) and the rest in Excess (the wet image's blue × 16, core
+`io::attributes`), which the group adds back.
 
 **Water.** Wetness w (the liquid in the fibres over what they hold) changes the optics
 three ways, each weighted by w so a dry cloth keeps R_dry exactly:
@@ -79,7 +84,7 @@ material by nodes that `sync_material` places (named "Madder Input: …"):
   nodes on the object's sequences (`images.sequence_image`: non-colour, channel-packed
   alpha, auto refresh, frame start/offset/length so that scene frame f shows file f),
   read through a UV Map node of the UV map they were baked for; the wet image's R and G
-  are the wetness and deposit (B is written as 0).
+  are the wetness and deposit, its B the dye's excess over saturation (× 16: Excess).
 
 A bake, a re-export, Free Bake and switching the output re-run `sync_object`, so a
 material that has the group always reads what its object has. A group made by an older
@@ -119,7 +124,10 @@ _INPUTS = (
      "The weave's local reflectance factor, mean 1; 1 = no weave"),
     ("Stain", "NodeSocketColor", (0.0, 0.0, 0.0, 1.0), None,
      "The liquid's colour times the dye amount (premultiplied)"),
-    ("Coverage", "NodeSocketFloat", 0.0, (0.0, 1.0), "Dye amount: 1 = a spot saturated with the liquid"),
+    ("Coverage", "NodeSocketFloat", 0.0, (0.0, 17.0),
+     "Dye amount: 1 = a spot saturated with the liquid (the images' part up to 1)"),
+    ("Excess", "NodeSocketFloat", 0.0, (0.0, 16.0),
+     "Dye amount above 1 that the images carry apart (0 with vertex colors, whose Coverage holds it all)"),
     ("Wetness", "NodeSocketFloat", 0.0, (0.0, 1.0), "Liquid in the fibres: 1 = full"),
     ("Deposit", "NodeSocketFloat", 0.0, (0.0, 1.0), "Bound dye (passed through as an output)"),
 )
@@ -201,8 +209,9 @@ class _Maths:
 def _channel(m, base, stain, g):
     """One colour channel of the group's maths (module doc): `base` and `stain` the
     channel's sockets, `g` the group input node."""
-    amount = m.op("MAXIMUM", g.outputs["Coverage"], 0.0)
-    dye = m.op("DIVIDE", stain, m.op("MAXIMUM", amount, A_MIN))  # the liquid's colour
+    coverage = m.op("MAXIMUM", g.outputs["Coverage"], 0.0)
+    dye = m.op("DIVIDE", stain, m.op("MAXIMUM", coverage, A_MIN))  # the liquid's colour
+    amount = m.op("ADD", coverage, m.op("MAXIMUM", g.outputs["Excess"], 0.0))
     q = m.op("MULTIPLY_ADD", amount, m.ks(dye), m.ks(base))  # K/S, cloth + dye
     wet = g.outputs["Wetness"]
     q = m.op("MULTIPLY", q, m.op("MULTIPLY_ADD", g.outputs["Wet Scattering"], wet, 1.0))
@@ -334,6 +343,8 @@ def _attribute_inputs(nt, node, x, y):
 
 
 def _image_inputs(nt, node, obj, x, y):
+    import madder
+
     uv = _new(nt, "ShaderNodeUVMap", "UV Map", x - 500, y - 280)
     uv.uv_map = obj.madder.image_uv_map
     textures = {}
@@ -347,8 +358,13 @@ def _image_inputs(nt, node, obj, x, y):
         textures[kind] = tex
     channels = _new(nt, "ShaderNodeSeparateColor", "Wetness and Deposit", x, y - 300)
     nt.links.new(textures["wet"].outputs["Color"], channels.inputs["Color"])
+    excess = _new(nt, "ShaderNodeMath", "Excess", x, y - 340)
+    excess.operation = "MULTIPLY"
+    excess.inputs[1].default_value = madder.DYE_EXCESS_RANGE
+    nt.links.new(channels.outputs["Blue"], excess.inputs[0])
     nt.links.new(textures["stain"].outputs["Color"], node.inputs["Stain"])
     nt.links.new(textures["stain"].outputs["Alpha"], node.inputs["Coverage"])
+    nt.links.new(excess.outputs[0], node.inputs["Excess"])
     nt.links.new(channels.outputs["Red"], node.inputs["Wetness"])
     nt.links.new(channels.outputs["Green"], node.inputs["Deposit"])
 

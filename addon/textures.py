@@ -11,9 +11,10 @@ every path derived from the cache's (so Save As and Relocate Cache carry them al
                                            the images (re-exported from it at any size)
     <folder>/<stem>_images/<stem>_stain.####.exr
                                            RGBA: the solute colour × coverage, coverage
+                                           (the dye amount up to saturation, 1)
     <folder>/<stem>_images/<stem>_wet.####.exr
-                                           R: wetness, G: deposit (Blender reads the
-                                           missing B as 0, A as 1)
+                                           R: wetness, G: deposit, B: the dye above
+                                           saturation / madder.DYE_EXCESS_RANGE
 
 With a fabric's Thread Count, the images carry the weave's fine scale (`weave_maps`,
 `madder.WeaveDetail`: the homogenization's corrector and the threads' uptake), laid along
@@ -26,7 +27,8 @@ and the weave shows where the stain is faint.
 `####` is the scene frame (4 digits, more when needed). The values are exactly the
 playback attributes (`CacheReader.read_stain`, core `io::attributes`), rasterized over
 the refined cloth's UV triangles (`madder.rasterize`: barycentric at texel centres,
-islands padded), so the shader reads the same [0, 1] numbers from either.
+islands padded), with the dye amount split at 1 (coverage + range × excess), so the
+shader reads the same numbers from either.
 
 One more file, number `first − 1`, repeats the first frame: Blender's image user shows
 file `frame_offset` (here `first − 1`) at every scene frame before `frame_start` (it
@@ -51,8 +53,8 @@ KINDS = ("stain", "wet")
 EXT = ".exr"
 DIGITS = 4
 STAIN_CHANNELS = ("R", "G", "B", "A")
-# wetness, deposit, and a zero blue: Blender reads an EXR without B as garbage there
-# (−5e8, 1e15), which a material of the user's reading the image's colour would show
+# wetness, deposit, and the dye's excess over saturation (an EXR without B would read as
+# garbage there, −5e8, 1e15, in a material of the user's reading the image's colour)
 WET_CHANNELS = ("R", "G", "B")
 
 
@@ -219,7 +221,8 @@ the weave's detail, core `texture::clip`)."""
 
 UPTAKE = {"stain": (True, True, True, True), "wet": (False, True, False)}
 """Per image kind and channel, whether the threads' uptake applies (the deposit: the stain's
-colour and coverage, the wet image's deposit) or only the corrector (wetness; the zero blue)."""
+colour and coverage, the wet image's deposit) or only the corrector (wetness; the dye's
+excess over saturation, which lies over the threads evenly: core `io::attributes`)."""
 
 
 def triangle_areas(p):
@@ -332,6 +335,7 @@ class Exporter:
         self._rgba = np.zeros(4 * n, dtype=np.float32)
         self._wet = np.zeros(n, dtype=np.float32)
         self._deposit = np.zeros(n, dtype=np.float32)
+        self._excess = np.zeros(n, dtype=np.float32)
         self._wet_values = np.zeros((n, len(WET_CHANNELS)), dtype=np.float32)
         self.overlapping = None
         self._read = None  # the frame whose values the buffers hold
@@ -349,14 +353,17 @@ class Exporter:
 
     def values(self, frame):
         """Frame `frame`'s per-vertex image values: (RGBA (N, 4), wet (N, 3): wetness,
-        deposit and 0), exactly the playback attributes (without their clamp to 1 when the
-        weave's detail is added: `export` clips the finished texels instead)."""
+        deposit and the dye's excess), the playback attributes with the dye amount above 1
+        moved to the excess, a fraction of `madder.DYE_EXCESS_RANGE` (core `io::attributes`;
+        without their clamp to 1 when the weave's detail is added: `export` clips the
+        finished texels instead)."""
         # with the weave's detail the fractions are read unclamped and each finished texel
         # is clipped (`export`): a saturated stain stays saturated on every thread
         self.reader.read_stain(frame, self.references, self.color, self._rgba, self._wet, self._deposit,
-                               clamp=not self.weave)
+                               clamp=not self.weave, excess=self._excess)
         self._wet_values[:, 0] = self._wet
         self._wet_values[:, 1] = self._deposit
+        self._wet_values[:, 2] = self._excess
         self._read = frame
         return self._rgba.reshape(-1, 4), self._wet_values
 

@@ -76,18 +76,24 @@ def test_a_detail_bake_writes_the_fine_cache_and_an_image_pair_per_frame(open_fi
         stain, wet = (madder.read_exr(image_file(flag, k, f)) for k in ("stain", "wet"))
         assert stain.shape == (512, 512, 4) and wet.shape[:2] == (512, 512)
         # the images hold the playback values of the fine cache (interpolated, so within
-        # their range; the stain's peak is on a vertex's texel to half-float rounding)
+        # their range; the stain's peak is on a vertex's texel to half-float rounding): the
+        # dye amount up to 1 in the stain's alpha, the rest over the range in the wet's blue
         refined.read_stain(f, tuple(s.bake_references), tuple(s.stain_color), *buf)
-        coverage = buf[0][3::4]
-        assert stain[..., 3].max() == pytest.approx(coverage.max(), rel=0.02)
+        dye = buf[0][3::4]
+        assert dye.max() > 1.0  # the spill is above saturation
+        assert stain[..., 3].max() == pytest.approx(1.0, rel=0.002)
+        # (the excess peaks at one vertex, between texel centres: interpolated, a little below)
+        top = (dye.max() - 1) / madder.DYE_EXCESS_RANGE
+        assert 0.95 * top < wet[..., 2].max() < top * (1 + 1e-3)
         # (interpolation rounds: −3e-7 where every vertex of a triangle is 0)
         assert stain[..., 3].min() > -1e-6 and wet[..., 0].max() == pytest.approx(buf[1].max(), rel=0.02)
         np.testing.assert_allclose(stain[..., :3], stain[..., 3:] * np.array(s.stain_color), atol=2e-3)
-    # Blender's own read of a wet image: wetness in R, and a blue it finds written (zeros), not garbage
+    # Blender's own read of a wet image: wetness in R, the excess in B (finite, not garbage)
     blender_wet = bpy.data.images.load(image_file(flag, "wet", 12))
     px = np.array(blender_wet.pixels[:], dtype=np.float32).reshape(512, 512, 4)
     bpy.data.images.remove(blender_wet)
-    assert np.isfinite(px).all() and not px[..., 2].any()
+    assert np.isfinite(px).all()
+    assert px[..., 2].max() == pytest.approx(wet[..., 2].max(), rel=1e-3) and px[..., 2].min() > -1e-6
     assert px[..., 0].max() == pytest.approx(wet[..., 0].max(), rel=1e-3)
     # the vertex colours still play, from the cloth-resolution cache
     scene.frame_set(6)
@@ -280,18 +286,24 @@ def stain_measures(stained, bare):
 
 
 def show_dye(material, group):
-    """Makes `material` emit the dye amount its group reads (its Coverage input's source),
-    whichever nodes feed it now: the stain's shading is not linear in the dye
-    (Kubelka–Munk, test_shading.py), so a half-peak contour of the shaded colour would sit
-    in the faint rim, which the vertex colours spread over one cloth cell."""
+    """Makes `material` emit the dye amount its group reads (its Coverage input's source
+    plus its Excess input's, the images' dye above saturation), whichever nodes feed them
+    now: the stain's shading is not linear in the dye (Kubelka–Munk, test_shading.py), so
+    a half-peak contour of the shaded colour would sit in the faint rim, which the vertex
+    colours spread over one cloth cell."""
     nt = material.node_tree
     emit = nt.nodes.get("dye") or nt.nodes.new("ShaderNodeEmission")
     emit.name = "dye"
-    for link in emit.inputs["Color"].links:
-        nt.links.remove(link)
-    emit.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
-    if group.inputs["Coverage"].is_linked:
-        nt.links.new(group.inputs["Coverage"].links[0].from_socket, emit.inputs["Color"])
+    total = nt.nodes.get("dye total") or nt.nodes.new("ShaderNodeMath")
+    total.name, total.operation = "dye total", "ADD"
+    for socket in (emit.inputs["Color"], *total.inputs[:2]):
+        for link in socket.links:
+            nt.links.remove(link)
+        socket.default_value = (0.0, 0.0, 0.0, 1.0) if socket == emit.inputs["Color"] else 0.0
+    for name, socket in (("Coverage", total.inputs[0]), ("Excess", total.inputs[1])):
+        if group.inputs[name].is_linked:
+            nt.links.new(group.inputs[name].links[0].from_socket, socket)
+    nt.links.new(total.outputs[0], emit.inputs["Color"])
     out = next(n for n in nt.nodes if n.type == "OUTPUT_MATERIAL")
     nt.links.new(emit.outputs[0], out.inputs["Surface"])
 

@@ -59,7 +59,8 @@ def model(base, colour, amount, wetness, yarn=1.0):
 
 # --- the swatch scene ----------------------------------------------------------------------
 
-# name: (column, row, mode, base, liquid colour, dye amount, wetness, yarn, backing)
+# name: (column, row, mode, base, liquid colour, dye amount, wetness, yarn, backing); the dye
+# amount is Coverage alone (the vertex colours), or (Coverage, Excess) as the images split it
 SWATCHES = {}
 for i, a in enumerate((0.1, 0.3, 0.6, 1.0)):
     SWATCHES[f"km wine {a}"] = (i, 0, "EMIT", COTTON, WINE, a, 0.0, 1.0, None)
@@ -68,6 +69,9 @@ SWATCHES["km wet wine"] = (5, 0, "EMIT", COTTON, WINE, 0.6, 1.0, 1.0, None)
 SWATCHES["km yarn"] = (6, 0, "EMIT", COTTON, WINE, 0.3, 0.5, 0.8, None)
 for i, w in enumerate((0.0, 0.25, 0.5, 0.75, 1.0)):
     SWATCHES[f"water {w}"] = (i, 1, "LIT", COTTON, (1.0, 1.0, 1.0), 0.0, w, 1.0, None)
+# a tide line's dye, three times a saturated spot's
+SWATCHES["km wine ring"] = (5, 1, "EMIT", COTTON, WINE, 3.0, 0.0, 1.0, None)
+SWATCHES["km wine ring, images"] = (6, 1, "EMIT", COTTON, WINE, (1.0, 2.0), 0.0, 1.0, None)
 for i, (a, w) in enumerate(((0.3, 0.0), (0.3, 1.0), (1.0, 0.0), (1.0, 1.0))):
     SWATCHES[f"wine {a} {w}"] = (i, 2, "LIT", COTTON, WINE, a, w, 1.0, None)
 for i, (w, back) in enumerate(((0.0, 0.0), (0.0, 1.0), (1.0, 0.0), (1.0, 1.0))):
@@ -92,7 +96,13 @@ def _plain(name, colour):
     return mat
 
 
+def dye(amount):
+    """A swatch's whole dye amount (Coverage + Excess)."""
+    return sum(amount) if isinstance(amount, tuple) else amount
+
+
 def _swatch_material(name, mode, base, colour, amount, wetness, yarn):
+    coverage, excess = amount if isinstance(amount, tuple) else (amount, 0.0)
     mat = bpy.data.materials.new(name)
     nt = compat.ensure_node_tree(mat)
     bsdf = next(n for n in nt.nodes if n.type == "BSDF_PRINCIPLED")
@@ -101,8 +111,9 @@ def _swatch_material(name, mode, base, colour, amount, wetness, yarn):
     for n in [n for n in nt.nodes if n.name.startswith(shading.INPUT_PREFIX)]:
         nt.nodes.remove(n)  # fed on the sockets instead of the attributes
     group = next(n for n in nt.nodes if n.type == "GROUP")
-    group.inputs["Stain"].default_value = (*(amount * np.asarray(colour)), 1.0)
-    group.inputs["Coverage"].default_value = amount
+    group.inputs["Stain"].default_value = (*(coverage * np.asarray(colour)), 1.0)
+    group.inputs["Coverage"].default_value = coverage
+    group.inputs["Excess"].default_value = excess
     group.inputs["Wetness"].default_value = wetness
     group.inputs["Yarn"].default_value = yarn
     if mode == "EMIT":  # the pixel is the node maths
@@ -184,13 +195,24 @@ def test_stain_colour_follows_kubelka_munk(swatches):
     for name, (_c, _r, mode, base, colour, amount, wet, yarn, _b) in SWATCHES.items():
         if mode != "EMIT":
             continue
-        want = model(np.array(base), np.array(colour), amount, wet, yarn)
+        want = model(np.array(base), np.array(colour), dye(amount), wet, yarn)
         got = srgb_decode(means[name])
         np.testing.assert_allclose(got, want, rtol=0.02, atol=2e-4, err_msg=f"{engine} {name}")
     # a thin stain is a pale tint of the same hue, the reference amount is the liquid's colour
     thin, full = srgb_decode(means["km wine 0.1"]), srgb_decode(means["km wine 1.0"])
     assert np.argmin(thin) == np.argmin(WINE) and np.argmax(thin) == np.argmax(WINE)
     assert np.all(thin > full)
+
+
+def test_a_tide_line_above_saturation_is_darker_from_either_output(swatches):
+    """The dye amount is not limited to a saturated spot's (1): a ring with three times the
+    dye is visibly darker (ΔE*ab > 5) than the saturated spot, whether the amount arrives
+    whole in Coverage (vertex colours) or split into Coverage 1 and Excess 2 (images)."""
+    engine, means = swatches
+    full, ring, split = (lab(means[n]) for n in ("km wine 1.0", "km wine ring", "km wine ring, images"))
+    print(f"{engine}: L* saturated {full[0]:.1f}, ring {ring[0]:.1f} / {split[0]:.1f}")
+    assert np.linalg.norm(ring - full) > 5.0 and ring[0] < full[0]
+    assert np.linalg.norm(ring - split) < 0.5
 
 
 def test_wet_is_darker_and_more_saturated(swatches):

@@ -22,15 +22,20 @@ def cache(path, colors):
     return frames
 
 
-def expected(values, refs, color):
-    cov = np.clip(values["solute"] / np.float32(refs[0]), 0, 1)
+def expected(values, refs, color, split=False):
+    """The attributes (rgba, wetness, deposit) and, with `split` (the images), the dye's
+    excess: the dye amount solute / reference held in [0, 1 + DYE_EXCESS_RANGE], or in
+    [0, 1] with the share above 1 over the range (within [0, 1]) apart."""
+    dye = values["solute"] / np.float32(refs[0])
+    cov = np.clip(dye, 0, 1 if split else 1 + madder.DYE_EXCESS_RANGE)
     if "color_r" in values:
         tint = np.stack([values[c] for c in ("color_r", "color_g", "color_b")], 1)
     else:
         tint = np.float32(color)
     rgba = np.concatenate([cov[:, None] * tint, cov[:, None]], axis=1)
     wet = np.clip(values["wetness"] / np.float32(refs[1]), 0, 1)
-    return rgba.ravel(), wet, np.zeros(N, dtype=np.float32)  # deposit reference 0: no deposit
+    out = rgba.ravel(), wet, np.zeros(N, dtype=np.float32)  # deposit reference 0: no deposit
+    return (*out, np.clip((dye - 1) / madder.DYE_EXCESS_RANGE, 0, 1)) if split else out
 
 
 @pytest.mark.parametrize("colors", [False, True])
@@ -38,11 +43,17 @@ def test_read_stain_matches_numpy(tmp_path, colors):
     frames = cache(tmp_path / "c.madder", colors)
     r = madder.CacheReader(str(tmp_path / "c.madder"))
     rgba, wet, dep = np.full(4 * N, 9, np.float32), np.full(N, 9, np.float32), np.full(N, 9, np.float32)
+    excess = np.full(N, 9, np.float32)
+    # solute up to 0.3 over 0.05: dye amounts up to 6, above a saturated spot's 1
     refs, color = (0.05, 0.1, 0.0), (0.5, 0.25, 1.0)
     for k in range(3):
         r.read_stain(4 + k, refs, color, rgba, wet, dep)
+        assert rgba[3::4].max() > 5.0
         for got, want in zip((rgba, wet, dep), expected(frames[k], refs, color), strict=True):
             np.testing.assert_allclose(got, want, rtol=1e-6, atol=0)
+        r.read_stain(4 + k, refs, color, rgba, wet, dep, excess=excess)
+        for got, want in zip((rgba, wet, dep, excess), expected(frames[k], refs, color, split=True), strict=True):
+            np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-7)
 
 
 def test_read_stain_checks_buffers_and_names_bad_frames(tmp_path):
@@ -54,6 +65,9 @@ def test_read_stain_checks_buffers_and_names_bad_frames(tmp_path):
     with pytest.raises(ValueError, match="contiguous"):
         r.read_stain(4, (1, 1, 1), (1, 1, 1), np.zeros(8 * N, np.float32)[::2], np.zeros(N, np.float32),
                      np.zeros(N, np.float32))
+    with pytest.raises(ValueError, match=f"excess buffer of {N - 1} values for {N} vertices"):
+        r.read_stain(4, (1, 1, 1), (1, 1, 1), np.zeros(4 * N, np.float32), np.zeros(N, np.float32),
+                     np.zeros(N, np.float32), excess=np.zeros(N - 1, np.float32))
     data = path.read_bytes()
     path.write_bytes(data[:-10])
     r = madder.CacheReader(str(path))

@@ -167,13 +167,17 @@ def test_the_exporter_writes_the_playback_values_of_each_frame(tmp_path):
     ex = textures.Exporter(core, reader, FACES, UV, refs, color, "512", str(out), "Flag")
     assert list(ex.frames()) == [1, 2, 3]
     rgba, wet = ex.values(2)
-    # exactly what playback writes into the attributes for that frame
+    # what playback writes into the attributes for that frame, the dye amount (solute over
+    # its reference: 0, 0.5, 1, 1.5) split at 1: the rest over the range in the wet's blue
     want = [np.zeros(16, np.float32), np.zeros(4, np.float32), np.zeros(4, np.float32)]
     madder.CacheReader(str(tmp_path / "Flag.fine.madder")).read_stain(2, refs, color, *want)
-    np.testing.assert_array_equal(rgba, want[0].reshape(4, 4))
+    dye = np.array([0.0, 0.5, 1.0, 1.5], np.float32)
+    np.testing.assert_allclose(want[0][3::4], dye, rtol=1e-6)  # playback: all of it
+    np.testing.assert_allclose(rgba[:, 3], np.minimum(dye, 1.0), rtol=1e-6)
+    np.testing.assert_allclose(rgba[:, :3], np.minimum(dye, 1.0)[:, None] * np.array(color), rtol=1e-6)
+    np.testing.assert_allclose(wet[:, 2], [0.0, 0.0, 0.0, 0.5 / madder.DYE_EXCESS_RANGE], rtol=1e-6)
     np.testing.assert_array_equal(wet[:, 0], want[1])
     np.testing.assert_array_equal(wet[:, 1], want[2])
-    assert not wet[:, 2].any()  # the wet image's blue is written, as zeros
     for f in ex.frames():
         ex.export(f)
     assert ex.overlapping == 3
@@ -187,13 +191,15 @@ def test_the_exporter_writes_the_playback_values_of_each_frame(tmp_path):
         np.testing.assert_array_equal(lead, first)
         assert os.path.samefile(out / f"Flag_{kind}.0000.exr", out / f"Flag_{kind}.0001.exr")
     last = np.load(out / "Flag_stain.0003.exr", allow_pickle=False)
-    np.testing.assert_allclose(last, madder_values(tmp_path / "Flag.fine.madder", 3, refs, color).mean(axis=0))
+    np.testing.assert_allclose(last, madder_values(tmp_path / "Flag.fine.madder", 3, refs, color)[0].mean(axis=0))
 
 
 def madder_values(path, frame, refs, color):
+    """The images' stain values (RGBA, the dye amount within 1) and dye excess of `frame`."""
     buf = [np.zeros(16, np.float32), np.zeros(4, np.float32), np.zeros(4, np.float32)]
-    madder.CacheReader(str(path)).read_stain(frame, refs, color, *buf)
-    return buf[0].reshape(4, 4)
+    excess = np.zeros(4, np.float32)
+    madder.CacheReader(str(path)).read_stain(frame, refs, color, *buf, excess=excess)
+    return buf[0].reshape(4, 4), excess
 
 
 def test_a_sequence_from_frame_0_has_no_lead_file(tmp_path):
@@ -238,7 +244,7 @@ def test_real_images_hold_the_values_at_texel_centres(tmp_path):
     assert ex.overlapping == 0
     image = madder.read_exr(str(out / "Flag_stain.0003.exr"))
     assert image.shape == (512, 512, 4)
-    v = madder_values(tmp_path / "f.madder", 3, refs, color)
+    v, excess = madder_values(tmp_path / "f.madder", 3, refs, color)
     # texel (x, y) has its centre at ((x + ½)/512, (y + ½)/512), row 0 at the bottom; in
     # the lower triangle (0, 1, 2) the barycentric weights are (1 − s, s − t, t)
     for x, y in ((400, 100), (511, 0), (300, 299), (10, 5)):
@@ -250,7 +256,12 @@ def test_real_images_hold_the_values_at_texel_centres(tmp_path):
     # wetness 0.15 kg/m² over the reference 0.1 reads as full; deposit 2e-4 / 2e-4 too
     np.testing.assert_allclose(wet[..., 0], 1.0)
     np.testing.assert_allclose(wet[..., 1], 1.0)
-    assert not wet[..., 2].any()
+    # the dye amounts 0, 0.75, 1.5, 2.25: the excess over 1 (over the range) interpolated
+    np.testing.assert_allclose(excess, np.array([0.0, 0.0, 0.5, 1.25]) / madder.DYE_EXCESS_RANGE, rtol=1e-6)
+    for x, y in ((400, 100), (511, 0), (300, 299), (10, 5)):
+        s, t = (x + 0.5) / 512, (y + 0.5) / 512
+        want = (1 - s) * excess[0] + (s - t) * excess[1] + t * excess[2]
+        assert wet[y, x, 2] == pytest.approx(want, rel=1e-3, abs=1e-5)
 
 
 def test_with_the_weave_a_saturated_stain_shows_every_thread_full_and_a_faint_one_the_weave(tmp_path):

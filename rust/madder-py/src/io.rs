@@ -115,13 +115,17 @@ impl CacheReader {
     }
 
     /// Reads `frame` and fills the playback attributes in place (core `io::attributes`):
-    /// `rgba` (4 float32 per vertex: colour × coverage, coverage), `wetness` and `deposit`
-    /// (float32 per vertex), each density over its reference (solute, liquid, deposit)
-    /// clamped to [0, 1] (with `clamp=False` only to ≥ 0: for `rasterize` with the weave's
-    /// detail and `clip`). The colour is the cache's `color_r/g/b` fields when it has them,
-    /// else `color`. The buffers must be contiguous float32 of the right lengths.
+    /// `rgba` (4 float32 per vertex: colour × dye amount, dye amount), `wetness` and
+    /// `deposit` (float32 per vertex), each density over its reference (solute, liquid,
+    /// deposit), wetness and deposit clamped to [0, 1] and the dye amount to
+    /// [0, 1 + `DYE_EXCESS_RANGE`]. Given `excess` (float32 per vertex: the images), the
+    /// dye amount in `rgba` stays within [0, 1] and `excess` takes the share above 1 over
+    /// `DYE_EXCESS_RANGE`, clamped to [0, 1]. With `clamp=False` the values in `rgba`,
+    /// `wetness` and `deposit` are only held ≥ 0 (for `rasterize` with the weave's detail
+    /// and `clip`). The colour is the cache's `color_r/g/b` fields when it has them, else
+    /// `color`. The buffers must be contiguous float32 of the right lengths.
     #[allow(clippy::too_many_arguments)]
-    #[pyo3(signature = (frame, references, color, rgba, wetness, deposit, clamp=true))]
+    #[pyo3(signature = (frame, references, color, rgba, wetness, deposit, clamp=true, excess=None))]
     fn read_stain(
         &mut self,
         py: Python<'_>,
@@ -132,6 +136,7 @@ impl CacheReader {
         mut wetness: PyReadwriteArray1<'_, f32>,
         mut deposit: PyReadwriteArray1<'_, f32>,
         clamp: bool,
+        mut excess: Option<PyReadwriteArray1<'_, f32>>,
     ) -> PyResult<()> {
         let n = self.inner.n_vertices();
         let (rgba, wetness, deposit) = (
@@ -139,7 +144,9 @@ impl CacheReader {
             wetness.as_slice_mut(),
             deposit.as_slice_mut(),
         );
-        let (Ok(rgba), Ok(wetness), Ok(deposit)) = (rgba, wetness, deposit) else {
+        let excess = excess.as_mut().map(|e| e.as_slice_mut()).transpose();
+        let (Ok(rgba), Ok(wetness), Ok(deposit), Ok(excess)) = (rgba, wetness, deposit, excess)
+        else {
             return Err(PyValueError::new_err(
                 "read_stain: the buffers must be contiguous",
             ));
@@ -153,9 +160,21 @@ impl CacheReader {
                 4 * n
             )));
         }
+        if let Some(e) = &excess
+            && e.len() != n
+        {
+            return Err(PyValueError::new_err(format!(
+                "read_stain: an excess buffer of {} values for {n} vertices",
+                e.len()
+            )));
+        }
         let inner = &mut self.inner;
-        py.detach(|| inner.read_stain(frame, references, color, clamp, rgba, wetness, deposit))
-            .map_err(to_py)
+        py.detach(|| {
+            inner.read_stain(
+                frame, references, color, clamp, rgba, wetness, deposit, excess,
+            )
+        })
+        .map_err(to_py)
     }
 
     /// Field `field` at `frame`, as a float32 array of one value per vertex.

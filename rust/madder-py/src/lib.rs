@@ -30,6 +30,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let [r, g, b] = madder::stain::DEFAULT_SOLUTE_COLOR;
     m.add("DEFAULT_SOLUTE_COLOR", (r, g, b))?;
     m.add("DEGENERATE_UV_REL", madder::ops::DEGENERATE_UV_REL)?;
+    m.add("DYE_EXCESS_RANGE", madder::io::EXCESS_RANGE)?;
     errors::register(m)?;
     m.add_class::<mesh::Topology>()?;
     m.add_class::<mesh::Refinement>()?;

@@ -258,7 +258,9 @@ fn a_version_1_cache_still_reads() {
     );
     // the playback read-out works on it as before
     let (mut rgba, mut wet, mut dep) = (vec![0.0; 4 * n], vec![0.0; n], vec![0.0; n]);
-    r.read_stain(4, [100.0; 3], [1.0; 3], true, &mut rgba, &mut wet, &mut dep)
-        .unwrap();
+    r.read_stain(
+        4, [100.0; 3], [1.0; 3], true, &mut rgba, &mut wet, &mut dep, None,
+    )
+    .unwrap();
     assert_eq!(wet, vec![value(1, 1, 0) / 100.0, value(1, 1, 1) / 100.0]);
 }

@@ -38,6 +38,9 @@ DEFAULT_SOLUTE_COLOR: Final[_RGB]
 """The default colour of the liquid's solute, linear RGB (the core's)."""
 DEGENERATE_UV_REL: Final[float]
 """A face's UVs are degenerate when |det| ≤ DEGENERATE_UV_REL·|u1 − u0|·|u2 − u0|."""
+DYE_EXCESS_RANGE: Final[float]
+"""The dye amount above saturation the playback values carry (up to 1 + this; an image's
+excess channel is the amount above 1 over this)."""
 NO_WEAVE: Final[int]
 """`WeaveDetail`'s face_fabric value of a face without the weave's detail."""
 
@@ -276,6 +279,7 @@ class CacheReader:
         wetness: _F32,
         deposit: _F32,
         clamp: bool = True,
+        excess: _F32 | None = None,
     ) -> None: ...
     def read(self, frame: int, field: str) -> _F32: ...
     @property

@@ -420,11 +420,13 @@ impl CacheReader {
     /// vertex), `wetness` and `deposit`, from the fields a bake writes: `solute`,
     /// `wetness`, `deposit`, and `color_r`/`color_g`/`color_b` when it tracked colours
     /// (else the stain is `colour`); `clamp` false keeps fractions over 1 (for the weave's
-    /// detail, [`crate::io::attributes`]). One read and one checksum; no allocation once
-    /// the reader has read a frame.
+    /// detail), and `excess` takes the images' share of the dye above saturation (module
+    /// [`crate::io::attributes`]). One read and one checksum; no allocation once the reader
+    /// has read a frame.
     ///
     /// # Panics
-    /// When the buffers' lengths are not `4 × n_vertices`, `n_vertices`, `n_vertices`.
+    /// When the buffers' lengths are not `4 × n_vertices`, `n_vertices`, `n_vertices` (and
+    /// `n_vertices` for `excess`).
     #[allow(clippy::too_many_arguments)]
     pub fn read_stain(
         &mut self,
@@ -435,6 +437,7 @@ impl CacheReader {
         rgba: &mut [f32],
         wetness: &mut [f32],
         deposit: &mut [f32],
+        excess: Option<&mut [f32]>,
     ) -> Result<(), CacheError> {
         let [s, w, d] = [
             self.field("solute")?,
@@ -465,6 +468,7 @@ impl CacheReader {
             rgba,
             wetness,
             deposit,
+            excess,
         );
         self.values = values;
         Ok(())

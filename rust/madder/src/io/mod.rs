@@ -5,3 +5,5 @@
 pub(crate) mod attributes;
 pub mod cache;
 pub mod point_cache;
+
+pub use attributes::EXCESS_RANGE;
