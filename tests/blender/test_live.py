@@ -65,12 +65,23 @@ def play(scene, frames):
         scene.frame_set(f)
 
 
-def test_frames_shown_in_order_give_a_bakes_fields(open_fixture, addon, tmp_path):
+@pytest.mark.parametrize("clock", ["SCENE", "KEYED_FRAME_TIME"])
+def test_frames_shown_in_order_give_a_bakes_fields(open_fixture, addon, tmp_path, clock):
+    """Also with the Frame Time clock keyed from 1/24 s to 2 s at frame 5: the preview's
+    frames carry each frame's own length (and the animated value is no setting change
+    that restarts it)."""
     scene = open_fixture("flag.blend")
     flag = setup_flag(scene)
+    if clock == "KEYED_FRAME_TIME":
+        flag.madder.clock = "FRAME_TIME"
+        for frame, seconds in ((4, 1 / 24), (5, 2.0)):
+            flag.madder.frame_time = seconds
+            flag.keyframe_insert("madder.frame_time", frame=frame)
     bake_copy(flag, tmp_path, "bake.madder")
     reader, baked = baked_fields(flag, range(1, LAST + 1))
     assert not np.array_equal(baked[2][0], baked[LAST][0])  # the stain moves over the range
+    # (the keyed clock bakes frames of two lengths: the cache records no single one)
+    assert (reader.frame_time is None) == (clock == "KEYED_FRAME_TIME")
     preview = preview_module(addon)
     flag.madder.live = True
     for f in range(1, LAST + 1):

@@ -77,21 +77,27 @@ def test_pour_adds_exactly_its_flow_during_its_frame_range():
         assert m[0] == 0.0
 
 
-@pytest.mark.parametrize("keyed", [True, False])
-def test_a_frame_time_clock_sets_how_long_each_frame_pours(keyed):
+@pytest.mark.parametrize("animated", ["KEYED", "DRIVEN", None])
+def test_a_frame_time_clock_sets_how_long_each_frame_pours(animated):
     """With the Frame Time clock, the step into frame f lasts the Frame Time at f: keyed
-    from 1/24 s (to frame 8) to 0.5 s (from frame 9), a source's pour over frames 5–12
-    brings flow·T(f)·ΣA(1 − d/reach) a frame, so 12 times more once the clock runs slow;
-    the cache records no single frame time then. Unkeyed, every frame lasts the Frame
-    Time, and the cache records it."""
+    (or driven by the frame) from 1/24 s (to frame 8) to 0.5 s (from frame 9), a source's
+    pour over frames 5–12 brings flow·T(f)·ΣA(1 − d/reach) a frame, so 12 times more once
+    the clock runs slow; the cache records no single frame time then. Not animated, every
+    frame lasts the Frame Time, and the cache records it."""
     cloth, co = cloth_plane()
     s = cloth.madder
     s.evaporation = 0.0
     s.clock = "FRAME_TIME"
-    if keyed:
+    keyed = animated is not None
+    if animated == "KEYED":
         for frame, seconds in ((8, 1 / FPS), (9, 0.5)):
             s.frame_time = seconds
             cloth.keyframe_insert("madder.frame_time", frame=frame)
+    if animated == "DRIVEN":  # a simple expression: evaluated without Python's auto-run
+        driver = cloth.driver_add("madder.frame_time").driver
+        driver.expression = f"1 / {FPS} if frame <= 8 else 0.5"
+        assert driver.is_simple_expression
+    if keyed:
         expected_time = np.where(np.arange(2, 21) <= 8, 1 / FPS, 0.5)
     else:
         s.frame_time = 0.2
