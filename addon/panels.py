@@ -199,6 +199,7 @@ class MADDER_PT_stain_look(_StainSubPanel, bpy.types.Panel):
         sub.prop(s, "residual_saturation")
         sub.prop(s, "carried_fraction")
         sub.prop(s, "dispersivity")
+        sub.prop(s, "capillary_rise")
         col.prop(s, "vapour_limited")
         col = layout.column(align=True)
         col.prop(s, "holdup")

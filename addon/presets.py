@@ -73,7 +73,13 @@ A preset carries the whole look of its liquid (issue 34), not only its solute:
   5 g of free liquid per metre before it drips (Hem Holds; what drips leaves the cloth),
   about a pendant drop's 46 mg (Tate's law, `2π r γ / g` at r = 1 mm, γ = 0.072 N/m) per
   centimetre of hem (an estimate): without it a hem gathers all that runs down to it, and
-  that pile wicks back up the cloth while it dries. The flow's viscosity and the
+  that pile wicks back up the cloth while it dries. The weight of the fibres' liquid
+  (Capillary Rise) is left off: Jurin's `2γ / (ρ g r)` for the yarns' pores (r ≈ 0.15 mm,
+  an estimate) gives about 10 cm for water and 7 for wine, but with it the demo's hanging
+  run drains down the front and siphons the table-top patch's liquid over the rim, which
+  then dries without the tide line along its edge; whether a draped tablecloth does that
+  is not yet checked against references (ARCHITECTURE.md, Open questions). The flow's
+  viscosity and the
   fibres' friction are the cloth's and the flow's (left alone), so the four liquids run
   alike.
 - Sub-steps: none of the four needs more than the automatic choice (the core adds steps
@@ -238,6 +244,8 @@ def simulator_keywords(s, gravity, scene_gravity, unit, grain=None):
         holdup=s.holdup,
         # the hem (issue 34 §1): from grams to kilograms per metre of cloth
         drip_hold=s.drip_hold * 1e-3,
+        # the weight of the fibres' liquid: from centimetres of cloth to metres
+        capillary_height=s.capillary_rise * 1e-2,
         use_gravity=bool(s.use_gravity and scene_gravity),
         use_rectilinear=s.use_rectilinear,
         use_coriolis=s.use_coriolis,

@@ -544,6 +544,17 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         precision=1,
         update=_mark_custom,
     )
+    capillary_rise: FloatProperty(
+        name="Capillary Rise (cm)",
+        description="How high the fabric wicks the liquid up from a reservoir: with Carry Solute "
+        "the liquid in the fibres drains down a hanging cloth while it wicks and settles no higher "
+        "than this (0 = off: the wicking has no weight)",
+        default=0.0,
+        min=0.0,
+        soft_max=30.0,
+        precision=1,
+        update=_mark_custom,
+    )
     vapour_limited: BoolProperty(
         name="Vapour-Limited Drying",
         description="A wet patch dries fastest at its edge, as vapour diffusing into still air does "

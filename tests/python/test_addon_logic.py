@@ -93,6 +93,7 @@ def test_simulator_keywords_scale_gravity_and_need_both_switches():
         use_gravity=True, use_rectilinear=False, use_coriolis=True, momentum_advection=False,
         wicking=2.0, irregularity=0.5, irregularity_length=4.0, irregularity_seed=7, carry_solute=True,
         residual_saturation=0.1, vapour_limited=1, irregularity_fine=0.5, holdup=0.05, drip_hold=5.0,
+        capillary_rise=10.0,
         carried_fraction=0.7, dispersivity=3.5, wicking_iterations=2, front_settles=True, first_substep=0.25,
     )
     kw = presets.simulator_keywords(s, (0.0, 0.0, -981.0), True, 0.01)
@@ -102,6 +103,8 @@ def test_simulator_keywords_scale_gravity_and_need_both_switches():
     assert kw["irregularity_fine_length"] == pytest.approx(5e-4) and kw["holdup"] == 0.05
     # what a hem holds from grams to kilograms per metre
     assert kw["drip_hold"] == pytest.approx(5e-3)
+    # the capillary rise from centimetres to metres
+    assert kw["capillary_height"] == pytest.approx(0.1)
     # the front iterated until it settles: the core's tolerance, 0 (a fixed count) when off
     assert kw["wicking_picard"] == 2 and kw["wicking_tolerance"] == presets.FRONT_TOLERANCE > 0
     s.front_settles = False

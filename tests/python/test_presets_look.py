@@ -105,7 +105,7 @@ def test_simulator_keywords_take_the_grain_given():
     s.update(irregularity_fine=0.0, holdup=0.0)
     s.update(viscosity=1e-4, friction=50.0, saturation=0.1, substeps=1, first_substep=0.25, irregularity=0.0,
              irregularity_length=3.0, irregularity_seed=0, use_gravity=True, use_rectilinear=True, use_coriolis=True,
-             momentum_advection=True)
+             momentum_advection=True, capillary_rise=0.0)
     from types import SimpleNamespace
 
     s = SimpleNamespace(**s)

@@ -70,6 +70,9 @@ use crate::threads::Pool;
 /// before the run moves on and left behind to soak in (0, the default: off).
 /// `drip_hold` (kg/m, ≥ 0): the free liquid a hanging hem holds per metre of the cloth's
 /// border; the rest drips off, counted in `totals()` (0, the default: off).
+/// `capillary_height` (m, ≥ 0): how high the fabric wicks up from a reservoir; with
+/// `carry_solute`, the fibres' liquid drains down the body force (Richards' equation), so
+/// a hanging wet cloth settles into a wedge that height tall (0, the default: off).
 /// `first_substep` (s, ≥ 0): after liquid is poured, the sub-steps start this long and
 /// double until they reach the frame's own, so a fresh spill spreads in short steps in a
 /// scene whose frames are long (0, the default: off).
@@ -130,7 +133,7 @@ impl Simulator {
         wicking_density=None, wicking_picard=0, wicking_tolerance=0.0, irregularity=None, irregularity_length=None, irregularity_seed=0,
         irregularity_fine_length=None,
         carry_solute=false, residual_saturation=None, vapour_limited=false, carried_fraction=None,
-        dispersivity=None, holdup=None, drip_hold=0.0, substeps=1, first_substep=0.0,
+        dispersivity=None, holdup=None, drip_hold=0.0, capillary_height=0.0, substeps=1, first_substep=0.0,
         use_gravity=true, use_rectilinear=true, use_coriolis=true, momentum_advection=true,
         detail=0, threads=None))]
     #[allow(clippy::too_many_arguments)]
@@ -168,6 +171,7 @@ impl Simulator {
         dispersivity: Option<f64>,
         holdup: Option<f64>,
         drip_hold: f64,
+        capillary_height: f64,
         substeps: u32,
         first_substep: f64,
         use_gravity: bool,
@@ -235,6 +239,7 @@ impl Simulator {
             substeps,
             first_substep,
             drip_hold,
+            capillary_height,
             ..Default::default()
         };
         let set = |slot: &mut f64, v: Option<f64>| {

@@ -49,6 +49,7 @@ fn ideal(forces: Forces, momentum_advection: bool) -> StainParams {
         substeps: 1,
         first_substep: 0.0,
         drip_hold: 0.0,
+        capillary_height: 0.0,
         active_region: true,
     }
 }

@@ -52,6 +52,7 @@ fn ideal(forces: Forces) -> StainParams {
         substeps: 1,
         first_substep: 0.0,
         drip_hold: 0.0,
+        capillary_height: 0.0,
         active_region: true,
     }
 }
@@ -689,6 +690,7 @@ fn full_params(momentum_advection: bool, substeps: u32) -> StainParams {
         substeps,
         first_substep: 0.0,
         drip_hold: 0.0,
+        capillary_height: 0.0,
         active_region: true,
     }
 }

@@ -185,6 +185,7 @@ class Simulator:
         dispersivity: float | None = None,
         holdup: float | None = None,
         drip_hold: float = 0.0,
+        capillary_height: float = 0.0,
         substeps: int = 1,
         first_substep: float = 0.0,
         use_gravity: bool = True,

@@ -4,7 +4,7 @@
 //!   ([`forces`], §4.4), advection ([`advect`], §4.3.1–4.3.2, with the velocity extended
 //!   over the dry cloth by [`extend`]), diffusion ([`diffuse`], §4.3.3–4.3.4) and
 //!   stain–surface interactions ([`interact`], §4.5) — and, beside them, drips off a
-//!   hanging hem ([`drip`]), the window's
+//!   hanging hem ([`drip`]), gravity in the fibres' liquid ([`drain`]), the window's
 //!   upkeep, liquid poured, splashes and initial velocities, and what is read out;
 //! - [`window`]: the active region a frame works on, cut out of the cloth;
 //! - `work` (the `roofline` feature): what each phase must move and compute at least, for
@@ -18,6 +18,7 @@ pub mod advect;
 pub(crate) mod check;
 pub(crate) mod detail;
 pub(crate) mod diffuse;
+pub(crate) mod drain;
 pub(crate) mod drip;
 pub mod extend;
 pub(crate) mod forces;

@@ -10,6 +10,7 @@ use crate::error::Error;
 use crate::mesh::{Geometry, RingAdjacency, Topology, Transport};
 use crate::ops::cg::Preconditioner;
 use crate::ops::{CscPattern, Restriction, VertexPattern, WarmCg};
+use crate::stain::drain::Potential;
 use crate::stain::state::{Fields, merge_rgb, split_rgb};
 
 /// Warm-started CG solvers of the two restricted systems, the densities' and the
@@ -62,6 +63,9 @@ pub(in crate::stain) enum SoluteMotion<'a> {
         held_scale: Option<&'a [f64]>,
         /// How the sweep carries it: the share carried and the dispersivity.
         carry: Carry,
+        /// The gravity potential the fibres' liquid diffuses down ([`crate::stain::drain`]),
+        /// if any.
+        potential: Option<&'a Potential>,
     },
 }
 
@@ -94,10 +98,24 @@ pub(in crate::stain) fn diffuse_densities(
     solute: SoluteMotion<'_>,
     solvent_only: bool,
 ) -> Result<DensityWork, Error> {
-    let (carry, held_scale, how) = match solute {
-        SoluteMotion::Diffused => (false, None, None),
-        SoluteMotion::Carried { held_scale, carry } => (true, held_scale, Some(carry)),
+    let (carry, held_scale, how, potential) = match solute {
+        SoluteMotion::Diffused => (false, None, None, None),
+        SoluteMotion::Carried {
+            held_scale,
+            carry,
+            potential,
+        } => (true, held_scale, Some(carry), potential),
     };
+    // the fibres' liquid down the gravity potential: m + hKφ ([`crate::stain::drain`]),
+    // along the edges whose upper end holds some of it; not in a Picard round's trial
+    // solve, whose factors settle as the wicking's alone (the gravity takes the settled
+    // factors: with it in every round the rounds and halvings tripled on long steps)
+    let potential = potential.filter(|_| !solvent_only).map(|p| {
+        let density: Vec<f64> = (f.absorbed_solvent.iter().zip(&geometry.vertex_area))
+            .map(|(&m, &a)| if a > 0.0 { m / a } else { 0.0 })
+            .collect();
+        p.gated(ops.topology, &density)
+    });
     let how = how.unwrap_or(Carry {
         fraction: 1.0,
         dispersivity: 0.0,
@@ -146,7 +164,7 @@ pub(in crate::stain) fn diffuse_densities(
             fields.extend(c.iter_mut());
         }
     }
-    let rhs: Vec<f64> = fields
+    let mut rhs: Vec<f64> = fields
         .iter()
         .flat_map(|m| vertices.iter().map(|&v| m[v as usize]))
         .collect();
@@ -161,6 +179,17 @@ pub(in crate::stain) fn diffuse_densities(
             if a > 0.0 { m / a } else { 0.0 }
         })
         .collect();
+    // (after the warm start: the masses' own densities are the closer guess)
+    if let Some(potential) = &potential {
+        let stiffness = held_full
+            .as_ref()
+            .or(full.as_ref())
+            .expect("carried: a stiffness");
+        let source = potential_source(ops, stiffness, potential);
+        for (j, &v) in vertices.iter().enumerate() {
+            rhs[nv + j] += source[v as usize];
+        }
+    }
     let mut work = DensityWork {
         iterations: 0,
         solves: fields.len(),
@@ -210,6 +239,7 @@ pub(in crate::stain) fn diffuse_densities(
             &mut moves,
             how,
             &geometry.edge_length,
+            None,
         );
         // the absorbed solute with the solvent in the fibres; the held colour pool
         // (absorbed + adsorbed) gives up the absorbed solute's share
@@ -244,6 +274,7 @@ pub(in crate::stain) fn diffuse_densities(
             &mut refs,
             how,
             &geometry.edge_length,
+            potential.as_ref(),
         );
         drop(refs);
         let mut held_moves = held_moves.into_iter();
@@ -257,6 +288,24 @@ pub(in crate::stain) fn diffuse_densities(
         merge_rgb(&c, cf);
     }
     Ok(work)
+}
+
+/// `hKφ` per window vertex (zero outside the region): `Σ_b w_ab (φ_a − φ_b)` over the
+/// region's edges, `w_ab = −K_ab` of the `h`-scaled `stiffness` ([`crate::stain::drain`]).
+/// Antisymmetric edge by edge, so it sums to zero: it moves mass and adds none.
+fn potential_source(ops: &Ops<'_>, stiffness: &[f64], potential: &Potential) -> Vec<f64> {
+    let region = ops.region;
+    let slot = ops.pattern.edge_slot();
+    let mut source = vec![0.0; region.mask.len()];
+    for (e, &[a, b]) in ops.topology.edges().iter().enumerate() {
+        let (a, b) = (a as usize, b as usize);
+        if region.mask[a] && region.mask[b] {
+            let flow = -stiffness[slot[e] as usize] * potential.edge[e];
+            source[a] += flow;
+            source[b] -= flow;
+        }
+    }
+    source
 }
 
 /// What one density diffusion did (counted for [`crate::stain::Profile`]).
@@ -285,7 +334,9 @@ const MAX_DISPERSED_SWEEPS: usize = 400;
 
 /// Moves the solute (and its colour) with the solvent's diffusive fluxes of the solve
 /// just made (issue 13 §2, "Tide lines" in the module doc). Across every edge `a–b` of
-/// the region the solvent moved `F_ab = −h K_ab (σ'_a − σ'_b)` (kg, `a → b`), and the
+/// the region the solvent moved `F_ab = −h K_ab (σ'_a − σ'_b)` (kg, `a → b`; with the
+/// gravity `potential`, `−h K_ab ((σ'_a − φ_a) − (σ'_b − φ_b))`, [`crate::stain::drain`],
+/// and the sweep goes down `σ' − φ`), and the
 /// solute goes with it at the concentration `c = s/f` of the vertex it leaves, **at the
 /// end of the step** (implicit upwind, as the solvent's own step is implicit):
 ///
@@ -331,6 +382,7 @@ const MAX_DISPERSED_SWEEPS: usize = 400;
 /// order); each move is a mass field and the part of it that moves
 /// (the field itself, or the moving solute's share of a colour pool); `edge_length` the
 /// mesh's edges' lengths.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn carry_with_solvent(
     ops: &Ops<'_>,
     stiffness: &[f64],
@@ -339,6 +391,7 @@ pub(super) fn carry_with_solvent(
     moves: &mut [(&mut Vec<f64>, Vec<f64>)],
     how: Carry,
     edge_length: &[f64],
+    potential: Option<&Potential>,
 ) {
     let region = ops.region;
     let n = before.len();
@@ -346,11 +399,13 @@ pub(super) fn carry_with_solvent(
     for (j, &v) in region.vertices.iter().enumerate() {
         density[v as usize] = sigma[j];
     }
-    // the sweep order: decreasing solved density (ties by vertex), and each vertex's rank
+    // the sweep order: decreasing solved density, or potential `σ' − φ` with gravity
+    // (ties by vertex), and each vertex's rank
+    let rank_of = |v: usize| density[v] - potential.map_or(0.0, |p| p.vertex[v]);
     let mut order: Vec<u32> = region.vertices.clone();
     order.sort_by(|&a, &b| {
-        density[b as usize]
-            .total_cmp(&density[a as usize])
+        rank_of(b as usize)
+            .total_cmp(&rank_of(a as usize))
             .then(a.cmp(&b))
     });
     let mut rank = vec![u32::MAX; n];
@@ -367,7 +422,8 @@ pub(super) fn carry_with_solvent(
         .filter(|(_, e)| region.mask[e[0] as usize] && region.mask[e[1] as usize])
         .filter_map(|(e, &[a, b])| {
             let (a, b) = (a as usize, b as usize);
-            let flow = -stiffness[slot[e] as usize] * (density[a] - density[b]);
+            let step = potential.map_or(0.0, |p| p.edge[e]);
+            let flow = -stiffness[slot[e] as usize] * (density[a] - density[b] - step);
             match flow.partial_cmp(&0.0) {
                 Some(std::cmp::Ordering::Greater) => Some((a, b, flow, e)),
                 Some(std::cmp::Ordering::Less) => Some((b, a, -flow, e)),

@@ -263,6 +263,13 @@ pub struct StainParams {
     /// before it drips off ([`crate::stain::drip`]); what drips is counted in
     /// [`super::Totals`]. 0 (the default) is off: the border holds everything.
     pub drip_hold: f64,
+    /// `H`, m: the capillary height of the fabric, how high a vertical strip wicks up from
+    /// a reservoir; with it the fibres' liquid drains along the body force at the wicking's
+    /// conductivity over `H` ([`crate::stain::drain`], Richards' equation), so a hanging
+    /// wet region spreads down faster than up and rises no higher than capillarity holds
+    /// it. Acts with [`Self::carry_solute`] (the fibres' liquid moves only then). 0 (the
+    /// default) is off: the wicking has no weight.
+    pub capillary_height: f64,
     /// Sub-steps per frame, at least: a frame whose vertex frames turn by more than
     /// [`MAX_TURN`] takes more on its own (module doc, "Fast rotation").
     pub substeps: u32,
@@ -293,6 +300,7 @@ impl Default for StainParams {
             vapour_limited: false,
             holdup: 0.0,
             drip_hold: 0.0,
+            capillary_height: 0.0,
             substeps: 1,
             first_substep: 0.0,
             active_region: true,
@@ -356,6 +364,12 @@ impl StainParams {
             "drip hold",
             self.drip_hold,
             self.drip_hold >= 0.0,
+            "finite and ≥ 0",
+        )?;
+        check_range(
+            "capillary height",
+            self.capillary_height,
+            self.capillary_height >= 0.0,
             "finite and ≥ 0",
         )?;
         self.wicking.validate()?;

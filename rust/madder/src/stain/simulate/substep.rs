@@ -15,6 +15,7 @@ use crate::stain::advect::{UpwindPlan, advect_velocity_in, dual_fluxes_in};
 use crate::stain::diffuse::{
     Carry, DensityWork, MAX_PICARD, Ops, SoluteMotion, diffuse_densities, diffuse_velocity,
 };
+use crate::stain::drain::{Potential, edge_steps};
 use crate::stain::drip;
 use crate::stain::extend::{extend_velocity, wet_vertices};
 use crate::stain::forces::{VelocityStep, frame_angular_velocity, frame_body_acceleration};
@@ -59,7 +60,7 @@ impl Simulator {
         self.second_half_kick(loc, sub);
         laps.lap(&mut prof.forces);
 
-        self.diffusion_phase(w, loc, h, prof, sub)?;
+        self.diffusion_phase(w, loc, q, acceleration, h, prof, sub)?;
         laps.lap(&mut prof.diffusion);
 
         self.interaction_phase(w, loc, h, sub)?;
@@ -325,15 +326,20 @@ impl Simulator {
 
     /// Step 4 of the module doc: diffusion (§4.3.3–4.3.4, eq. 4.6): the densities and the
     /// velocity, solved side by side ([`crate::stain::diffuse`]).
+    #[allow(clippy::too_many_arguments)]
     fn diffusion_phase(
         &self,
         w: &mut Window,
         loc: &mut Local,
+        q: &[DVec3],
+        acceleration: &[DVec3],
         h: f64,
         prof: &mut Profile,
         sub: &SubstepScratch,
     ) -> Result<(), Error> {
         let p = &self.params;
+        let potential = self.potential(w, q, acceleration);
+        let potential = potential.as_ref();
         let topo = &w.cloth.topology;
         let (geometry, transport) = (&sub.geometry, &sub.transport);
         // the densities and the velocity are independent systems, solved side by side
@@ -396,7 +402,7 @@ impl Simulator {
                                     geometry,
                                     hp,
                                     g0,
-                                    solute_motion(p, held0),
+                                    solute_motion(p, held0, potential),
                                     start.is_some(),
                                 )?;
                                 let Some(start) = start else {
@@ -414,7 +420,7 @@ impl Simulator {
                                         geometry,
                                         hp,
                                         g,
-                                        solute_motion(p, held.as_deref()),
+                                        solute_motion(p, held.as_deref(), potential),
                                         trial,
                                     )
                                 };
@@ -495,6 +501,33 @@ impl Simulator {
         prof.carried_fields += densities.carried;
         prof.velocity_iterations += viscous?;
         Ok(())
+    }
+
+    /// The gravity potential the fibres' liquid diffuses down this sub-step
+    /// ([`crate::stain::drain`]): with `StainParams::capillary_height` and the solute
+    /// carried (the fibres' liquid moves only then), from the body force `g − p̈` at the
+    /// window's positions `q`; None otherwise.
+    fn potential(&self, w: &Window, q: &[DVec3], acceleration: &[DVec3]) -> Option<Potential> {
+        let p = &self.params;
+        let g = p.gravity.length();
+        let density = p.wicking.density;
+        if p.capillary_height <= 0.0 || !p.carry_solute || g <= 0.0 || density <= 0.0 {
+            return None;
+        }
+        let gravity = if p.forces.gravity {
+            p.gravity
+        } else {
+            DVec3::ZERO
+        };
+        let body: Vec<DVec3> = acceleration.iter().map(|&a| gravity - a).collect();
+        let scale = density / (g * p.capillary_height);
+        Some(edge_steps(
+            &w.cloth.topology,
+            q,
+            &body,
+            &w.region.vertices,
+            scale,
+        ))
     }
 
     /// The per-face scale of the density diffusion: the wicking factor of every face from
@@ -685,7 +718,11 @@ fn held_faces(mobile: &[bool], face_scale: Option<&[f64]>) -> Vec<f64> {
 
 /// How the solute moves in the density diffusion: carried by the solvents' fluxes (the
 /// fibres' liquid through the faces of `held`), or diffused with them.
-fn solute_motion<'a>(p: &StainParams, held: Option<&'a [f64]>) -> SoluteMotion<'a> {
+fn solute_motion<'a>(
+    p: &StainParams,
+    held: Option<&'a [f64]>,
+    potential: Option<&'a Potential>,
+) -> SoluteMotion<'a> {
     if p.carry_solute {
         SoluteMotion::Carried {
             held_scale: held,
@@ -693,6 +730,7 @@ fn solute_motion<'a>(p: &StainParams, held: Option<&'a [f64]>) -> SoluteMotion<'
                 fraction: p.carried_fraction,
                 dispersivity: p.dispersivity,
             },
+            potential,
         }
     } else {
         SoluteMotion::Diffused
