@@ -48,7 +48,9 @@
 //! taken as the sweep takes any flux uphill). Only the fibres' liquid takes the
 //! potential: the free liquid runs by the flow, with the same body force. The fibres'
 //! liquid moves only where the solute is carried with the solvent
-//! ([`super::StainParams::carry_solute`]), so without that nothing drains.
+//! ([`super::StainParams::carry_solute`]), so without that nothing drains, and only in
+//! the window's active region, around free liquid (as the wicking: where the cloth holds
+//! only absorbed liquid, far from any free liquid, it stays put).
 //!
 //! **The dry front.** The wicking's face factor is the mean over the face's corners, so a
 //! face with one wet corner conducts, and the potential would pull liquid out of its dry

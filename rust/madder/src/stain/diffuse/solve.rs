@@ -107,7 +107,7 @@ pub(in crate::stain) fn diffuse_densities(
         } => (true, held_scale, Some(carry), potential),
     };
     // the fibres' liquid down the gravity potential: m + hKφ ([`crate::stain::drain`]),
-    // along the edges whose upper end holds some of it; not in a Picard round's trial
+    // along the edges whose upper end holds at least the step; not in a Picard round's trial
     // solve, whose factors settle as the wicking's alone (the gravity takes the settled
     // factors: with it in every round the rounds and halvings tripled on long steps)
     let potential = potential.filter(|_| !solvent_only).map(|p| {
