@@ -12,6 +12,9 @@ use glam::DVec3;
 use madder::mesh::Topology;
 use madder::stain::{Conductivity, InteractionRates, Simulator, StainParams, Wicking};
 
+mod common;
+use common::sheet;
+
 const COLS: usize = 8; // 2 cm wide
 const ROWS: usize = 48; // 12 cm tall
 const CELL: f64 = 2.5e-3;
@@ -19,27 +22,10 @@ const H: f64 = 0.05; // the capillary height, m
 const SIGMA_W: f64 = 0.1; // kg/m², the saturation
 const THETA: f64 = 0.1; // the liquid poured, as a saturation over the whole strip
 
-/// The strip hanging in the XZ plane, bottom at z = 0.
+/// The strip hanging in the XZ plane, bottom at z = 0 (`COLS × ROWS` cells).
 fn strip() -> (Topology, Vec<DVec3>) {
-    let mut pos = Vec::new();
-    for i in 0..=ROWS {
-        for j in 0..=COLS {
-            pos.push(DVec3::new(j as f64 * CELL, 0.0, i as f64 * CELL));
-        }
-    }
-    let at = |i: usize, j: usize| (i * (COLS + 1) + j) as u32;
-    let mut faces = Vec::new();
-    for i in 0..ROWS {
-        for j in 0..COLS {
-            let (a, b, c, d) = (at(i, j), at(i, j + 1), at(i + 1, j + 1), at(i + 1, j));
-            if (i + j) % 2 == 0 {
-                faces.extend([[a, b, c], [a, c, d]]);
-            } else {
-                faces.extend([[a, b, d], [b, c, d]]);
-            }
-        }
-    }
-    (Topology::from_triangles(pos.len(), faces).unwrap(), pos)
+    let (topo, pos, _) = sheet(COLS as f64 * CELL, ROWS as f64 * CELL, CELL);
+    (topo, pos)
 }
 
 fn params(capillary_height: f64) -> StainParams {

@@ -15,6 +15,9 @@ use glam::DVec3;
 use madder::mesh::Topology;
 use madder::stain::{Conductivity, Forces, Simulator, StainParams};
 
+mod common;
+use common::sheet;
+
 /// The flag's rest grid: `nu × nv` quads over `size_u × size_v` in the XZ plane, vertex
 /// `j·(nu+1) + i` at `(u, 0, v)`, each quad split along a diagonal.
 fn flag() -> (Topology, Vec<DVec3>) {
@@ -144,36 +147,6 @@ fn a_run_grows_with_the_amount_and_follows_gravity() {
             last = r.length;
         }
     }
-}
-
-/// A vertical sheet (issue 34 §1): `w × h` m in the XZ plane at spacing `dx`, vertex
-/// `j·(nu+1) + i` at `(i dx, 0, j dx)`, quads split along alternating diagonals (no
-/// preferred diagonal for the run to follow).
-fn sheet(w: f64, h: f64, dx: f64) -> (Topology, Vec<DVec3>, usize) {
-    let (nu, nv) = ((w / dx).round() as usize, (h / dx).round() as usize);
-    let row = nu + 1;
-    let pos = (0..=nv)
-        .flat_map(|j| (0..=nu).map(move |i| DVec3::new(dx * i as f64, 0.0, dx * j as f64)))
-        .collect();
-    let mut faces = Vec::new();
-    for j in 0..nv {
-        for i in 0..nu {
-            let a = (j * row + i) as u32;
-            let (b, c, d) = (a + 1, a + 1 + row as u32, a + row as u32);
-            if (i + j) % 2 == 0 {
-                faces.push([a, b, c]);
-                faces.push([a, c, d]);
-            } else {
-                faces.push([a, b, d]);
-                faces.push([b, c, d]);
-            }
-        }
-    }
-    (
-        Topology::from_triangles(row * (nv + 1), faces).unwrap(),
-        pos,
-        row,
-    )
 }
 
 /// A still sheet of `topo` at `pos` with `params`, fed 1 g/s of a 2 % solution for 1.5 s

@@ -12,6 +12,7 @@
 //! - [`Built`]: one-rings, geometry, vertex frames and transport of a mesh.
 //! - [`gaussian`], [`centroid`], [`covariance`]: a blob at every vertex and the mass-weighted
 //!   moments of a field.
+//! - [`sheet`]: a vertical `w × h` sheet in the XZ plane (runs, drips, drainage).
 //! - [`no_interaction`], [`coffee_rates`], [`addon_look`]: parameters several tests share
 //!   (the Coffee preset's rates, the look the add-on's presets give).
 
@@ -307,4 +308,34 @@ pub fn addon_look(first_substep: f64) -> StainParams {
         first_substep,
         ..Default::default()
     }
+}
+
+/// A vertical sheet (issue 34 §1): `w × h` m in the XZ plane at spacing `dx`, vertex
+/// `j·(nu+1) + i` at `(i dx, 0, j dx)`, quads split along alternating diagonals (no
+/// preferred diagonal for the run to follow).
+pub fn sheet(w: f64, h: f64, dx: f64) -> (Topology, Vec<DVec3>, usize) {
+    let (nu, nv) = ((w / dx).round() as usize, (h / dx).round() as usize);
+    let row = nu + 1;
+    let pos = (0..=nv)
+        .flat_map(|j| (0..=nu).map(move |i| DVec3::new(dx * i as f64, 0.0, dx * j as f64)))
+        .collect();
+    let mut faces = Vec::new();
+    for j in 0..nv {
+        for i in 0..nu {
+            let a = (j * row + i) as u32;
+            let (b, c, d) = (a + 1, a + 1 + row as u32, a + row as u32);
+            if (i + j) % 2 == 0 {
+                faces.push([a, b, c]);
+                faces.push([a, c, d]);
+            } else {
+                faces.push([a, b, d]);
+                faces.push([b, c, d]);
+            }
+        }
+    }
+    (
+        Topology::from_triangles(row * (nv + 1), faces).unwrap(),
+        pos,
+        row,
+    )
 }
