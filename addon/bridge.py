@@ -134,10 +134,11 @@ def write_stain(mesh, rgba, wetness, deposit):
     """Writes one frame's playback attributes on the POINT domain (computed from the
     cache's densities by `CacheReader.read_stain`, core `io::attributes`):
 
-    - `madder_stain` (FLOAT_COLOR): RGB = solute colour × dye amount, alpha = the dye
-      amount = solute / (concentration × saturation) (premultiplied, for an "over" mix),
-      in [0, 1 + madder.DYE_EXCESS_RANGE]: a tide line holds several times the dye of a
-      saturated spot (1), and the shader darkens by all of it.
+    - `madder_stain` (FLOAT_COLOR): alpha = the dye amount a = solute / (concentration ×
+      saturation), in [0, 1 + madder.DYE_EXCESS_RANGE]: a tide line holds several times
+      the dye of a saturated spot (1), and the shader darkens by all of it; RGB = solute
+      colour × min(a, 1), the coverage (premultiplied, for an "over" mix, and never
+      brighter than the liquid's colour where the Solid view shows the attribute).
     - `madder_wetness` (FLOAT): liquid / saturation (1: the fibres are full; free liquid
       pooled on top reads 1 as well).
     - `madder_deposit` (FLOAT): adsorbed solute / capacity.

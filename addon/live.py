@@ -94,8 +94,8 @@ class FrameStore:
 
 
 def stain_attributes(solute, liquid, deposit, references, color):
-    """The playback attributes (RGBA premultiplied with the dye amount in
-    [0, 1 + madder.DYE_EXCESS_RANGE]; wetness and deposit in [0, 1]) of one frame's
+    """The playback attributes (RGB the colour premultiplied by the coverage, min(a, 1),
+    A the dye amount a in [0, 1 + madder.DYE_EXCESS_RANGE]; wetness and deposit in [0, 1]) of one frame's
     densities: what `CacheReader.read_stain` computes from a cache (core `io::attributes`),
     here from fields held in memory. `color` is one RGB or per-vertex (3, N) colours. A
     reference ≤ 0 makes its attribute 0."""
@@ -110,7 +110,8 @@ def stain_attributes(solute, liquid, deposit, references, color):
     c = fraction(solute, rs, 1.0 + madder.DYE_EXCESS_RANGE)
     rgba = np.empty((len(c), 4), dtype=np.float32)
     col = np.asarray(color, dtype=np.float32)
+    s = np.minimum(c, 1.0)  # the colour premultiplied by the coverage (core `io::attributes`)
     for k in range(3):
-        rgba[:, k] = c * (col[k] if col.ndim == 1 else col[k])
+        rgba[:, k] = s * (col[k] if col.ndim == 1 else col[k])
     rgba[:, 3] = c
     return rgba.ravel(), fraction(liquid, rl), fraction(deposit, rd)

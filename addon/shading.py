@@ -10,7 +10,7 @@ R∞ = 1 + K/S − √((K/S)² + 2·K/S), the inverse of K/S = (1 − R)²/2R (K
 1931; Kubelka 1948); K/S of a mixture is the sum of its parts' K/S. So
 
     q_cloth = (1 − B)² / 2B                 B: the clean cloth's colour (Base Color)
-    q_dye   = (1 − C)² / 2C                 C: the liquid's colour = Stain / Coverage
+    q_dye   = (1 − C)² / 2C                 C: the liquid's colour = Stain / min(Coverage, 1)
     q       = q_cloth + a·q_dye             a: the dye amount (Coverage + Excess)
     R_dry   = R∞(q)
 
@@ -88,7 +88,8 @@ material by nodes that `sync_material` places (named "Madder Input: …"):
 
 A bake, a re-export, Free Bake and switching the output re-run `sync_object`, so a
 material that has the group always reads what its object has. A group made by an older
-Madder is rebuilt in place: its sockets keep their identifiers (the material's links
+Madder (other sockets, or an older `REVISION` of the maths, kept as the group's custom
+property `madder_revision`) is rebuilt in place: its sockets keep their identifiers (the material's links
 stay), it gains the inputs it lacks and loses "Wet Darkening" and "Deposit Darkening"
 (the old neutral darkening `1 − 0.35·w` and the bound dye's extra darkening, replaced by
 the model above), and every material using it gets its input nodes and the Mix Shader
@@ -123,7 +124,7 @@ _INPUTS = (
     ("Yarn", "NodeSocketFloat", 1.0, (0.0, 2.0),
      "The weave's local reflectance factor, mean 1; 1 = no weave"),
     ("Stain", "NodeSocketColor", (0.0, 0.0, 0.0, 1.0), None,
-     "The liquid's colour times the dye amount (premultiplied)"),
+     "The liquid's colour times the coverage, the dye amount up to 1 (premultiplied)"),
     ("Coverage", "NodeSocketFloat", 0.0, (0.0, 17.0),
      "Dye amount: 1 = a spot saturated with the liquid (the images' part up to 1)"),
     ("Excess", "NodeSocketFloat", 0.0, (0.0, 16.0),
@@ -137,9 +138,12 @@ _OUTPUTS = (("Base Color", "NodeSocketColor"), ("Roughness", "NodeSocketFloat"),
 # defaults of an older Madder's group that this one changed (an upgrade moves a material's
 # value still at the old default to the new one)
 _OLD_DEFAULTS = {"Wet Roughness": 0.25}
+# the group's maths, counted up when it changes (2: the liquid's colour recovered from
+# Stain / min(Coverage, 1), as the attributes premultiply by the coverage, not the amount)
+REVISION = 2
 # smallest reflectance the K/S maths sees (K/S = (1 − R)²/2R is infinite at R = 0)
 R_MIN = 1e-3
-# smallest dye amount the liquid's colour is recovered from (Stain / Coverage)
+# smallest dye amount the liquid's colour is recovered from (Stain / min(Coverage, 1))
 A_MIN = 1e-4
 
 
@@ -210,7 +214,8 @@ def _channel(m, base, stain, g):
     """One colour channel of the group's maths (module doc): `base` and `stain` the
     channel's sockets, `g` the group input node."""
     coverage = m.op("MAXIMUM", g.outputs["Coverage"], 0.0)
-    dye = m.op("DIVIDE", stain, m.op("MAXIMUM", coverage, A_MIN))  # the liquid's colour
+    # the liquid's colour: Stain is premultiplied by the coverage, the amount up to 1
+    dye = m.op("DIVIDE", stain, m.op("MAXIMUM", m.op("MINIMUM", coverage, 1.0), A_MIN))
     amount = m.op("ADD", coverage, m.op("MAXIMUM", g.outputs["Excess"], 0.0))
     q = m.op("MULTIPLY_ADD", amount, m.ks(dye), m.ks(base))  # K/S, cloth + dye
     wet = g.outputs["Wetness"]
@@ -229,6 +234,7 @@ def _build(group):
     """The group's maths, from its inputs (see the module doc). Returns the names of the
     inputs it added to an existing group."""
     added = _ensure_sockets(group)
+    group["madder_revision"] = REVISION
     nodes, links = group.nodes, group.links
     nodes.clear()
     gin, gout = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
@@ -257,7 +263,8 @@ def _build(group):
 
 
 def _current(group):
-    return (set(_sockets(group, "INPUT")) == {name for name, *_ in _INPUTS}
+    return (group.get("madder_revision") == REVISION
+            and set(_sockets(group, "INPUT")) == {name for name, *_ in _INPUTS}
             and set(_sockets(group, "OUTPUT")) >= {name for name, _ in _OUTPUTS})
 
 

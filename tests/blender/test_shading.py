@@ -111,7 +111,8 @@ def _swatch_material(name, mode, base, colour, amount, wetness, yarn):
     for n in [n for n in nt.nodes if n.name.startswith(shading.INPUT_PREFIX)]:
         nt.nodes.remove(n)  # fed on the sockets instead of the attributes
     group = next(n for n in nt.nodes if n.type == "GROUP")
-    group.inputs["Stain"].default_value = (*(coverage * np.asarray(colour)), 1.0)
+    # premultiplied by the coverage, the amount up to 1 (core `io::attributes`)
+    group.inputs["Stain"].default_value = (*(min(coverage, 1.0) * np.asarray(colour)), 1.0)
     group.inputs["Coverage"].default_value = coverage
     group.inputs["Excess"].default_value = excess
     group.inputs["Wetness"].default_value = wetness
@@ -325,3 +326,10 @@ def test_the_previous_group_is_upgraded_in_place(open_fixture):
     assert mix.inputs[1].links[0].from_node == bsdf and mix.inputs[2].links[0].from_node.type == "BSDF_TRANSPARENT"
     assert bpy.ops.madder.add_stain_shader() == {"FINISHED"}  # idempotent
     assert sum(n.type == "MIX_SHADER" for n in nt.nodes) == 1
+    # a group with today's sockets but an older revision of the maths is rebuilt too
+    assert group["madder_revision"] == shading.REVISION
+    group["madder_revision"] = shading.REVISION - 1
+    n_nodes = len(group.nodes)
+    group.nodes.new("ShaderNodeMath")
+    assert shading.stain_group() == group and group["madder_revision"] == shading.REVISION
+    assert len(group.nodes) == n_nodes

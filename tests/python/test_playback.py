@@ -32,7 +32,8 @@ def expected(values, refs, color, split=False):
         tint = np.stack([values[c] for c in ("color_r", "color_g", "color_b")], 1)
     else:
         tint = np.float32(color)
-    rgba = np.concatenate([cov[:, None] * tint, cov[:, None]], axis=1)
+    # the colour premultiplied by the coverage (at most 1), the alpha the dye amount
+    rgba = np.concatenate([np.minimum(cov, 1)[:, None] * tint, cov[:, None]], axis=1)
     wet = np.clip(values["wetness"] / np.float32(refs[1]), 0, 1)
     out = rgba.ravel(), wet, np.zeros(N, dtype=np.float32)  # deposit reference 0: no deposit
     return (*out, np.clip((dye - 1) / madder.DYE_EXCESS_RANGE, 0, 1)) if split else out

@@ -3,7 +3,9 @@
 //!
 //! Per vertex, with the references the bake recorded (densities that read as full):
 //! - the dye amount `a = solute / ref_solute` (1: the fibres saturated with the liquid)
-//!   and the stain colour, RGBA `(a·r, a·g, a·b, a)` (premultiplied, for an "over" mix);
+//!   and the stain colour, RGBA `(s·r, s·g, s·b, a)` with `s = min(a, 1)` the coverage
+//!   (premultiplied, for an "over" mix: the colour never brightens past the liquid's own,
+//!   where Blender's Solid view shows the attribute as it is);
 //!   the colour is the bake's one colour, or the per-vertex mix of the liquids when the
 //!   bake tracked colours;
 //! - wetness `clamp(liquid / ref_liquid, 0, 1)` (1: the fibres are full);
@@ -94,7 +96,10 @@ pub(crate) fn stain_attributes(
             StainColour::Uniform(rgb) => rgb,
             StainColour::PerVertex([r, g, b]) => [r[i], g[i], b[i]],
         };
-        px.copy_from_slice(&[c * r, c * g, c * b, c]);
+        // the colour premultiplied by the coverage (within 1 where the amount is clamped;
+        // the unclamped texture path keeps `c` and clips the texel after the detail)
+        let s = if clamp { c.min(1.0) } else { c };
+        px.copy_from_slice(&[s * r, s * g, s * b, c]);
         if let Some(e) = excess.as_deref_mut() {
             e[i] = ((a - 1.0) / EXCESS_RANGE).clamp(0.0, 1.0);
         }
@@ -136,9 +141,11 @@ mod tests {
         // the vertex attributes: the whole dye amount, within 1 + EXCESS_RANGE
         let (rgba, w, d, _) = attributes(&s, colour, [1.0, 0.2, 0.0], true, false);
         assert_eq!(&rgba[4..8], &[0.25, 0.125, 0.5, 0.5]);
-        assert_eq!(&rgba[8..12], &[1.0, 0.5, 2.0, 2.0]); // twice saturated: twice the dye
+        // twice saturated: twice the dye, the colour premultiplied by the coverage, 1
+        assert_eq!(&rgba[8..12], &[0.5, 0.25, 1.0, 2.0]);
         assert_eq!(&rgba[12..16], &[0.0; 4]); // negative: 0
-        assert_eq!(rgba[19], 1.0 + EXCESS_RANGE); // a pool beyond the range: held at its top
+        // a pool beyond the range: held at its top
+        assert_eq!(&rgba[16..], &[0.5, 0.25, 1.0, 1.0 + EXCESS_RANGE]);
         assert_eq!(w, [0.5, 1.0, 0.0, 1.0, 0.0]);
         assert_eq!(d, [0.0; 5]); // reference 0
         // the images: the alpha within 1, the share above it as a fraction of the range
