@@ -157,7 +157,8 @@ class SequenceExport:
                 object=obj.name, filename=fine_path)
         self.exporter = textures.Exporter(
             madder, self.reader, refinement.faces(), refinement.face_uv(uv), references,
-            tuple(obj.madder.stain_color), size, folder, name, weave=weave[0] if weave else None)
+            tuple(obj.madder.stain_color), size, folder, name, weave=weave[0] if weave else None,
+            outline=textures.OUTLINE_RINGS if obj.madder.sharp_outline else 0)
         self.weave_warnings = list(weave[1]) if weave else []
         self.first, self.last = self.exporter.first, self.exporter.last
         self.size = self.exporter.size

@@ -120,6 +120,7 @@ class MADDER_PT_stain_output(_StainSubPanel, bpy.types.Panel):
         col = layout.column()
         col.active = s.output_images
         col.prop(s, "image_size")
+        col.prop(s, "sharp_outline")
         if not s.output_images:
             return
         if obj.data.uv_layers.active is None:

@@ -644,6 +644,13 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
             "area and the cloth's), the smallest size reaching it", len(textures.SIZES))],
         default="AUTO",
     )
+    sharp_outline: BoolProperty(
+        name="Sharp Outline",
+        description="The image sequence draws the stain's edge within a texel where the simulated front "
+        "is a few cells wide and the cloth beyond is dry (a stain's edge is sharp at the fibres); off: "
+        "the images as the Detail mesh resolves them. Re-export Textures applies a change",
+        default=True,
+    )
     image_baked: BoolProperty(
         name="Images Baked",
         description="The bake (or Re-export Textures) wrote the image sequence beside the cache",

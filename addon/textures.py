@@ -24,6 +24,11 @@ threads' uptake, so those images start from the values *before* their clamp to 1
 each finished texel (`CLIP`): where the dye saturates the fibres every thread shows it,
 and the weave shows where the stain is faint.
 
+With Sharp Outline (`outline`, on by default) the stain's front, which the Detail mesh
+resolves over a few of its cells, is drawn within a texel where the cloth beyond is dry
+(core `texture::outline`: the coverage read as the cell average of a sharp front at half
+its local plateau); the dye above saturation is cut with it, wetness and deposit are left.
+
 `####` is the scene frame (4 digits, more when needed). The values are exactly the
 playback attributes (`CacheReader.read_stain`, core `io::attributes`), rasterized over
 the refined cloth's UV triangles (`madder.rasterize`: barycentric at texel centres,
@@ -49,6 +54,9 @@ from .errors import ExportError
 SIZES = (512, 1024, 2048, 4096)
 DEFAULT_SIZE = 1024
 PADDING = 4  # texels each UV island grows by (bilinear filtering and mip-maps read inside)
+# rings of the Detail mesh over which Sharp Outline reads a front as smeared (the
+# simulation's span two to four; core `texture::outline::DEFAULT_RINGS`)
+OUTLINE_RINGS = 3
 KINDS = ("stain", "wet")
 EXT = ".exr"
 DIGITS = 4
@@ -316,12 +324,15 @@ class Exporter:
     - `size` (one of `SIZES`), `folder` (where the files go) and `name` (their prefix).
 
     `weave`: None, or per kind the `madder.WeaveDetail` that adds the weave's fine scale.
+    `outline`: the rings over which a front is read as smeared and drawn within a texel
+    (`madder.outline_fields`, `sharpen_outline`; core `texture::outline`), or 0 for the
+    images as rasterized.
 
     `overlapping` holds the texels covered by more than one UV triangle (overlapping
     islands), as `madder.rasterize` counts them on the first frame exported."""
 
     def __init__(self, madder, reader, faces, uv, references, color, size, folder, name, padding=PADDING,
-                 weave=None):
+                 weave=None, outline=0):
         self.madder, self.reader = madder, reader
         self.faces = np.ascontiguousarray(faces, dtype=np.uint32)
         self.uv = np.ascontiguousarray(uv, dtype=np.float32)
@@ -331,6 +342,8 @@ class Exporter:
         self.size, self.padding = check_size(size), padding
         self.folder, self.name = folder, name
         self.weave = weave or {}
+        self.outline = int(outline)
+        self._fields = None  # the frame's outline fields (N, 2), read with the values
         n = reader.n_vertices
         self._rgba = np.zeros(4 * n, dtype=np.float32)
         self._wet = np.zeros(n, dtype=np.float32)
@@ -364,6 +377,8 @@ class Exporter:
         self._wet_values[:, 0] = self._wet
         self._wet_values[:, 1] = self._deposit
         self._wet_values[:, 2] = self._excess
+        if self.outline:
+            self._fields = self.madder.outline_fields(self.faces, self._rgba[3::4], self.outline)
         self._read = frame
         return self._rgba.reshape(-1, 4), self._wet_values
 
@@ -384,6 +399,13 @@ class Exporter:
                     extra["weave"] = self.weave[kind]
             image, overlapping = self.madder.rasterize(self.faces, self.uv, values, self.size, self.padding,
                                                        **extra)
+            if self.outline:  # the front drawn within a texel
+                fields, _ = self.madder.rasterize(self.faces, self.uv, self._fields, self.size, self.padding)
+                if kind == "stain":
+                    self.madder.sharpen_outline(fields, stain=image)
+                else:
+                    self.madder.sharpen_outline(fields, wet=image, excess=WET_CHANNELS.index("B"))
+                del fields
             if self.overlapping is None:  # the same on every frame: the UV layout's
                 self.overlapping = int(overlapping)
             path = frame_file(self.folder, self.name, kind, frame)

@@ -187,6 +187,21 @@ def rasterize_weave(A):
     return image
 
 
+# a stain with dry cloth round it (float16 holds its values): the outline has a front
+STAINED = np.where(DENSITY > 0.3, DENSITY, 0.0)
+
+
+def outline_fields(A):
+    return madder.outline_fields(A.i("faces", FACES), A.f("coverage", STAINED), 1)
+
+
+def sharpen_outline(A):
+    fields = f16(madder.rasterize(FACES, UV, madder.outline_fields(FACES, STAINED, 1), 16, 2)[0])
+    stain, _ = madder.rasterize(FACES, UV, np.c_[STAINED, STAINED, STAINED, STAINED], 16, 2)
+    madder.sharpen_outline(A.f("fields", fields), stain)
+    return stain
+
+
 def write_exr(A, path):
     image = f16(np.stack([np.outer(np.linspace(0, 1, 4), np.linspace(1, 2, 5))] * 3, -1))
     madder.write_exr(path, A.f("image", image), ["R", "G", "B"])
@@ -234,7 +249,7 @@ CASES = {
     for f in [
         topology, weft_directions, distances_within, refinement_face_uv, diffusion_stepper, diffusion_stepper_woven,
         simulator, ftle, ridges, encode_angles, decode_angles, homogenize, rasterize, rasterize_weave,
-        position_baseline_stats,
+        outline_fields, sharpen_outline, position_baseline_stats,
     ]
 }
 FILE_CASES = {f.__name__: f for f in [write_exr, cache_writer, write_pc2, write_mdd, pc2_writer, motion_encoder]}
@@ -286,6 +301,8 @@ ARGS = {
     "homogenize": "tensors:f",
     "rasterize": "faces:i uv:f values:f",
     "rasterize_weave": "face_fabric:i face_map:f",
+    "outline_fields": "faces:i coverage:f",
+    "sharpen_outline": "fields:f",
     "position_baseline_stats": "frames:f",
     "write_exr": "image:f",
     "cache_writer": "fields[0]:f fields[1]:f",

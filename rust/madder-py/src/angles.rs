@@ -26,12 +26,7 @@ fn faces_of(faces: &Bound<'_, PyAny>) -> PyResult<Vec<[u32; 3]>> {
     if shape[1] != 3 || shape[0] == 0 {
         return Err(shape_error("faces", "(F, 3) with F > 0", shape));
     }
-    Ok(faces
-        .as_array()
-        .rows()
-        .into_iter()
-        .map(|r| [r[0], r[1], r[2]])
-        .collect())
+    Ok(args::triples(&faces))
 }
 
 fn rows3(name: &str, a: &Bound<'_, PyAny>, n: Option<usize>) -> PyResult<Vec<DVec3>> {

@@ -129,3 +129,12 @@ fn type_name(ob: &Bound<'_, PyAny>) -> String {
         .name()
         .map_or_else(|_| "?".into(), |n| n.to_string())
 }
+
+/// The rows of a `(T, 3)` index array (its shape checked by the caller) as triples.
+pub fn triples(a: &PyReadonlyArray<'_, u32, numpy::ndarray::Ix2>) -> Vec<[u32; 3]> {
+    a.as_array()
+        .rows()
+        .into_iter()
+        .map(|r| [r[0], r[1], r[2]])
+        .collect()
+}

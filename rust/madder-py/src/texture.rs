@@ -30,6 +30,18 @@ fn uv_arg(a: &Bound<'_, PyAny>) -> PyResult<Vec<[[f64; 2]; 3]>> {
         .collect())
 }
 
+/// The `(T, 3)` faces (any integer dtype) as `u32` triples.
+fn faces_arg(a: &Bound<'_, PyAny>) -> PyResult<Vec<[u32; 3]>> {
+    let faces = args::indices::<Ix2>("faces", a)?;
+    if faces.shape()[1] != 3 {
+        return Err(ParameterError::new_err(format!(
+            "faces must have shape (T, 3), got {:?}",
+            faces.shape()
+        )));
+    }
+    Ok(args::triples(&faces))
+}
+
 /// The float32 values of `a` (converted by `args`) with one of `ndim` dimensions, copied in
 /// C order.
 fn flat(name: &str, a: &PyReadonlyArrayDyn<'_, f32>, ndim: &[usize]) -> PyResult<Vec<f32>> {
@@ -177,19 +189,7 @@ pub fn rasterize<'py>(
     let size = size_arg("size", size)?;
     let padding = usize::try_from(padding)
         .map_err(|_| ParameterError::new_err(format!("padding must be ≥ 0, got {padding}")))?;
-    let faces = args::indices::<Ix2>("faces", faces)?;
-    if faces.shape()[1] != 3 {
-        return Err(ParameterError::new_err(format!(
-            "faces must have shape (T, 3), got {:?}",
-            faces.shape()
-        )));
-    }
-    let faces: Vec<[u32; 3]> = faces
-        .as_array()
-        .rows()
-        .into_iter()
-        .map(|r| [r[0], r[1], r[2]])
-        .collect();
+    let faces = faces_arg(faces)?;
     let uv = uv_arg(uv)?;
     let values = args::floats::<f32, IxDyn>("values", values)?;
     let one = values.ndim() == 1;
@@ -300,8 +300,115 @@ pub fn read_exr<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyAr
     PyArray1::from_vec(py, image.pixels).reshape(shape)
 }
 
+/// The per-vertex fields of the outline drawn at the texel (core `texture::outline`).
+///
+/// `outline_fields(faces, coverage, rings=3, *, threads=None) -> (N, 2) float32`: `faces`
+/// `(T, 3)` (any integer dtype), `coverage` `(N,)` (any float dtype), the dye amount per
+/// vertex. Per vertex: `f = c / P`, with `P` the highest coverage within `rings` rings,
+/// and the zone `w` (1 where a vertex within `rings` rings is dry). Rasterize them like the
+/// stain and give the image to `sharpen_outline`.
+#[pyfunction]
+#[pyo3(signature = (faces, coverage, rings=core::outline::DEFAULT_RINGS, *, threads=None))]
+pub fn outline_fields<'py>(
+    py: Python<'py>,
+    faces: &Bound<'py, PyAny>,
+    coverage: &Bound<'py, PyAny>,
+    rings: usize,
+    threads: Option<usize>,
+) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+    let faces = faces_arg(faces)?;
+    let coverage = args::floats::<f32, IxDyn>("coverage", coverage)?;
+    let coverage = flat("coverage", &coverage, &[1])?;
+    let n = coverage.len();
+    if let Some((t, v)) = faces
+        .iter()
+        .enumerate()
+        .find_map(|(t, f)| f.iter().find(|&&v| v as usize >= n).map(|&v| (t, v)))
+    {
+        return Err(ParameterError::new_err(format!(
+            "face {t} names vertex {v}, but coverage has {n} values"
+        )));
+    }
+    let pool = Pool::new(threads)?;
+    let fields = pool.run(py, || core::outline_fields(&faces, &coverage, rings));
+    PyArray1::from_vec(py, fields).reshape(vec![n, core::outline::FIELDS])
+}
+
+/// A C-contiguous float32 array's values, writeable, or a `ParameterError` naming it.
+fn writeable<'a>(
+    name: &str,
+    guard: &'a mut numpy::PyReadwriteArrayDyn<'_, f32>,
+) -> PyResult<&'a mut [f32]> {
+    guard.as_slice_mut().map_err(|_| {
+        ParameterError::new_err(format!(
+            "{name} must be a C-contiguous, writeable float32 array"
+        ))
+    })
+}
+
+/// Draws the stain's outline within a texel, in place (core `texture::outline`).
+///
+/// `sharpen_outline(fields, stain=None, wet=None, *, excess=2, threads=None)`: `fields`
+/// the `(size, size, 2)` raster of `outline_fields`; `stain` the `(size, size, 4)`
+/// premultiplied RGBA stain image (float32, C-contiguous), each texel scaled by the front's ratio (and
+/// clipped to coverage 1 where the weave's detail then exceeds it); `wet` optionally the
+/// `(size, size, C)` wet image, whose channel `excess` (the dye above saturation) is cut
+/// ahead of the front. The GIL is released; the result does not depend on `threads`.
+#[pyfunction]
+#[pyo3(signature = (fields, stain=None, wet=None, *, excess=2, threads=None))]
+pub fn sharpen_outline<'py>(
+    py: Python<'py>,
+    fields: &Bound<'py, PyAny>,
+    stain: Option<Bound<'py, PyArrayDyn<f32>>>,
+    wet: Option<Bound<'py, PyArrayDyn<f32>>>,
+    excess: usize,
+    threads: Option<usize>,
+) -> PyResult<()> {
+    let fields = args::floats::<f32, IxDyn>("fields", fields)?;
+    let fshape = fields.shape().to_vec();
+    let fields = flat("fields", &fields, &[3])?;
+    let size = fshape[0];
+    if fshape != [size, size, core::outline::FIELDS] {
+        return Err(ParameterError::new_err(format!(
+            "fields must have shape (size, size, {}), got {fshape:?}",
+            core::outline::FIELDS
+        )));
+    }
+    if let Some(stain) = stain.as_ref().filter(|s| s.shape() != [size, size, 4]) {
+        return Err(ParameterError::new_err(format!(
+            "stain must have shape ({size}, {size}, 4) as the fields, got {:?}",
+            stain.shape()
+        )));
+    }
+    let channels = match &wet {
+        Some(w) if w.ndim() != 3 || w.shape()[..2] != [size, size] || excess >= w.shape()[2] => {
+            return Err(ParameterError::new_err(format!(
+                "wet must have shape ({size}, {size}, C) with channel {excess} in it, got {:?}",
+                w.shape()
+            )));
+        }
+        Some(w) => w.shape()[2],
+        None => 0,
+    };
+    let pool = Pool::new(threads)?;
+    let mut stain_guard = stain.as_ref().map(|s| s.try_readwrite()).transpose()?;
+    let stain = match stain_guard.as_mut() {
+        Some(g) => Some(writeable("stain", g)?),
+        None => None,
+    };
+    let mut wet_guard = wet.as_ref().map(|w| w.try_readwrite()).transpose()?;
+    let wet = match wet_guard.as_mut() {
+        Some(g) => Some((writeable("wet", g)?, channels, excess)),
+        None => None,
+    };
+    pool.run(py, || core::sharpen(&fields, size, stain, wet));
+    Ok(())
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rasterize, m)?)?;
+    m.add_function(wrap_pyfunction!(outline_fields, m)?)?;
+    m.add_function(wrap_pyfunction!(sharpen_outline, m)?)?;
     m.add_class::<WeaveDetail>()?;
     m.add("NO_WEAVE", core::NO_WEAVE)?;
     m.add_function(wrap_pyfunction!(write_exr, m)?)?;

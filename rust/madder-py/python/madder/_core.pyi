@@ -244,6 +244,17 @@ def rasterize(
     weave: WeaveDetail | None = None,
     clip: str | None = None,
 ) -> tuple[_F32, int]: ...
+def outline_fields(
+    faces: _Indices, coverage: _Floats, rings: int = 3, *, threads: int | None = None
+) -> _F32: ...
+def sharpen_outline(
+    fields: _Floats,
+    stain: _F32 | None = None,
+    wet: _F32 | None = None,
+    *,
+    excess: int = 2,
+    threads: int | None = None,
+) -> None: ...
 
 class WeaveDetail:
     def __new__(

@@ -25,6 +25,8 @@
 //! texel (`weave.rs`: the two-scale expansion `σ0 + ε χ(x/ε)·∇σ0` and the threads' uptake,
 //! issue 13 part 4; see [`weave`] for the math and why it runs inside the rasterizer),
 //! and [`clip()`] (`clip.rs`) limits the finished image to what the shader reads.
+//! [`sharpen`] (`outline.rs`) then draws the stain's outline within a texel where the
+//! simulation's front is a few cells wide (issue 34 §2; see [`outline`] for the math).
 //!
 //! ## Image layout
 //! `size × size × C` `f32`, row-major, **row 0 at the bottom** (`v ∈ [0, 1/size)`), as
@@ -47,6 +49,7 @@
 pub mod clip;
 pub(crate) mod coverage;
 pub mod exr;
+pub mod outline;
 pub mod pad;
 pub mod raster;
 pub mod weave;
@@ -54,6 +57,7 @@ pub mod weave;
 pub use self::clip::{Clip, clip};
 pub use self::exr::{Compression, ExrImage, read_exr, write_exr, write_exr_with};
 pub use crate::error::TextureError;
+pub use outline::{outline_fields, sharpen};
 pub use pad::{DEFAULT_PADDING, pad, pad_to};
 pub use raster::{
     MAX_CHANNELS, MAX_SIZE, Raster, rasterize, rasterize_into, rasterize_to, rasterize_to_with,
