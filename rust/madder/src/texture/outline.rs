@@ -211,13 +211,17 @@ pub fn sharpen(
         .collect();
     if let Some(stain) = stain {
         assert!(stain.len() == 4 * n, "stain image layout");
-        let mut over = false;
-        for (px, &r) in stain.chunks_exact_mut(4).zip(&ratios) {
-            if r != 1.0 {
+        let over = stain
+            .par_chunks_exact_mut(4)
+            .zip(ratios.par_iter())
+            .map(|(px, &r)| {
+                if r == 1.0 {
+                    return false;
+                }
                 px.iter_mut().for_each(|v| *v *= r);
-                over |= px[3] > 1.0;
-            }
-        }
+                px[3] > 1.0
+            })
+            .reduce(|| false, |a, b| a | b);
         if over {
             clip(stain, 4, Clip::Premultiplied);
         }
@@ -227,11 +231,13 @@ pub fn sharpen(
             wet.len() == channels * n && excess < channels,
             "wet image layout"
         );
-        for (px, &r) in wet.chunks_exact_mut(channels).zip(&ratios) {
-            if r < 1.0 {
-                px[excess] *= r;
-            }
-        }
+        wet.par_chunks_exact_mut(channels)
+            .zip(ratios.par_iter())
+            .for_each(|(px, &r)| {
+                if r < 1.0 {
+                    px[excess] *= r;
+                }
+            });
     }
 }
 
