@@ -325,7 +325,7 @@ class Exporter:
 
     `weave`: None, or per kind the `madder.WeaveDetail` that adds the weave's fine scale.
     `outline`: the rings over which a front is read as smeared and drawn within a texel
-    (`madder.outline_fields`, `sharpen_outline`; core `texture::outline`), or 0 for the
+    (`madder.Outline`, `sharpen_outline`; core `texture::outline`), or 0 for the
     images as rasterized.
 
     `overlapping` holds the texels covered by more than one UV triangle (overlapping
@@ -342,8 +342,10 @@ class Exporter:
         self.size, self.padding = check_size(size), padding
         self.folder, self.name = folder, name
         self.weave = weave or {}
-        self.outline = int(outline)
+        # the Detail mesh's rings, built once for every frame (`madder.Outline`)
+        self._outline = madder.Outline(self.faces, reader.n_vertices, int(outline)) if outline else None
         self._fields = None  # the frame's outline fields (N, 2), read with the values
+        self._fields_raster = None  # (frame, their image)
         n = reader.n_vertices
         self._rgba = np.zeros(4 * n, dtype=np.float32)
         self._wet = np.zeros(n, dtype=np.float32)
@@ -377,10 +379,19 @@ class Exporter:
         self._wet_values[:, 0] = self._wet
         self._wet_values[:, 1] = self._deposit
         self._wet_values[:, 2] = self._excess
-        if self.outline:
-            self._fields = self.madder.outline_fields(self.faces, self._rgba[3::4], self.outline)
+        if self._outline is not None:
+            self._fields = self._outline.fields(self._rgba[3::4])
         self._read = frame
         return self._rgba.reshape(-1, 4), self._wet_values
+
+    def _fields_image(self, frame):
+        """The outline fields of `frame` rasterized, kept for the frame's other image (a
+        rasterization was half the images' cost)."""
+        if self._fields_raster is None or self._fields_raster[0] != frame:
+            self._fields_raster = None  # (free the last frame's before the next is made)
+            image, _ = self.madder.rasterize(self.faces, self.uv, self._fields, self.size, self.padding)
+            self._fields_raster = (frame, image)
+        return self._fields_raster[1]
 
     def export(self, frame, kinds=KINDS):
         """Writes scene `frame`'s images of `kinds` (both by default; one at a time keeps a
@@ -399,13 +410,12 @@ class Exporter:
                     extra["weave"] = self.weave[kind]
             image, overlapping = self.madder.rasterize(self.faces, self.uv, values, self.size, self.padding,
                                                        **extra)
-            if self.outline:  # the front drawn within a texel
-                fields, _ = self.madder.rasterize(self.faces, self.uv, self._fields, self.size, self.padding)
+            if self._outline is not None:  # the front drawn within a texel
+                fields = self._fields_image(frame)
                 if kind == "stain":
                     self.madder.sharpen_outline(fields, stain=image)
                 else:
                     self.madder.sharpen_outline(fields, wet=image, excess=WET_CHANNELS.index("B"))
-                del fields
             if self.overlapping is None:  # the same on every frame: the UV layout's
                 self.overlapping = int(overlapping)
             path = frame_file(self.folder, self.name, kind, frame)

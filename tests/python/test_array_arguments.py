@@ -191,12 +191,12 @@ def rasterize_weave(A):
 STAINED = np.where(DENSITY > 0.3, DENSITY, 0.0)
 
 
-def outline_fields(A):
-    return madder.outline_fields(A.i("faces", FACES), A.f("coverage", STAINED), 1)
+def outline(A):
+    return madder.Outline(A.i("faces", FACES), NV, 1).fields(A.f("coverage", STAINED))
 
 
 def sharpen_outline(A):
-    fields = f16(madder.rasterize(FACES, UV, madder.outline_fields(FACES, STAINED, 1), 16, 2)[0])
+    fields = f16(madder.rasterize(FACES, UV, madder.Outline(FACES, NV, 1).fields(STAINED), 16, 2)[0])
     stain, _ = madder.rasterize(FACES, UV, np.c_[STAINED, STAINED, STAINED, STAINED], 16, 2)
     madder.sharpen_outline(A.f("fields", fields), stain)
     return stain
@@ -249,7 +249,7 @@ CASES = {
     for f in [
         topology, weft_directions, distances_within, refinement_face_uv, diffusion_stepper, diffusion_stepper_woven,
         simulator, ftle, ridges, encode_angles, decode_angles, homogenize, rasterize, rasterize_weave,
-        outline_fields, sharpen_outline, position_baseline_stats,
+        outline, sharpen_outline, position_baseline_stats,
     ]
 }
 FILE_CASES = {f.__name__: f for f in [write_exr, cache_writer, write_pc2, write_mdd, pc2_writer, motion_encoder]}
@@ -301,7 +301,7 @@ ARGS = {
     "homogenize": "tensors:f",
     "rasterize": "faces:i uv:f values:f",
     "rasterize_weave": "face_fabric:i face_map:f",
-    "outline_fields": "faces:i coverage:f",
+    "outline": "faces:i coverage:f",
     "sharpen_outline": "fields:f",
     "position_baseline_stats": "frames:f",
     "write_exr": "image:f",

@@ -1,4 +1,4 @@
-"""`madder.outline_fields` and `madder.sharpen_outline` (core `texture::outline`, whose
+"""`madder.Outline` and `madder.sharpen_outline` (core `texture::outline`, whose
 tests/outline.rs checks the drawing against exact fronts): the binding's arguments, its
 errors naming them, and the images changed in place as the core changes them."""
 
@@ -19,7 +19,7 @@ def square(n=8):
 def test_a_front_is_cut_and_lifted_in_place_and_the_excess_only_cut():
     faces, uv, u = square()
     c = np.clip(0.5 + (0.5 - u[:, 0]) * 4, 0, 1).astype(np.float32)  # a ramp over two cells
-    fields = madder.outline_fields(faces, c, rings=2)
+    fields = madder.Outline(faces, len(c), rings=2).fields(c)
     assert fields.shape == (len(c), 2) and fields.dtype == np.float32
     img, _ = madder.rasterize(faces, uv, fields, 32, 2)
     stain, _ = madder.rasterize(faces, uv, np.c_[0.5 * c, 0.25 * c, c, c], 32, 2)
@@ -40,10 +40,15 @@ def test_a_front_is_cut_and_lifted_in_place_and_the_excess_only_cut():
 
 def test_bad_arguments_are_errors_naming_them():
     faces, _, _ = square(2)
-    with pytest.raises(madder.ParameterError, match="face 0 names vertex 0, but coverage has 0 values"):
-        madder.outline_fields(faces, np.zeros(0, np.float32))
+    with pytest.raises(madder.ParameterError, match="face 0 names vertex 0, but the mesh has 0 vertices"):
+        madder.Outline(faces, 0)
     with pytest.raises(madder.ParameterError, match="faces must have shape"):
-        madder.outline_fields(faces[:, :2], np.zeros(9, np.float32))
+        madder.Outline(faces[:, :2], 9)
+    outline = madder.Outline(faces, 9)
+    assert outline.n_vertices == 9
+    with pytest.raises(madder.ParameterError, match="coverage has 8 values for 9 vertices"):
+        outline.fields(np.zeros(8, np.float32))
+    assert not outline.fields(np.zeros(9, np.float32)).any()  # a clean cloth
     fields = np.zeros((4, 4, 2), np.float32)
     with pytest.raises(madder.ParameterError, match=r"fields must have shape \(size, size, 2\)"):
         madder.sharpen_outline(np.zeros((4, 4, 3), np.float32), np.zeros((4, 4, 4), np.float32))

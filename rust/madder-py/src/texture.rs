@@ -300,38 +300,69 @@ pub fn read_exr<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyAr
     PyArray1::from_vec(py, image.pixels).reshape(shape)
 }
 
-/// The per-vertex fields of the outline drawn at the texel (core `texture::outline`).
+/// The rings of a mesh for the outline drawn at the texel (core `texture::Outline`).
 ///
-/// `outline_fields(faces, coverage, rings=3, *, threads=None) -> (N, 2) float32`: `faces`
-/// `(T, 3)` (any integer dtype), `coverage` `(N,)` (any float dtype), the dye amount per
-/// vertex. Per vertex: `f = c / P`, with `P` the highest coverage within `rings` rings,
-/// and the zone `w` (1 where a vertex within `rings` rings is dry). Rasterize them like the
-/// stain and give the image to `sharpen_outline`.
-#[pyfunction]
-#[pyo3(signature = (faces, coverage, rings=core::outline::DEFAULT_RINGS, *, threads=None))]
-pub fn outline_fields<'py>(
-    py: Python<'py>,
-    faces: &Bound<'py, PyAny>,
-    coverage: &Bound<'py, PyAny>,
-    rings: usize,
-    threads: Option<usize>,
-) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
-    let faces = faces_arg(faces)?;
-    let coverage = args::floats::<f32, IxDyn>("coverage", coverage)?;
-    let coverage = flat("coverage", &coverage, &[1])?;
-    let n = coverage.len();
-    if let Some((t, v)) = faces
-        .iter()
-        .enumerate()
-        .find_map(|(t, f)| f.iter().find(|&&v| v as usize >= n).map(|&v| (t, v)))
-    {
-        return Err(ParameterError::new_err(format!(
-            "face {t} names vertex {v}, but coverage has {n} values"
-        )));
+/// `Outline(faces, n_vertices, rings=3)`: `faces` `(T, 3)` (any integer dtype), the mesh
+/// the stain is rasterized from; its vertices' neighbours are built once, for every frame.
+/// `fields(coverage, *, threads=None) -> (N, 2) float32`: per vertex `f = c / P`, with `P`
+/// the highest coverage (the dye amount, read within [0, 1]) within `rings` rings, and the
+/// zone `w` (1 where a vertex within `rings` rings is dry). Rasterize them like the stain
+/// and give the image to `sharpen_outline`.
+#[pyclass(module = "madder", frozen)]
+pub struct Outline {
+    inner: core::Outline,
+}
+
+#[pymethods]
+impl Outline {
+    #[new]
+    #[pyo3(signature = (faces, n_vertices, rings=core::outline::DEFAULT_RINGS))]
+    fn new(
+        py: Python<'_>,
+        faces: &Bound<'_, PyAny>,
+        n_vertices: usize,
+        rings: usize,
+    ) -> PyResult<Self> {
+        let faces = faces_arg(faces)?;
+        if let Some((t, v)) = faces.iter().enumerate().find_map(|(t, f)| {
+            f.iter()
+                .find(|&&v| v as usize >= n_vertices)
+                .map(|&v| (t, v))
+        }) {
+            return Err(ParameterError::new_err(format!(
+                "face {t} names vertex {v}, but the mesh has {n_vertices} vertices"
+            )));
+        }
+        let inner = py.detach(|| core::Outline::new(&faces, n_vertices, rings));
+        Ok(Self { inner })
     }
-    let pool = Pool::new(threads)?;
-    let fields = pool.run(py, || core::outline_fields(&faces, &coverage, rings));
-    PyArray1::from_vec(py, fields).reshape(vec![n, core::outline::FIELDS])
+
+    /// Vertices of the mesh.
+    #[getter]
+    fn n_vertices(&self) -> usize {
+        self.inner.n_vertices()
+    }
+
+    #[pyo3(signature = (coverage, *, threads=None))]
+    fn fields<'py>(
+        &self,
+        py: Python<'py>,
+        coverage: &Bound<'py, PyAny>,
+        threads: Option<usize>,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+        let coverage = args::floats::<f32, IxDyn>("coverage", coverage)?;
+        let coverage = flat("coverage", &coverage, &[1])?;
+        let n = self.inner.n_vertices();
+        if coverage.len() != n {
+            return Err(ParameterError::new_err(format!(
+                "coverage has {} values for {n} vertices",
+                coverage.len()
+            )));
+        }
+        let pool = Pool::new(threads)?;
+        let fields = pool.run(py, || self.inner.fields(&coverage));
+        PyArray1::from_vec(py, fields).reshape(vec![n, core::outline::FIELDS])
+    }
 }
 
 /// A C-contiguous float32 array's values, writeable, or a `ParameterError` naming it.
@@ -349,7 +380,7 @@ fn writeable<'a>(
 /// Draws the stain's outline within a texel, in place (core `texture::outline`).
 ///
 /// `sharpen_outline(fields, stain=None, wet=None, *, excess=2, threads=None)`: `fields`
-/// the `(size, size, 2)` raster of `outline_fields`; `stain` the `(size, size, 4)`
+/// the `(size, size, 2)` raster of `Outline.fields`; `stain` the `(size, size, 4)`
 /// premultiplied RGBA stain image (float32, C-contiguous), each texel scaled by the front's ratio (and
 /// clipped to coverage 1 where the weave's detail then exceeds it); `wet` optionally the
 /// `(size, size, C)` wet image, whose channel `excess` (the dye above saturation) is cut
@@ -407,7 +438,7 @@ pub fn sharpen_outline<'py>(
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rasterize, m)?)?;
-    m.add_function(wrap_pyfunction!(outline_fields, m)?)?;
+    m.add_class::<Outline>()?;
     m.add_function(wrap_pyfunction!(sharpen_outline, m)?)?;
     m.add_class::<WeaveDetail>()?;
     m.add("NO_WEAVE", core::NO_WEAVE)?;

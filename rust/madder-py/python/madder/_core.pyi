@@ -244,9 +244,6 @@ def rasterize(
     weave: WeaveDetail | None = None,
     clip: str | None = None,
 ) -> tuple[_F32, int]: ...
-def outline_fields(
-    faces: _Indices, coverage: _Floats, rings: int = 3, *, threads: int | None = None
-) -> _F32: ...
 def sharpen_outline(
     fields: _Floats,
     stain: _F32 | None = None,
@@ -255,6 +252,12 @@ def sharpen_outline(
     excess: int = 2,
     threads: int | None = None,
 ) -> None: ...
+
+class Outline:
+    def __new__(cls, faces: _Indices, n_vertices: int, rings: int = 3) -> Outline: ...
+    @property
+    def n_vertices(self) -> int: ...
+    def fields(self, coverage: _Floats, *, threads: int | None = None) -> _F32: ...
 
 class WeaveDetail:
     def __new__(

@@ -57,7 +57,7 @@ pub mod weave;
 pub use self::clip::{Clip, clip};
 pub use self::exr::{Compression, ExrImage, read_exr, write_exr, write_exr_with};
 pub use crate::error::TextureError;
-pub use outline::{outline_fields, sharpen};
+pub use outline::{Outline, outline_fields, sharpen};
 pub use pad::{DEFAULT_PADDING, pad, pad_to};
 pub use raster::{
     MAX_CHANNELS, MAX_SIZE, Raster, rasterize, rasterize_into, rasterize_to, rasterize_to_with,

@@ -9,7 +9,7 @@
 //! of 6 mm cells. This module reads the ramp as the cell average of a sharp front and draws
 //! the front instead, within a texel, where (and only where) the cloth is dry nearby.
 //!
-//! ## Per vertex ([`outline_fields`])
+//! ## Per vertex ([`Outline::fields`])
 //! With `N_k(v)` the vertices within `k` rings of `v` (edges of the mesh, `k` = `rings`):
 //! - the plateau `P_v = max_{N_k(v)} c`, the stain's level behind the front;
 //! - the fraction `f_v = c_v / P_v` (0 where `P_v` = 0): 1 on the plateau, ½ where a front
@@ -106,51 +106,93 @@ fn spread(
     cur
 }
 
-/// The per-vertex fields `(f, w)` of the reconstruction (module doc), [`FIELDS`] per
-/// vertex, from the mesh's triangles and each vertex's `coverage`, read within `[0, 1]`
-/// (the dye amount up to saturation; a NaN gives `w` 0 around it, so that the texels keep
-/// their value).
+/// A mesh's rings for [`Outline::fields`]: its vertices' neighbours, built once for a
+/// sequence of frames (the fine mesh's edges do not change; sorting them was most of a
+/// frame's cost).
+#[derive(Debug, Clone)]
+pub struct Outline {
+    offsets: Vec<usize>,
+    nbrs: Vec<u32>,
+    rings: usize,
+}
+
+impl Outline {
+    /// The rings of the mesh `faces` over `n_vertices` vertices, `rings` deep.
+    ///
+    /// # Panics
+    /// When a face names a vertex beyond `n_vertices`.
+    pub fn new(faces: &[[u32; 3]], n_vertices: usize, rings: usize) -> Self {
+        assert!(
+            faces.iter().flatten().all(|&v| (v as usize) < n_vertices),
+            "face vertex out of range"
+        );
+        let (offsets, nbrs) = neighbours(n_vertices, faces);
+        Outline {
+            offsets,
+            nbrs,
+            rings,
+        }
+    }
+
+    /// Vertices of the mesh.
+    pub fn n_vertices(&self) -> usize {
+        self.offsets.len() - 1
+    }
+
+    /// The per-vertex fields `(f, w)` of the reconstruction (module doc), [`FIELDS`] per
+    /// vertex, from each vertex's `coverage`, read within `[0, 1]` (the dye amount up to
+    /// saturation; a NaN gives `w` 0 around it, so that the texels keep their value).
+    ///
+    /// # Panics
+    /// When `coverage` does not hold one value per vertex.
+    pub fn fields(&self, coverage: &[f32]) -> Vec<f32> {
+        let n = self.n_vertices();
+        assert_eq!(coverage.len(), n, "one coverage per vertex");
+        // the coverage within [0, 1]: a dye amount above saturation (a tide line, a pool's
+        // unclamped amount under the weave's detail) is graded physics, not a smeared front
+        let c: Vec<f32> = coverage
+            .iter()
+            .map(|&x| if x.is_nan() { x } else { x.clamp(0.0, 1.0) })
+            .collect();
+        let mut out = vec![0.0; FIELDS * n];
+        if c.iter().all(|&x| x == 0.0) {
+            return out; // a clean cloth: nothing to draw
+        }
+        let (o, nb, k) = (&self.offsets, &self.nbrs, self.rings);
+        let plateau = spread(&c, o, nb, k, |a, b| {
+            if a.is_nan() || b.is_nan() {
+                f32::NAN
+            } else {
+                a.max(b)
+            }
+        });
+        let lowest = spread(&c, o, nb, k, |a, b| {
+            if a.is_nan() || b.is_nan() {
+                f32::NAN
+            } else {
+                a.min(b)
+            }
+        });
+        out.par_chunks_exact_mut(FIELDS)
+            .enumerate()
+            .for_each(|(v, o)| {
+                let p = plateau[v];
+                if p > 0.0 {
+                    o[0] = c[v] / p;
+                    o[1] = if lowest[v] <= DRY * p { 1.0 } else { 0.0 };
+                }
+            });
+        out
+    }
+}
+
+/// [`Outline::fields`] of `coverage` on the mesh `faces` (one vertex per value), the rings
+/// built for this one call.
 ///
 /// # Panics
 /// When a face names a vertex beyond `coverage`.
 pub fn outline_fields(faces: &[[u32; 3]], coverage: &[f32], rings: usize) -> Vec<f32> {
-    let n = coverage.len();
-    assert!(
-        faces.iter().flatten().all(|&v| (v as usize) < n),
-        "face vertex out of range"
-    );
-    let (offsets, nbrs) = neighbours(n, faces);
-    // the coverage within [0, 1]: a dye amount above saturation (a tide line, a pool's
-    // unclamped amount under the weave's detail) is graded physics, not a smeared front
-    let c: Vec<f32> = coverage
-        .iter()
-        .map(|&x| if x.is_nan() { x } else { x.clamp(0.0, 1.0) })
-        .collect();
-    let plateau = spread(&c, &offsets, &nbrs, rings, |a, b| {
-        if a.is_nan() || b.is_nan() {
-            f32::NAN
-        } else {
-            a.max(b)
-        }
-    });
-    let lowest = spread(&c, &offsets, &nbrs, rings, |a, b| {
-        if a.is_nan() || b.is_nan() {
-            f32::NAN
-        } else {
-            a.min(b)
-        }
-    });
-    let mut out = vec![0.0; FIELDS * n];
-    out.par_chunks_exact_mut(FIELDS)
-        .enumerate()
-        .for_each(|(v, o)| {
-            let p = plateau[v];
-            if p > 0.0 {
-                o[0] = c[v] / p;
-                o[1] = if lowest[v] <= DRY * p { 1.0 } else { 0.0 };
-            }
-        });
-    out
+    Outline::new(faces, coverage.len(), rings).fields(coverage)
 }
 
 /// The ratio `r` of one texel (module doc) from its `f`, `w` and the magnitude of `∇f` in
