@@ -30,7 +30,7 @@ resolves over a few of its cells, is drawn within a texel where the cloth beyond
 its local plateau); the dye above saturation is cut with it, wetness and deposit are left.
 
 `####` is the scene frame (4 digits, more when needed). The values are exactly the
-playback attributes (`CacheReader.read_stain`, core `io::attributes`), rasterized over
+playback attributes (Sharp Outline aside) (`CacheReader.read_stain`, core `io::attributes`), rasterized over
 the refined cloth's UV triangles (`madder.rasterize`: barycentric at texel centres,
 islands padded), with the dye amount split at 1 (coverage + range × excess), so the
 shader reads the same numbers from either.

@@ -303,3 +303,57 @@ def test_with_the_weave_a_saturated_stain_shows_every_thread_full_and_a_faint_on
     assert unclipped[..., 3].min() > 1.0  # without the clip the values run over 1
     with pytest.raises(madder.ParameterError, match="clip"):
         madder.rasterize(FACES, UV, ex._rgba.reshape(-1, 4), 64, 0, clip="over")
+
+
+def test_sharp_outline_draws_the_front_in_both_images_from_one_raster_of_its_fields(tmp_path):
+    """With `outline` (Sharp Outline) the exporter writes the images as rasterized, then
+    drawn by `madder.sharpen_outline` from the fields of `madder.Outline` (core
+    `texture::outline`): the stain's edge within a texel, the wet image's excess only cut,
+    wetness and deposit left; the fields are rasterized once for a frame's two images.
+    Without it the images are the plain rasterization's."""
+    n = 16
+    j, i = np.meshgrid(np.arange(n + 1), np.arange(n + 1))
+    a = (i[:-1, :-1] * (n + 1) + j[:-1, :-1]).ravel()
+    faces = np.concatenate([np.stack([a, a + 1, a + n + 2], 1), np.stack([a, a + n + 2, a + n + 1], 1)])
+    faces = faces.astype(np.uint32)
+    uv_v = np.stack([j.ravel() / n, i.ravel() / n], 1)
+    uv = uv_v[faces].astype(np.float32)
+    ramp = np.clip(0.5 + (0.5 - uv_v[:, 0]) * n / 3, 0, 1)  # a front smeared over three cells
+    path = tmp_path / "Flag.fine.madder"
+    writer = madder.CacheWriter(str(path), len(uv_v), ["solute", "wetness", "deposit"], 1, 2)
+    # frame 1: twice saturation on the plateau; frame 2: ten times, so that the last cell
+    # goes from above saturation to dry
+    for k in (2, 10):
+        writer.push_frame([(k * 1e-3 * ramp).astype(np.float32), (0.1 * ramp).astype(np.float32),
+                           np.zeros(len(uv_v), np.float32)])
+    writer.finish()
+    refs, color = (1e-3, 0.1, 2e-4), (0.5, 0.25, 1.0)
+
+    class Counting:
+        def __getattr__(self, name):
+            return getattr(madder, name)
+
+        def rasterize(self, *args, **kw):
+            calls.append(args[2].shape[1])
+            return madder.rasterize(*args, **kw)
+
+    images = {}
+    for outline in (0, 3):
+        calls = []
+        out = tmp_path / f"images{outline}"
+        out.mkdir()
+        ex = textures.Exporter(Counting(), madder.CacheReader(str(path)), faces, uv, refs, color, 512, str(out),
+                               "Flag", outline=outline)
+        for f in (1, 2):
+            ex.export(f)
+        assert calls == 2 * ([4, 3] if not outline else [4, 2, 3])  # stain, (fields,) wet
+        images[outline] = [madder.read_exr(str(out / f"Flag_{k}.{f:04d}.exr")) for f in (1, 2)
+                           for k in textures.KINDS]
+    (stain0, wet0, _, wet0_ten), (stain3, wet3, _, wet3_ten) = images[0], images[3]
+    ramp_texels = ((stain0[..., 3] > 0.1) & (stain0[..., 3] < 0.9)).sum(axis=1).max()
+    edge_texels = ((stain3[..., 3] > 0.1) & (stain3[..., 3] < 0.9)).sum(axis=1).max()
+    assert ramp_texels > 40 and edge_texels <= 2  # 3 cells of 32 texels, then one texel
+    assert abs(stain3[..., 3].sum() / stain0[..., 3].sum() - 1) < 0.01
+    np.testing.assert_allclose(stain3[..., 0], 0.5 * stain3[..., 3], atol=2e-3)  # the hue (half float)
+    assert np.array_equal(wet3[..., :2], wet0[..., :2]) and np.array_equal(wet3_ten[..., :2], wet0_ten[..., :2])
+    assert (wet3_ten[..., 2] <= wet0_ten[..., 2]).all() and (wet3_ten[..., 2] < wet0_ten[..., 2]).any()
