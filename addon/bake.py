@@ -407,6 +407,7 @@ class BakeJob(Stepper):
         self.frame_before = scene.frame_current
         self.writer = None
         self.fine_writer = self.staging = self.export = None
+        self.image_outline = False  # whether Sharp Outline drew the images (SequenceExport's)
         # (positions, contacts) per frame, evaluated once each, one frame early
         self._walk = schedule.Lookahead(self._visit)
         self._evaluating = self.first  # the frame being read, for error messages
@@ -534,6 +535,7 @@ class BakeJob(Stepper):
         self.export = images.SequenceExport(self.madder, self.obj, self.fine_staged, self.topology, self.detail,
                                             uv, self.references, size, self.staging.path,
                                             textures.stem(self.path), weave=weave)
+        self.image_outline = self.export.outline
 
     def _step_images(self):
         try:
@@ -598,7 +600,7 @@ class BakeJob(Stepper):
         s.bake_detail = self.detail
         if self.images is not None:
             size, _, uv_map = self.images
-            images.record(obj, self.first, self.last, size, uv_map)
+            images.record(obj, self.first, self.last, size, uv_map, self.image_outline)
         else:
             images.forget(obj)
             try:

@@ -145,6 +145,7 @@ class SequenceExport:
 
     def __init__(self, madder, obj, fine_path, topology, level, uv, references, size, folder, name, weave=None):
         self.madder, self.obj = madder, obj
+        self.outline = bool(obj.madder.sharp_outline)  # as the export began (`record` keeps it)
         try:
             self.reader = madder.CacheReader(fine_path)
             refinement = madder.Refinement(topology, level)
@@ -158,7 +159,7 @@ class SequenceExport:
         self.exporter = textures.Exporter(
             madder, self.reader, refinement.faces(), refinement.face_uv(uv), references,
             tuple(obj.madder.stain_color), size, folder, name, weave=weave[0] if weave else None,
-            outline=textures.OUTLINE_RINGS if obj.madder.sharp_outline else 0)
+            outline=textures.OUTLINE_RINGS if self.outline else 0)
         self.weave_warnings = list(weave[1]) if weave else []
         self.first, self.last = self.exporter.first, self.exporter.last
         self.size = self.exporter.size
@@ -204,13 +205,15 @@ class SequenceExport:
         self.reader = self.exporter = None
 
 
-def record(obj, first, last, size, uv_map):
-    """What the shader needs to read the sequence, recorded on the object."""
+def record(obj, first, last, size, uv_map, outline):
+    """What the shader needs to read the sequence, and whether Sharp Outline drew it
+    (`outline`), recorded on the object."""
     s = obj.madder
     s.image_baked = True
     s.image_frames = (first, last)
     s.image_baked_size = size
     s.image_uv_map = uv_map
+    s.image_baked_outline = outline
 
 
 def forget(obj):
@@ -219,3 +222,4 @@ def forget(obj):
     s.image_frames = (0, 0)
     s.image_baked_size = 0
     s.image_uv_map = ""
+    s.image_baked_outline = False

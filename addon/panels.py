@@ -132,6 +132,8 @@ class MADDER_PT_stain_output(_StainSubPanel, bpy.types.Panel):
             col.label(text=f"Images: {s.image_baked_size} px, frames {first}–{last}", icon="IMAGE_DATA")
             if s.image_size != "AUTO" and s.image_baked_size != int(s.image_size):
                 col.label(text="Size changed: Re-export Textures to apply it", icon="INFO")
+            if s.image_baked_outline != s.sharp_outline:
+                col.label(text="Sharp Outline changed: Re-export Textures to apply it", icon="INFO")
         else:
             col.label(text="Bake to write the image sequence", icon="INFO")
         col.operator("madder.export_textures", icon="TEXTURE")

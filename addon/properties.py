@@ -670,6 +670,12 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
         default=0,
         options={"HIDDEN"},
     )
+    image_baked_outline: BoolProperty(
+        name="Sharp Outline Baked",
+        description="The image sequence was written with Sharp Outline",
+        default=False,
+        options={"HIDDEN"},
+    )
     image_uv_map: StringProperty(
         name="Image UV Map",
         description="The UV map the images were laid out on (the stain shader reads them through it)",

@@ -82,7 +82,7 @@ class ReexportJob:
         except BaseException:
             self.cancel()
             raise
-        images.record(self.obj, self.export.first, self.export.last, self.size, self.uv_map)
+        images.record(self.obj, self.export.first, self.export.last, self.size, self.uv_map, self.export.outline)
         shading.sync_object(self.obj)
         images.reload(self.obj)
         return folder

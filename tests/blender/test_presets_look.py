@@ -130,9 +130,10 @@ def test_only_a_preset_gives_a_sharp_stain(open_fixture):
     # Sharp Outline (on by default) drew that edge within a texel: against the images as the
     # Detail mesh resolves them (Re-export Textures without it), the edge is at most half as
     # wide and the dye's total within 2 %; with it again, the bake's images bit for bit
-    assert s.sharp_outline
+    assert s.sharp_outline and s.image_baked_outline  # (the panel compares them)
     s.sharp_outline = False
     assert bpy.ops.madder.export_textures() == {"FINISHED"}
+    assert not s.image_baked_outline
     soft = stain_alpha(flag, s.image_frames[1])
     soft_width = edge_width(soft, texel)
     print(f"without Sharp Outline: edge width {soft_width * 1e3:.2f} mm; "
