@@ -3,11 +3,11 @@
 //!
 //! A liquid front in a fabric stops at a line: behind it the fibres hold the dye, ahead
 //! they are dry. The simulation resolves that front to its cells, so the coverage `c` (the
-//! dye amount the stain image carries) falls from its plateau to 0 over two to four rings
-//! of the mesh (`c` read within `[0, 1]`: the dye above saturation is graded by the
-//! drying flow, not smeared), and the barycentric image of it draws a ramp a centimetre wide on a cloth
-//! of 6 mm cells. This module reads the ramp as the cell average of a sharp front and draws
-//! the front instead, within a texel, where (and only where) the cloth is dry nearby.
+//! dye amount the stain image carries, read within `[0, 1]`: the dye above saturation is
+//! graded by the drying flow, not smeared) falls from its plateau to 0 over two to four
+//! rings of the mesh, and the barycentric image of it draws a ramp a centimetre wide on a
+//! cloth of 6 mm cells. This module reads the ramp as the cell average of a sharp front and
+//! draws the front instead, within a texel, where (and only where) the cloth is dry nearby.
 //!
 //! ## Per vertex ([`Outline::fields`])
 //! With `N_k(v)` the vertices within `k` rings of `v` (edges of the mesh, `k` = `rings`):
@@ -40,8 +40,8 @@
 //!
 //! **Mass.** For a front smeared symmetrically about its line (a ramp, an error function)
 //! the plateau's excess behind the line equals the deficit ahead of it, so `∫ c'` = `∫ c`
-//! to the texel; on the flag's wine and the gallery's stains it is within 0.5 %
-//! (`tests/outline.rs`). Wider gradations than `k` rings (ink's halo, a run's graded trail)
+//! to the texel: within 1 % on a round stain smeared over three cells (`tests/outline.rs`),
+//! +0.8 % on the flag's wine (`tests/blender/test_presets_look.py`). Wider gradations than `k` rings (ink's halo, a run's graded trail)
 //! keep `f` near 1 on their plateau side and are cut only at their own half level.
 //!
 //! The output depends on the texel size only through `|∇f|` in texels: the same front at a
@@ -107,8 +107,7 @@ fn spread(
 }
 
 /// A mesh's rings for [`Outline::fields`]: its vertices' neighbours, built once for a
-/// sequence of frames (the fine mesh's edges do not change; sorting them was most of a
-/// frame's cost).
+/// sequence of frames (the fine mesh's edges do not change).
 #[derive(Debug, Clone)]
 pub struct Outline {
     offsets: Vec<usize>,
