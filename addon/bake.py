@@ -407,7 +407,7 @@ class BakeJob(Stepper):
         self.frame_before = scene.frame_current
         self.writer = None
         self.fine_writer = self.staging = self.export = None
-        self.image_outline = False  # whether Sharp Outline drew the images (SequenceExport's)
+        self.image_outline = ""  # how Sharp Outline drew the images (SequenceExport's)
         # (positions, contacts) per frame, evaluated once each, one frame early
         self._walk = schedule.Lookahead(self._visit)
         self._evaluating = self.first  # the frame being read, for error messages

@@ -145,7 +145,8 @@ class SequenceExport:
 
     def __init__(self, madder, obj, fine_path, topology, level, uv, references, size, folder, name, weave=None):
         self.madder, self.obj = madder, obj
-        self.outline = bool(obj.madder.sharp_outline)  # as the export began (`record` keeps it)
+        s = obj.madder  # the outline's mode as the export began (`record` keeps it)
+        self.outline = ("SHADER" if s.outline_in_shader else "TEXEL") if s.sharp_outline else ""
         try:
             self.reader = madder.CacheReader(fine_path)
             refinement = madder.Refinement(topology, level)
@@ -159,7 +160,8 @@ class SequenceExport:
         self.exporter = textures.Exporter(
             madder, self.reader, refinement.faces(), refinement.face_uv(uv), references,
             tuple(obj.madder.stain_color), size, folder, name, weave=weave[0] if weave else None,
-            outline=textures.OUTLINE_RINGS if self.outline else 0)
+            outline=textures.OUTLINE_RINGS if self.outline else 0, shader=self.outline == "SHADER",
+            texel=self._texel(uv, size) if self.outline == "SHADER" else None)
         self.weave_warnings = list(weave[1]) if weave else []
         self.first, self.last = self.exporter.first, self.exporter.last
         self.size = self.exporter.size
@@ -168,6 +170,18 @@ class SequenceExport:
         self.frame = None  # the last frame whose images are all written
         self.done = 0
         self.overlapping = None
+
+    def _texel(self, uv, size):
+        """A texel's size in metres along u and v at `size` px: the cloth's rest metres per
+        UV unit per axis (`weave_shader.metres_per_uv_axes`) over `size`."""
+        from . import weave_shader
+
+        layer = self.obj.data.uv_layers.active  # the map the images are baked for
+        scales = weave_shader.metres_per_uv_axes(self.obj, layer.name if layer else "")
+        if scales is None:
+            raise ExportError(f"'{self.obj.name}': its UV map has no area, so the outline cannot be measured "
+                              "in metres (turn Sharp Outline's In Shader off, or unwrap it)", object=self.obj.name)
+        return (scales[0] / textures.check_size(size), scales[1] / textures.check_size(size))
 
     @property
     def total(self):
@@ -206,14 +220,15 @@ class SequenceExport:
 
 
 def record(obj, first, last, size, uv_map, outline):
-    """What the shader needs to read the sequence, and whether Sharp Outline drew it
-    (`outline`), recorded on the object."""
+    """What the shader needs to read the sequence, and how Sharp Outline drew it
+    (`outline`, one of `textures.OUTLINE_MODES`), recorded on the object."""
     s = obj.madder
     s.image_baked = True
     s.image_frames = (first, last)
     s.image_baked_size = size
     s.image_uv_map = uv_map
-    s.image_baked_outline = outline
+    s.image_baked_outline = bool(outline)
+    s.image_baked_outline_shader = outline == "SHADER"
 
 
 def forget(obj):
@@ -223,3 +238,4 @@ def forget(obj):
     s.image_baked_size = 0
     s.image_uv_map = ""
     s.image_baked_outline = False
+    s.image_baked_outline_shader = False

@@ -121,6 +121,9 @@ class MADDER_PT_stain_output(_StainSubPanel, bpy.types.Panel):
         col.active = s.output_images
         col.prop(s, "image_size")
         col.prop(s, "sharp_outline")
+        sub = col.row()
+        sub.active = s.sharp_outline
+        sub.prop(s, "outline_in_shader")
         if not s.output_images:
             return
         if obj.data.uv_layers.active is None:
@@ -132,7 +135,8 @@ class MADDER_PT_stain_output(_StainSubPanel, bpy.types.Panel):
             col.label(text=f"Images: {s.image_baked_size} px, frames {first}–{last}", icon="IMAGE_DATA")
             if s.image_size != "AUTO" and s.image_baked_size != int(s.image_size):
                 col.label(text="Size changed: Re-export Textures to apply it", icon="INFO")
-            if s.image_baked_outline != s.sharp_outline:
+            if s.image_baked_outline != s.sharp_outline or (
+                    s.sharp_outline and s.image_baked_outline_shader != s.outline_in_shader):
                 col.label(text="Sharp Outline changed: Re-export Textures to apply it", icon="INFO")
         else:
             col.label(text="Bake to write the image sequence", icon="INFO")

@@ -37,7 +37,7 @@ _NOT_SIMULATED = {
     "live", "live_memory", "enabled", "cache_dir", "cache_file", "bake_references", "bake_topology",
     "bake_detail", "lcs", "render_without_cache", "output_vertex_colors", "output_images", "image_size",
     "image_baked", "image_frames", "image_baked_size", "image_uv_map", "rna_type", "name",
-    "sharp_outline", "image_baked_outline",
+    "sharp_outline", "image_baked_outline", "outline_in_shader", "image_baked_outline_shader",
 }
 
 

@@ -646,9 +646,16 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
     )
     sharp_outline: BoolProperty(
         name="Sharp Outline",
-        description="The image sequence draws the stain's edge within a texel where the simulated front "
-        "is a few cells wide and the cloth beyond is dry (a stain's edge is sharp at the fibres); off: "
-        "the images as the Detail mesh resolves them. Re-export Textures applies a change",
+        description="Draw the stain's edge sharp where the simulated front is a few cells wide and the "
+        "cloth beyond is dry (a stain's edge is sharp at the fibres); off: the images as the Detail mesh "
+        "resolves them. Re-export Textures applies a change",
+        default=True,
+    )
+    outline_in_shader: BoolProperty(
+        name="In Shader",
+        description="The Madder Stain shader draws the sharp edge at the pixel, ragged down to the fibres, "
+        "from the front's distance in the wet image's alpha; off: the images draw it within a texel "
+        "(for materials of your own that read the images). Re-export Textures applies a change",
         default=True,
     )
     image_baked: BoolProperty(
@@ -673,6 +680,12 @@ class MadderObjectSettings(bpy.types.PropertyGroup):
     image_baked_outline: BoolProperty(
         name="Sharp Outline Baked",
         description="The image sequence was written with Sharp Outline",
+        default=False,
+        options={"HIDDEN"},
+    )
+    image_baked_outline_shader: BoolProperty(
+        name="Outline in Shader Baked",
+        description="The image sequence was written for the shader to draw its outline",
         default=False,
         options={"HIDDEN"},
     )

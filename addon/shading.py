@@ -74,6 +74,30 @@ the finished colour, clean cloth and stain alike, since the yarns carry both. Th
 weave's own node group (`weave_shader`) feeds it. The Deposit input (bound dye) does
 not change the colour; it is passed through as an output for the material's own nodes.
 
+**The outline** is drawn at the pixel. With Sharp Outline in the shader (the default
+with images) the images carry the stain lifted to its plateau at the front and, in the
+wet image's alpha, the front's signed distance D in metres (core `texture::outline`, "At
+the pixel"); bilinear filtering reads D linearly, so the group places the front to a
+fraction of a pixel, however coarse the texel:
+
+    cover = clamp(½ + (D + n) / e, 0, 1)         e: Edge Width (the fabric's thread pitch)
+    n     = Front Roughness · (fBm(p / Front Scale) − ½) / NOISE_RMS
+
+and the dye amount (Coverage + Excess) is multiplied by `cover` (the liquid's colour,
+their ratio, is not). `n` is Blender's Noise Texture (fBm, `FRONT_OCTAVES` octaves of
+lacunarity 2 and gain 2^−H, H = `FRONT_HURST`) at the point `p` on the cloth in metres
+(the UV times the layout's metres per UV along u and v): the front wanders from the
+simulated outline by `n`, an RMS of Front Roughness (`NOISE_RMS` calibrates the node's
+spread: tests/blender/test_shading.py), self-affine from the Front Scale down to the
+finest octave (40 mm / 2^10, the fibres'). Imbibition fronts in paper and fabric are
+rough that way, at every scale from the fibres up (Buldyrev et al. 1992: a roughness
+exponent about 0.63); the outline the user renders measures 0.74 between 1 and 20 mm
+(tests/blender/test_presets_look.py: the octaves are smooth within themselves, so the
+measured exponent lies above H). A front 10–90 % over 0.8 e is 0.3 mm on plain cotton.
+Without the distance channel (vertex colours, or images written without it) the input's
+default 1 m, or the image's alpha 1, leaves `cover` = 1: nothing is cut. The group's
+Dye output is the dye amount after the cut.
+
 `Stain`, `Coverage`, `Wetness` and `Deposit` are inputs of the group, fed in the
 material by nodes that `sync_material` places (named "Madder Input: …"):
 
@@ -84,7 +108,10 @@ material by nodes that `sync_material` places (named "Madder Input: …"):
   nodes on the object's sequences (`images.sequence_image`: non-colour, channel-packed
   alpha, auto refresh, frame start/offset/length so that scene frame f shows file f),
   read through a UV Map node of the UV map they were baked for; the wet image's R and G
-  are the wetness and deposit, its B the dye's excess over saturation (× 16: Excess).
+  are the wetness and deposit, its B the dye's excess over saturation (× 16: Excess),
+  its alpha the Outline Distance; the UV times the layout's metres per UV
+  (`weave_shader.metres_per_uv_axes`) is the Outline Position, and the Edge Width is
+  set to a thread pitch of the material's fabric (or the default fabric's).
 
 A bake, a re-export, Free Bake and switching the output re-run `sync_object`, so a
 material that has the group always reads what its object has. A group made by an older
@@ -131,16 +158,38 @@ _INPUTS = (
      "Dye amount above 1 that the images carry apart (0 with vertex colors, whose Coverage holds it all)"),
     ("Wetness", "NodeSocketFloat", 0.0, (0.0, 1.0), "Liquid in the fibres: 1 = full"),
     ("Deposit", "NodeSocketFloat", 0.0, (0.0, 1.0), "Bound dye (passed through as an output)"),
+    ("Outline Distance", "NodeSocketFloat", 1.0, (-1.0, 1.0),
+     "Signed distance (m) to the stain's front, positive behind it (the wet image's alpha with Sharp "
+     "Outline in the shader); 1 m: no front near, nothing is cut"),
+    ("Outline Position", "NodeSocketVector", (0.0, 0.0, 0.0), None,
+     "The point on the cloth in metres (its UV times the layout's metres per UV): where the front's "
+     "roughness is drawn"),
+    ("Edge Width", "NodeSocketFloat", 0.0004, (0.0, 0.01),
+     "Width (m) over which the front rises from dry to stained: a thread pitch (set from the "
+     "material's fabric when the material is synced)"),
+    ("Front Roughness", "NodeSocketFloat", 0.003, (0.0, 0.01),
+     "How far (m, RMS) the front wanders from the simulated outline at the Front Scale; at every "
+     "scale below it, as that scale to the power 0.65 (0: the simulated outline, sharp)"),
+    ("Front Scale", "NodeSocketFloat", 0.04, (0.0001, 1.0),
+     "The largest scale (m) of the front's own roughness (above it the simulation's outline)"),
 )
 _OUTPUTS = (("Base Color", "NodeSocketColor"), ("Roughness", "NodeSocketFloat"), ("Specular", "NodeSocketFloat"),
             ("Film", "NodeSocketFloat"), ("Film Roughness", "NodeSocketFloat"),
-            ("Translucency", "NodeSocketFloat"), ("Deposit", "NodeSocketFloat"))
+            ("Translucency", "NodeSocketFloat"), ("Deposit", "NodeSocketFloat"), ("Dye", "NodeSocketFloat"))
 # defaults of an older Madder's group that this one changed (an upgrade moves a material's
 # value still at the old default to the new one)
 _OLD_DEFAULTS = {"Wet Roughness": 0.25}
 # the group's maths, counted up when it changes (2: the liquid's colour recovered from
-# Stain / min(Coverage, 1), as the attributes premultiply by the coverage, not the amount)
-REVISION = 2
+# Stain / min(Coverage, 1), as the attributes premultiply by the coverage, not the amount;
+# 3: the front drawn at the pixel from Outline Distance)
+REVISION = 3
+# the front's roughness (module doc): fractal noise of Hurst exponent FRONT_HURST, an
+# octave's amplitude 2^-H of the one before, FRONT_OCTAVES octaves below the Front Scale
+FRONT_HURST = 0.4
+FRONT_OCTAVES = 10.0
+# RMS of Blender's normalized fBm Noise Texture (its Fac about ½) at those settings,
+# measured over 10⁶ points of 10² and 40² periods: 0.0472, 0.0449
+NOISE_RMS = 0.046
 # smallest reflectance the K/S maths sees (K/S = (1 − R)²/2R is infinite at R = 0)
 R_MIN = 1e-3
 # smallest dye amount the liquid's colour is recovered from (Stain / min(Coverage, 1))
@@ -210,13 +259,40 @@ class _Maths:
         return self.op("MULTIPLY_ADD", t, self.op("SUBTRACT", b, a), a)
 
 
-def _channel(m, base, stain, g):
+def _front(m, nodes, links, g):
+    """The front's cover at the point (module doc, "The outline"): clamp(½ + (D + n) / e),
+    D the Outline Distance, n the fractal roughness at the Outline Position, e the Edge
+    Width."""
+    where = nodes.new("ShaderNodeVectorMath")
+    where.operation = "SCALE"
+    links.new(g.outputs["Outline Position"], where.inputs[0])
+    links.new(m.op("DIVIDE", 1.0, m.op("MAXIMUM", g.outputs["Front Scale"], 1e-6)), where.inputs["Scale"])
+    noise = nodes.new("ShaderNodeTexNoise")
+    noise.noise_dimensions = "3D"
+    if hasattr(noise, "noise_type"):
+        noise.noise_type = "FBM"
+    if hasattr(noise, "normalize"):
+        noise.normalize = True
+    noise.inputs["Scale"].default_value = 1.0
+    noise.inputs["Detail"].default_value = FRONT_OCTAVES
+    noise.inputs["Roughness"].default_value = 2.0 ** -FRONT_HURST
+    noise.inputs["Lacunarity"].default_value = 2.0
+    noise.inputs["Distortion"].default_value = 0.0
+    links.new(where.outputs["Vector"], noise.inputs["Vector"])
+    m.made += [where, noise]
+    wander = m.op("MULTIPLY", m.op("SUBTRACT", noise.outputs["Fac"], 0.5),
+                  m.op("DIVIDE", g.outputs["Front Roughness"], NOISE_RMS))
+    ahead = m.op("ADD", g.outputs["Outline Distance"], wander)
+    return m.op("ADD", 0.5, m.op("DIVIDE", ahead, m.op("MAXIMUM", g.outputs["Edge Width"], 1e-6)), clamp=True)
+
+
+def _channel(m, base, stain, g, cover):
     """One colour channel of the group's maths (module doc): `base` and `stain` the
-    channel's sockets, `g` the group input node."""
+    channel's sockets, `g` the group input node, `cover` the front's (`_front`)."""
     coverage = m.op("MAXIMUM", g.outputs["Coverage"], 0.0)
     # the liquid's colour: Stain is premultiplied by the coverage, the amount up to 1
     dye = m.op("DIVIDE", stain, m.op("MAXIMUM", m.op("MINIMUM", coverage, 1.0), A_MIN))
-    amount = m.op("ADD", coverage, m.op("MAXIMUM", g.outputs["Excess"], 0.0))
+    amount = m.op("MULTIPLY", m.op("ADD", coverage, m.op("MAXIMUM", g.outputs["Excess"], 0.0)), cover)
     q = m.op("MULTIPLY_ADD", amount, m.ks(dye), m.ks(base))  # K/S, cloth + dye
     wet = g.outputs["Wetness"]
     q = m.op("MULTIPLY", q, m.op("MULTIPLY_ADD", g.outputs["Wet Scattering"], wet, 1.0))
@@ -243,8 +319,11 @@ def _build(group):
     links.new(gin.outputs["Base Color"], split_base.inputs[0])
     links.new(gin.outputs["Stain"], split_stain.inputs[0])
     join = nodes.new("ShaderNodeCombineColor")
+    cover = _front(m, nodes, links, gin)
     for i in range(3):
-        links.new(_channel(m, split_base.outputs[i], split_stain.outputs[i], gin), join.inputs[i])
+        links.new(_channel(m, split_base.outputs[i], split_stain.outputs[i], gin, cover), join.inputs[i])
+    dye = m.op("ADD", m.op("MAXIMUM", gin.outputs["Coverage"], 0.0), m.op("MAXIMUM", gin.outputs["Excess"], 0.0))
+    links.new(m.op("MULTIPLY", dye, cover), gout.inputs["Dye"])
     links.new(join.outputs[0], gout.inputs["Base Color"])
     wet = gin.outputs["Wetness"]
     links.new(gin.outputs["Roughness"], gout.inputs["Roughness"])  # the fibres under the film
@@ -321,7 +400,7 @@ def sync_material(material, obj):
         nt.nodes.remove(n)
     x, y = node.location.x - 300, node.location.y
     if obj is not None and stored.uses_images(obj):
-        _image_inputs(nt, node, obj, x, y)
+        _image_inputs(nt, node, obj, x, y, material)
     else:
         _attribute_inputs(nt, node, x, y)
     weave_shader.place(material, obj, node, INPUT_PREFIX, x, y, kept_normal)
@@ -349,7 +428,7 @@ def _attribute_inputs(nt, node, x, y):
     nt.links.new(deposit.outputs["Fac"], node.inputs["Deposit"])
 
 
-def _image_inputs(nt, node, obj, x, y):
+def _image_inputs(nt, node, obj, x, y, material):
     import madder
 
     uv = _new(nt, "ShaderNodeUVMap", "UV Map", x - 500, y - 280)
@@ -374,6 +453,28 @@ def _image_inputs(nt, node, obj, x, y):
     nt.links.new(excess.outputs[0], node.inputs["Excess"])
     nt.links.new(channels.outputs["Red"], node.inputs["Wetness"])
     nt.links.new(channels.outputs["Green"], node.inputs["Deposit"])
+    # the front's distance (a wet image without it reads alpha 1: 1 m, nothing cut) and
+    # where the point lies on the cloth, in metres
+    nt.links.new(textures["wet"].outputs["Alpha"], node.inputs["Outline Distance"])
+    scales = weave_shader.metres_per_uv_axes(obj, obj.madder.image_uv_map or "")
+    if scales is not None:
+        metres = _new(nt, "ShaderNodeVectorMath", "Outline Position", x, y - 380)
+        metres.operation = "MULTIPLY"
+        metres.inputs[1].default_value = (scales[0], scales[1], 0.0)
+        nt.links.new(uv.outputs["UV"], metres.inputs[0])
+        nt.links.new(metres.outputs["Vector"], node.inputs["Outline Position"])
+    node.inputs["Edge Width"].default_value = _thread_pitch(material)
+
+
+def _thread_pitch(material):
+    """A thread pitch (m) of `material`'s Madder fabric, or of the default fabric (the one
+    a cloth without a fabric is simulated with)."""
+    from . import presets
+
+    fab = getattr(material, "madder_fabric", None)
+    count = fab.thread_count if fab is not None and fab.enabled and fab.thread_count > 0 else \
+        presets.FABRIC_PRESETS[presets.DEFAULT_FABRIC]["thread_count"]
+    return 0.01 / count
 
 
 def sync_object(obj):

@@ -64,6 +64,13 @@ STAIN_CHANNELS = ("R", "G", "B", "A")
 # wetness, deposit, and the dye's excess over saturation (an EXR without B would read as
 # garbage there, −5e8, 1e15, in a material of the user's reading the image's colour)
 WET_CHANNELS = ("R", "G", "B")
+# with the outline left to the shader, the wet image's alpha is the front's signed
+# distance in metres (core `texture::outline`, "At the pixel"; `shading` reads it)
+DISTANCE_CHANNEL = "A"
+OUTLINE_MODES = ("", "TEXEL", "SHADER")
+"""How the images draw the stain's outline: as rasterized (""), within a texel
+(`madder.sharpen_outline`), or lifted with its distance for the shader to draw at the
+pixel (`madder.lift_outline`)."""
 
 
 # -- names
@@ -324,15 +331,17 @@ class Exporter:
     - `size` (one of `SIZES`), `folder` (where the files go) and `name` (their prefix).
 
     `weave`: None, or per kind the `madder.WeaveDetail` that adds the weave's fine scale.
-    `outline`: the rings over which a front is read as smeared and drawn within a texel
-    (`madder.Outline`, `sharpen_outline`; core `texture::outline`), or 0 for the
-    images as rasterized.
+    `outline`: the rings over which a front is read as smeared (`madder.Outline`; core
+    `texture::outline`), or 0 for the images as rasterized; `shader`: whether the front is
+    left to the shader (`madder.lift_outline`, the wet image gains `DISTANCE_CHANNEL`;
+    then `texel` is a texel's size in metres along u and v) instead of drawn within a
+    texel (`madder.sharpen_outline`).
 
     `overlapping` holds the texels covered by more than one UV triangle (overlapping
     islands), as `madder.rasterize` counts them on the first frame exported."""
 
     def __init__(self, madder, reader, faces, uv, references, color, size, folder, name, padding=PADDING,
-                 weave=None, outline=0):
+                 weave=None, outline=0, shader=False, texel=None):
         self.madder, self.reader = madder, reader
         self.faces = np.ascontiguousarray(faces, dtype=np.uint32)
         self.uv = np.ascontiguousarray(uv, dtype=np.float32)
@@ -344,6 +353,11 @@ class Exporter:
         self.weave = weave or {}
         # the Detail mesh's rings, built once for every frame (`madder.Outline`)
         self._outline = madder.Outline(self.faces, reader.n_vertices, int(outline)) if outline else None
+        self.shader = bool(self._outline) and bool(shader)
+        if self.shader:
+            if texel is None or not all(np.isfinite(t) and t > 0 for t in texel):
+                raise ValueError(f"the outline left to the shader needs the texel's size in metres, got {texel}")
+            self.texel = (float(texel[0]), float(texel[1]))
         self._fields = None  # the frame's outline fields (N, 2), read with the values
         self._fields_raster = None  # (frame, their image)
         n = reader.n_vertices
@@ -410,7 +424,15 @@ class Exporter:
                     extra["weave"] = self.weave[kind]
             image, overlapping = self.madder.rasterize(self.faces, self.uv, values, self.size, self.padding,
                                                        **extra)
-            if self._outline is not None:  # the front drawn within a texel
+            if self.shader:  # the front left to the shader: the stain lifted, its distance
+                fields = self._fields_image(frame)
+                if kind == "stain":
+                    self.madder.lift_outline(fields, self.texel, stain=image)
+                else:
+                    image = np.concatenate([image, np.empty(image.shape[:2] + (1,), np.float32)], axis=2)
+                    self.madder.lift_outline(fields, self.texel, wet=image, distance=len(WET_CHANNELS))
+                    channels = WET_CHANNELS + (DISTANCE_CHANNEL,)
+            elif self._outline is not None:  # the front drawn within a texel
                 fields = self._fields_image(frame)
                 if kind == "stain":
                     self.madder.sharpen_outline(fields, stain=image)

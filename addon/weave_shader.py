@@ -368,6 +368,41 @@ def metres_per_uv(obj, uv_name=""):
     return statistics.median((dco[ok] / duv[ok]).tolist()) * bpy.context.scene.unit_settings.scale_length
 
 
+def metres_per_uv_axes(obj, uv_name=""):
+    """Metres of rest surface per UV unit of `obj` along u and along v, `(s_u, s_v)`: the
+    medians over its polygons of the lengths of the rest pose's Jacobian columns dX/du and
+    dX/dv, from each polygon's first three corners (a layout that maps a 2 × 1.2 m cloth
+    onto the unit square stretches the two axes differently; `metres_per_uv` is their
+    one-number summary). On UV map `uv_name` (the active render map when empty); None when
+    no polygon has UV area."""
+    mesh = obj.data
+    layer = mesh.uv_layers.get(uv_name) if uv_name else next(
+        (u for u in mesh.uv_layers if u.active_render), mesh.uv_layers.active)
+    if layer is None or not mesh.polygons:
+        return None
+    n = len(mesh.loops)
+    uv = np.empty(2 * n)
+    layer.data.foreach_get("uv", uv)
+    uv = uv.reshape(-1, 2)
+    vi = np.empty(n, dtype=np.int64)
+    mesh.loops.foreach_get("vertex_index", vi)
+    co = np.empty(3 * len(mesh.vertices))
+    mesh.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3) @ np.array(obj.matrix_world)[:3, :3].T
+    start = np.empty(len(mesh.polygons), dtype=np.int64)
+    mesh.polygons.foreach_get("loop_start", start)
+    corners = start[:, None] + np.arange(3)
+    duv = uv[corners[:, 1:]] - uv[corners[:, :1]]  # (P, 2 edges, 2)
+    dx = co[vi[corners[:, 1:]]] - co[vi[corners[:, :1]]]  # (P, 2 edges, 3)
+    det = duv[:, 0, 0] * duv[:, 1, 1] - duv[:, 0, 1] * duv[:, 1, 0]
+    ok = np.abs(det) > 1e-12
+    if not ok.any():
+        return None
+    jac = np.linalg.solve(duv[ok], dx[ok])  # rows: dX/du, dX/dv
+    unit = bpy.context.scene.unit_settings.scale_length
+    return tuple(float(np.median(np.linalg.norm(jac[:, k], axis=1))) * unit for k in range(2))
+
+
 def camera_pixel(scene):
     """`(pixel angle in radians, orthographic pixel size in Blender units)` of the scene's
     active camera at its render resolution; (0, 0) without a camera (no filtering)."""

@@ -333,3 +333,71 @@ def test_the_previous_group_is_upgraded_in_place(open_fixture):
     group.nodes.new("ShaderNodeMath")
     assert shading.stain_group() == group and group["madder_revision"] == shading.REVISION
     assert len(group.nodes) == n_nodes
+
+
+def _front_render(tmp_path, name, edge, roughness, size=0.4, pixels=1000):
+    """The group's Dye output rendered (Cycles, orthographic, one point sample a pixel,
+    32-bit EXR) on a `size` m square centred at the origin, the group fed Coverage 1, an
+    Outline Distance of x (metres: the front along x = 0, the stain at x > 0), the Outline
+    Position the point itself, and `edge`, `roughness`. Returns the (pixels, pixels) dye,
+    row 0 at low y, and the pixels' centres' x (metres)."""
+    bpy.ops.wm.read_homefile(use_empty=True)  # (as build_swatches: the add-on stays enabled)
+    scene = bpy.context.scene
+    mat = bpy.data.materials.new(name)
+    nt = compat.ensure_node_tree(mat)
+    nt.nodes.clear()
+    group = nt.nodes.new("ShaderNodeGroup")
+    group.node_tree = shading.stain_group()
+    coords, split = nt.nodes.new("ShaderNodeTexCoord"), nt.nodes.new("ShaderNodeSeparateXYZ")
+    nt.links.new(coords.outputs["Object"], split.inputs[0])
+    nt.links.new(split.outputs["X"], group.inputs["Outline Distance"])
+    nt.links.new(coords.outputs["Object"], group.inputs["Outline Position"])
+    group.inputs["Coverage"].default_value = 1.0
+    group.inputs["Edge Width"].default_value = edge
+    group.inputs["Front Roughness"].default_value = roughness
+    emit, out = nt.nodes.new("ShaderNodeEmission"), nt.nodes.new("ShaderNodeOutputMaterial")
+    nt.links.new(group.outputs["Dye"], emit.inputs["Color"])
+    nt.links.new(emit.outputs[0], out.inputs["Surface"])
+    _plane(name, (0.0, 0.0, 0.0), size, mat)
+    cam = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
+    cam.data.type, cam.data.ortho_scale = "ORTHO", size
+    cam.location = (0.0, 0.0, 1.0)
+    scene.collection.objects.link(cam)
+    scene.camera, scene.render.engine = cam, "CYCLES"
+    scene.cycles.samples, scene.cycles.device, scene.cycles.max_bounces = 1, "CPU", 0
+    scene.render.filter_size = 0.01
+    scene.render.resolution_x = scene.render.resolution_y = pixels
+    scene.render.resolution_percentage = 100
+    scene.view_settings.view_transform = "Standard"
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    scene.render.image_settings.color_depth = "32"
+    scene.render.filepath = str(tmp_path / f"{name}.exr")
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(scene.render.filepath)
+    px = np.array(img.pixels[:], dtype=np.float64).reshape(pixels, pixels, 4)[..., 0]
+    bpy.data.images.remove(img)
+    return px, (np.arange(pixels) + 0.5) * size / pixels - size / 2
+
+
+def test_the_front_is_drawn_at_the_pixel_with_its_roughness(addon, tmp_path):
+    """The group's front (module doc, "The outline"): with no roughness, the dye across a
+    front at x = 0 rises as clamp(½ + x/e), 10–90 % over 0.8 e, centred on the front;
+    with the Edge Width far above the roughness the cover is linear in the noise, so the
+    image gives the front's wander itself, whose RMS is the Front Roughness (the
+    NOISE_RMS calibration: 3.02 mm measured for 3 mm) and whose mean is 0 (the front is
+    not moved on average)."""
+    e = 4e-3
+    px, x = _front_render(tmp_path, "smooth", e, 0.0, size=0.04, pixels=400)
+    # (the rows along the square's top and bottom edges, which Cycles samples at the
+    # plane's very border, are left out)
+    np.testing.assert_allclose(px[4:-4], np.broadcast_to(np.clip(0.5 + x / e, 0, 1), px[4:-4].shape), atol=0.01)
+    # the wander: cover = ½ + n/e for |n| far below e/2
+    wide = 1.0
+    px, x = _front_render(tmp_path, "rough", wide, 3e-3)
+    wander = (px[4:-4] - (0.5 + x / wide)) * wide
+    rms = wander.std()
+    print(f"front wander: RMS {rms * 1e3:.2f} mm for a Front Roughness of 3 mm, mean {wander.mean() * 1e3:.3f} mm")
+    assert rms == pytest.approx(3e-3, rel=0.15)
+    # the mean, to the sampling error of the largest octave over ten periods (~RMS/10
+    # a period-row, 0.78 mm measured); an offset of Fac's mean by 0.05 would be 3 mm
+    assert abs(wander.mean()) < 1.2e-3

@@ -202,6 +202,13 @@ def sharpen_outline(A):
     return stain
 
 
+def lift_outline(A):
+    fields = f16(madder.rasterize(FACES, UV, madder.Outline(FACES, NV, 1).fields(STAINED), 16, 2)[0])
+    stain, _ = madder.rasterize(FACES, UV, np.c_[STAINED, STAINED, STAINED, STAINED], 16, 2)
+    madder.lift_outline(A.f("fields", fields), (0.01, 0.02), stain)
+    return stain
+
+
 def write_exr(A, path):
     image = f16(np.stack([np.outer(np.linspace(0, 1, 4), np.linspace(1, 2, 5))] * 3, -1))
     madder.write_exr(path, A.f("image", image), ["R", "G", "B"])
@@ -249,7 +256,7 @@ CASES = {
     for f in [
         topology, weft_directions, distances_within, refinement_face_uv, diffusion_stepper, diffusion_stepper_woven,
         simulator, ftle, ridges, encode_angles, decode_angles, homogenize, rasterize, rasterize_weave,
-        outline, sharpen_outline, position_baseline_stats,
+        outline, sharpen_outline, lift_outline, position_baseline_stats,
     ]
 }
 FILE_CASES = {f.__name__: f for f in [write_exr, cache_writer, write_pc2, write_mdd, pc2_writer, motion_encoder]}
@@ -303,6 +310,7 @@ ARGS = {
     "rasterize_weave": "face_fabric:i face_map:f",
     "outline": "faces:i coverage:f",
     "sharpen_outline": "fields:f",
+    "lift_outline": "fields:f",
     "position_baseline_stats": "frames:f",
     "write_exr": "image:f",
     "cache_writer": "fields[0]:f fields[1]:f",

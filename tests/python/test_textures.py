@@ -357,3 +357,46 @@ def test_sharp_outline_draws_the_front_in_both_images_from_one_raster_of_its_fie
     np.testing.assert_allclose(stain3[..., 0], 0.5 * stain3[..., 3], atol=2e-3)  # the hue (half float)
     assert np.array_equal(wet3[..., :2], wet0[..., :2]) and np.array_equal(wet3_ten[..., :2], wet0_ten[..., :2])
     assert (wet3_ten[..., 2] <= wet0_ten[..., 2]).all() and (wet3_ten[..., 2] < wet0_ten[..., 2]).any()
+
+
+def test_outline_in_shader_lifts_the_stain_and_writes_the_front_distance_as_the_wet_alpha(tmp_path):
+    """With `shader` (Sharp Outline in the shader) the exporter lifts the stain to its
+    plateau (`madder.lift_outline`) and writes the front's signed distance in metres as a
+    fourth channel of the wet image (`DISTANCE_CHANNEL`), wetness, deposit and excess as
+    rasterized; the texel's size in metres is required."""
+    n = 16
+    j, i = np.meshgrid(np.arange(n + 1), np.arange(n + 1))
+    a = (i[:-1, :-1] * (n + 1) + j[:-1, :-1]).ravel()
+    faces = np.concatenate([np.stack([a, a + 1, a + n + 2], 1), np.stack([a, a + n + 2, a + n + 1], 1)])
+    faces = faces.astype(np.uint32)
+    uv_v = np.stack([j.ravel() / n, i.ravel() / n], 1)
+    uv = uv_v[faces].astype(np.float32)
+    ramp = np.clip(0.5 + (0.5 - uv_v[:, 0]) * n / 3, 0, 1)  # a front smeared over three cells at u = ½
+    path = tmp_path / "Flag.fine.madder"
+    writer = madder.CacheWriter(str(path), len(uv_v), ["solute", "wetness", "deposit"], 1, 1)
+    writer.push_frame([(1e-3 * ramp).astype(np.float32), (0.1 * ramp).astype(np.float32),
+                       np.zeros(len(uv_v), np.float32)])
+    writer.finish()
+    refs, color = (1e-3, 0.1, 2e-4), (0.5, 0.25, 1.0)
+    with pytest.raises(ValueError, match="texel's size in metres"):
+        textures.Exporter(madder, madder.CacheReader(str(path)), faces, uv, refs, color, 512, str(tmp_path),
+                          "Flag", outline=3, shader=True)
+    images = {}
+    for shader in (False, True):
+        out = tmp_path / f"images{shader}"
+        out.mkdir()
+        size = 512
+        ex = textures.Exporter(madder, madder.CacheReader(str(path)), faces, uv, refs, color, size, str(out), "Flag",
+                               outline=3 if shader else 0, shader=shader, texel=(0.1 / size, 0.05 / size))
+        ex.export(1)
+        images[shader] = [madder.read_exr(str(out / f"Flag_{k}.0001.exr")) for k in textures.KINDS]
+    (stain0, wet0), (stain1, wet1) = images[False], images[True]
+    assert wet0.shape[2] == 3 and wet1.shape[2] == 4
+    assert np.array_equal(wet1[..., :3], wet0)
+    x = (np.arange(size) + 0.5) / size
+    exact = 0.1 * (0.5 - x)  # metres behind the front (a 10 cm wide cloth)
+    near = np.abs(exact) < 5e-4
+    np.testing.assert_allclose(wet1[:, near, 3], np.broadcast_to(exact[near], (size, near.sum())), atol=1e-4)
+    zone = (stain0[..., 3] > 0.01) & (x > 0.5 - 1 / n)  # stained, every vertex near the dry cloth
+    assert np.all(stain1[..., 3][zone] > 0.99)  # lifted to the plateau (half float)
+    np.testing.assert_allclose(stain1[..., 0], 0.5 * stain1[..., 3], atol=2e-3)

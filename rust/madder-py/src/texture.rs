@@ -395,6 +395,67 @@ pub fn sharpen_outline<'py>(
     excess: usize,
     threads: Option<usize>,
 ) -> PyResult<()> {
+    outline_pass(
+        py,
+        fields,
+        stain,
+        wet,
+        ("excess", excess),
+        threads,
+        core::sharpen,
+    )
+}
+
+/// Leaves the stain's outline to the shader, in place (core `texture::outline`, "At the
+/// pixel").
+///
+/// `lift_outline(fields, texel, stain=None, wet=None, *, distance=3, threads=None)`:
+/// `fields` as for `sharpen_outline`; `texel` a texel's size in metres along u and v;
+/// `stain` the premultiplied RGBA stain image, lifted to its plateau over the front's
+/// zone; `wet` the `(size, size, C)` wet image, whose channel `distance` gets the front's
+/// signed distance in metres (positive behind it, `±DISTANCE_LIMIT` far behind or ahead). The GIL
+/// is released; the result does not depend on `threads`.
+#[pyfunction]
+#[pyo3(signature = (fields, texel, stain=None, wet=None, *, distance=3, threads=None))]
+pub fn lift_outline<'py>(
+    py: Python<'py>,
+    fields: &Bound<'py, PyAny>,
+    texel: (f32, f32),
+    stain: Option<Bound<'py, PyArrayDyn<f32>>>,
+    wet: Option<Bound<'py, PyArrayDyn<f32>>>,
+    distance: usize,
+    threads: Option<usize>,
+) -> PyResult<()> {
+    if !(texel.0 > 0.0 && texel.1 > 0.0 && texel.0.is_finite() && texel.1.is_finite()) {
+        return Err(ParameterError::new_err(format!(
+            "texel must be two positive sizes in metres, got {texel:?}"
+        )));
+    }
+    outline_pass(
+        py,
+        fields,
+        stain,
+        wet,
+        ("distance", distance),
+        threads,
+        |f, size, stain, wet| core::lift(f, size, [texel.0, texel.1], stain, wet),
+    )
+}
+
+type WetImage<'a> = Option<(&'a mut [f32], usize, usize)>;
+
+/// Checks an outline pass's images against `fields` (the `(size, size, FIELDS)` raster)
+/// and runs `pass` on them: the wet image's channel `channel` (its name, its index) must
+/// exist.
+fn outline_pass<'py>(
+    py: Python<'py>,
+    fields: &Bound<'py, PyAny>,
+    stain: Option<Bound<'py, PyArrayDyn<f32>>>,
+    wet: Option<Bound<'py, PyArrayDyn<f32>>>,
+    channel: (&str, usize),
+    threads: Option<usize>,
+    pass: impl FnOnce(&[f32], usize, Option<&mut [f32]>, WetImage<'_>) + Send,
+) -> PyResult<()> {
     let fields = args::floats::<f32, IxDyn>("fields", fields)?;
     let fshape = fields.shape().to_vec();
     let fields = flat("fields", &fields, &[3])?;
@@ -411,10 +472,11 @@ pub fn sharpen_outline<'py>(
             stain.shape()
         )));
     }
+    let (name, index) = channel;
     let channels = match &wet {
-        Some(w) if w.ndim() != 3 || w.shape()[..2] != [size, size] || excess >= w.shape()[2] => {
+        Some(w) if w.ndim() != 3 || w.shape()[..2] != [size, size] || index >= w.shape()[2] => {
             return Err(ParameterError::new_err(format!(
-                "wet must have shape ({size}, {size}, C) with channel {excess} in it, got {:?}",
+                "wet must have shape ({size}, {size}, C) with channel {index} ({name}) in it, got {:?}",
                 w.shape()
             )));
         }
@@ -429,10 +491,10 @@ pub fn sharpen_outline<'py>(
     };
     let mut wet_guard = wet.as_ref().map(|w| w.try_readwrite()).transpose()?;
     let wet = match wet_guard.as_mut() {
-        Some(g) => Some((writeable("wet", g)?, channels, excess)),
+        Some(g) => Some((writeable("wet", g)?, channels, index)),
         None => None,
     };
-    pool.run(py, || core::sharpen(&fields, size, stain, wet));
+    pool.run(py, || pass(&fields, size, stain, wet));
     Ok(())
 }
 
@@ -440,6 +502,8 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(rasterize, m)?)?;
     m.add_class::<Outline>()?;
     m.add_function(wrap_pyfunction!(sharpen_outline, m)?)?;
+    m.add_function(wrap_pyfunction!(lift_outline, m)?)?;
+    m.add("OUTLINE_DISTANCE_LIMIT", core::outline::DISTANCE_LIMIT)?;
     m.add_class::<WeaveDetail>()?;
     m.add("NO_WEAVE", core::NO_WEAVE)?;
     m.add_function(wrap_pyfunction!(write_exr, m)?)?;

@@ -253,6 +253,18 @@ def sharpen_outline(
     threads: int | None = None,
 ) -> None: ...
 
+def lift_outline(
+    fields: _Floats,
+    texel: tuple[float, float],
+    stain: _F32 | None = None,
+    wet: _F32 | None = None,
+    *,
+    distance: int = 3,
+    threads: int | None = None,
+) -> None: ...
+
+OUTLINE_DISTANCE_LIMIT: Final[float]
+
 class Outline:
     def __new__(cls, faces: _Indices, n_vertices: int, rings: int = 3) -> Outline: ...
     @property

@@ -26,7 +26,8 @@
 //! issue 13 part 4; see [`weave`] for the math and why it runs inside the rasterizer),
 //! and [`clip()`] (`clip.rs`) limits the finished image to what the shader reads.
 //! [`sharpen`] (`outline.rs`) then draws the stain's outline within a texel where the
-//! simulation's front is a few cells wide (issue 34 §2; see [`outline`] for the math).
+//! simulation's front is a few cells wide (issue 34 §2; see [`outline`] for the math), or
+//! [`lift`] leaves it to the shader, at the pixel.
 //!
 //! ## Image layout
 //! `size × size × C` `f32`, row-major, **row 0 at the bottom** (`v ∈ [0, 1/size)`), as
@@ -57,7 +58,7 @@ pub mod weave;
 pub use self::clip::{Clip, clip};
 pub use self::exr::{Compression, ExrImage, read_exr, write_exr, write_exr_with};
 pub use crate::error::TextureError;
-pub use outline::{Outline, outline_fields, sharpen};
+pub use outline::{Outline, lift, outline_fields, sharpen};
 pub use pad::{DEFAULT_PADDING, pad, pad_to};
 pub use raster::{
     MAX_CHANNELS, MAX_SIZE, Raster, rasterize, rasterize_into, rasterize_to, rasterize_to_with,

@@ -45,8 +45,39 @@
 //! keep `f` near 1 on their plateau side and are cut only at their own half level.
 //!
 //! The output depends on the texel size only through `|∇f|` in texels: the same front at a
-//! finer image is drawn at that image's texel. Both passes are exact per element (max, min
-//! and one texel's arithmetic), so the result is the same on any number of threads.
+//! finer image is drawn at that image's texel.
+//!
+//! ## At the pixel ([`lift`])
+//! A texel is still a few millimetres on a large cloth, and a thread pitch is a fraction of
+//! one. So the front can instead be left to the shader, which draws it at the pixel: the
+//! images carry the stain **lifted** to its plateau over the zone, the box filter's `s`
+//! taken as 1,
+//!
+//! ```text
+//! L = c · (1 + w (1/f − 1)) = c (1 − w) + w P
+//! ```
+//!
+//! (a texel ahead of the smear, `f` ≈ 0 in the zone, takes the mean of its lifted
+//! 4-neighbours, so that the plateau reaches a texel past the last stained one), and a
+//! channel of the wet image carries the front's **signed distance** in metres, positive
+//! behind it,
+//!
+//! ```text
+//! D = w · clamp((f − ½) / |∇f|, ±DISTANCE_LIMIT) + (1 − w) · (±DISTANCE_LIMIT)
+//! ```
+//!
+//! with `∇f` the central differences over the texel's size in metres along u and v (the
+//! UV layout's scale per axis), and outside the zone `+DISTANCE_LIMIT` on the stain
+//! (`f` above 0), `−DISTANCE_LIMIT` on clean cloth (no stain within `k` rings, `f` = 0),
+//! so that `D` = 0 is the front alone. Bilinear filtering reads `D` linearly at any point,
+//! so the shader's `s = clamp(½ + (D + n)/e)` (`n` its roughness, `e` the edge's width;
+//! add-on `shading`) places the front to a fraction of a pixel: the stain drawn is
+//! `L · s`. Outside the zone `s` is 1 on the stain and 0 on clean cloth: the stain is the
+//! simulation's. The dye above saturation is not lifted (the shader multiplies it by `s`
+//! too).
+//!
+//! Every pass is exact per element (max, min and one texel's arithmetic), so the result
+//! is the same on any number of threads.
 
 use rayon::prelude::*;
 
@@ -59,6 +90,13 @@ pub const DEFAULT_RINGS: usize = 3;
 pub const DRY: f32 = 0.02;
 /// Values per vertex of [`outline_fields`]: `f`, `w`.
 pub const FIELDS: usize = 2;
+/// Below this fraction of its plateau a texel is taken as unstained by [`lift`] (its
+/// `1/f` would overflow the colour's channels).
+const F_MIN: f32 = 1e-6;
+/// The largest distance to the front (metres) that [`lift`]'s channel carries: a texel
+/// farther is well behind or ahead of it for the shader (whose roughness is a millimetre
+/// or two), and outside the zone the channel is this.
+pub const DISTANCE_LIMIT: f32 = 0.02;
 
 /// The vertices' neighbours along the mesh's edges, compressed rows (`offsets`, `nbrs`).
 fn neighbours(n_vertices: usize, faces: &[[u32; 3]]) -> (Vec<usize>, Vec<u32>) {
@@ -230,26 +268,41 @@ pub fn sharpen(
 ) {
     let n = size * size;
     assert!(fields.len() == FIELDS * n, "fields layout");
-    let f = |x: usize, y: usize| fields[FIELDS * (y * size + x)];
     let ratios: Vec<f32> = (0..n)
         .into_par_iter()
         .map(|i| {
-            let (x, y) = (i % size, i / size);
-            let (x0, x1) = (x.saturating_sub(1), (x + 1).min(size - 1));
-            let (y0, y1) = (y.saturating_sub(1), (y + 1).min(size - 1));
-            let gx = if x1 > x0 {
-                (f(x1, y) - f(x0, y)) / (x1 - x0) as f32
-            } else {
-                0.0
-            };
-            let gy = if y1 > y0 {
-                (f(x, y1) - f(x, y0)) / (y1 - y0) as f32
-            } else {
-                0.0
-            };
+            let [gx, gy] = gradient(fields, size, i);
             ratio(fields[FIELDS * i], fields[FIELDS * i + 1], gx.hypot(gy))
         })
         .collect();
+    scale(&ratios, stain, wet);
+}
+
+/// The central differences of the `f` raster at texel `i`, per texel along x and y (one
+/// side at the image's border).
+#[inline]
+fn gradient(fields: &[f32], size: usize, i: usize) -> [f32; 2] {
+    let f = |x: usize, y: usize| fields[FIELDS * (y * size + x)];
+    let (x, y) = (i % size, i / size);
+    let (x0, x1) = (x.saturating_sub(1), (x + 1).min(size - 1));
+    let (y0, y1) = (y.saturating_sub(1), (y + 1).min(size - 1));
+    let gx = if x1 > x0 {
+        (f(x1, y) - f(x0, y)) / (x1 - x0) as f32
+    } else {
+        0.0
+    };
+    let gy = if y1 > y0 {
+        (f(x, y1) - f(x, y0)) / (y1 - y0) as f32
+    } else {
+        0.0
+    };
+    [gx, gy]
+}
+
+/// Every channel of each stain texel times its ratio (re-clipped where the coverage then
+/// exceeds 1), and the wet image's excess channel times `min(r, 1)`.
+fn scale(ratios: &[f32], stain: Option<&mut [f32]>, wet: Option<(&mut [f32], usize, usize)>) {
+    let n = ratios.len();
     if let Some(stain) = stain {
         assert!(stain.len() == 4 * n, "stain image layout");
         let over = stain
@@ -278,6 +331,111 @@ pub fn sharpen(
                 if r < 1.0 {
                     px[excess] *= r;
                 }
+            });
+    }
+}
+
+/// Leaves the front to the shader (module doc, "At the pixel"): lifts the stain image to
+/// its plateau over the zone, a texel past the smear, and writes the front's signed
+/// distance (metres) into channel `distance` of the wet image, `(pixels, channels,
+/// distance)`. `fields` is the `size × size × FIELDS` raster of [`outline_fields`] and
+/// `texel` a texel's size in metres along x (u) and y (v).
+///
+/// # Panics
+/// When the images' lengths disagree with `size`.
+pub fn lift(
+    fields: &[f32],
+    size: usize,
+    texel: [f32; 2],
+    stain: Option<&mut [f32]>,
+    wet: Option<(&mut [f32], usize, usize)>,
+) {
+    let n = size * size;
+    assert!(fields.len() == FIELDS * n, "fields layout");
+    let at = |i: usize| (fields[FIELDS * i], fields[FIELDS * i + 1]);
+    let zoned = |f: f32, w: f32| f.is_finite() && w.is_finite() && w > 0.0;
+    if let Some(stain) = stain {
+        assert!(stain.len() == 4 * n, "stain image layout");
+        let ratios: Vec<f32> = (0..n)
+            .into_par_iter()
+            .map(|i| match at(i) {
+                (f, w) if zoned(f, w) && f > F_MIN => 1.0 + w * (1.0 / f - 1.0),
+                _ => 1.0,
+            })
+            .collect();
+        scale(&ratios, Some(&mut *stain), None);
+        // a zone texel ahead of the smear takes its lifted 4-neighbours' mean
+        let lifted: &[f32] = stain;
+        let fill: Vec<(usize, [f32; 4])> = (0..n)
+            .into_par_iter()
+            .filter_map(|i| {
+                let (f, w) = at(i);
+                if !(zoned(f, w) && f <= F_MIN) {
+                    return None;
+                }
+                let (x, y) = (i % size, i / size);
+                let mut sum = [0.0f32; 4];
+                let mut count = 0.0f32;
+                let mut add = |j: usize| {
+                    let (fj, wj) = at(j);
+                    if zoned(fj, wj) && fj > F_MIN {
+                        for (s, v) in sum.iter_mut().zip(&lifted[4 * j..4 * j + 4]) {
+                            *s += v;
+                        }
+                        count += 1.0;
+                    }
+                };
+                if x > 0 {
+                    add(i - 1);
+                }
+                if x + 1 < size {
+                    add(i + 1);
+                }
+                if y > 0 {
+                    add(i - size);
+                }
+                if y + 1 < size {
+                    add(i + size);
+                }
+                (count > 0.0).then(|| (i, sum.map(|s| s / count)))
+            })
+            .collect();
+        for (i, px) in fill {
+            stain[4 * i..4 * i + 4].copy_from_slice(&px);
+        }
+    }
+    if let Some((wet, channels, distance)) = wet {
+        assert!(
+            wet.len() == channels * n && distance < channels,
+            "wet image layout"
+        );
+        wet.par_chunks_exact_mut(channels)
+            .enumerate()
+            .for_each(|(i, px)| {
+                let (f, w) = at(i);
+                // outside the zone: behind the front on the stain, ahead on clean cloth
+                let away = if f > 0.0 {
+                    DISTANCE_LIMIT
+                } else {
+                    -DISTANCE_LIMIT
+                };
+                px[distance] = if zoned(f, w) {
+                    let [gx, gy] = gradient(fields, size, i);
+                    let slope = (gx / texel[0]).hypot(gy / texel[1]);
+                    let d = if slope > 0.0 && slope.is_finite() {
+                        ((f - 0.5) / slope).clamp(-DISTANCE_LIMIT, DISTANCE_LIMIT)
+                    } else if f > 0.5 {
+                        DISTANCE_LIMIT
+                    } else {
+                        -DISTANCE_LIMIT
+                    };
+                    let w = w.min(1.0);
+                    w * d + (1.0 - w) * away
+                } else if f.is_nan() {
+                    DISTANCE_LIMIT
+                } else {
+                    away
+                };
             });
     }
 }
