@@ -5,7 +5,10 @@ In real Blender (bpy) with the extension installed from the zip: the demo's scen
 21k-vertex tablecloth draped on a table, `blend_fixtures/demo.py`) and its spill of red
 wine at Detail 1, 32 frames, baked by `bpy.ops.madder.bake()` with vertex colours only,
 and with the image sequence at 1024 px as well, in interleaved rounds in one process (so
-the machine's drift hits both). Prints the bake times and their ratio; asserts nothing.
+the machine's drift hits both). Then, on the last bake's cache, Re-export Textures with
+Sharp Outline off, within a texel and in the shader (the images lifted and the front's
+distance written), in interleaved rounds. Prints the times and their ratios; asserts
+nothing.
 """
 
 import argparse
@@ -59,6 +62,17 @@ def main():
         f"({1e3 * (textured - plain) / demo.FRAMES:.0f} ms a frame for the images): "
         f"{textured / plain:.2f}x (target <= 2x)"
     )
+    modes = {"off": (False, False), "within a texel": (True, False), "in the shader": (True, True)}
+    spent = {mode: [] for mode in modes}
+    s = bpy.data.objects["Tablecloth"].madder
+    for _ in range(args.rounds):
+        for mode, (sharp, shader) in modes.items():
+            s.sharp_outline, s.outline_in_shader = sharp, shader
+            start = time.perf_counter()
+            assert bpy.ops.madder.export_textures() == {"FINISHED"}
+            spent[mode].append(time.perf_counter() - start)
+    print(f"Re-export Textures of the {demo.FRAMES} frames at {args.size} px, Sharp Outline "
+          + ", ".join(f"{mode}: {statistics.median(t):.1f} s" for mode, t in spent.items()))
 
 
 if __name__ == "__main__":
