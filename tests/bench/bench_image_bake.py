@@ -3,7 +3,7 @@ bake without it, at 1024 px), measured from outside as a user meets it.
 
 In real Blender (bpy) with the extension installed from the zip: the demo's scene (the
 21k-vertex tablecloth draped on a table, `blend_fixtures/demo.py`) and its spill of red
-wine at Detail 1, 32 frames, baked by `bpy.ops.madder.bake()` with vertex colours only,
+wine at Detail 1, all its frames, baked by `bpy.ops.madder.bake()` with vertex colours only,
 and with the image sequence at 1024 px as well, in interleaved rounds in one process (so
 the machine's drift hits both). Then, on the last bake's cache, Re-export Textures with
 Sharp Outline off, within a texel and in the shader (the images lifted and the front's
