@@ -147,6 +147,7 @@ class SequenceExport:
         self.madder, self.obj = madder, obj
         s = obj.madder  # the outline's mode as the export began (`record` keeps it)
         self.outline = ("SHADER" if s.outline_in_shader else "TEXEL") if s.sharp_outline else ""
+        texel = self._texel(size) if self.outline == "SHADER" else None
         try:
             self.reader = madder.CacheReader(fine_path)
             refinement = madder.Refinement(topology, level)
@@ -160,8 +161,7 @@ class SequenceExport:
         self.exporter = textures.Exporter(
             madder, self.reader, refinement.faces(), refinement.face_uv(uv), references,
             tuple(obj.madder.stain_color), size, folder, name, weave=weave[0] if weave else None,
-            outline=textures.OUTLINE_RINGS if self.outline else 0, shader=self.outline == "SHADER",
-            texel=self._texel(uv, size) if self.outline == "SHADER" else None)
+            outline=textures.OUTLINE_RINGS if self.outline else 0, shader=texel is not None, texel=texel)
         self.weave_warnings = list(weave[1]) if weave else []
         self.first, self.last = self.exporter.first, self.exporter.last
         self.size = self.exporter.size
@@ -171,7 +171,7 @@ class SequenceExport:
         self.done = 0
         self.overlapping = None
 
-    def _texel(self, uv, size):
+    def _texel(self, size):
         """A texel's size in metres along u and v at `size` px: the cloth's rest metres per
         UV unit per axis (`weave_shader.metres_per_uv_axes`) over `size`."""
         from . import weave_shader
@@ -221,7 +221,8 @@ class SequenceExport:
 
 def record(obj, first, last, size, uv_map, outline):
     """What the shader needs to read the sequence, and how Sharp Outline drew it
-    (`outline`, one of `textures.OUTLINE_MODES`), recorded on the object."""
+    (`outline`: "" as rasterized, "TEXEL" within a texel, "SHADER" lifted with the front's
+    distance for the shader), recorded on the object."""
     s = obj.madder
     s.image_baked = True
     s.image_frames = (first, last)

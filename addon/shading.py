@@ -131,6 +131,13 @@ GROUP = "Madder Stain"
 INPUT_PREFIX = "Madder Input: "
 SEE_THROUGH = "Madder See-Through"  # the material's Transparent BSDF and its Mix Shader
 MIX = "Madder Wet Transmission"
+# the front's roughness (module doc): fractal noise of Hurst exponent FRONT_HURST, an
+# octave's amplitude 2^-H of the one before, FRONT_OCTAVES octaves below the Front Scale
+FRONT_HURST = 0.4
+FRONT_OCTAVES = 10.0
+# RMS of Blender's normalized fBm Noise Texture (its Fac about ½) at those settings,
+# measured over 10⁶ points of 10² and 40² periods: 0.0472, 0.0449
+NOISE_RMS = 0.046
 # the group's inputs: name, socket type, default, range, tooltip
 _INPUTS = (
     ("Base Color", "NodeSocketColor", (0.8, 0.8, 0.8, 1.0), None, "The clean, dry cloth's colour"),
@@ -169,7 +176,7 @@ _INPUTS = (
      "material's fabric when the material is synced)"),
     ("Front Roughness", "NodeSocketFloat", 0.003, (0.0, 0.01),
      "How far (m, RMS) the front wanders from the simulated outline at the Front Scale; at every "
-     "scale below it, as that scale to the power 0.65 (0: the simulated outline, sharp)"),
+     f"scale below it, as that scale to the power {FRONT_HURST} (0: the simulated outline, sharp)"),
     ("Front Scale", "NodeSocketFloat", 0.04, (0.0001, 1.0),
      "The largest scale (m) of the front's own roughness (above it the simulation's outline)"),
 )
@@ -183,13 +190,6 @@ _OLD_DEFAULTS = {"Wet Roughness": 0.25}
 # Stain / min(Coverage, 1), as the attributes premultiply by the coverage, not the amount;
 # 3: the front drawn at the pixel from Outline Distance)
 REVISION = 3
-# the front's roughness (module doc): fractal noise of Hurst exponent FRONT_HURST, an
-# octave's amplitude 2^-H of the one before, FRONT_OCTAVES octaves below the Front Scale
-FRONT_HURST = 0.4
-FRONT_OCTAVES = 10.0
-# RMS of Blender's normalized fBm Noise Texture (its Fac about ½) at those settings,
-# measured over 10⁶ points of 10² and 40² periods: 0.0472, 0.0449
-NOISE_RMS = 0.046
 # smallest reflectance the K/S maths sees (K/S = (1 − R)²/2R is infinite at R = 0)
 R_MIN = 1e-3
 # smallest dye amount the liquid's colour is recovered from (Stain / min(Coverage, 1))
@@ -268,11 +268,7 @@ def _front(m, nodes, links, g):
     links.new(g.outputs["Outline Position"], where.inputs[0])
     links.new(m.op("DIVIDE", 1.0, m.op("MAXIMUM", g.outputs["Front Scale"], 1e-6)), where.inputs["Scale"])
     noise = nodes.new("ShaderNodeTexNoise")
-    noise.noise_dimensions = "3D"
-    if hasattr(noise, "noise_type"):
-        noise.noise_type = "FBM"
-    if hasattr(noise, "normalize"):
-        noise.normalize = True
+    noise.noise_dimensions, noise.noise_type, noise.normalize = "3D", "FBM", True  # (Blender 4.1+)
     noise.inputs["Scale"].default_value = 1.0
     noise.inputs["Detail"].default_value = FRONT_OCTAVES
     noise.inputs["Roughness"].default_value = 2.0 ** -FRONT_HURST

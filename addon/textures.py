@@ -67,10 +67,6 @@ WET_CHANNELS = ("R", "G", "B")
 # with the outline left to the shader, the wet image's alpha is the front's signed
 # distance in metres (core `texture::outline`, "At the pixel"; `shading` reads it)
 DISTANCE_CHANNEL = "A"
-OUTLINE_MODES = ("", "TEXEL", "SHADER")
-"""How the images draw the stain's outline: as rasterized (""), within a texel
-(`madder.sharpen_outline`), or lifted with its distance for the shader to draw at the
-pixel (`madder.lift_outline`)."""
 
 
 # -- names

@@ -331,37 +331,46 @@ def weave_group(fabric):
     return build(group, rows, cpt)
 
 
-def metres_per_uv(obj, uv_name=""):
-    """Metres of rest surface per UV unit of `obj`: the median over its edges (of non-zero
-    UV length) of world edge length / UV edge length, on UV map `uv_name` (the active
-    render map when empty). None when no edge has a UV length."""
+def _rest_uv(obj, uv_name):
+    """`obj`'s corners on UV map `uv_name` (the active render map when empty: what a UV
+    Map node without a name reads): `(uv (L, 2), world positions of the corners' vertices
+    (L, 3), each polygon's loop start and loop total)`, or None without the map or loops."""
     mesh = obj.data
     if uv_name:
         layer = mesh.uv_layers.get(uv_name)
-    else:  # what a UV Map node without a name reads: the active render map
+    else:
         layer = next((u for u in mesh.uv_layers if u.active_render), mesh.uv_layers.active)
     if layer is None or not mesh.loops:
         return None
     n = len(mesh.loops)
     uv = np.empty(2 * n)
     layer.data.foreach_get("uv", uv)
-    uv = uv.reshape(-1, 2)
     vi = np.empty(n, dtype=np.int64)
     mesh.loops.foreach_get("vertex_index", vi)
     co = np.empty(3 * len(mesh.vertices))
     mesh.vertices.foreach_get("co", co)
-    m = np.array(obj.matrix_world)
-    co = co.reshape(-1, 3) @ m[:3, :3].T
+    co = co.reshape(-1, 3) @ np.array(obj.matrix_world)[:3, :3].T
     start = np.empty(len(mesh.polygons), dtype=np.int64)
     total = np.empty(len(mesh.polygons), dtype=np.int64)
     mesh.polygons.foreach_get("loop_start", start)
     mesh.polygons.foreach_get("loop_total", total)
+    return uv.reshape(-1, 2), co[vi], start, total
+
+
+def metres_per_uv(obj, uv_name=""):
+    """Metres of rest surface per UV unit of `obj`: the median over its edges (of non-zero
+    UV length) of world edge length / UV edge length, on UV map `uv_name` (the active
+    render map when empty). None when no edge has a UV length."""
+    corners = _rest_uv(obj, uv_name)
+    if corners is None:
+        return None
+    uv, co, start, total = corners
     # each polygon's corner i to corner i+1
-    a = np.arange(n)
+    a = np.arange(len(uv))
     poly = np.repeat(np.arange(len(start)), total)
     b = start[poly] + (a - start[poly] + 1) % total[poly]
     duv = np.linalg.norm(uv[b] - uv[a], axis=1)
-    dco = np.linalg.norm(co[vi[b]] - co[vi[a]], axis=1)
+    dco = np.linalg.norm(co[b] - co[a], axis=1)
     ok = duv > 1e-9
     if not ok.any():
         return None
@@ -375,25 +384,13 @@ def metres_per_uv_axes(obj, uv_name=""):
     onto the unit square stretches the two axes differently; `metres_per_uv` is their
     one-number summary). On UV map `uv_name` (the active render map when empty); None when
     no polygon has UV area."""
-    mesh = obj.data
-    layer = mesh.uv_layers.get(uv_name) if uv_name else next(
-        (u for u in mesh.uv_layers if u.active_render), mesh.uv_layers.active)
-    if layer is None or not mesh.polygons:
+    corners = _rest_uv(obj, uv_name)
+    if corners is None:
         return None
-    n = len(mesh.loops)
-    uv = np.empty(2 * n)
-    layer.data.foreach_get("uv", uv)
-    uv = uv.reshape(-1, 2)
-    vi = np.empty(n, dtype=np.int64)
-    mesh.loops.foreach_get("vertex_index", vi)
-    co = np.empty(3 * len(mesh.vertices))
-    mesh.vertices.foreach_get("co", co)
-    co = co.reshape(-1, 3) @ np.array(obj.matrix_world)[:3, :3].T
-    start = np.empty(len(mesh.polygons), dtype=np.int64)
-    mesh.polygons.foreach_get("loop_start", start)
-    corners = start[:, None] + np.arange(3)
-    duv = uv[corners[:, 1:]] - uv[corners[:, :1]]  # (P, 2 edges, 2)
-    dx = co[vi[corners[:, 1:]]] - co[vi[corners[:, :1]]]  # (P, 2 edges, 3)
+    uv, co, start, _ = corners
+    first = start[:, None] + np.arange(3)
+    duv = uv[first[:, 1:]] - uv[first[:, :1]]  # (P, 2 edges, 2)
+    dx = co[first[:, 1:]] - co[first[:, :1]]  # (P, 2 edges, 3)
     det = duv[:, 0, 0] * duv[:, 1, 1] - duv[:, 0, 1] * duv[:, 1, 0]
     ok = np.abs(det) > 1e-12
     if not ok.any():

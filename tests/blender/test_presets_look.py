@@ -257,7 +257,8 @@ def test_only_a_preset_gives_a_sharp_stain(open_fixture, tmp_path):
     material = flag.material_slots[0].material
     lengths = np.geomspace(1e-3, 20e-3, 8)
     widths, rough, rendered, expected = [], [], 0.0, 0.0
-    for k, centre in enumerate(front_points(distance, CLOSE_UPS)):
+    centres = front_points(distance, CLOSE_UPS)
+    for k, centre in enumerate(centres):
         dye = render_dye(flag, material, frame, centre, scales, tmp_path / f"close-up-{k}.exr")
         level = local_level(dye, PIXEL, 2e-3)
         widths.append(edge_width(level, (PIXEL, PIXEL)))
@@ -294,7 +295,7 @@ def test_only_a_preset_gives_a_sharp_stain(open_fixture, tmp_path):
     assert sharp_width < 0.6 * soft_width
     assert abs(sharp.sum() / soft.sum() - 1) < 0.02
     # the shader's front keeps the dye: the close-ups' total against the soft images' there
-    for centre in front_points(distance, CLOSE_UPS):
+    for centre in centres:
         pixels = round(WINDOW / PIXEL)
         t = (np.arange(pixels) + 0.5) / pixels - 0.5
         uv = np.stack(np.meshgrid(centre[0] + t * WINDOW / scales[0], centre[1] + t * WINDOW / scales[1]), axis=-1)

@@ -305,6 +305,16 @@ def test_with_the_weave_a_saturated_stain_shows_every_thread_full_and_a_faint_on
         madder.rasterize(FACES, UV, ex._rgba.reshape(-1, 4), 64, 0, clip="over")
 
 
+def _square(n):
+    """The unit square as an n × n grid of triangle pairs: faces (uint32), the vertices'
+    UVs, the faces' corner UVs (float32)."""
+    j, i = np.meshgrid(np.arange(n + 1), np.arange(n + 1))
+    a = (i[:-1, :-1] * (n + 1) + j[:-1, :-1]).ravel()
+    faces = np.concatenate([np.stack([a, a + 1, a + n + 2], 1), np.stack([a, a + n + 2, a + n + 1], 1)])
+    uv_v = np.stack([j.ravel() / n, i.ravel() / n], 1)
+    return faces.astype(np.uint32), uv_v, uv_v[faces].astype(np.float32)
+
+
 def test_sharp_outline_draws_the_front_in_both_images_from_one_raster_of_its_fields(tmp_path):
     """With `outline` (Sharp Outline) the exporter writes the images as rasterized, then
     drawn by `madder.sharpen_outline` from the fields of `madder.Outline` (core
@@ -312,12 +322,7 @@ def test_sharp_outline_draws_the_front_in_both_images_from_one_raster_of_its_fie
     wetness and deposit left; the fields are rasterized once for a frame's two images.
     Without it the images are the plain rasterization's."""
     n = 16
-    j, i = np.meshgrid(np.arange(n + 1), np.arange(n + 1))
-    a = (i[:-1, :-1] * (n + 1) + j[:-1, :-1]).ravel()
-    faces = np.concatenate([np.stack([a, a + 1, a + n + 2], 1), np.stack([a, a + n + 2, a + n + 1], 1)])
-    faces = faces.astype(np.uint32)
-    uv_v = np.stack([j.ravel() / n, i.ravel() / n], 1)
-    uv = uv_v[faces].astype(np.float32)
+    faces, uv_v, uv = _square(n)
     ramp = np.clip(0.5 + (0.5 - uv_v[:, 0]) * n / 3, 0, 1)  # a front smeared over three cells
     path = tmp_path / "Flag.fine.madder"
     writer = madder.CacheWriter(str(path), len(uv_v), ["solute", "wetness", "deposit"], 1, 2)
@@ -365,12 +370,7 @@ def test_outline_in_shader_lifts_the_stain_and_writes_the_front_distance_as_the_
     fourth channel of the wet image (`DISTANCE_CHANNEL`), wetness, deposit and excess as
     rasterized; the texel's size in metres is required."""
     n = 16
-    j, i = np.meshgrid(np.arange(n + 1), np.arange(n + 1))
-    a = (i[:-1, :-1] * (n + 1) + j[:-1, :-1]).ravel()
-    faces = np.concatenate([np.stack([a, a + 1, a + n + 2], 1), np.stack([a, a + n + 2, a + n + 1], 1)])
-    faces = faces.astype(np.uint32)
-    uv_v = np.stack([j.ravel() / n, i.ravel() / n], 1)
-    uv = uv_v[faces].astype(np.float32)
+    faces, uv_v, uv = _square(n)
     ramp = np.clip(0.5 + (0.5 - uv_v[:, 0]) * n / 3, 0, 1)  # a front smeared over three cells at u = ½
     path = tmp_path / "Flag.fine.madder"
     writer = madder.CacheWriter(str(path), len(uv_v), ["solute", "wetness", "deposit"], 1, 1)
