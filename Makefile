@@ -179,6 +179,7 @@ bench: $(ZIP) $(WHEELDIR)/.stamp
 	cargo bench -p madder --features roofline
 	MADDER_ZIP=$(abspath $(ZIP)) $(BLENDER_PY) tests/bench/bench_playback.py
 	MADDER_ZIP=$(abspath $(ZIP)) $(BLENDER_PY) tests/bench/bench_image_bake.py
+	MADDER_ZIP=$(abspath $(ZIP)) $(BLENDER_PY) tests/bench/bench_look.py
 	$(BENCH_ENV) $(BLENDER_PY) tests/bench/bench_dynamic_paint.py --size 316 --frames 12
 	$(BENCH_ENV) $(BLENDER_PY) tests/bench/bench_dynamic_paint.py --size 100 --frames 12
 	@# the angle codec against position coding (full run: drop --quick; it redraws docs/codec-curve.png)

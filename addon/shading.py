@@ -110,8 +110,10 @@ material by nodes that `sync_material` places (named "Madder Input: …"):
   read through a UV Map node of the UV map they were baked for; the wet image's R and G
   are the wetness and deposit, its B the dye's excess over saturation (× 16: Excess),
   its alpha the Outline Distance; the UV times the layout's metres per UV
-  (`weave_shader.metres_per_uv_axes`) is the Outline Position, and the Edge Width is
-  set to a thread pitch of the material's fabric (or the default fabric's).
+  (`weave_shader.metres_per_uv_axes`) is the Outline Position, and the Edge Width
+  follows a thread pitch of the material's fabric (or the default fabric's) until the
+  user sets it (the value Madder wrote is kept on the node; a socket that differs from
+  it is the user's and stays).
 
 A bake, a re-export, Free Bake and switching the output re-run `sync_object`, so a
 material that has the group always reads what its object has. A group made by an older
@@ -129,6 +131,8 @@ from .bridge import DEPOSIT_ATTR, STAIN_ATTR, WETNESS_ATTR
 
 GROUP = "Madder Stain"
 INPUT_PREFIX = "Madder Input: "
+# the group node's custom property holding the Edge Width Madder last wrote (`_follow_fabric_pitch`)
+EDGE_WIDTH_SET = "madder_edge_width"
 SEE_THROUGH = "Madder See-Through"  # the material's Transparent BSDF and its Mix Shader
 MIX = "Madder Wet Transmission"
 # the front's roughness (module doc): fractal noise of Hurst exponent FRONT_HURST, an
@@ -459,7 +463,19 @@ def _image_inputs(nt, node, obj, x, y, material):
         metres.inputs[1].default_value = (scales[0], scales[1], 0.0)
         nt.links.new(uv.outputs["UV"], metres.inputs[0])
         nt.links.new(metres.outputs["Vector"], node.inputs["Outline Position"])
-    node.inputs["Edge Width"].default_value = _thread_pitch(material)
+    _follow_fabric_pitch(node, material)
+
+
+def _follow_fabric_pitch(node, material):
+    """Sets the group node's Edge Width to a thread pitch of `material`'s fabric, unless the
+    user has set it: the value Madder last wrote is kept on the node (`EDGE_WIDTH_SET`),
+    and a socket that no longer holds it keeps the user's value through every sync."""
+    socket = node.inputs["Edge Width"]
+    written = node.get(EDGE_WIDTH_SET)
+    if written is not None and socket.default_value != written:
+        return
+    socket.default_value = _thread_pitch(material)
+    node[EDGE_WIDTH_SET] = socket.default_value  # as the socket holds it (single precision)
 
 
 def _thread_pitch(material):

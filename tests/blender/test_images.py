@@ -4,11 +4,12 @@ Texture nodes, renders find the stain where the vertex colours put it, an animat
 render shows each frame's file, and nothing is lost on failure."""
 
 import os
+import sys
 
 import bpy
 import numpy as np
 import pytest
-from conftest import make_active, shown
+from conftest import ADDON, make_active, shown
 
 import madder
 
@@ -213,6 +214,29 @@ def test_reexport_at_another_size_needs_no_bake_and_free_bake_removes_everything
     assert not [i for i in bpy.data.images if i.name.startswith("Madder Flag")]
     with pytest.raises(RuntimeError):  # nothing to re-export from
         bpy.ops.madder.export_textures()
+
+
+def test_the_edge_width_follows_the_fabric_until_the_user_sets_it(open_fixture):
+    """The group's Edge Width is a thread pitch of the material's fabric (the default
+    fabric's without one), set again at each sync while it holds what Madder wrote; a
+    value the user typed stays through re-exports and a fabric change."""
+    presets = sys.modules[ADDON + ".presets"]
+    _, flag = bake_flag(open_fixture, detail=0, size="512", frames=(1, 3))
+    assert bpy.ops.madder.add_stain_shader() == {"FINISHED"}
+    mat = flag.active_material
+    node = next(n for n in mat.node_tree.nodes if n.type == "GROUP" and n.node_tree.name == "Madder Stain")
+    width = node.inputs["Edge Width"]
+    cotton = presets.FABRIC_PRESETS[presets.DEFAULT_FABRIC]["thread_count"]
+    assert width.default_value == pytest.approx(0.01 / cotton, rel=1e-6)
+    fab = mat.madder_fabric
+    fab.enabled, fab.preset = True, "LINEN_PLAIN"
+    fab.thread_count = 5.0
+    assert bpy.ops.madder.export_textures() == {"FINISHED"}
+    assert width.default_value == pytest.approx(0.002, rel=1e-6)  # 5 threads a cm
+    width.default_value = 0.0007
+    fab.thread_count = 8.0
+    assert bpy.ops.madder.export_textures() == {"FINISHED"}
+    assert width.default_value == pytest.approx(0.0007, rel=1e-6)  # the user's
 
 
 def test_a_shader_group_of_an_older_madder_is_upgraded_in_place(open_fixture):
