@@ -54,7 +54,7 @@ def switch_off(s):
     s.splash.throw = None
 
 
-def flag_scene(blend, before, _detail):
+def flag_scene(blend, before):
     bpy.ops.wm.open_mainfile(filepath=blend)
     flag = bpy.data.objects["Flag"]
     bpy.context.view_layer.objects.active = flag
@@ -65,7 +65,7 @@ def flag_scene(blend, before, _detail):
     return flag
 
 
-def demo_scene(blend, before, detail):
+def demo_scene(blend, before, detail=None):
     bpy.ops.wm.open_mainfile(filepath=blend)
     cloth = demo.configure(detail=None if before else detail)
     if before:
@@ -73,9 +73,10 @@ def demo_scene(blend, before, detail):
     return cloth
 
 
-def bake(scene, blend, before, detail):
-    """One bake on a fresh load of `blend`; returns (seconds, Detail, image size or 0)."""
-    obj = scene(blend, before, detail)
+def bake(scene, blend, before):
+    """One bake of `scene(blend, before)` (a fresh load of `blend`, set up); returns
+    (seconds, Detail, image size or 0)."""
+    obj = scene(blend, before)
     start = time.perf_counter()
     assert bpy.ops.madder.bake() == {"FINISHED"}
     spent = time.perf_counter() - start
@@ -83,11 +84,11 @@ def bake(scene, blend, before, detail):
     return spent, s.bake_detail, s.image_baked_size if s.image_baked else 0
 
 
-def compare(label, scene, blend, rounds, detail=None):
+def compare(label, scene, blend, rounds):
     runs = {False: [], True: []}
     for _ in range(rounds):
         for before in (True, False):
-            runs[before].append(bake(scene, blend, before, detail))
+            runs[before].append(bake(scene, blend, before))
     line = []
     for before in (True, False):
         t = statistics.median(r[0] for r in runs[before])
@@ -115,7 +116,8 @@ def main():
     harness.install_extension(harness.default_zip())
     compare("out-of-box flag (Red Wine preset only)", flag_scene, flag, args.rounds)
     if not args.no_demo:
-        compare(f"demo ({demo.FRAMES} frames)", demo_scene, table, args.demo_rounds, args.demo_detail)
+        compare(f"demo ({demo.FRAMES} frames)", lambda blend, before: demo_scene(blend, before, args.demo_detail),
+                table, args.demo_rounds)
     shutil.rmtree(work, ignore_errors=True)
 
 
