@@ -286,12 +286,13 @@ class Stepper:
             except splash.SplashError as e:
                 raise BakeError(f"'{self.obj.name}': its splash (Throw '{throw.name}'): {e}",
                                 object=self.obj.name) from e
-            liquid = splash.densities(laid.mass, self.sim.vertex_area)
+            self.sim.add_liquid(splash.densities(laid.mass, self.sim.vertex_area), s.concentration,
+                                tuple(s.stain_color))
         elif s.spill_shape == "POOL":
-            liquid = pour.pooled(self.wet0, s.amount, self.sim.vertex_area)
+            # laid on the simulated (refined) cloth, its edge free of the cloth's mesh
+            self.sim.add_pool(self.wet0, s.amount, s.concentration, tuple(s.stain_color))
         else:
-            liquid = pour.spilled(self.wet0, s.amount)
-        self.sim.add_liquid(liquid, s.concentration, tuple(s.stain_color))
+            self.sim.add_liquid(pour.spilled(self.wet0, s.amount), s.concentration, tuple(s.stain_color))
         if s.splash_speed > 0.0:
             self.sim.splash(pour.centroid(self.wet0, pos), s.splash_speed * self.unit, s.splash_seed, self.wet0)
 

@@ -3,11 +3,12 @@ tests/python): what each vertex receives, and where a splash starts.
 
 - A spill adds, at the first frame, the liquid the Spill Group's weights hold,
   `M = Σ amount · weight_i · A_i` (kg, `A_i` the vertex areas), either as a **pool**
-  (the default): `amount` on the vertices of the highest weights first, until `M` is laid,
-  or as the weights themselves, `weight × amount` (kg/m²) on every vertex. The same mass
-  either way; a pool has a sharp edge, where a soft brush's weights would lay a film that
-  thins to nothing and stains as a blurred disc (a liquid lands as a body of liquid, of
-  its own depth: the weights say where it lands first, the amount how deep).
+  (the default; laid by the core, `Simulator.add_pool`, on the simulated cloth's
+  vertices): `amount` deep where the weights are highest, until `M` is laid, or as the
+  weights themselves, `weight × amount` (kg/m²) on every vertex (`spilled`). The same
+  mass either way; a pool has a sharp edge, where a soft brush's weights would lay a film
+  that thins to nothing and stains as a blurred disc (a liquid lands as a body of liquid,
+  of its own depth: the weights say where it lands first, the amount how deep).
 - A source pours `flow × dt × weight` over each frame it is active, `weight` falling
   linearly from 1 at contact to 0 at its reach `d ≥ reach` (and 0 out of reach, where
   the distance query returns infinity).
@@ -31,31 +32,6 @@ def pours_at(frame, use_frame_range, frame_start, frame_end):
 def spilled(weights, amount):
     """The liquid (kg/m², float32) a spill of `amount` puts on vertices of `weights`."""
     return (weights * amount).astype(np.float32)
-
-
-def pooled(weights, amount, area):
-    """The liquid (kg/m², float32) a spill of `amount` puts on vertices of `weights` and
-    vertex areas `area` (m²) as a pool: the mass of `spilled`, `Σ amount · w · A`, laid at
-    `amount` on the vertices of the highest weight first (ties by index, so the same on
-    any machine), the vertex where the mass runs out filled in part; vertices of weight 0
-    (or of no area) get nothing. With every weight 1 it is `spilled`."""
-    w = np.asarray(weights, dtype=np.float64)
-    a = np.asarray(area, dtype=np.float64)
-    if w.shape != a.shape:
-        raise ValueError(f"{len(w)} weights but {len(a)} vertex areas")
-    out = np.zeros(len(w), dtype=np.float64)
-    mass = float(np.sum(amount * w * a))
-    order = np.lexsort((np.arange(len(w)), -w))
-    order = order[(w[order] > 0.0) & (a[order] > 0.0)]
-    if amount <= 0.0 or mass <= 0.0 or not len(order):
-        return out.astype(np.float32)
-    laid = np.cumsum(amount * a[order])
-    full = int(np.searchsorted(laid, mass, side="right"))  # vertices filled to `amount`
-    out[order[:full]] = amount
-    if full < len(order):
-        rest = mass - (laid[full - 1] if full else 0.0)
-        out[order[full]] = rest / a[order[full]]
-    return out.astype(np.float32)
 
 
 def poured(flow, dt, weights):

@@ -229,38 +229,6 @@ def test_pour_falls_off_linearly_to_the_reach():
     assert pour.pours_at(-100, False, 2, 4)
 
 
-def test_a_pool_lays_the_mass_of_the_weights_amount_deep_where_they_are_highest():
-    # a cosine bump of radius R on a fine grid: the pool is the disc whose area holds the
-    # bump's mass at the full amount, πr² = ∫ w dA = πR² (1/2 − 2/π²), r = 0.5446 R
-    n, side, radius, amount = 401, 0.2, 0.08, 1.2
-    x = np.linspace(-side / 2, side / 2, n)
-    xx, yy = np.meshgrid(x, x)
-    r = np.hypot(xx, yy).ravel()
-    w = np.where(r < radius, 0.5 * (1.0 + np.cos(np.pi * r / radius)), 0.0).astype(np.float32)
-    area = np.full(w.shape, (side / (n - 1)) ** 2)
-    area[::7] *= 1.5  # uneven areas: the pool follows the mass, not the vertex count
-    liquid = pour.pooled(w, amount, area)
-    assert liquid.dtype == np.float32
-    mass = float(np.sum(amount * w.astype(np.float64) * area))
-    assert float(np.sum(liquid.astype(np.float64) * area)) == pytest.approx(mass, rel=1e-6)
-    partial = (liquid > 0) & (liquid < np.float32(amount))
-    assert partial.sum() <= 1 and liquid.max() == np.float32(amount)
-    # the pool is the highest weights: no dry member of the group outweighs a wet vertex
-    assert w[liquid > 0].min() >= w[(liquid == 0) & (w > 0)].max()
-    edge = r[liquid > 0].max()
-    assert edge == pytest.approx(radius * np.sqrt(0.5 - 2.0 / np.pi**2), rel=0.02)
-    # every weight 1: the pool is the weights × amount; no weight, no liquid
-    ones = np.ones(5, dtype=np.float32)
-    np.testing.assert_allclose(pour.pooled(ones, 2.0, np.arange(1.0, 6.0)), pour.spilled(ones, 2.0), rtol=1e-6)
-    assert not pour.pooled(np.zeros(4, dtype=np.float32), 2.0, np.ones(4)).any()
-    assert not pour.pooled(ones, 0.0, np.ones(5)).any()
-    # ties go to the lower index (the same pool on any machine); a vertex of no area gets none
-    tied = pour.pooled(np.float32([0.5, 0.5, 0.5, 0.5]), 1.0, np.float32([0.0, 1.0, 1.0, 1.0]))
-    np.testing.assert_allclose(tied, [0.0, 1.0, 0.5, 0.0], rtol=1e-6)
-    with pytest.raises(ValueError, match="3 weights but 2 vertex areas"):
-        pour.pooled(np.ones(3), 1.0, np.ones(2))
-
-
 def test_the_splash_starts_at_the_weighted_centroid():
     pos = np.float32([[0, 0, 0], [4, 0, 0], [0, 8, 0]])
     assert pour.centroid(np.float32([1, 1, 0]), pos) == (2.0, 0.0, 0.0)

@@ -77,3 +77,22 @@ def test_bad_levels_are_refused():
         madder.Simulator(faces, pos, pos, detail=4)
     with pytest.raises(OverflowError):
         madder.Simulator(faces, pos, pos, detail=-1)
+
+
+@pytest.mark.parametrize("detail", [0, 2])
+def test_a_pool_lays_the_weights_mass_amount_deep_on_the_refined_cloth(detail):
+    # the core's own tests (rust/madder/tests/pool.rs) check its shape; here the binding:
+    # the mass is amount x the weights' integral at either level, laid at the amount on
+    # the fine vertices, and bad weights name the vertex
+    faces, pos = grid(10)
+    sim = madder.Simulator(faces, pos, pos, detail=detail, evaporation=0.0)
+    w = np.clip(blob(pos) / blob(pos).max(), 0.0, 1.0).astype(np.float32)
+    w[w < 0.05] = 0.0
+    sim.add_pool(w, 1.2, 0.05, (0.2, 0.3, 0.9))
+    assert sim.totals()["solvent"] == pytest.approx(1.2 * float(sim.vertex_area @ w.astype(np.float64)), rel=1e-6)
+    fine = sim.wetness(fine=True)
+    assert fine.max() == pytest.approx(1.2, rel=1e-6)
+    assert ((fine > 0) & (fine < np.float32(1.2) * (1 - 1e-6))).sum() <= 1
+    w[3] = 1.5
+    with pytest.raises(ValueError, match="pool weight at vertex 3 must be in \\[0, 1\\], got 1.5"):
+        sim.add_pool(w, 1.2)

@@ -335,6 +335,25 @@ impl Simulator {
             .map_err(to_py)
     }
 
+    /// Pours a pool: the liquid `weights` ((N,) floats in [0, 1], per cloth vertex) hold at
+    /// `amount` kg/m², `amount × Σ weight × area` kg, laid `amount` deep where the weights
+    /// are highest (their smooth reconstruction, so the edge does not follow the cloth's
+    /// mesh), on the refined cloth's vertices at a Detail level; `concentration` and
+    /// `color` as for `add_liquid`.
+    #[pyo3(signature = (weights, amount, concentration=0.05, color=None))]
+    fn add_pool(
+        &mut self,
+        weights: &Bound<'_, PyAny>,
+        amount: f64,
+        concentration: f64,
+        color: Option<[f64; 3]>,
+    ) -> PyResult<()> {
+        let w = f64s("weights", weights)?;
+        self.inner
+            .add_pool(&w, amount, concentration, color)
+            .map_err(to_py)
+    }
+
     /// A splash: a random outgoing velocity (m/s) away from `center` (world), for the
     /// vertices with `weights` > 0 ((N,) floats, scaling the speed), reproducible from
     /// `seed`.

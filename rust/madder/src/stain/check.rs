@@ -50,3 +50,16 @@ pub(super) fn check_each_nonnegative(name: &'static str, values: &[f64]) -> Resu
         }),
     }
 }
+
+/// Every value in `[0, 1]`, else the error names the first vertex that is not.
+pub(super) fn check_each_unit(name: &'static str, values: &[f64]) -> Result<(), ParamError> {
+    match values.iter().position(|x| !(*x >= 0.0 && *x <= 1.0)) {
+        None => Ok(()),
+        Some(index) => Err(ParamError::OutOfRangeAt {
+            name,
+            index,
+            requirement: "in [0, 1]",
+            value: values[index],
+        }),
+    }
+}

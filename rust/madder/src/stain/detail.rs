@@ -74,8 +74,9 @@ use faer::Par;
 use glam::{DMat3, DVec2, DVec3};
 use rayon::prelude::*;
 
-use super::check::{check_each_nonnegative, check_length};
+use super::check::{check_each_nonnegative, check_each_unit, check_length};
 use super::diffuse::{Conductivity, WovenFaces};
+use super::pool;
 use super::simulate::{Profile, Simulator, StainParams};
 use super::state::{Fields, Totals};
 use crate::error::{Error, ParamError};
@@ -525,6 +526,46 @@ impl Detailed {
         fine.grow_around(&mut self.sim, |v| solvent[v] > 0.0)?;
         let spread = fine.partial.prolong(solvent);
         Ok(self.sim.add_liquid(&spread, concentration, color)?)
+    }
+
+    /// Pours a pool: the liquid the cloth's `weights` (in `[0, 1]`) hold at `amount`
+    /// kg/m², `M = amount Σ w_i A_i`, laid `amount` deep where they are highest, on the
+    /// refined cloth's vertices, its edge free of the cloth's mesh (`pool`'s module doc),
+    /// then [`Simulator::add_liquid`] with `concentration` and `color`.
+    pub fn add_pool(
+        &mut self,
+        weights: &[f64],
+        amount: f64,
+        concentration: f64,
+        color: Option<[f64; 3]>,
+    ) -> Result<(), Error> {
+        check_length("pool weights", self.topology().n_vertices(), weights.len())?;
+        check_each_unit("pool weight", weights)?;
+        super::check::check_range("pool amount", amount, amount >= 0.0, "finite and ≥ 0")?;
+        let laid = match &mut self.fine {
+            None => {
+                let (at, area) = (self.sim.positions(), pool::areas(&self.sim, weights));
+                let painted = pool::Painted {
+                    at,
+                    weight: weights,
+                    area: &area,
+                };
+                pool::pool(&painted, amount, at, weights, &area)
+            }
+            Some(fine) => {
+                fine.grow_around(&mut self.sim, |v| weights[v] > 0.0)?;
+                let p = &fine.partial;
+                let reach = p.prolong(weights);
+                let area = pool::areas(&self.sim, &reach);
+                let painted = pool::Painted {
+                    at: &fine.current,
+                    weight: weights,
+                    area: &fine.area,
+                };
+                pool::pool(&painted, amount, &p.prolong(&fine.current), &reach, &area)
+            }
+        };
+        Ok(self.sim.add_liquid(&laid, concentration, color)?)
     }
 
     /// [`Simulator::splash`] with `weight` per cloth vertex (interpolated).

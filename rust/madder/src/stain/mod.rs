@@ -6,6 +6,7 @@
 //!   stain–surface interactions ([`interact`], §4.5) — and, beside them, drips off a
 //!   hanging hem ([`drip`]), gravity in the fibres' liquid ([`drain`]), the window's
 //!   upkeep, liquid poured, splashes and initial velocities, and what is read out;
+//! - `pool`: a spill laid as a pool of its own depth, its edge free of the mesh;
 //! - [`window`]: the active region a frame works on, cut out of the cloth;
 //! - `work` (the `roofline` feature): what each phase must move and compute at least, for
 //!   the benchmarks;
@@ -24,6 +25,7 @@ pub mod extend;
 pub(crate) mod forces;
 pub(crate) mod interact;
 pub(crate) mod irregular;
+pub(crate) mod pool;
 pub(crate) mod simulate;
 pub(crate) mod state;
 pub(crate) mod window;

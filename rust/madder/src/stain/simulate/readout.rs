@@ -13,6 +13,10 @@ impl Simulator {
     pub fn vertex_area(&self) -> &[f64] {
         &self.state.vertex_area
     }
+    /// The cloth's positions at the current frame, m.
+    pub fn positions(&self) -> &[DVec3] {
+        &self.state.positions
+    }
     /// Per-vertex masses, kg.
     pub fn fields(&self) -> &Fields {
         &self.state.fields
