@@ -60,20 +60,10 @@
 //! for a vertical porous sheet, Kim et al., Phys. Fluids 27, 2015). With
 //! `holdup = h_r > 0`, in step 2 each vertex keeps `min(f, h_r A)` of its free solvent
 //! (and the same fraction of its dissolved solute and colour) out of the transport and
-//! adds it back after; the velocity is the moving part's. In step 3 it keeps
-//! `min(f, s h_r A)` out of the free liquid's diffusion the same way, `s = |g_t| / g`
-//! the slope (the tangential body force over gravity). Held out of the transport alone,
-//! a run's film is drained by the free liquid's spreading instead and thins below `h_r`
-//! behind its front, so the run never stops (measured: with absorption 0 it climbed 8 cm
-//! above its feed, and the film left was a fifth of `h_r`). Scaling by the slope is a
-//! modelling choice: the pinned film is what holds against a run, and a level pool
-//! (`s = 0`) spreads as before, its edge the wicking front's (the rims of
-//! [`crate::stain::diffuse`]; holding a level pool's film too moved the presets' rims,
-//! wine's rim/centre to 1.72). So
+//! adds it back after; the velocity is the moving part's. So
 //! - a run's front advances only as fast as the flux fills the holdup ahead of it, and
-//!   stops when the excess over `h_r` (and over what the fibres take) is used up: the
-//!   area its film stands on is `(fed − absorbed) / h_r` (`tests/runs.rs`: within 14 %;
-//!   the fibres' wicking wets a margin beyond it);
+//!   stops when the excess over `h_r` (and over what the fibres take) is used up: its
+//!   area is `(fed − absorbed) / h_r`;
 //! - the liquid left behind soaks into the fibres at `K_p` for as long as it stays,
 //!   and their solute is adsorbed at `K_d`: the path is stained in proportion to the time
 //!   liquid stood there, not to the time the front took to pass;

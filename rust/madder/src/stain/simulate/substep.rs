@@ -369,24 +369,6 @@ impl Simulator {
         // a tolerance iterates until the front stops, `picard` rounds at least
         let converge = p.wicking.is_on() && p.wicking.tolerance > 0.0;
         let iterate = picard > 0 || converge;
-        // the run's holdup stays out of the free liquid's diffusion too, in proportion to
-        // the slope (the tangential body force over g): the film pinned against a run, not
-        // a level pool's
-        let g = p.gravity.length();
-        let slope: Option<Vec<f64>> = (p.holdup > 0.0 && g > 0.0).then(|| {
-            (0..sub.force.len())
-                .map(|j| {
-                    let s = (sub.force[j].0.length() / g).min(1.0);
-                    s * cloth.irregular.as_deref().map_or(1.0, |m| m[j])
-                })
-                .collect()
-        });
-        let hold = slope.as_deref().map(|multiplier| FilmHold {
-            area: &geometry.vertex_area,
-            active: &w.region.mask,
-            holdup: p.holdup,
-            multiplier,
-        });
         let (fields, velocity) = (&mut loc.fields, &mut loc.velocity);
         let (densities, viscous) = match w.cg.as_mut() {
             None => (
@@ -413,19 +395,16 @@ impl Simulator {
                              held0: Option<&[f64]>|
                              -> Result<(DensityWork, bool, Option<Fields>), Error> {
                                 let start = iterate.then(|| fields.clone());
-                                let trial = start.is_some();
-                                let mut work = holding_film(fields, hold, |fields| {
-                                    diffuse_densities(
-                                        &ops,
-                                        scalar_cg,
-                                        fields,
-                                        geometry,
-                                        hp,
-                                        g0,
-                                        solute_motion(p, held0, potential),
-                                        trial,
-                                    )
-                                })?;
+                                let mut work = diffuse_densities(
+                                    &ops,
+                                    scalar_cg,
+                                    fields,
+                                    geometry,
+                                    hp,
+                                    g0,
+                                    solute_motion(p, held0, potential),
+                                    start.is_some(),
+                                )?;
                                 let Some(start) = start else {
                                     return Ok((work, true, None));
                                 };
@@ -434,18 +413,16 @@ impl Simulator {
                                 let mut again = |fields: &mut Fields, g: Option<&[f64]>, trial| {
                                     fields.clone_from(&start);
                                     let held = mobile.as_deref().map(|m| held_faces(m, g));
-                                    holding_film(fields, hold, |fields| {
-                                        diffuse_densities(
-                                            &ops,
-                                            scalar_cg,
-                                            fields,
-                                            geometry,
-                                            hp,
-                                            g,
-                                            solute_motion(p, held.as_deref(), potential),
-                                            trial,
-                                        )
-                                    })
+                                    diffuse_densities(
+                                        &ops,
+                                        scalar_cg,
+                                        fields,
+                                        geometry,
+                                        hp,
+                                        g,
+                                        solute_motion(p, held.as_deref(), potential),
+                                        trial,
+                                    )
                                 };
                                 let mut last = g0.map(<[f64]>::to_vec);
                                 let mut settled = true;
@@ -664,10 +641,9 @@ impl Simulator {
 }
 
 /// The run's holdup (module doc, "Runs"): on the active vertices, takes
-/// `min(f, h_r m_i A_i)` of the free solvent `fields[0]` (`m_i` a per-vertex multiplier:
-/// the irregular fabric's around the transport, times the slope around the diffusion; 1
-/// without) and the same fraction of every other field out of `fields`, and returns what
-/// it took, per field, to be added back after the transport or the diffusion.
+/// `min(f, h_r m_i A_i)` of the free solvent `fields[0]` (`m_i` the irregular fabric's
+/// multiplier, 1 without) and the same fraction of every other field out of `fields`,
+/// and returns what it took, per field, to be added back after the transport.
 fn hold_back(
     fields: &mut [&mut [f64]],
     area: &[f64],
@@ -701,61 +677,6 @@ fn hold_back(
                 .collect()
         })
         .collect()
-}
-
-/// What [`holding_film`] holds: on the `active` vertices of lumped `area`, the film
-/// `h_r × multiplier` (the slope times the irregular fabric's multiplier).
-#[derive(Clone, Copy)]
-struct FilmHold<'a> {
-    area: &'a [f64],
-    active: &'a [bool],
-    holdup: f64,
-    multiplier: &'a [f64],
-}
-
-/// The run's holdup in the free liquid's diffusion (module doc, "Runs"): with `hold`, the
-/// pinned film [`hold_back`] takes is kept out of `fields` (free solvent, dissolved
-/// solute, the free colour) while `solve` diffuses them, and added back after, as around
-/// the transport; the fibres' liquid and everything else diffuse whole. Without `hold`,
-/// `solve` alone.
-fn holding_film<T>(
-    fields: &mut Fields,
-    hold: Option<FilmHold<'_>>,
-    solve: impl FnOnce(&mut Fields) -> T,
-) -> T {
-    let Some(FilmHold {
-        area,
-        active,
-        holdup,
-        multiplier,
-    }) = hold
-    else {
-        return solve(fields);
-    };
-    let mut color = fields.color_free.as_ref().map(|c| split_rgb(c));
-    let held = {
-        let mut moving: Vec<&mut [f64]> = vec![&mut fields.free_solvent, &mut fields.solute];
-        if let Some(c) = color.as_mut() {
-            moving.extend(c.iter_mut().map(|v| v.as_mut_slice()));
-        }
-        hold_back(&mut moving, area, active, holdup, Some(multiplier))
-    };
-    if let (Some(c), Some(cf)) = (color.as_ref(), fields.color_free.as_mut()) {
-        merge_rgb(c, cf);
-    }
-    let out = solve(fields);
-    let add =
-        |field: &mut [f64], kept: &[f64]| field.iter_mut().zip(kept).for_each(|(m, k)| *m += k);
-    add(&mut fields.free_solvent, &held[0]);
-    add(&mut fields.solute, &held[1]);
-    if let Some(cf) = fields.color_free.as_mut() {
-        for (i, px) in cf.iter_mut().enumerate() {
-            for (k, v) in px.iter_mut().enumerate() {
-                *v += held[2 + k][i];
-            }
-        }
-    }
-    out
 }
 
 /// Most halvings of a sub-step's density diffusion whose wicking front does not settle
