@@ -3,8 +3,8 @@
 //!
 //! 1. a cosine bump of weights on a fine cloth pools into the disc that holds its mass at
 //!    the full depth, `πr² = ∫ w dA = πR²(1/2 − 2/π²)`, with the mass `a Σ w_i A_i` to
-//!    rounding, one vertex filled in part, and no dry vertex of higher weight than a wet
-//!    one's neighbourhood allows;
+//!    rounding, one vertex filled in part, nothing laid beyond the weights, and no dry
+//!    vertex more than a cell and a half inside its edge;
 //! 2. on a coarse cloth refined by Detail, a painted 3 × 3 patch pools round, not into the
 //!    square its linear interpolant's level sets make (the 4-fold Fourier term of the
 //!    pool's outline r(θ) against the square's), with the same mass, inside the weights'

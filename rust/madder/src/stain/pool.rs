@@ -113,10 +113,10 @@ pub(crate) fn areas(sim: &Simulator, reach: &[f64]) -> Vec<f64> {
         .collect()
 }
 
-/// The pool (kg/m² per point) of `mass` kg laid `amount` deep on the `points` of areas
-/// `area` where `reach > 0` (the interpolated weight), highest reconstruction first
-/// (module doc). A point of no area gets nothing; what rounding leaves over goes to the
-/// last point laid.
+/// The pool (kg/m² per point): the mass `painted` holds at `amount` ([`Painted::mass`]),
+/// laid `amount` deep on the `points` of areas `area` where `reach > 0` (the interpolated
+/// weight), highest reconstruction first (module doc). A point of no area gets nothing;
+/// what rounding leaves over goes to the last point laid.
 pub(crate) fn pool(
     painted: &Painted<'_>,
     amount: f64,
