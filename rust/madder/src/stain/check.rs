@@ -40,25 +40,29 @@ pub(super) fn check_length(
 
 /// Every value finite and `≥ 0`, else the error names the first vertex that is not.
 pub(super) fn check_each_nonnegative(name: &'static str, values: &[f64]) -> Result<(), ParamError> {
-    match values.iter().position(|x| !(x.is_finite() && *x >= 0.0)) {
-        None => Ok(()),
-        Some(index) => Err(ParamError::OutOfRangeAt {
-            name,
-            index,
-            requirement: "finite and ≥ 0",
-            value: values[index],
-        }),
-    }
+    check_each(name, values, "finite and ≥ 0", |x| {
+        x.is_finite() && x >= 0.0
+    })
 }
 
 /// Every value in `[0, 1]`, else the error names the first vertex that is not.
 pub(super) fn check_each_unit(name: &'static str, values: &[f64]) -> Result<(), ParamError> {
-    match values.iter().position(|x| !(*x >= 0.0 && *x <= 1.0)) {
+    check_each(name, values, "in [0, 1]", |x| (0.0..=1.0).contains(&x))
+}
+
+/// Every value `ok`, else the error names the first vertex that is not and `requirement`.
+fn check_each(
+    name: &'static str,
+    values: &[f64],
+    requirement: &'static str,
+    ok: impl Fn(f64) -> bool,
+) -> Result<(), ParamError> {
+    match values.iter().position(|&x| !ok(x)) {
         None => Ok(()),
         Some(index) => Err(ParamError::OutOfRangeAt {
             name,
             index,
-            requirement: "in [0, 1]",
+            requirement,
             value: values[index],
         }),
     }

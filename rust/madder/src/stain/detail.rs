@@ -542,29 +542,29 @@ impl Detailed {
         check_length("pool weights", self.topology().n_vertices(), weights.len())?;
         check_each_unit("pool weight", weights)?;
         super::check::check_range("pool amount", amount, amount >= 0.0, "finite and ≥ 0")?;
-        let laid = match &mut self.fine {
-            None => {
-                let (at, area) = (self.sim.positions(), pool::areas(&self.sim, weights));
-                let painted = pool::Painted {
-                    at,
-                    weight: weights,
-                    area: &area,
-                };
-                pool::pool(&painted, amount, at, weights, &area)
-            }
+        // where the interpolated weights reach: the cloth's vertices, or the refined
+        // cloth's, built around the painted ones first
+        let reach = match &mut self.fine {
+            None => Cow::Borrowed(weights),
             Some(fine) => {
                 fine.grow_around(&mut self.sim, |v| weights[v] > 0.0)?;
-                let p = &fine.partial;
-                let reach = p.prolong(weights);
-                let area = pool::areas(&self.sim, &reach);
-                let painted = pool::Painted {
-                    at: &fine.current,
-                    weight: weights,
-                    area: &fine.area,
-                };
-                pool::pool(&painted, amount, &p.prolong(&fine.current), &reach, &area)
+                Cow::Owned(fine.partial.prolong(weights))
             }
         };
+        let area = pool::areas(&self.sim, &reach);
+        let painted = match &self.fine {
+            None => pool::Painted {
+                at: self.sim.positions(),
+                weight: weights,
+                area: &area,
+            },
+            Some(fine) => pool::Painted {
+                at: &fine.current,
+                weight: weights,
+                area: &fine.area,
+            },
+        };
+        let laid = pool::pool(&painted, amount, self.sim.positions(), &reach, &area);
         Ok(self.sim.add_liquid(&laid, concentration, color)?)
     }
 

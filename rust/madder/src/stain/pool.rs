@@ -129,11 +129,15 @@ pub(crate) fn pool(
     if !(amount > 0.0 && mass > 0.0) {
         return out;
     }
-    let mut order: Vec<usize> = (0..points.len())
+    // the candidates, by their reconstruction (computed for them alone)
+    let candidates: Vec<usize> = (0..points.len())
         .filter(|&j| reach[j] > 0.0 && area[j] > 0.0)
         .collect();
-    let s = painted.reconstruction(points);
-    order.sort_by(|&j, &k| s[k].total_cmp(&s[j]).then(j.cmp(&k)));
+    let at: Vec<DVec3> = candidates.iter().map(|&j| points[j]).collect();
+    let s = painted.reconstruction(&at);
+    let mut ranked: Vec<usize> = (0..candidates.len()).collect();
+    ranked.sort_by(|&a, &b| s[b].total_cmp(&s[a]).then(a.cmp(&b)));
+    let order: Vec<usize> = ranked.into_iter().map(|k| candidates[k]).collect();
     let mut left = mass;
     for &j in &order {
         let laid = (amount * area[j]).min(left);
