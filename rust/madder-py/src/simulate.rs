@@ -23,7 +23,7 @@ use crate::threads::Pool;
 /// irregularity_seed=0,
 /// irregularity_fine_length=0,
 /// carry_solute=False, residual_saturation=0, vapour_limited=False, carried_fraction=1,
-/// dispersivity=0, holdup=0, drip_hold=0, substeps=1, first_substep=0, use_gravity=True, use_rectilinear=True,
+/// dispersivity=0, holdup=0, film_creep=0.1, drip_hold=0, substeps=1, first_substep=0, use_gravity=True, use_rectilinear=True,
 /// use_coriolis=True, momentum_advection=True, detail=0, threads=None)`.
 ///
 /// `topology` is a `Topology` or an `(F, 3)` face array (any integer dtype); `rest` and
@@ -68,6 +68,9 @@ use crate::threads::Pool;
 /// spacing (0, the default: off, the ring one cell wide).
 /// `holdup` (kg/m², ≥ 0) is the free liquid each vertex keeps back from a run, filled
 /// before the run moves on and left behind to soak in (0, the default: off).
+/// `film_creep` (0 to 1): with a holdup, the share of the free liquid's spreading left
+/// to the pinned film, so a run's film stays at `holdup` while it runs and evens out
+/// while it dries (0.1, the default; 1: the holdup holds in the flow alone).
 /// `drip_hold` (kg/m, ≥ 0): the free liquid a hanging hem holds per metre of the cloth's
 /// border; the rest drips off, counted in `totals()` (0, the default: off).
 /// `capillary_height` (m, ≥ 0): how high the fabric wicks up from a reservoir; with
@@ -133,7 +136,7 @@ impl Simulator {
         wicking_density=None, wicking_picard=0, wicking_tolerance=0.0, irregularity=None, irregularity_length=None, irregularity_seed=0,
         irregularity_fine_length=None,
         carry_solute=false, residual_saturation=None, vapour_limited=false, carried_fraction=None,
-        dispersivity=None, holdup=None, drip_hold=0.0, capillary_height=0.0, substeps=1, first_substep=0.0,
+        dispersivity=None, holdup=None, film_creep=None, drip_hold=0.0, capillary_height=0.0, substeps=1, first_substep=0.0,
         use_gravity=true, use_rectilinear=true, use_coriolis=true, momentum_advection=true,
         detail=0, threads=None))]
     #[allow(clippy::too_many_arguments)]
@@ -170,6 +173,7 @@ impl Simulator {
         carried_fraction: Option<f64>,
         dispersivity: Option<f64>,
         holdup: Option<f64>,
+        film_creep: Option<f64>,
         drip_hold: f64,
         capillary_height: f64,
         substeps: u32,
@@ -269,6 +273,7 @@ impl Simulator {
         set(&mut params.carried_fraction, carried_fraction);
         set(&mut params.dispersivity, dispersivity);
         set(&mut params.holdup, holdup);
+        set(&mut params.film_creep, film_creep);
         let r = &mut params.interaction;
         set(&mut r.absorption, absorption);
         set(&mut r.saturation, saturation);

@@ -95,6 +95,7 @@ fn main() {
         dispersivity: 0.0,
         vapour_limited: tide,
         holdup: 0.0,
+        film_creep: 1.0,
         ..Default::default()
     };
     let plain = ms_per_frame("coffee, seed's drying", coffee(false), frames);

@@ -46,6 +46,7 @@ fn ideal(forces: Forces, momentum_advection: bool) -> StainParams {
         dispersivity: 0.0,
         vapour_limited: false,
         holdup: 0.0,
+        film_creep: 1.0,
         substeps: 1,
         first_substep: 0.0,
         drip_hold: 0.0,

@@ -184,6 +184,7 @@ class Simulator:
         carried_fraction: float | None = None,
         dispersivity: float | None = None,
         holdup: float | None = None,
+        film_creep: float | None = None,
         drip_hold: float = 0.0,
         capillary_height: float = 0.0,
         substeps: int = 1,

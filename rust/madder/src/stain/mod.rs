@@ -39,7 +39,7 @@ pub use diffuse::{
 pub use forces::Forces;
 pub use interact::InteractionRates;
 pub use irregular::Irregularity;
-pub use simulate::{DEFAULT_SOLUTE_COLOR, Profile, Simulator, StainParams};
+pub use simulate::{DEFAULT_SOLUTE_COLOR, FILM_CREEP, Profile, Simulator, StainParams};
 pub use state::{Fields, Totals};
 #[cfg(feature = "roofline")]
 pub use work::{PhaseWork, TRANSCENDENTAL};

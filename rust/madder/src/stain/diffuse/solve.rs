@@ -3,6 +3,8 @@
 //! velocity by warm-started CG on the window's active vertices, each total restored and
 //! any negative mass repaired.
 
+use std::borrow::Cow;
+
 use glam::DVec2;
 
 use super::{Conductivity, DENSITY_TOLERANCE, VELOCITY_TOLERANCE};
@@ -87,6 +89,11 @@ pub(in crate::stain) struct Carry {
 /// `solvent_only` solves the solvent alone and leaves the solute (and its colour) as it
 /// is: a Picard iteration's trial solve ([`super::Wicking::picard`]), whose solute the
 /// next iteration throws away (the wicking rate depends on the liquid alone).
+///
+/// `film`, per face, gates the free liquid's operator (a run's pinned film,
+/// `stain::simulate`, "Runs"): its faces are scaled by it on top of `wicking`, and the
+/// fibres' liquid, carried, keeps the ungated operator (its own when `held_scale` is not
+/// given).
 #[allow(clippy::too_many_arguments)]
 pub(in crate::stain) fn diffuse_densities(
     ops: &Ops<'_>,
@@ -95,6 +102,7 @@ pub(in crate::stain) fn diffuse_densities(
     geometry: &Geometry,
     h: f64,
     wicking: Option<&[f64]>,
+    film: Option<&[f64]>,
     solute: SoluteMotion<'_>,
     solvent_only: bool,
 ) -> Result<DensityWork, Error> {
@@ -106,6 +114,21 @@ pub(in crate::stain) fn diffuse_densities(
             potential,
         } => (true, held_scale, Some(carry), potential),
     };
+    // the free liquid's faces: the wicking's scale times the film's gate; the fibres'
+    // liquid, sharing the free operator without a pinned edge, keeps the wicking's alone
+    let gated: Option<Vec<f64>> = film.map(|gate| match wicking {
+        Some(w) => w.iter().zip(gate).map(|(w, g)| w * g).collect(),
+        None => gate.to_vec(),
+    });
+    let held_scale = match (&gated, held_scale) {
+        (Some(_), None) if carry => Some(wicking.map_or_else(
+            || Cow::Owned(vec![1.0; ops.topology.n_faces()]),
+            Cow::Borrowed,
+        )),
+        (_, held) => held.map(Cow::Borrowed),
+    };
+    let held_scale = held_scale.as_deref();
+    let wicking = gated.as_deref().or(wicking);
     // the fibres' liquid down the gravity potential: m + hKφ ([`crate::stain::drain`]),
     // along the edges whose upper end holds at least the step; not in a Picard round's trial
     // solve, whose factors settle as the wicking's alone (the gravity takes the settled

@@ -60,10 +60,29 @@
 //! for a vertical porous sheet, Kim et al., Phys. Fluids 27, 2015). With
 //! `holdup = h_r > 0`, in step 2 each vertex keeps `min(f, h_r A)` of its free solvent
 //! (and the same fraction of its dissolved solute and colour) out of the transport and
-//! adds it back after; the velocity is the moving part's. So
+//! adds it back after; the velocity is the moving part's. In step 4 the pinned film
+//! hardly spreads either: the free liquid's operator is gated face by face, a face's
+//! conductivity times the creep `κ` ([`StainParams::film_creep`], 0.1) where the film
+//! its corners hold is no thicker than `s h_r`, `s = |g_t| / g` the slope (the
+//! tangential body force over gravity). Held out of the transport alone, a run's film is
+//! drained by the free liquid's spreading instead and thins below `h_r` behind its
+//! front, so the run never stops (with absorption 0 it climbed 8 cm above its feed, and
+//! the film left was a fifth of `h_r`). A gate, not a held share: keeping
+//! `min(f, s h_r A)` of each vertex out of the solve leaves the rest spreading toward
+//! where more is held, so liquid gathered at the steepest vertices of a wrinkled cloth;
+//! a gated face gathers nothing. And a creep, not a wall: with `κ = 0` the film the
+//! transport leaves uneven never evens out, and on the demo a few vertices of the
+//! hanging front were still wet after two hours of drying and dried near-black, the
+//! sides stepped along the mesh; at 0.1 a run's film creeps a few millimetres over its
+//! seconds and evens out over the minutes it dries. Scaling by the slope is a modelling
+//! choice: the pinned film is what holds against a run, and a level pool (`s = 0`,
+//! every face open) spreads as without it, its edge the wicking front's (the rims of
+//! [`crate::stain::diffuse`]; holding a level pool's film too moved the presets' rims,
+//! wine's rim/centre to 1.72). So
 //! - a run's front advances only as fast as the flux fills the holdup ahead of it, and
-//!   stops when the excess over `h_r` (and over what the fibres take) is used up: its
-//!   area is `(fed − absorbed) / h_r`;
+//!   stops when the excess over `h_r` (and over what the fibres take) is used up: the
+//!   area its film stands on is `(fed − absorbed) / h_r` (`tests/runs.rs`: within 8 %;
+//!   the fibres' wicking wets a margin beyond it);
 //! - the liquid left behind soaks into the fibres at `K_p` for as long as it stays,
 //!   and their solute is adsorbed at `K_d`: the path is stained in proportion to the time
 //!   liquid stood there, not to the time the front took to pass;
@@ -198,6 +217,13 @@ pub(crate) const MAX_TURN: f64 = 0.1;
 /// [`MAX_TURN`] (a frame turning by 6.4 rad, a full turn, in one frame).
 pub(crate) const MAX_AUTO_SUBSTEPS: usize = 64;
 
+/// The default [`StainParams::film_creep`] `κ`: a pinned film's faces keep a tenth of the
+/// free liquid's conductivity (module doc, "Runs"). Over a run's seconds the film creeps a
+/// few millimetres, so the holdup's volume law holds (`tests/runs.rs`); over a drying
+/// frame of minutes it evens out, where at `κ = 0` a film the transport left uneven
+/// dries in points.
+pub const FILM_CREEP: f64 = 0.1;
+
 /// The default colour of the liquid's solute (linear RGB, a dark red; the add-on's and
 /// the Python simulator's default).
 pub const DEFAULT_SOLUTE_COLOR: [f64; 3] = [0.45, 0.05, 0.1];
@@ -259,6 +285,12 @@ pub struct StainParams {
     /// and dyeing them, when the run has passed. Scaled by the irregular fabric's
     /// multiplier. 0 (the default) is off.
     pub holdup: f64,
+    /// `κ`, from 0 to 1: the share of the free liquid's conductivity left on a face where
+    /// the run's holdup pins the film (module doc, "Runs"): the pinned film creeps at `κ`
+    /// times the rate of the liquid above it. 1 is off (the holdup acts in the transport
+    /// alone); the default 0.1 keeps a run's film at `h_r` over the seconds it runs
+    /// (`tests/runs.rs`) and evens it out over the minutes it dries. Acts with a holdup.
+    pub film_creep: f64,
     /// `λ`, kg/m: the free liquid a hanging hem holds per metre of the cloth's border
     /// before it drips off ([`crate::stain::drip`]); what drips is counted in
     /// [`super::Totals`]. 0 (the default) is off: the border holds everything.
@@ -299,6 +331,7 @@ impl Default for StainParams {
             dispersivity: 0.0,
             vapour_limited: false,
             holdup: 0.0,
+            film_creep: FILM_CREEP,
             drip_hold: 0.0,
             capillary_height: 0.0,
             substeps: 1,
@@ -360,6 +393,12 @@ impl StainParams {
             "finite and ≥ 0",
         )?;
         check_range("holdup", self.holdup, self.holdup >= 0.0, "finite and ≥ 0")?;
+        check_range(
+            "film creep",
+            self.film_creep,
+            (0.0..=1.0).contains(&self.film_creep),
+            "from 0 to 1",
+        )?;
         check_range(
             "drip hold",
             self.drip_hold,

@@ -360,6 +360,10 @@ impl Simulator {
         let held_scale = mobile
             .as_deref()
             .map(|m| held_faces(m, face_scale.as_deref()));
+        // the run's pinned film out of the free liquid's spreading (module doc, "Runs"),
+        // from the liquid before the solve, over the sub-step
+        let film = self.film_gate(cloth, &loc.fields, geometry, &sub.force);
+        let film = film.as_deref();
         // Picard iterations (`Wicking::picard`) solve again from the step's start
         let picard = if p.wicking.is_on() {
             p.wicking.picard
@@ -402,6 +406,7 @@ impl Simulator {
                                     geometry,
                                     hp,
                                     g0,
+                                    film,
                                     solute_motion(p, held0, potential),
                                     start.is_some(),
                                 )?;
@@ -420,6 +425,7 @@ impl Simulator {
                                         geometry,
                                         hp,
                                         g,
+                                        film,
                                         solute_motion(p, held.as_deref(), potential),
                                         trial,
                                     )
@@ -555,6 +561,54 @@ impl Simulator {
             (Some(g), Some(r)) => Some(g.iter().zip(r).map(|(g, r)| g * r).collect()),
             (g, r) => g.or_else(|| r.map(<[f64]>::to_vec)),
         }
+    }
+
+    /// The run's holdup in the free liquid's spreading (module doc, "Runs"): per face, 1
+    /// where the film its corners hold (their free solvent over their lumped areas) stands
+    /// above the pinned film `s h_r`, the creep `κ` where it does not; `s = |g_t| / g` the
+    /// slope (the tangential body force of the first half kick, `force`, over gravity)
+    /// times the irregular fabric's multiplier, the corners' mean. A face that the slope
+    /// holds nothing on (a level pool's) stays open, so a level pool spreads as without
+    /// the holdup, bit for bit. None without a holdup, without gravity or with `κ = 1`.
+    fn film_gate(
+        &self,
+        cloth: &Cloth,
+        fields: &Fields,
+        geometry: &Geometry,
+        force: &[(DVec2, f64, VelocityStep)],
+    ) -> Option<Vec<f64>> {
+        let p = &self.params;
+        let g = p.gravity.length();
+        if p.holdup <= 0.0 || g <= 0.0 || p.film_creep >= 1.0 {
+            return None;
+        }
+        let creep = p.film_creep;
+        let irregular = cloth.irregular.as_deref();
+        let pinned = |j: usize| {
+            let s = (force[j].0.length() / g).min(1.0);
+            p.holdup * s * irregular.map_or(1.0, |m| m[j])
+        };
+        let area = &geometry.vertex_area;
+        let free = &fields.free_solvent;
+        Some(
+            cloth
+                .topology
+                .faces()
+                .par_iter()
+                .map(|c| {
+                    let c = c.map(|v| v as usize);
+                    let threshold = (pinned(c[0]) + pinned(c[1]) + pinned(c[2])) / 3.0;
+                    let (mass, a) = c
+                        .iter()
+                        .fold((0.0, 0.0), |(m, s), &v| (m + free[v], s + area[v]));
+                    if threshold <= 0.0 || mass > threshold * a {
+                        1.0
+                    } else {
+                        creep
+                    }
+                })
+                .collect(),
+        )
     }
 
     /// The faces through which the fibres' liquid moves: those whose corners all hold it
