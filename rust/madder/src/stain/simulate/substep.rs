@@ -569,7 +569,10 @@ impl Simulator {
     /// slope (the tangential body force of the first half kick, `force`, over gravity)
     /// times the irregular fabric's multiplier, the corners' mean. A face that the slope
     /// holds nothing on (a level pool's) stays open, so a level pool spreads as without
-    /// the holdup, bit for bit. None without a holdup, without gravity or with `κ = 1`.
+    /// the holdup (bit for bit where the fibres' liquid has its own operator, a residual
+    /// saturation; without one it is solved apart from the free liquid's, the same to the
+    /// solver's tolerance).
+    /// None without a holdup, without gravity or with `κ = 1`.
     fn film_gate(
         &self,
         cloth: &Cloth,
