@@ -259,8 +259,8 @@ fn spans(mask: &[bool], row: usize) -> Vec<Option<(usize, usize)>> {
 /// stain is unbroken from the feed down to 2.5–3 cm below the wet front. With the holdup,
 /// the volume law: the area where the film stands (free liquid above `h_r / 2`) times
 /// `h_r` is within 20 % of the excess, fed − absorbed − evaporated (measured: 3.28·10⁻⁴
-/// kg against 3.05·10⁻⁴, +8 %); the wet region (liquid above half the saturation) runs
-/// 3 cm further down, the fibres' wicking ahead of the film.
+/// kg against 3.05·10⁻⁴, +8 %); the wet region (liquid above half the saturation) is
+/// twice that area, the fibres' wicking ahead of and beside the film.
 #[test]
 fn a_fed_run_on_a_vertical_sheet() {
     for holdup in [0.0, 0.05] {
