@@ -260,7 +260,7 @@ fn spans(mask: &[bool], row: usize) -> Vec<Option<(usize, usize)>> {
 /// the volume law: the area where the film stands (free liquid above `h_r / 2`) times
 /// `h_r` is within 20 % of the excess, fed − absorbed − evaporated (measured: 3.28·10⁻⁴
 /// kg against 3.05·10⁻⁴, +8 %); the wet region (liquid above half the saturation) is
-/// twice that area, the fibres' wicking ahead of and beside the film.
+/// 1.8 times that area, the fibres' wicking ahead of and beside the film.
 #[test]
 fn a_fed_run_on_a_vertical_sheet() {
     for holdup in [0.0, 0.05] {
