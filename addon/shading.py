@@ -91,9 +91,11 @@ simulated outline by `n`, an RMS of Front Roughness (`NOISE_RMS` calibrates the 
 spread: tests/blender/test_shading.py), self-affine from the Front Scale down to the
 finest octave (40 mm / 2^10, the fibres'). Imbibition fronts in paper and fabric are
 rough that way, at every scale from the fibres up (Buldyrev et al. 1992: a roughness
-exponent about 0.63); the outline the user renders measures 0.74 between 1 and 20 mm
-(tests/blender/test_presets_look.py: the octaves are smooth within themselves, so the
-measured exponent lies above H). A front 10–90 % over 0.8 e is 0.3 mm on plain cotton.
+exponent about 0.63); the outline the user renders measures 0.72-0.74 between 1 and 20
+mm (tests/blender/test_presets_look.py), whatever H: at 3 mm RMS the wander's slope
+exceeds 1 below about 2 mm, so the front folds back on itself there and the measure
+sees the folded line's extent (local exponent near 1 at 1-2 mm), not H. A front
+10–90 % over 0.8 e is 0.3 mm on plain cotton.
 Without the distance channel (vertex colours, or images written without it) the input's
 default 1 m, or the image's alpha 1, leaves `cover` = 1: nothing is cut. The group's
 Dye output is the dye amount after the cut.
