@@ -242,11 +242,6 @@ def simulator_keywords(s, gravity, scene_gravity, unit, grain=None):
         carried_fraction=s.carried_fraction,
         dispersivity=s.dispersivity * 1e-3,
         holdup=s.holdup,
-        # the pinned film's creep (core `StainParams::film_creep`) is off in the add-on:
-        # on the flag it raises the rendered outline's roughness exponent to the edge of
-        # the asked 0.5-0.75 (0.751 on bpy 5.0.1), so the add-on keeps the run's holdup in
-        # the flow alone until the outline is settled with it (ARCHITECTURE.md)
-        film_creep=1.0,
         # the hem (issue 34 §1): from grams to kilograms per metre of cloth
         drip_hold=s.drip_hold * 1e-3,
         # the weight of the fibres' liquid: from centimetres of cloth to metres

@@ -81,21 +81,23 @@ the pixel"); bilinear filtering reads D linearly, so the group places the front 
 fraction of a pixel, however coarse the texel:
 
     cover = clamp(½ + (D + n) / e, 0, 1)         e: Edge Width (the fabric's thread pitch)
-    n     = Front Roughness · (fBm(p / Front Scale) − ½) / NOISE_RMS
+    n     = Front Roughness · (fBm(p / Front Scale) − ½) / noise_rms(H)
 
 and the dye amount (Coverage + Excess) is multiplied by `cover` (the liquid's colour,
 their ratio, is not). `n` is Blender's Noise Texture (fBm, `FRONT_OCTAVES` octaves of
 lacunarity 2 and gain 2^−H, H = `FRONT_HURST`) at the point `p` on the cloth in metres
 (the UV times the layout's metres per UV along u and v): the front wanders from the
-simulated outline by `n`, an RMS of Front Roughness (`NOISE_RMS` calibrates the node's
+simulated outline by `n`, an RMS of Front Roughness (`noise_rms` calibrates the node's
 spread: tests/blender/test_shading.py), self-affine from the Front Scale down to the
 finest octave (40 mm / 2^10, the fibres'). Imbibition fronts in paper and fabric are
 rough that way, at every scale from the fibres up (Buldyrev et al. 1992: a roughness
-exponent about 0.63); the outline the user renders measures 0.72-0.74 between 1 and 20
-mm (tests/blender/test_presets_look.py), whatever H: at 3 mm RMS the wander's slope
-exceeds 1 below about 2 mm, so the front folds back on itself there and the measure
-sees the folded line's extent (local exponent near 1 at 1-2 mm), not H. A front
-10–90 % over 0.8 e is 0.3 mm on plain cotton.
+exponent about 0.63). H is 0.4, not 0.63: the drawn wander adds to the simulated
+outline, whose own centimetre lobes (its curvature: a local exponent above 1 from 5 to
+20 mm) dominate the sum above a few millimetres, and the flatter noise carries the
+sum's exponent into the measured range. The outline the user renders on the flag
+measures 0.71 between 1 and 20 mm (tests/blender/test_presets_look.py, the front's
+height over its mean line); with H 0.63, above 0.8. A front 10–90 % over 0.8 e
+is 0.3 mm on plain cotton.
 Without the distance channel (vertex colours, or images written without it) the input's
 default 1 m, or the image's alpha 1, leaves `cover` = 1: nothing is cut. The group's
 Dye output is the dye amount after the cut.
@@ -140,10 +142,11 @@ MIX = "Madder Wet Transmission"
 # the front's roughness (module doc): fractal noise of Hurst exponent FRONT_HURST, an
 # octave's amplitude 2^-H of the one before, FRONT_OCTAVES octaves below the Front Scale
 FRONT_HURST = 0.4
-FRONT_OCTAVES = 10.0
-# RMS of Blender's normalized fBm Noise Texture (its Fac about ½) at those settings,
-# measured over 10⁶ points of 10² and 40² periods: 0.0472, 0.0449
-NOISE_RMS = 0.046
+FRONT_OCTAVES = 10
+# RMS of one octave of Blender's Noise Texture about its mean ½ (its signed Perlin noise,
+# halved as the normalized Fac is): 0.046 measured for the normalized sum at H 0.4 over 10⁶
+# points of 10² and 40² periods, divided by that sum's factor (`noise_rms`) there, 0.389
+OCTAVE_RMS = 0.118
 # the group's inputs: name, socket type, default, range, tooltip
 _INPUTS = (
     ("Base Color", "NodeSocketColor", (0.8, 0.8, 0.8, 1.0), None, "The clean, dry cloth's colour"),
@@ -265,6 +268,14 @@ class _Maths:
         return self.op("MULTIPLY_ADD", t, self.op("SUBTRACT", b, a), a)
 
 
+def noise_rms(hurst):
+    """RMS of the front's Noise Texture about ½ at Hurst exponent `hurst`: its normalized
+    fBm is Σ aᵢ nᵢ / Σ aᵢ over FRONT_OCTAVES + 1 octaves of amplitude aᵢ = 2^(−i·hurst),
+    the octaves' noises nᵢ independent, each of RMS OCTAVE_RMS."""
+    amplitudes = [2.0 ** (-i * hurst) for i in range(FRONT_OCTAVES + 1)]
+    return OCTAVE_RMS * sum(a * a for a in amplitudes) ** 0.5 / sum(amplitudes)
+
+
 def _front(m, nodes, links, g):
     """The front's cover at the point (module doc, "The outline"): clamp(½ + (D + n) / e),
     D the Outline Distance, n the fractal roughness at the Outline Position, e the Edge
@@ -276,14 +287,14 @@ def _front(m, nodes, links, g):
     noise = nodes.new("ShaderNodeTexNoise")
     noise.noise_dimensions, noise.noise_type, noise.normalize = "3D", "FBM", True  # (Blender 4.1+)
     noise.inputs["Scale"].default_value = 1.0
-    noise.inputs["Detail"].default_value = FRONT_OCTAVES
+    noise.inputs["Detail"].default_value = float(FRONT_OCTAVES)
     noise.inputs["Roughness"].default_value = 2.0 ** -FRONT_HURST
     noise.inputs["Lacunarity"].default_value = 2.0
     noise.inputs["Distortion"].default_value = 0.0
     links.new(where.outputs["Vector"], noise.inputs["Vector"])
     m.made += [where, noise]
     wander = m.op("MULTIPLY", m.op("SUBTRACT", noise.outputs["Fac"], 0.5),
-                  m.op("DIVIDE", g.outputs["Front Roughness"], NOISE_RMS))
+                  m.op("DIVIDE", g.outputs["Front Roughness"], noise_rms(FRONT_HURST)))
     ahead = m.op("ADD", g.outputs["Outline Distance"], wander)
     return m.op("ADD", 0.5, m.op("DIVIDE", ahead, m.op("MAXIMUM", g.outputs["Edge Width"], 1e-6)), clamp=True)
 
